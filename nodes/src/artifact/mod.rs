@@ -1,0 +1,88 @@
+//! The artifact types that flow along graph edges. Plain data, serializable, deterministic.
+
+mod array;
+mod metrics;
+mod points;
+mod raster;
+
+use serde::{Deserialize, Serialize};
+
+pub use array::PodVec;
+pub use metrics::Metrics;
+pub use points::PointSet;
+pub use raster::{Grid, Raster};
+
+/// The type of an artifact, as the loader checks it on every edge.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum ArtifactType {
+    /// A [`Raster`]: one f32 band on a grid in the site frame.
+    Raster,
+    /// A [`PointSet`]: points in the site frame with per-point attributes.
+    Points,
+    /// [`Metrics`]: named numbers.
+    Metrics,
+}
+
+impl std::fmt::Display for ArtifactType {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        std::fmt::Debug::fmt(self, f)
+    }
+}
+
+/// Any artifact. The engine stores these as MessagePack; large arrays inside are raw bytes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Artifact {
+    /// See [`Raster`].
+    Raster(Raster),
+    /// See [`PointSet`].
+    Points(PointSet),
+    /// See [`Metrics`].
+    Metrics(Metrics),
+}
+
+impl Artifact {
+    /// The artifact's type.
+    pub fn ty(&self) -> ArtifactType {
+        match self {
+            Artifact::Raster(_) => ArtifactType::Raster,
+            Artifact::Points(_) => ArtifactType::Points,
+            Artifact::Metrics(_) => ArtifactType::Metrics,
+        }
+    }
+}
+
+/// A concrete artifact type that can be wrapped into and read out of [`Artifact`].
+pub trait Typed: Sized + Send + Sync + 'static {
+    /// Its [`ArtifactType`].
+    const TYPE: ArtifactType;
+    /// Wraps it.
+    fn into_artifact(self) -> Artifact;
+    /// Reads it out, if `a` is of this type.
+    fn from_artifact(a: &Artifact) -> Option<&Self>;
+}
+
+macro_rules! typed {
+    ($($t:ident),*) => {$(
+        impl Typed for $t {
+            const TYPE: ArtifactType = ArtifactType::$t;
+            fn into_artifact(self) -> Artifact { Artifact::$t(self) }
+            fn from_artifact(a: &Artifact) -> Option<&Self> {
+                match a { Artifact::$t(x) => Some(x), _ => None }
+            }
+        }
+    )*};
+}
+typed!(Raster, Metrics);
+
+impl Typed for PointSet {
+    const TYPE: ArtifactType = ArtifactType::Points;
+    fn into_artifact(self) -> Artifact {
+        Artifact::Points(self)
+    }
+    fn from_artifact(a: &Artifact) -> Option<&Self> {
+        match a {
+            Artifact::Points(x) => Some(x),
+            _ => None,
+        }
+    }
+}

@@ -1,0 +1,88 @@
+//! Rasters on grids in the site frame.
+
+use serde::{Deserialize, Serialize};
+
+use super::PodVec;
+
+/// A north-up grid in the site frame. Row 0 is the northern edge, as in GeoTIFF.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Grid {
+    /// Site-frame x of the western edge, metres.
+    pub x0: f64,
+    /// Site-frame y of the northern edge, metres.
+    pub y0: f64,
+    /// Cell size, metres (square cells).
+    pub cell_m: f64,
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+}
+
+impl Grid {
+    /// Number of cells.
+    pub fn len(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+    /// True when the grid has no cells.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Site-frame centre of cell (`col`, `row`).
+    pub fn center(&self, col: u32, row: u32) -> (f64, f64) {
+        (
+            self.x0 + (col as f64 + 0.5) * self.cell_m,
+            self.y0 - (row as f64 + 0.5) * self.cell_m,
+        )
+    }
+    /// The cell containing site-frame point (`x`, `y`), if inside the grid.
+    pub fn cell_of(&self, x: f64, y: f64) -> Option<(u32, u32)> {
+        let c = ((x - self.x0) / self.cell_m).floor();
+        let r = ((self.y0 - y) / self.cell_m).floor();
+        (c >= 0.0 && r >= 0.0 && c < self.width as f64 && r < self.height as f64)
+            .then(|| (c as u32, r as u32))
+    }
+    /// The smallest grid with cells of `cell_m`, aligned to multiples of `cell_m` from the site
+    /// origin, that covers the box `[lo, hi]`.
+    pub fn covering(lo: (f64, f64), hi: (f64, f64), cell_m: f64) -> Grid {
+        let x0 = (lo.0 / cell_m).floor() * cell_m;
+        let y0 = (hi.1 / cell_m).floor() * cell_m + cell_m;
+        let width = (((hi.0 - x0) / cell_m).floor() as u32 + 1).max(1);
+        let height = ((y0 - lo.1) / cell_m).floor() as u32 + 1;
+        Grid {
+            x0,
+            y0,
+            cell_m,
+            width,
+            height,
+        }
+    }
+}
+
+/// One f32 band on a [`Grid`], row-major from the north-west corner. NaN marks no-data
+/// (the paper's ⊥: nothing observed there).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Raster {
+    /// Where the cells are.
+    pub grid: Grid,
+    /// `grid.width * grid.height` values.
+    pub data: PodVec<f32>,
+}
+
+impl Raster {
+    /// A raster of `grid` filled with `v`.
+    pub fn filled(grid: Grid, v: f32) -> Raster {
+        Raster {
+            grid,
+            data: PodVec::filled(v, grid.len()),
+        }
+    }
+    /// The value at (`col`, `row`).
+    pub fn at(&self, col: u32, row: u32) -> f32 {
+        self.data[row as usize * self.grid.width as usize + col as usize]
+    }
+    /// Rows as slices.
+    pub fn rows(&self) -> std::slice::ChunksExact<'_, f32> {
+        self.data.chunks_exact(self.grid.width.max(1) as usize)
+    }
+}

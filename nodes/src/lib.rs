@@ -1,0 +1,53 @@
+//! The stages of the KODAMA pipeline, as plain functions over plain data.
+//!
+//! Every stage is a [`Stage`]: a `Params` struct read from the graph file, named typed inputs, one
+//! output artifact, a `VERSION` bumped whenever the output for the same inputs would change, and a
+//! `run` function. Artifacts ([`Artifact`]) are rasters, point sets, metrics and (as later stages
+//! land) meshes, scenes and view sets, all serializable and deterministic.
+//!
+//! **Invariant:** this crate knows nothing about the engine: no graph, no cache, no scheduler. A
+//! stage sees its parameters, its inputs, the site frame and a progress handle ([`Ctx`]), and nothing
+//! else; it reads only the files its `files` function declares.
+#![deny(missing_docs)]
+
+#[cfg(target_endian = "big")]
+compile_error!(
+    "artifact arrays are stored as little-endian bytes; big-endian targets are not supported"
+);
+
+pub mod artifact;
+pub mod export;
+pub mod rng;
+pub mod site;
+pub mod stage;
+
+pub mod gaussian_blur;
+pub mod raster_ops;
+pub mod rasterize_surface;
+pub mod read_xyz;
+pub mod stats;
+pub mod synth_scan;
+pub mod synth_terrain;
+
+pub use artifact::{Artifact, ArtifactType};
+pub use site::Site;
+pub use stage::{Arity, Ctx, FileRef, InputSpec, Inputs, ParamError, Progress, Stage, StageError};
+
+/// Calls `$m!` with the type of every node kind, in one list, so the engine can build its registry
+/// without the stages knowing about it. A new stage is added here and nowhere else.
+#[macro_export]
+macro_rules! for_each_stage {
+    ($m:ident) => {
+        $m! {
+            $crate::synth_terrain::SynthTerrain,
+            $crate::synth_scan::SynthScan,
+            $crate::read_xyz::ReadXyz,
+            $crate::rasterize_surface::RasterizeSurface,
+            $crate::gaussian_blur::GaussianBlur,
+            $crate::raster_ops::Clamp,
+            $crate::raster_ops::Difference,
+            $crate::stats::RasterStats,
+            $crate::stats::PointStats,
+        }
+    };
+}

@@ -1,0 +1,311 @@
+//! The contract between a stage and whoever runs it.
+//!
+//! The rules a stage keeps (the engine relies on every one):
+//! 1. `run` is a deterministic function of `Params`, the input artifacts, the files that `files`
+//!    declares and the [`Site`]: the same values give byte-identical output at any thread count.
+//!    Randomness is seeded from params (or [`Ctx::seed`]); no `HashMap` order reaches an output;
+//!    parallel reductions are ordered.
+//! 2. A stage reads no file its `files` function did not declare, and writes none.
+//! 3. `VERSION` is bumped whenever the output for the same inputs would change.
+//! 4. Bad user data is a [`StageError::BadInput`] naming the file, the place and what was expected;
+//!    a stage never panics on user input.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use crate::artifact::{Artifact, ArtifactType, Typed};
+use crate::site::Site;
+
+/// How many upstream nodes an input takes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Arity {
+    /// Exactly one node id.
+    One,
+    /// Zero or one node id.
+    Optional,
+    /// A list of node ids, possibly empty.
+    Many,
+}
+
+/// One named, typed input of a node kind.
+#[derive(Clone, Copy, Debug)]
+pub struct InputSpec {
+    /// The field name in the graph file.
+    pub name: &'static str,
+    /// The artifact type the upstream node must produce.
+    pub ty: ArtifactType,
+    /// How many upstream nodes it takes.
+    pub arity: Arity,
+    /// What the input is for, for `explain` and error messages.
+    pub doc: &'static str,
+}
+
+impl InputSpec {
+    /// An input taking exactly one node.
+    pub const fn one(name: &'static str, ty: ArtifactType, doc: &'static str) -> Self {
+        InputSpec {
+            name,
+            ty,
+            arity: Arity::One,
+            doc,
+        }
+    }
+    /// An input that may be left out.
+    pub const fn optional(name: &'static str, ty: ArtifactType, doc: &'static str) -> Self {
+        InputSpec {
+            name,
+            ty,
+            arity: Arity::Optional,
+            doc,
+        }
+    }
+    /// An input taking a list of nodes.
+    pub const fn many(name: &'static str, ty: ArtifactType, doc: &'static str) -> Self {
+        InputSpec {
+            name,
+            ty,
+            arity: Arity::Many,
+            doc,
+        }
+    }
+}
+
+/// A file a node reads, named by the params field that holds its path.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FileRef {
+    /// The params field holding the path, for error messages.
+    pub field: &'static str,
+    /// The path as written in the graph (relative to the data folder or the graph file).
+    pub path: String,
+}
+
+/// A parameter value that is well-formed but not acceptable.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamError {
+    /// The params field at fault.
+    pub field: &'static str,
+    /// What was expected, and what was found.
+    pub message: String,
+}
+
+impl ParamError {
+    /// An error on `field`.
+    pub fn new(field: &'static str, message: impl Into<String>) -> Self {
+        ParamError {
+            field,
+            message: message.into(),
+        }
+    }
+}
+
+/// Why a stage did not produce its output.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StageError {
+    /// The user's data is not what it should be: the file, the place in it, what was expected.
+    BadInput {
+        /// The file at fault.
+        file: PathBuf,
+        /// Where in it (a line, a record, a tag).
+        place: String,
+        /// What was expected and what was found.
+        expected: String,
+    },
+    /// A parameter turned out to be unusable with these inputs.
+    Param(ParamError),
+    /// The stage failed for a reason that is not the user's input.
+    Failed(String),
+}
+
+impl StageError {
+    /// A `BadInput` error.
+    pub fn bad_input(file: &Path, place: impl Into<String>, expected: impl Into<String>) -> Self {
+        StageError::BadInput {
+            file: file.to_path_buf(),
+            place: place.into(),
+            expected: expected.into(),
+        }
+    }
+    /// True when the user's input (data or params) is at fault, which the CLI reports as exit 2.
+    pub fn is_user_error(&self) -> bool {
+        !matches!(self, StageError::Failed(_))
+    }
+}
+
+impl std::fmt::Display for StageError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StageError::BadInput {
+                file,
+                place,
+                expected,
+            } => {
+                write!(f, "{}: {place}: {expected}", file.display())
+            }
+            StageError::Param(e) => write!(f, "param `{}`: {}", e.field, e.message),
+            StageError::Failed(m) => f.write_str(m),
+        }
+    }
+}
+
+impl std::error::Error for StageError {}
+
+/// Where a long stage reports how far it got. The engine turns it into progress bars or log lines.
+pub trait Progress: Sync {
+    /// Sets the amount of work (in the stage's own units).
+    fn set_total(&self, total: u64);
+    /// Marks `n` more units done.
+    fn advance(&self, n: u64);
+}
+
+/// A `Progress` that reports nowhere, for tests and library callers.
+pub struct NoProgress;
+impl Progress for NoProgress {
+    fn set_total(&self, _: u64) {}
+    fn advance(&self, _: u64) {}
+}
+
+/// What a stage may know of the world besides its inputs.
+pub struct Ctx<'a> {
+    /// The site frame.
+    pub site: &'a Site,
+    /// The resolved paths of the files `Stage::files` declared, in the same order.
+    pub files: &'a [PathBuf],
+    /// Where progress goes.
+    pub progress: &'a dyn Progress,
+    /// 32 bytes derived from the node's action key, for stages that need randomness but have no
+    /// seed parameter.
+    pub seed: [u8; 32],
+}
+
+impl<'a> Ctx<'a> {
+    /// A context for calling a stage directly (tests, benchmarks, other programs).
+    pub fn new(site: &'a Site, files: &'a [PathBuf]) -> Self {
+        Ctx {
+            site,
+            files,
+            progress: &NoProgress,
+            seed: [0; 32],
+        }
+    }
+    /// The resolved path of the `i`-th declared file.
+    pub fn file(&self, i: usize) -> Result<&Path, StageError> {
+        self.files
+            .get(i)
+            .map(PathBuf::as_path)
+            .ok_or_else(|| StageError::Failed(format!("declared file #{i} was not provided")))
+    }
+    /// The seed as a `u64`.
+    pub fn seed_u64(&self) -> u64 {
+        u64::from_le_bytes(self.seed[..8].try_into().expect("8 bytes"))
+    }
+}
+
+/// One input slot as handed to `run`.
+#[derive(Clone, Debug)]
+pub enum Slot {
+    /// An `Arity::One` input.
+    One(Arc<Artifact>),
+    /// An `Arity::Optional` input.
+    Optional(Option<Arc<Artifact>>),
+    /// An `Arity::Many` input.
+    Many(Vec<Arc<Artifact>>),
+}
+
+/// The input artifacts of one node run, by input name, in declared order.
+#[derive(Clone, Debug, Default)]
+pub struct Inputs {
+    slots: Vec<(&'static str, Slot)>,
+}
+
+impl Inputs {
+    /// Empty inputs.
+    pub fn new() -> Self {
+        Inputs::default()
+    }
+    /// Adds a slot (builder style).
+    pub fn with(mut self, name: &'static str, slot: Slot) -> Self {
+        self.slots.push((name, slot));
+        self
+    }
+    /// Adds a slot.
+    pub fn push(&mut self, name: &'static str, slot: Slot) {
+        self.slots.push((name, slot));
+    }
+
+    fn slot(&self, name: &str) -> Result<&Slot, StageError> {
+        self.slots
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, s)| s)
+            .ok_or_else(|| StageError::Failed(format!("input `{name}` was not provided")))
+    }
+
+    fn cast<'s, T: Typed>(name: &str, a: &'s Artifact) -> Result<&'s T, StageError> {
+        T::from_artifact(a).ok_or_else(|| {
+            StageError::Failed(format!(
+                "input `{name}`: expected {}, got {}",
+                T::TYPE,
+                a.ty()
+            ))
+        })
+    }
+
+    /// The artifact of an `Arity::One` input.
+    pub fn one<T: Typed>(&self, name: &str) -> Result<&T, StageError> {
+        match self.slot(name)? {
+            Slot::One(a) => Self::cast(name, a),
+            _ => Err(StageError::Failed(format!(
+                "input `{name}` is not a single input"
+            ))),
+        }
+    }
+    /// The artifact of an `Arity::Optional` input, if given.
+    pub fn optional<T: Typed>(&self, name: &str) -> Result<Option<&T>, StageError> {
+        match self.slot(name)? {
+            Slot::Optional(a) => a.as_deref().map(|a| Self::cast(name, a)).transpose(),
+            _ => Err(StageError::Failed(format!(
+                "input `{name}` is not an optional input"
+            ))),
+        }
+    }
+    /// The artifacts of an `Arity::Many` input, in the order the graph lists them.
+    pub fn many<T: Typed>(&self, name: &str) -> Result<Vec<&T>, StageError> {
+        match self.slot(name)? {
+            Slot::Many(v) => v.iter().map(|a| Self::cast(name, a)).collect(),
+            _ => Err(StageError::Failed(format!(
+                "input `{name}` is not a list input"
+            ))),
+        }
+    }
+}
+
+/// A node kind: what a graph file names, what it takes and what it makes.
+pub trait Stage: 'static {
+    /// The kind name as written in graph files, e.g. `"GaussianBlur"`.
+    const KIND: &'static str;
+    /// Bumped whenever the output for the same inputs and params would change.
+    const VERSION: u32;
+    /// One line saying what the stage does, with the paper reference.
+    const DOC: &'static str;
+    /// The named inputs, in the order they enter the action key.
+    const INPUTS: &'static [InputSpec];
+    /// The parameters as read from the graph file (`deny_unknown_fields`; defaults documented).
+    /// Maps inside must be `BTreeMap` so the canonical encoding is order-free.
+    type Params: Serialize + DeserializeOwned + Clone + Send + Sync + 'static;
+    /// The output artifact.
+    type Output: Typed;
+
+    /// Rejects values that are well-formed but unusable (a negative sigma, an empty range).
+    fn validate(_params: &Self::Params) -> Result<(), ParamError> {
+        Ok(())
+    }
+    /// The files this node reads; their contents enter the action key.
+    fn files(_params: &Self::Params) -> Vec<FileRef> {
+        Vec::new()
+    }
+    /// Computes the output.
+    fn run(params: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Self::Output, StageError>;
+}

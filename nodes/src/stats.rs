@@ -1,0 +1,94 @@
+//! Summary statistics of rasters and point sets: quick checks, and the numbers tests assert on.
+
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{ArtifactType, Metrics, PointSet, Raster};
+use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
+
+/// [`RasterStats`] and [`PointStats`] have no parameters.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoParams {}
+
+/// Cell count, valid count, min, max, mean and standard deviation of the valid cells.
+pub struct RasterStats;
+
+impl Stage for RasterStats {
+    const KIND: &'static str = "RasterStats";
+    const VERSION: u32 = 1;
+    const DOC: &'static str = "raster summary: cells, valid cells, min, max, mean, std";
+    const INPUTS: &'static [InputSpec] =
+        &[InputSpec::one("raster", ArtifactType::Raster, "the raster")];
+    type Params = NoParams;
+    type Output = Metrics;
+
+    fn run(_: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Metrics, StageError> {
+        let r: &Raster = inputs.one("raster")?;
+        Ok(raster_stats(r))
+    }
+}
+
+/// The statistics [`RasterStats`] reports. Sums run sequentially in f64 so the result does not
+/// depend on thread count.
+pub fn raster_stats(r: &Raster) -> Metrics {
+    let (mut n, mut sum, mut sum2) = (0u64, 0f64, 0f64);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for &v in r.data.iter().filter(|v| v.is_finite()) {
+        let v = v as f64;
+        n += 1;
+        sum += v;
+        sum2 += v * v;
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    let mut m = Metrics::default();
+    m.set("cells", r.data.len() as f64);
+    m.set("width", r.grid.width as f64);
+    m.set("height", r.grid.height as f64);
+    m.set("cell_m", r.grid.cell_m);
+    m.set("valid", n as f64);
+    if n > 0 {
+        let mean = sum / n as f64;
+        m.set("min", lo);
+        m.set("max", hi);
+        m.set("mean", mean);
+        m.set("std", (sum2 / n as f64 - mean * mean).max(0.0).sqrt());
+    }
+    m
+}
+
+/// Point count, extent and the ASPRS class histogram (`class_<n>`).
+pub struct PointStats;
+
+impl Stage for PointStats {
+    const KIND: &'static str = "PointStats";
+    const VERSION: u32 = 1;
+    const DOC: &'static str = "point set summary: count, extent, class histogram";
+    const INPUTS: &'static [InputSpec] = &[InputSpec::one(
+        "points",
+        ArtifactType::Points,
+        "the point set",
+    )];
+    type Params = NoParams;
+    type Output = Metrics;
+
+    fn run(_: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Metrics, StageError> {
+        let p: &PointSet = inputs.one("points")?;
+        let mut m = Metrics::default();
+        m.set("count", p.len() as f64);
+        if let Some((lo, hi)) = p.bounds() {
+            for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+                m.set(format!("{axis}_min"), lo[k] as f64);
+                m.set(format!("{axis}_max"), hi[k] as f64);
+            }
+        }
+        let mut hist = [0u64; 256];
+        for &c in p.class.iter() {
+            hist[c as usize] += 1;
+        }
+        for (c, &k) in hist.iter().enumerate().filter(|(_, k)| **k > 0) {
+            m.set(format!("class_{c}"), k as f64);
+        }
+        Ok(m)
+    }
+}

@@ -1,0 +1,79 @@
+//! Content digests of input files, behind a stat cache so unchanged files are not re-read.
+
+use std::fs;
+use std::io;
+use std::os::unix::fs::MetadataExt;
+use std::path::Path;
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use serde::{Deserialize, Serialize};
+
+use super::{Cache, Digest, write_atomic};
+
+#[derive(Serialize, Deserialize)]
+struct StatEntry {
+    path: String,
+    size: u64,
+    mtime_ns: i128,
+    inode: u64,
+    checked_ns: i128,
+    digest: String,
+}
+
+/// A file modified this close to when it was hashed may have changed again within the
+/// filesystem's timestamp granularity without its mtime moving ("racy git"); such entries are
+/// not trusted.
+const RACY_NS: i128 = 2_000_000_000;
+
+fn now_ns() -> i128 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_nanos() as i128)
+        .unwrap_or(0)
+}
+
+/// blake3 of a file's bytes, memory-mapped and hashed on all threads when large.
+pub fn hash_file(path: &Path) -> io::Result<Digest> {
+    let mut h = blake3::Hasher::new();
+    h.update_mmap_rayon(path)?;
+    Ok(h.finalize())
+}
+
+impl Cache {
+    /// The content digest of the file at `path`, read only if its size, mtime or inode changed
+    /// since it was last digested.
+    pub fn file_digest(&self, path: &Path) -> io::Result<Digest> {
+        let abs = fs::canonicalize(path)?;
+        let meta = fs::metadata(&abs)?;
+        let mtime_ns = meta.mtime() as i128 * 1_000_000_000 + meta.mtime_nsec() as i128;
+        let name = blake3::hash(abs.as_os_str().as_encoded_bytes()).to_hex();
+        let entry_path = self.root.join("stat").join(name.as_str());
+        if let Ok(bytes) = fs::read(&entry_path) {
+            if let Ok(e) = serde_json::from_slice::<StatEntry>(&bytes) {
+                let same = e.size == meta.len() && e.mtime_ns == mtime_ns && e.inode == meta.ino();
+                if same && e.checked_ns - e.mtime_ns > RACY_NS {
+                    if let Ok(d) = Digest::from_hex(&e.digest) {
+                        return Ok(d);
+                    }
+                }
+            }
+        }
+        let checked_ns = now_ns();
+        let digest = hash_file(&abs)?;
+        let entry = StatEntry {
+            path: abs.to_string_lossy().into_owned(),
+            size: meta.len(),
+            mtime_ns,
+            inode: meta.ino(),
+            checked_ns,
+            digest: digest.to_hex().to_string(),
+        };
+        // The stat cache is an optimisation: failing to record it must not fail the run.
+        let _ = write_atomic(
+            &self.tmp(),
+            &entry_path,
+            &serde_json::to_vec(&entry).expect("stat entry serializes"),
+        );
+        Ok(digest)
+    }
+}

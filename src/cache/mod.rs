@@ -1,0 +1,205 @@
+//! The on-disk cache: a content-addressed store of artifacts and an action cache mapping action
+//! keys to artifact digests.
+//!
+//! Layout under the cache root (kept simple so a shared filesystem or a Remote Execution API
+//! content store can stand in for it; blake3 is one of REAPI's digest functions):
+//!
+//! ```text
+//! FORMAT                 layout version
+//! lock                   runs hold it shared, gc exclusive
+//! cas/<2 hex>/<64 hex>   artifact bytes, named by their blake3 digest
+//! ac/<2 hex>/<64 hex>    "blake3:<digest hex> <size>\n" for an action key
+//! stat/<64 hex>          stat cache of input files, by blake3 of the absolute path
+//! runs/<graph>/...       last-run snapshots and run records
+//! tmp/                   temp files; renamed into place when complete
+//! ```
+//!
+//! **Invariant:** a file under `cas/`, `ac/` or `stat/` is only ever created by renaming a complete,
+//! fsynced temp file, so a reader sees either nothing or the whole file, whatever was killed when.
+//! A blob is verified against its name on every read; a bad one is a miss that rebuilds.
+
+mod atomic;
+mod files;
+mod gc;
+
+use std::fs::{self, File};
+use std::io;
+use std::path::{Path, PathBuf};
+use std::time::SystemTime;
+
+pub use atomic::write_atomic;
+pub use gc::{GcReport, gc};
+
+/// A blake3 digest (of artifact bytes, file contents, or an action).
+pub type Digest = blake3::Hash;
+
+const FORMAT: &str = "kodama-dag cache 1\n";
+
+/// Why a blob could not be read.
+#[derive(Debug)]
+pub enum BlobError {
+    /// Not in the store.
+    Missing,
+    /// Its bytes do not hash to its name.
+    Corrupt,
+    /// Reading failed.
+    Io(io::Error),
+}
+
+impl std::fmt::Display for BlobError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            BlobError::Missing => f.write_str("missing from the store"),
+            BlobError::Corrupt => f.write_str("corrupt (its bytes do not match its digest)"),
+            BlobError::Io(e) => write!(f, "unreadable: {e}"),
+        }
+    }
+}
+
+/// A cache directory.
+pub struct Cache {
+    root: PathBuf,
+}
+
+/// Digest of `bytes`, using all threads for large inputs.
+pub fn digest_bytes(bytes: &[u8]) -> Digest {
+    if bytes.len() >= 1 << 20 {
+        let mut h = blake3::Hasher::new();
+        h.update_rayon(bytes);
+        h.finalize()
+    } else {
+        blake3::hash(bytes)
+    }
+}
+
+fn shard(dir: &Path, hex: &str) -> PathBuf {
+    dir.join(&hex[..2]).join(hex)
+}
+
+impl Cache {
+    /// Opens (creating if needed) the cache at `root`.
+    pub fn open(root: &Path) -> io::Result<Cache> {
+        for d in ["cas", "ac", "stat", "runs", "tmp"] {
+            fs::create_dir_all(root.join(d))?;
+        }
+        let fmt = root.join("FORMAT");
+        match fs::read_to_string(&fmt) {
+            Ok(s) if s == FORMAT => {}
+            Ok(s) => {
+                return Err(io::Error::other(format!(
+                    "{} is a cache of another format ({:?}); use another --cache or delete it",
+                    root.display(),
+                    s.trim()
+                )));
+            }
+            Err(e) if e.kind() == io::ErrorKind::NotFound => {
+                write_atomic(&root.join("tmp"), &fmt, FORMAT.as_bytes())?;
+            }
+            Err(e) => return Err(e),
+        }
+        Ok(Cache {
+            root: root.to_path_buf(),
+        })
+    }
+
+    /// The cache root.
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    pub(crate) fn tmp(&self) -> PathBuf {
+        self.root.join("tmp")
+    }
+
+    /// A lock held for the duration of a run: any number of runs, but no gc, at a time.
+    pub fn lock_shared(&self) -> io::Result<File> {
+        let f = self.lock_file()?;
+        f.lock_shared()?;
+        Ok(f)
+    }
+
+    fn lock_file(&self) -> io::Result<File> {
+        File::options()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(self.root.join("lock"))
+    }
+
+    fn blob_path(&self, d: &Digest) -> PathBuf {
+        shard(&self.root.join("cas"), &d.to_hex())
+    }
+
+    /// Stores `bytes` under `digest` (which the caller computed with [`digest_bytes`]).
+    pub fn put_blob(&self, digest: &Digest, bytes: &[u8]) -> io::Result<()> {
+        let path = self.blob_path(digest);
+        if self.has_blob(digest, bytes.len() as u64) {
+            return Ok(());
+        }
+        fs::create_dir_all(path.parent().expect("sharded path has a parent"))?;
+        write_atomic(&self.tmp(), &path, bytes)
+    }
+
+    /// True if a blob of `size` bytes is stored under `digest` (by stat, not by hashing); marks it
+    /// recently used for gc.
+    pub fn has_blob(&self, digest: &Digest, size: u64) -> bool {
+        let path = self.blob_path(digest);
+        match fs::metadata(&path) {
+            Ok(m) if m.len() == size => {
+                touch(&path);
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Reads and verifies the blob `digest`.
+    pub fn get_blob(&self, digest: &Digest) -> Result<Vec<u8>, BlobError> {
+        let path = self.blob_path(digest);
+        let bytes = match fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Err(BlobError::Missing),
+            Err(e) => return Err(BlobError::Io(e)),
+        };
+        if digest_bytes(&bytes) != *digest {
+            return Err(BlobError::Corrupt);
+        }
+        touch(&path);
+        Ok(bytes)
+    }
+
+    /// The artifact digest and size recorded for action `key`, if any.
+    pub fn get_action(&self, key: &Digest) -> Option<(Digest, u64)> {
+        parse_action(&fs::read_to_string(shard(&self.root.join("ac"), &key.to_hex())).ok()?)
+    }
+
+    /// Records that action `key` produced the blob `digest` of `size` bytes.
+    pub fn put_action(&self, key: &Digest, digest: &Digest, size: u64) -> io::Result<()> {
+        let path = shard(&self.root.join("ac"), &key.to_hex());
+        fs::create_dir_all(path.parent().expect("sharded path has a parent"))?;
+        write_atomic(
+            &self.tmp(),
+            &path,
+            format!("blake3:{} {size}\n", digest.to_hex()).as_bytes(),
+        )
+    }
+
+    /// The folder for run records and last-run snapshots of one graph.
+    pub fn runs_dir(&self, graph_key: &str) -> PathBuf {
+        self.root.join("runs").join(graph_key)
+    }
+}
+
+/// Parses an action entry `blake3:<hex> <size>`.
+fn parse_action(text: &str) -> Option<(Digest, u64)> {
+    let (d, size) = text.trim().strip_prefix("blake3:")?.split_once(' ')?;
+    Some((Digest::from_hex(d).ok()?, size.parse().ok()?))
+}
+
+/// Marks a file as recently used (its mtime is the LRU clock gc reads). Best effort: a read-only
+/// cache still works, it just ages by write time.
+fn touch(path: &Path) {
+    if let Ok(f) = File::options().write(true).open(path) {
+        let _ = f.set_modified(SystemTime::now());
+    }
+}

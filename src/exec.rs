@@ -1,0 +1,574 @@
+//! Running a graph: nodes whose inputs are ready run in parallel on a rayon pool; each one is a
+//! cache hit (its action key maps to a stored artifact) or runs its stage and stores the result.
+//!
+//! **Invariants:**
+//! - a node runs at most once per run, after all its inputs are done (rebuilding a corrupt
+//!   blob re-executes the producing node once more, which is the point);
+//! - a failure is never cached, and stops only the failed node's descendants;
+//! - the state mutex is never held while a slot mutex is taken or a stage runs; slot mutexes are
+//!   taken in ancestor-before-descendant order only, so there is no lock cycle.
+
+use std::collections::BTreeMap;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Instant;
+
+use kodama_nodes::stage::{Arity, Slot};
+use kodama_nodes::{Artifact, Ctx, Inputs, StageError};
+use rayon::prelude::*;
+
+use crate::cache::{Cache, Digest, digest_bytes, write_atomic};
+use crate::graph::Graph;
+use crate::key::{action_key, site_digest};
+use crate::progress::Reporter;
+use crate::record::{LastRun, NodeRecord, RunRecord, Snapshot, Status, save_record, what_changed};
+
+/// Options of one run.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Worker threads; default: all cores.
+    pub jobs: Option<usize>,
+    /// Run only these nodes and their ancestors; all when empty.
+    pub targets: Vec<String>,
+    /// Where declared outputs are written.
+    pub out_dir: PathBuf,
+}
+
+/// Why a run could not start or finish.
+#[derive(Debug)]
+pub enum RunError {
+    /// Bad usage or input (exit 2): unknown target, unreadable input file.
+    Usage(String),
+    /// The cache or output folder failed (exit 1).
+    Io(String),
+}
+
+impl std::fmt::Display for RunError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RunError::Usage(m) | RunError::Io(m) => f.write_str(m),
+        }
+    }
+}
+
+/// The folder name under `runs/` for this graph file: its stem and a hash of its absolute path.
+pub fn graph_key(graph: &Graph) -> String {
+    let abs = std::fs::canonicalize(&graph.path).unwrap_or_else(|_| graph.path.clone());
+    let h = blake3::hash(abs.as_os_str().as_encoded_bytes()).to_hex();
+    format!("{}-{}", graph.name, &h[..16])
+}
+
+/// Resolves `--target` ids to node indices.
+pub fn target_indices(graph: &Graph, targets: &[String]) -> Result<Vec<usize>, RunError> {
+    targets
+        .iter()
+        .map(|t| {
+            graph.index(t).ok_or_else(|| {
+                let hint =
+                    crate::syntax::did_you_mean(t, graph.nodes.iter().map(|n| n.id.as_str()))
+                        .map(|m| format!("; did you mean `{m}`?"))
+                        .unwrap_or_default();
+                RunError::Usage(format!(
+                    "--target: no node `{t}` in {}{hint}",
+                    graph.path.display()
+                ))
+            })
+        })
+        .collect()
+}
+
+/// Content digests of the files of every needed node, in parallel, through the stat cache.
+pub fn file_digests(
+    graph: &Graph,
+    cache: &Cache,
+    need: &[bool],
+) -> Result<Vec<Vec<Digest>>, RunError> {
+    graph
+        .nodes
+        .par_iter()
+        .zip(need)
+        .map(|(n, &needed)| {
+            if !needed {
+                return Ok(Vec::new());
+            }
+            n.files
+                .iter()
+                .map(|f| {
+                    cache.file_digest(&f.path).map_err(|e| {
+                        RunError::Usage(format!(
+                            "node \"{}\": cannot read `{}` ({}): {e}",
+                            n.id,
+                            f.field,
+                            f.path.display()
+                        ))
+                    })
+                })
+                .collect()
+        })
+        .collect()
+}
+
+fn pool(jobs: Option<usize>) -> Result<rayon::ThreadPool, RunError> {
+    let mut b = rayon::ThreadPoolBuilder::new().thread_name(|i| format!("kodama-{i}"));
+    if let Some(j) = jobs {
+        b = b.num_threads(j.max(1));
+    }
+    b.build()
+        .map_err(|e| RunError::Io(format!("cannot start worker threads: {e}")))
+}
+
+/// Runs `graph` against `cache`, writes its outputs, saves the run record, and returns it.
+pub fn run(
+    graph: &Graph,
+    cache: &Cache,
+    opts: &RunOptions,
+    reporter: &Reporter,
+) -> Result<RunRecord, RunError> {
+    let io = |what: &str, e: std::io::Error| RunError::Io(format!("{what}: {e}"));
+    let targets = target_indices(graph, &opts.targets)?;
+    let need = graph.needed(&targets);
+    let _lock = cache
+        .lock_shared()
+        .map_err(|e| io("cannot lock the cache", e))?;
+    let runs_dir = cache.runs_dir(&graph_key(graph));
+    let last = LastRun::load(&runs_dir);
+    let started = Instant::now();
+    let pool = pool(opts.jobs)?;
+    let (records, snapshots, outputs) = pool.install(|| -> Result<_, RunError> {
+        let files = file_digests(graph, cache, &need)?;
+        let exec = Exec::new(graph, cache, &last, reporter, files, need.clone());
+        rayon::scope(|s| {
+            let exec = &exec;
+            for i in 0..graph.nodes.len() {
+                if exec.need[i] && graph.nodes[i].deps.is_empty() {
+                    s.spawn(move |s| exec.visit(s, i));
+                }
+            }
+        });
+        let outputs = exec.export(&opts.out_dir)?;
+        let (records, snapshots) = exec.into_results();
+        Ok((records, snapshots, outputs))
+    })?;
+    reporter.finish(&records, started.elapsed().as_secs_f64());
+    let record = RunRecord {
+        graph: graph.path.display().to_string(),
+        nodes: records,
+        outputs,
+    };
+    let mut next = last;
+    next.nodes.extend(snapshots);
+    next.save(&runs_dir, &cache.tmp())
+        .map_err(|e| io("cannot save the run state", e))?;
+    save_record(&record, &runs_dir, &cache.tmp())
+        .map_err(|e| io("cannot save the run record", e))?;
+    Ok(record)
+}
+
+/// The result of one node.
+struct Outcome {
+    record: NodeRecord,
+    digest: Option<Digest>,
+    /// This node or one of its ancestors ran in this run.
+    ran_upstream: bool,
+    snapshot: Option<Snapshot>,
+}
+
+impl Outcome {
+    fn ok(&self) -> bool {
+        self.digest.is_some()
+    }
+}
+
+#[derive(Default)]
+struct State {
+    pending: Vec<usize>,
+    consumers_left: Vec<usize>,
+    outcomes: Vec<Option<Outcome>>,
+}
+
+struct Executed {
+    artifact: Arc<Artifact>,
+    digest: Digest,
+    snapshot: Snapshot,
+}
+
+struct Exec<'a> {
+    graph: &'a Graph,
+    cache: &'a Cache,
+    last: &'a LastRun,
+    reporter: &'a Reporter,
+    site: Digest,
+    files: Vec<Vec<Digest>>,
+    need: Vec<bool>,
+    consumers: Vec<Vec<usize>>,
+    is_output: Vec<bool>,
+    state: Mutex<State>,
+    /// Artifacts in memory: produced this run, or loaded for a consumer; dropped when the last
+    /// consumer is done (outputs are kept for export).
+    slots: Vec<Mutex<Option<Arc<Artifact>>>>,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    // A panicking stage is caught before it can poison anything; recover the data regardless.
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl<'a> Exec<'a> {
+    fn new(
+        graph: &'a Graph,
+        cache: &'a Cache,
+        last: &'a LastRun,
+        reporter: &'a Reporter,
+        files: Vec<Vec<Digest>>,
+        need: Vec<bool>,
+    ) -> Self {
+        let n = graph.nodes.len();
+        let consumers: Vec<Vec<usize>> = graph
+            .consumers()
+            .into_iter()
+            .map(|c| c.into_iter().filter(|&c| need[c]).collect())
+            .collect();
+        let mut is_output = vec![false; n];
+        for (_, i) in &graph.outputs {
+            is_output[*i] = true;
+        }
+        let state = State {
+            pending: graph.nodes.iter().map(|n| n.deps.len()).collect(),
+            consumers_left: consumers.iter().map(Vec::len).collect(),
+            outcomes: (0..n).map(|_| None).collect(),
+        };
+        Exec {
+            graph,
+            cache,
+            last,
+            reporter,
+            site: site_digest(&graph.site),
+            files,
+            need,
+            consumers,
+            is_output,
+            state: Mutex::new(state),
+            slots: (0..n).map(|_| Mutex::new(None)).collect(),
+        }
+    }
+
+    fn visit<'s>(&'s self, s: &rayon::Scope<'s>, i: usize) {
+        let t0 = Instant::now();
+        let mut outcome = self.process(i);
+        outcome.record.ms = (t0.elapsed().as_secs_f64() * 1e6).round() / 1e3;
+        self.reporter.finished(&outcome.record);
+        let node = &self.graph.nodes[i];
+        let (ready, release) = {
+            let mut st = lock(&self.state);
+            st.outcomes[i] = Some(outcome);
+            let mut release = Vec::new();
+            for &d in &node.deps {
+                st.consumers_left[d] -= 1;
+                if st.consumers_left[d] == 0 && !self.is_output[d] {
+                    release.push(d);
+                }
+            }
+            let mut ready = Vec::new();
+            for &c in &self.consumers[i] {
+                st.pending[c] -= 1;
+                if st.pending[c] == 0 {
+                    ready.push(c);
+                }
+            }
+            (ready, release)
+        };
+        for d in release {
+            *lock(&self.slots[d]) = None;
+        }
+        if self.consumers[i].is_empty() && !self.is_output[i] {
+            *lock(&self.slots[i]) = None;
+        }
+        for c in ready {
+            s.spawn(move |s| self.visit(s, c));
+        }
+    }
+
+    fn record(
+        &self,
+        i: usize,
+        status: Status,
+        reason: String,
+        digest: Option<Digest>,
+    ) -> NodeRecord {
+        let node = &self.graph.nodes[i];
+        NodeRecord {
+            id: node.id.clone(),
+            kind: node.kind.name.to_owned(),
+            status,
+            reason,
+            ms: 0.0,
+            digest: digest.map(|d| d.to_hex().to_string()),
+            error: None,
+            user_error: false,
+        }
+    }
+
+    /// The digests of each input list of node `i`, once all its inputs are done.
+    fn input_digests(&self, i: usize) -> Vec<Vec<Digest>> {
+        let st = lock(&self.state);
+        let node = &self.graph.nodes[i];
+        node.inputs
+            .iter()
+            .map(|list| {
+                list.iter()
+                    .map(|&d| {
+                        st.outcomes[d]
+                            .as_ref()
+                            .and_then(|o| o.digest)
+                            .expect("input done")
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    fn process(&self, i: usize) -> Outcome {
+        let node = &self.graph.nodes[i];
+        let ran_upstream = {
+            let st = lock(&self.state);
+            let deps: Vec<&Outcome> = node
+                .deps
+                .iter()
+                .map(|&d| st.outcomes[d].as_ref().expect("deps done"))
+                .collect();
+            if let Some((d, o)) = node.deps.iter().zip(&deps).find(|(_, o)| !o.ok()) {
+                let why = if o.record.status == Status::Failed {
+                    "failed"
+                } else {
+                    "was skipped"
+                };
+                let reason = format!("input \"{}\" {why}", self.graph.nodes[*d].id);
+                return Outcome {
+                    record: self.record(i, Status::Skipped, reason, None),
+                    digest: None,
+                    ran_upstream: false,
+                    snapshot: None,
+                };
+            }
+            deps.iter().any(|o| o.ran_upstream)
+        };
+        let (key, snapshot) = action_key(node, &self.site, &self.input_digests(i), &self.files[i]);
+        let last = self.last.nodes.get(&node.id);
+        let mut reason = None;
+        if let Some((digest, size)) = self.cache.get_action(&key) {
+            if self.cache.has_blob(&digest, size) {
+                let unchanged = last.is_some_and(|l| l.key == snapshot.key);
+                let (status, why) = match (ran_upstream, unchanged) {
+                    (true, true) => (
+                        Status::Cutoff,
+                        "upstream reran and reproduced its output".to_owned(),
+                    ),
+                    (true, false) => (
+                        Status::Cached,
+                        format!("in the cache, though {}", what_changed(&snapshot, last)),
+                    ),
+                    (false, true) => (Status::Cached, "unchanged".to_owned()),
+                    (false, false) => (
+                        Status::Cached,
+                        format!("in the cache, though {}", what_changed(&snapshot, last)),
+                    ),
+                };
+                let snapshot = Snapshot {
+                    digest: Some(digest.to_hex().to_string()),
+                    ..snapshot
+                };
+                return Outcome {
+                    record: self.record(i, status, why, Some(digest)),
+                    digest: Some(digest),
+                    ran_upstream,
+                    snapshot: Some(snapshot),
+                };
+            }
+            self.reporter.warn(&format!(
+                "node \"{}\": its cached output is missing from the store; rebuilding",
+                node.id
+            ));
+            reason = Some("cached output was missing from the store; rebuilt".to_owned());
+        }
+        let reason = reason.unwrap_or_else(|| what_changed(&snapshot, last));
+        match self.execute(i) {
+            Ok(ex) => {
+                *lock(&self.slots[i]) = Some(ex.artifact);
+                Outcome {
+                    record: self.record(i, Status::Ran, reason, Some(ex.digest)),
+                    digest: Some(ex.digest),
+                    ran_upstream: true,
+                    snapshot: Some(ex.snapshot),
+                }
+            }
+            Err(e) => {
+                let mut record = self.record(i, Status::Failed, reason, None);
+                record.user_error = e.is_user_error();
+                record.error = Some(e.to_string());
+                Outcome {
+                    record,
+                    digest: None,
+                    ran_upstream: true,
+                    snapshot: None,
+                }
+            }
+        }
+    }
+
+    /// Runs node `i`'s stage on its inputs and stores the output.
+    fn execute(&self, i: usize) -> Result<Executed, StageError> {
+        let node = &self.graph.nodes[i];
+        let mut inputs = Inputs::new();
+        for (spec, list) in node.kind.inputs.iter().zip(&node.inputs) {
+            let arts = list
+                .iter()
+                .map(|&d| self.artifact(d))
+                .collect::<Result<Vec<_>, _>>()?;
+            let slot = match spec.arity {
+                Arity::One => Slot::One(arts.into_iter().next().expect("checked by the loader")),
+                Arity::Optional => Slot::Optional(arts.into_iter().next()),
+                Arity::Many => Slot::Many(arts),
+            };
+            inputs.push(spec.name, slot);
+        }
+        // Inputs are loaded now; a rebuilt input may have changed its digest, so key afresh.
+        let (key, mut snapshot) =
+            action_key(node, &self.site, &self.input_digests(i), &self.files[i]);
+        let paths: Vec<PathBuf> = node.files.iter().map(|f| f.path.clone()).collect();
+        let progress = self.reporter.started(&node.id, node.kind.name);
+        let ctx = Ctx {
+            site: &self.graph.site,
+            files: &paths,
+            progress: &progress,
+            seed: *key.as_bytes(),
+        };
+        let result = catch_unwind(AssertUnwindSafe(|| node.params.run(&inputs, &ctx)));
+        drop(progress);
+        let artifact = match result {
+            Ok(r) => r?,
+            Err(panic) => {
+                let msg = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned());
+                return Err(StageError::Failed(format!(
+                    "the stage panicked (a bug): {}",
+                    msg.unwrap_or_default()
+                )));
+            }
+        };
+        if artifact.ty() != node.kind.output {
+            return Err(StageError::Failed(format!(
+                "the stage returned {} instead of {}",
+                artifact.ty(),
+                node.kind.output
+            )));
+        }
+        let bytes = rmp_serde::to_vec(&artifact)
+            .map_err(|e| StageError::Failed(format!("cannot encode the output: {e}")))?;
+        let digest = digest_bytes(&bytes);
+        let store = |e: std::io::Error| {
+            StageError::Failed(format!(
+                "cannot store the output in {}: {e}",
+                self.cache.root().display()
+            ))
+        };
+        self.cache.put_blob(&digest, &bytes).map_err(store)?;
+        self.cache
+            .put_action(&key, &digest, bytes.len() as u64)
+            .map_err(store)?;
+        snapshot.digest = Some(digest.to_hex().to_string());
+        Ok(Executed {
+            artifact: Arc::new(artifact),
+            digest,
+            snapshot,
+        })
+    }
+
+    /// The artifact of finished node `d`: from memory, else from the store (verified). A missing or
+    /// corrupt blob is rebuilt by running `d` again.
+    fn artifact(&self, d: usize) -> Result<Arc<Artifact>, StageError> {
+        let mut slot = lock(&self.slots[d]);
+        if let Some(a) = slot.as_ref() {
+            return Ok(a.clone());
+        }
+        let digest = lock(&self.state).outcomes[d]
+            .as_ref()
+            .and_then(|o| o.digest)
+            .expect("input done");
+        let problem = match self.cache.get_blob(&digest) {
+            Ok(bytes) => match rmp_serde::from_slice::<Artifact>(&bytes) {
+                Ok(a) => {
+                    let a = Arc::new(a);
+                    *slot = Some(a.clone());
+                    return Ok(a);
+                }
+                Err(e) => format!("undecodable ({e})"),
+            },
+            Err(e) => e.to_string(),
+        };
+        let id = &self.graph.nodes[d].id;
+        self.reporter.warn(&format!(
+            "node \"{id}\": its stored output {} is {problem}; rebuilding",
+            &digest.to_hex()[..12]
+        ));
+        let t0 = Instant::now();
+        let ex = self.execute(d)?;
+        if ex.digest != digest {
+            self.reporter.warn(&format!("node \"{id}\": the rebuilt output differs from the recorded one; is its stage deterministic?"));
+        }
+        {
+            let mut st = lock(&self.state);
+            let o = st.outcomes[d].as_mut().expect("input done");
+            o.digest = Some(ex.digest);
+            o.snapshot = Some(ex.snapshot);
+            o.record.status = Status::Ran;
+            o.record.reason = format!("stored output was {problem}; rebuilt");
+            o.record.digest = Some(ex.digest.to_hex().to_string());
+            o.record.ms += t0.elapsed().as_secs_f64() * 1e3;
+        }
+        *slot = Some(ex.artifact.clone());
+        Ok(ex.artifact)
+    }
+
+    /// Writes every declared output whose node succeeded into `dir`, each file atomically.
+    fn export(&self, dir: &Path) -> Result<BTreeMap<String, String>, RunError> {
+        let mut written = BTreeMap::new();
+        for (name, i) in &self.graph.outputs {
+            let ok = self.need[*i]
+                && lock(&self.state).outcomes[*i]
+                    .as_ref()
+                    .is_some_and(Outcome::ok);
+            if !ok {
+                continue;
+            }
+            let art = self
+                .artifact(*i)
+                .map_err(|e| RunError::Io(format!("output \"{name}\": {e}")))?;
+            let (ext, bytes) = kodama_nodes::export::encode(&art, &self.graph.site)
+                .map_err(|e| RunError::Io(format!("output \"{name}\": {e}")))?;
+            std::fs::create_dir_all(dir)
+                .map_err(|e| RunError::Io(format!("cannot create {}: {e}", dir.display())))?;
+            let path = dir.join(format!("{name}.{ext}"));
+            write_atomic(dir, &path, &bytes)
+                .map_err(|e| RunError::Io(format!("cannot write {}: {e}", path.display())))?;
+            written.insert(name.clone(), path.display().to_string());
+        }
+        Ok(written)
+    }
+
+    fn into_results(self) -> (Vec<NodeRecord>, Vec<(String, Snapshot)>) {
+        let st = self.state.into_inner().unwrap_or_else(|p| p.into_inner());
+        let mut records = Vec::new();
+        let mut snapshots = Vec::new();
+        for (i, o) in st.outcomes.into_iter().enumerate() {
+            let Some(o) = o else { continue };
+            if let Some(s) = o.snapshot {
+                snapshots.push((self.graph.nodes[i].id.clone(), s));
+            }
+            records.push(o.record);
+        }
+        (records, snapshots)
+    }
+}

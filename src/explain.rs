@@ -1,0 +1,94 @@
+//! `explain`: what a run would do and why, without running anything or touching outputs.
+
+use serde::Serialize;
+
+use crate::cache::{Cache, Digest};
+use crate::exec::{RunError, file_digests, graph_key, target_indices};
+use crate::graph::Graph;
+use crate::key::{action_key, site_digest};
+use crate::record::{LastRun, what_changed};
+
+/// What would happen to one node.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Plan {
+    /// Its output is in the cache for the current inputs.
+    Cached,
+    /// It would run.
+    Run,
+    /// It would run unless everything upstream that runs reproduces its output (early cutoff).
+    Maybe,
+}
+
+/// One node's line.
+#[derive(Clone, Debug, Serialize)]
+pub struct PlanEntry {
+    /// Node id.
+    pub id: String,
+    /// Kind.
+    pub kind: String,
+    /// What would happen.
+    pub plan: Plan,
+    /// Why.
+    pub reason: String,
+}
+
+/// Plans a run of `graph` (restricted to `targets` and their ancestors when given).
+pub fn explain(
+    graph: &Graph,
+    cache: &Cache,
+    targets: &[String],
+) -> Result<Vec<PlanEntry>, RunError> {
+    let need = graph.needed(&target_indices(graph, targets)?);
+    let files = file_digests(graph, cache, &need)?;
+    let last = LastRun::load(&cache.runs_dir(&graph_key(graph)));
+    let site = site_digest(&graph.site);
+    let mut digests: Vec<Option<Digest>> = vec![None; graph.nodes.len()];
+    let mut out = Vec::new();
+    for (i, node) in graph.nodes.iter().enumerate().filter(|(i, _)| need[*i]) {
+        let entry = |plan, reason| PlanEntry {
+            id: node.id.clone(),
+            kind: node.kind.name.to_owned(),
+            plan,
+            reason,
+        };
+        let unknown: Vec<&str> = node
+            .deps
+            .iter()
+            .filter(|&&d| digests[d].is_none())
+            .map(|&d| graph.nodes[d].id.as_str())
+            .collect();
+        if !unknown.is_empty() {
+            let list = unknown
+                .iter()
+                .map(|u| format!("\"{u}\""))
+                .collect::<Vec<_>>()
+                .join(", ");
+            out.push(entry(
+                Plan::Maybe,
+                format!("runs unless {list} reproduce their outputs"),
+            ));
+            continue;
+        }
+        let inputs: Vec<Vec<Digest>> = node
+            .inputs
+            .iter()
+            .map(|l| l.iter().map(|&d| digests[d].expect("known")).collect())
+            .collect();
+        let (key, snapshot) = action_key(node, &site, &inputs, &files[i]);
+        let hit = cache
+            .get_action(&key)
+            .filter(|(d, size)| cache.has_blob(d, *size));
+        match hit {
+            Some((d, _)) => {
+                digests[i] = Some(d);
+                out.push(entry(Plan::Cached, "in the cache".into()));
+            }
+            None => out.push(entry(
+                Plan::Run,
+                what_changed(&snapshot, last.nodes.get(&node.id)),
+            )),
+        }
+    }
+    Ok(out)
+}

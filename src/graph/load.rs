@@ -1,0 +1,663 @@
+//! Graph file -> [`Graph`]: parse, apply `--set`, look up kinds, split inputs from params, check
+//! edges, types, cycles, values and files. Every problem found is reported, not just the first.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::path::{Path, PathBuf};
+
+use kodama_nodes::Site;
+use kodama_nodes::stage::Arity;
+use petgraph::algo::tarjan_scc;
+use petgraph::graph::DiGraph;
+
+use super::{Graph, InputFile, Node};
+use crate::diag::{Diagnostic, GraphError, Sources};
+use crate::registry;
+use crate::syntax::{self, Ast, DeError, Name, Span, Value, did_you_mean};
+
+/// How to load a graph.
+#[derive(Clone, Debug, Default)]
+pub struct LoadOptions {
+    /// Resolve data paths against this folder instead of the graph file's.
+    pub data_dir: Option<PathBuf>,
+    /// `NODE.PARAM=VALUE` overrides, in order.
+    pub sets: Vec<String>,
+}
+
+struct RawNode {
+    id: String,
+    kind: Name,
+    fields: Vec<(Name, Ast)>,
+}
+
+/// Loads and checks the graph at `path`.
+pub fn load(path: &Path, opts: &LoadOptions) -> Result<Graph, GraphError> {
+    let display = path.display().to_string();
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| GraphError::general(&display, format!("cannot read the graph file: {e}")))?;
+    let mut sources = Sources {
+        items: vec![(display, text)],
+    };
+    for s in &opts.sets {
+        sources.items.push((format!("--set {s}"), s.clone()));
+    }
+    let mut diags = Vec::new();
+    let graph = check(path, opts, &sources, &mut diags);
+    match graph {
+        Some(g) if diags.is_empty() => Ok(g),
+        _ => Err(GraphError {
+            diagnostics: diags,
+            sources,
+        }),
+    }
+}
+
+fn de_diag(e: DeError, fallback: Span, node: Option<&str>) -> Diagnostic {
+    Diagnostic::at(e.span.unwrap_or(fallback), node, e.message)
+}
+
+fn check(
+    path: &Path,
+    opts: &LoadOptions,
+    sources: &Sources,
+    diags: &mut Vec<Diagnostic>,
+) -> Option<Graph> {
+    let ast = match syntax::parse(&sources.items[0].1, 0, 1, 1) {
+        Ok(a) => a,
+        Err(e) => {
+            diags.push(Diagnostic::at(e.span, None, e.message));
+            return None;
+        }
+    };
+    let top = match &ast.v {
+        Value::Struct { name, fields } if name.as_ref().is_none_or(|n| n.name == "Graph") => fields,
+        _ => {
+            diags.push(Diagnostic::at(
+                ast.span,
+                None,
+                format!(
+                    "expected `Graph(site: ..., nodes: {{...}}, outputs: {{...}})`, found {}",
+                    ast.v.describe()
+                ),
+            ));
+            return None;
+        }
+    };
+    const TOP: &[&str] = &["site", "nodes", "outputs"];
+    let mut site_ast = None;
+    let mut nodes_ast = None;
+    let mut outputs_ast = None;
+    for (name, v) in top {
+        match name.name.as_str() {
+            "site" => site_ast = Some(v),
+            "nodes" => nodes_ast = Some(v),
+            "outputs" => outputs_ast = Some(v),
+            other => diags.push(Diagnostic::at(
+                name.span,
+                None,
+                unknown("field", other, TOP.iter().copied()),
+            )),
+        }
+    }
+    let site = match site_ast {
+        None => {
+            diags.push(Diagnostic::at(ast.span, None, "missing field `site`: expected `site: Site(crs: \"EPSG:<code>\", origin: (x, y), cell_m: 0.5)`"));
+            None
+        }
+        Some(a) => match syntax::from_ast::<Site>(a) {
+            Err(e) => {
+                diags.push(de_diag(e, a.span, None));
+                None
+            }
+            Ok(site) => match site.validate() {
+                Err((field, msg)) => {
+                    diags.push(Diagnostic::at(
+                        field_span(a, field).unwrap_or(a.span),
+                        None,
+                        format!("invalid `{field}`: {msg}"),
+                    ));
+                    None
+                }
+                Ok(()) => Some(site),
+            },
+        },
+    };
+    let Some(nodes_ast) = nodes_ast else {
+        diags.push(Diagnostic::at(
+            ast.span,
+            None,
+            "missing field `nodes`: expected `nodes: { \"id\": Kind(...), ... }`",
+        ));
+        return None;
+    };
+    let mut raw = raw_nodes(nodes_ast, diags);
+    apply_sets(&mut raw, opts, diags);
+
+    // Kinds, inputs and params.
+    let ids: Vec<&str> = raw.iter().map(|r| r.id.as_str()).collect();
+    let index: HashMap<&str, usize> = ids.iter().enumerate().map(|(i, id)| (*id, i)).collect();
+    let mut nodes: Vec<Option<Node>> = Vec::with_capacity(raw.len());
+    let base = opts
+        .data_dir
+        .clone()
+        .unwrap_or_else(|| path.parent().map(Path::to_path_buf).unwrap_or_default());
+    let base = if base.as_os_str().is_empty() {
+        PathBuf::from(".")
+    } else {
+        base
+    };
+    for r in &raw {
+        nodes.push(build_node(
+            r,
+            &raw,
+            &index,
+            &base,
+            opts.data_dir.is_some(),
+            diags,
+        ));
+    }
+
+    let outputs = outputs_ast
+        .map(|a| check_outputs(a, &index, &ids, diags))
+        .unwrap_or_default();
+    if !diags.is_empty() {
+        return None;
+    }
+    let nodes: Vec<Node> = nodes
+        .into_iter()
+        .map(|n| n.expect("no diagnostics means every node built"))
+        .collect();
+    let order = topo_order(&nodes, &raw, diags)?;
+    let site = site?;
+
+    // Renumber into topological order.
+    let mut new_index = vec![0; nodes.len()];
+    for (new, &old) in order.iter().enumerate() {
+        new_index[old] = new;
+    }
+    let mut slots: Vec<Option<Node>> = nodes.into_iter().map(Some).collect();
+    let nodes = order
+        .iter()
+        .map(|&old| {
+            let mut n = slots[old].take().expect("each node once");
+            for list in &mut n.inputs {
+                for i in list.iter_mut() {
+                    *i = new_index[*i];
+                }
+            }
+            n.deps = n
+                .inputs
+                .iter()
+                .flatten()
+                .copied()
+                .collect::<BTreeSet<_>>()
+                .into_iter()
+                .collect();
+            n
+        })
+        .collect();
+    let outputs = outputs
+        .into_iter()
+        .map(|(name, old)| (name, new_index[old]))
+        .collect();
+    let name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "graph".into());
+    Some(Graph {
+        path: path.to_path_buf(),
+        name,
+        site,
+        nodes,
+        outputs,
+    })
+}
+
+fn unknown<'a>(
+    what: &str,
+    word: &str,
+    candidates: impl IntoIterator<Item = &'a str> + Clone,
+) -> String {
+    match did_you_mean(word, candidates.clone()) {
+        Some(m) => format!("unknown {what} `{word}`; did you mean `{m}`?"),
+        None => {
+            let list: Vec<&str> = candidates.into_iter().collect();
+            if list.is_empty() {
+                format!("unknown {what} `{word}`")
+            } else {
+                format!(
+                    "unknown {what} `{word}`; expected one of: {}",
+                    list.join(", ")
+                )
+            }
+        }
+    }
+}
+
+fn field_span(a: &Ast, field: &str) -> Option<Span> {
+    match &a.v {
+        Value::Struct { fields, .. } => fields
+            .iter()
+            .find(|(n, _)| n.name == field)
+            .map(|(_, v)| v.span),
+        _ => None,
+    }
+}
+
+fn raw_nodes(nodes_ast: &Ast, diags: &mut Vec<Diagnostic>) -> Vec<RawNode> {
+    let Value::Map(entries) = &nodes_ast.v else {
+        diags.push(Diagnostic::at(
+            nodes_ast.span,
+            None,
+            format!(
+                "expected `{{ \"id\": Kind(...), ... }}`, found {}",
+                nodes_ast.v.describe()
+            ),
+        ));
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for (k, v) in entries {
+        let Value::Str(id) = &k.v else {
+            diags.push(Diagnostic::at(
+                k.span,
+                None,
+                format!("expected a node id string, found {}", k.v.describe()),
+            ));
+            continue;
+        };
+        if id.is_empty() || id.contains(['.', '"', '\n']) || id.trim() != id {
+            diags.push(Diagnostic::at(k.span, None, format!("invalid node id {id:?}: expected a non-empty name without dots, quotes or surrounding spaces")));
+            continue;
+        }
+        let (kind, fields) = match &v.v {
+            Value::Struct {
+                name: Some(n),
+                fields,
+            } => (n.clone(), fields.clone()),
+            Value::Ident(n) => (
+                Name {
+                    name: n.clone(),
+                    span: v.span,
+                },
+                Vec::new(),
+            ),
+            Value::Call { name, .. } => {
+                diags.push(Diagnostic::at(
+                    v.span,
+                    Some(id),
+                    format!(
+                        "expected `{}(field: value, ...)` with named fields",
+                        name.name
+                    ),
+                ));
+                continue;
+            }
+            other => {
+                diags.push(Diagnostic::at(
+                    v.span,
+                    Some(id),
+                    format!(
+                        "expected a node `Kind(field: value, ...)`, found {}",
+                        other.describe()
+                    ),
+                ));
+                continue;
+            }
+        };
+        out.push(RawNode {
+            id: id.clone(),
+            kind,
+            fields,
+        });
+    }
+    out
+}
+
+fn apply_sets(raw: &mut [RawNode], opts: &LoadOptions, diags: &mut Vec<Diagnostic>) {
+    for (k, s) in opts.sets.iter().enumerate() {
+        let src = (k + 1) as u16;
+        let at = |col: usize| Span {
+            src,
+            line: 1,
+            col: col as u32,
+        };
+        let Some((lhs, value)) = s.split_once('=') else {
+            diags.push(Diagnostic::at(at(1), None, "expected NODE.PARAM=VALUE"));
+            continue;
+        };
+        let Some((node, param)) = lhs.split_once('.') else {
+            diags.push(Diagnostic::at(
+                at(1),
+                None,
+                "expected NODE.PARAM=VALUE (no `.` between node and param)",
+            ));
+            continue;
+        };
+        let Some(r) = raw.iter_mut().find(|r| r.id == node) else {
+            let ids: Vec<String> = raw.iter().map(|r| r.id.clone()).collect();
+            diags.push(Diagnostic::at(
+                at(1),
+                None,
+                unknown("node", node, ids.iter().map(String::as_str)),
+            ));
+            continue;
+        };
+        let value_col = lhs.chars().count() + 2;
+        // Shells eat quotes, so a value that is not RON (a path, say) is taken as a string.
+        let v = syntax::parse(value, src, 1, value_col as u32).unwrap_or_else(|_| Ast {
+            v: Value::Str(value.to_owned()),
+            span: at(value_col),
+        });
+        let name = Name {
+            name: param.to_owned(),
+            span: at(node.chars().count() + 2),
+        };
+        match r.fields.iter_mut().find(|(n, _)| n.name == param) {
+            Some(f) => *f = (name, v),
+            None => r.fields.push((name, v)),
+        }
+    }
+}
+
+fn build_node(
+    r: &RawNode,
+    raw: &[RawNode],
+    index: &HashMap<&str, usize>,
+    base: &Path,
+    data_dir_given: bool,
+    diags: &mut Vec<Diagnostic>,
+) -> Option<Node> {
+    let id = Some(r.id.as_str());
+    let Some(kind) = registry::kind(&r.kind.name) else {
+        let names = registry::kinds().iter().map(|k| k.name);
+        diags.push(Diagnostic::at(
+            r.kind.span,
+            id,
+            unknown("node kind", &r.kind.name, names),
+        ));
+        return None;
+    };
+    let before = diags.len();
+    let mut inputs = vec![Vec::new(); kind.inputs.len()];
+    let mut params = Vec::new();
+    for (name, v) in &r.fields {
+        let Some(slot) = kind.inputs.iter().position(|s| s.name == name.name) else {
+            params.push((name.clone(), v.clone()));
+            continue;
+        };
+        let spec = kind.inputs[slot];
+        let refs: Vec<&Ast> = match (&v.v, spec.arity) {
+            (Value::Ident(n), Arity::Optional) if n == "None" => vec![],
+            (Value::Str(_) | Value::Ident(_), _) => vec![v],
+            (Value::Call { name: n, args }, Arity::Optional)
+                if n.name == "Some" && args.len() == 1 =>
+            {
+                vec![&args[0]]
+            }
+            (Value::List(items), Arity::Many) => items.iter().collect(),
+            _ => {
+                let expected = match spec.arity {
+                    Arity::Many => "a list of node ids",
+                    _ => "a node id string",
+                };
+                diags.push(Diagnostic::at(
+                    v.span,
+                    id,
+                    format!(
+                        "input `{}` expects {expected} ({} nodes), found {}",
+                        spec.name,
+                        spec.ty,
+                        v.v.describe()
+                    ),
+                ));
+                continue;
+            }
+        };
+        for a in refs {
+            let (Value::Str(target) | Value::Ident(target)) = &a.v else {
+                diags.push(Diagnostic::at(
+                    a.span,
+                    id,
+                    format!(
+                        "input `{}` expects a node id string, found {}",
+                        spec.name,
+                        a.v.describe()
+                    ),
+                ));
+                continue;
+            };
+            let Some(&t) = index.get(target.as_str()) else {
+                let ids = raw.iter().map(|r| r.id.as_str());
+                diags.push(Diagnostic::at(
+                    a.span,
+                    id,
+                    format!("input `{}`: {}", spec.name, unknown("node", target, ids)),
+                ));
+                continue;
+            };
+            let produced = registry::kind(&raw[t].kind.name).map(|k| k.output);
+            if let Some(out) = produced.filter(|o| *o != spec.ty) {
+                diags.push(Diagnostic::at(
+                    a.span,
+                    id,
+                    format!(
+                        "input `{}` expects a {} node, but \"{target}\" ({}) produces {out}",
+                        spec.name, spec.ty, raw[t].kind.name
+                    ),
+                ));
+                continue;
+            }
+            inputs[slot].push(t);
+        }
+    }
+    for (slot, spec) in kind.inputs.iter().enumerate() {
+        if spec.arity == Arity::One
+            && inputs[slot].is_empty()
+            && !r.fields.iter().any(|(n, _)| n.name == spec.name)
+        {
+            diags.push(Diagnostic::at(
+                r.kind.span,
+                id,
+                format!(
+                    "missing input `{}`: expected the id of a {} node ({})",
+                    spec.name, spec.ty, spec.doc
+                ),
+            ));
+        }
+    }
+    let params_ast = Ast {
+        v: Value::Struct {
+            name: None,
+            fields: params.clone(),
+        },
+        span: r.kind.span,
+    };
+    let parsed = match (kind.parse)(&params_ast) {
+        Ok(p) => p,
+        Err(e) => {
+            diags.push(de_diag(e, r.kind.span, id));
+            return None;
+        }
+    };
+    if let Err(e) = parsed.validate() {
+        let span = params
+            .iter()
+            .find(|(n, _)| n.name == e.field)
+            .map(|(_, v)| v.span)
+            .unwrap_or(r.kind.span);
+        diags.push(Diagnostic::at(
+            span,
+            id,
+            format!("invalid `{}`: {}", e.field, e.message),
+        ));
+    }
+    let mut files = Vec::new();
+    for f in parsed.files() {
+        let written = PathBuf::from(&f.path);
+        let path = if written.is_absolute() {
+            written
+        } else {
+            base.join(&f.path)
+        };
+        if !path.is_file() {
+            let span = params
+                .iter()
+                .find(|(n, _)| n.name == f.field)
+                .map(|(_, v)| v.span)
+                .unwrap_or(r.kind.span);
+            let against = if data_dir_given {
+                "--data"
+            } else {
+                "the graph file's folder"
+            };
+            let what = if path.exists() {
+                "is not a file"
+            } else {
+                "not found"
+            };
+            diags.push(Diagnostic::at(
+                span,
+                id,
+                format!(
+                    "file {what}: {} (`{}` resolves against {against})",
+                    path.display(),
+                    f.field
+                ),
+            ));
+        }
+        files.push(InputFile {
+            field: f.field,
+            written: f.path,
+            path,
+        });
+    }
+    if diags.len() > before {
+        return None;
+    }
+    Some(Node {
+        id: r.id.clone(),
+        kind,
+        inputs,
+        deps: Vec::new(),
+        params: parsed,
+        files,
+    })
+}
+
+fn check_outputs(
+    a: &Ast,
+    index: &HashMap<&str, usize>,
+    ids: &[&str],
+    diags: &mut Vec<Diagnostic>,
+) -> Vec<(String, usize)> {
+    let Value::Map(entries) = &a.v else {
+        diags.push(Diagnostic::at(
+            a.span,
+            None,
+            format!(
+                "expected `{{ \"name\": \"node id\", ... }}`, found {}",
+                a.v.describe()
+            ),
+        ));
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for (k, v) in entries {
+        let (Value::Str(name), Value::Str(node)) = (&k.v, &v.v) else {
+            diags.push(Diagnostic::at(
+                k.span,
+                None,
+                "expected `\"output name\": \"node id\"`",
+            ));
+            continue;
+        };
+        if name.is_empty() || name.contains(['/', '\\']) || name.starts_with('.') {
+            diags.push(Diagnostic::at(
+                k.span,
+                None,
+                format!("invalid output name {name:?}: expected a plain file name"),
+            ));
+            continue;
+        }
+        match index.get(node.as_str()) {
+            Some(&i) => out.push((name.clone(), i)),
+            None => diags.push(Diagnostic::at(
+                v.span,
+                None,
+                format!(
+                    "output \"{name}\": {}",
+                    unknown("node", node, ids.iter().copied())
+                ),
+            )),
+        }
+    }
+    out
+}
+
+/// Kahn's algorithm, taking the earliest ready node in file order; on a cycle, reports one.
+fn topo_order(nodes: &[Node], raw: &[RawNode], diags: &mut Vec<Diagnostic>) -> Option<Vec<usize>> {
+    let n = nodes.len();
+    let mut indegree = vec![0usize; n];
+    let mut consumers = vec![Vec::new(); n];
+    for (i, node) in nodes.iter().enumerate() {
+        let deps: BTreeSet<usize> = node.inputs.iter().flatten().copied().collect();
+        indegree[i] = deps.len();
+        for d in deps {
+            consumers[d].push(i);
+        }
+    }
+    let mut ready: BTreeSet<usize> = (0..n).filter(|&i| indegree[i] == 0).collect();
+    let mut order = Vec::with_capacity(n);
+    while let Some(i) = ready.pop_first() {
+        order.push(i);
+        for &c in &consumers[i] {
+            indegree[c] -= 1;
+            if indegree[c] == 0 {
+                ready.insert(c);
+            }
+        }
+    }
+    if order.len() == n {
+        return Some(order);
+    }
+    let mut g = DiGraph::<usize, ()>::new();
+    let idx: Vec<_> = (0..n).map(|i| g.add_node(i)).collect();
+    for (i, node) in nodes.iter().enumerate() {
+        for &d in node.inputs.iter().flatten() {
+            g.add_edge(idx[d], idx[i], ());
+        }
+    }
+    let scc = tarjan_scc(&g)
+        .into_iter()
+        .find(|c| c.len() > 1 || g.contains_edge(c[0], c[0]))
+        .expect("a graph without a topological order has a cycle");
+    let members: BTreeSet<usize> = scc.iter().map(|&x| g[x]).collect();
+    // Walk the cycle from its first member (in file order), following edges inside the component.
+    let start = *members.first().expect("non-empty component");
+    let mut path = vec![start];
+    let mut seen = BTreeMap::from([(start, 0usize)]);
+    let mut cur = start;
+    loop {
+        let next = consumers[cur]
+            .iter()
+            .copied()
+            .filter(|c| members.contains(c))
+            .min()
+            .expect("cycle member has a successor in the cycle");
+        if let Some(&pos) = seen.get(&next) {
+            path.push(next);
+            path.drain(..pos);
+            break;
+        }
+        seen.insert(next, path.len());
+        path.push(next);
+        cur = next;
+    }
+    let text: Vec<String> = path.iter().map(|&i| format!("\"{}\"", raw[i].id)).collect();
+    diags.push(Diagnostic::at(
+        raw[path[0]].kind.span,
+        Some(&raw[path[0]].id),
+        format!("cycle: {}", text.join(" -> ")),
+    ));
+    None
+}

@@ -1,0 +1,88 @@
+//! A loaded, checked graph: nodes in topological order with resolved edges, params and files.
+
+mod load;
+mod render;
+
+use std::path::PathBuf;
+
+use kodama_nodes::Site;
+
+use crate::registry::{Kind, Params};
+
+pub use load::{LoadOptions, load};
+pub use render::{to_dot, to_mermaid};
+
+/// A graph that passed every check: every edge exists and has the right type, there is no cycle,
+/// every param is valid and every declared file exists.
+pub struct Graph {
+    /// The graph file as given.
+    pub path: PathBuf,
+    /// The file stem, used for the default output folder and in run records.
+    pub name: String,
+    /// The site frame.
+    pub site: Site,
+    /// Nodes in a topological order (file order where free).
+    pub nodes: Vec<Node>,
+    /// Declared outputs: name and node index.
+    pub outputs: Vec<(String, usize)>,
+}
+
+/// One node of a [`Graph`].
+pub struct Node {
+    /// The id in the graph file.
+    pub id: String,
+    /// Its kind.
+    pub kind: &'static Kind,
+    /// Upstream node indices for each of `kind.inputs`, in list order.
+    pub inputs: Vec<Vec<usize>>,
+    /// Distinct upstream node indices, ascending.
+    pub deps: Vec<usize>,
+    /// Typed params.
+    pub params: Box<dyn Params>,
+    /// Declared files, resolved.
+    pub files: Vec<InputFile>,
+}
+
+/// A file a node reads.
+#[derive(Clone, Debug)]
+pub struct InputFile {
+    /// The params field naming it.
+    pub field: &'static str,
+    /// The path as written in the graph.
+    pub written: String,
+    /// The resolved path.
+    pub path: PathBuf,
+}
+
+impl Graph {
+    /// Index of the node called `id`.
+    pub fn index(&self, id: &str) -> Option<usize> {
+        self.nodes.iter().position(|n| n.id == id)
+    }
+
+    /// The nodes needed for `targets` (themselves and their ancestors), or all nodes if empty.
+    pub fn needed(&self, targets: &[usize]) -> Vec<bool> {
+        if targets.is_empty() {
+            return vec![true; self.nodes.len()];
+        }
+        let mut need = vec![false; self.nodes.len()];
+        let mut stack = targets.to_vec();
+        while let Some(i) = stack.pop() {
+            if !std::mem::replace(&mut need[i], true) {
+                stack.extend(&self.nodes[i].deps);
+            }
+        }
+        need
+    }
+
+    /// Direct consumers of every node.
+    pub fn consumers(&self) -> Vec<Vec<usize>> {
+        let mut out = vec![Vec::new(); self.nodes.len()];
+        for (i, n) in self.nodes.iter().enumerate() {
+            for &d in &n.deps {
+                out[d].push(i);
+            }
+        }
+        out
+    }
+}

@@ -1,0 +1,321 @@
+//! The `kodama-dag` command line. Exit codes: 0 success, 1 a node (or the cache) failed,
+//! 2 bad usage or an invalid graph or input.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+use kodama_dag::cache::{Cache, gc};
+use kodama_dag::exec::{RunError, RunOptions, run};
+use kodama_dag::explain::{Plan, explain};
+use kodama_dag::graph::{Graph, LoadOptions, load, to_dot, to_mermaid};
+use kodama_dag::progress::{Mode, Reporter};
+use kodama_dag::record::Status;
+use kodama_dag::registry;
+
+#[derive(Parser)]
+#[command(
+    name = "kodama-dag",
+    version,
+    about = "RF digital twins from off-the-shelf geospatial data, as a cached dataflow graph"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a graph: only nodes whose inputs or params changed run; the rest come from the cache.
+    Run {
+        #[command(flatten)]
+        graph: GraphArgs,
+        /// Cache directory (default: $KODAMA_DAG_CACHE, else ./cache).
+        #[arg(long)]
+        cache: Option<PathBuf>,
+        /// Where the declared outputs go (default: out/<graph name>/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Run only this node and what it needs (repeatable).
+        #[arg(long = "target", value_name = "NODE")]
+        targets: Vec<String>,
+        /// Worker threads (default: all cores).
+        #[arg(long, short)]
+        jobs: Option<usize>,
+        /// Print the run record as one JSON object on stdout.
+        #[arg(long)]
+        json: bool,
+        /// Print only warnings and errors.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Say what `run` would do and why, without running anything.
+    Explain {
+        #[command(flatten)]
+        graph: GraphArgs,
+        /// Cache directory (default: $KODAMA_DAG_CACHE, else ./cache).
+        #[arg(long)]
+        cache: Option<PathBuf>,
+        /// Explain only this node and what it needs (repeatable).
+        #[arg(long = "target", value_name = "NODE")]
+        targets: Vec<String>,
+        /// Print the plan as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Evict least recently used artifacts until the cache holds at most --max-bytes.
+    Gc {
+        /// Cache directory (default: $KODAMA_DAG_CACHE, else ./cache).
+        #[arg(long)]
+        cache: Option<PathBuf>,
+        /// Size bound, in bytes or with a unit: 500M, 2G, 1GiB.
+        #[arg(long, value_parser = parse_bytes)]
+        max_bytes: u64,
+    },
+    /// Print the graph as Graphviz dot or Mermaid.
+    Graph {
+        #[command(flatten)]
+        graph: GraphArgs,
+        /// Output format.
+        #[arg(long, value_enum, default_value = "dot")]
+        format: Format,
+    },
+    /// List the node kinds with their inputs and outputs.
+    Kinds,
+}
+
+#[derive(Args)]
+struct GraphArgs {
+    /// The graph file (RON).
+    graph: PathBuf,
+    /// Resolve data paths against this folder instead of the graph file's.
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Override one parameter for this run: NODE.PARAM=VALUE, VALUE in RON syntax (repeatable).
+    #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+    sets: Vec<String>,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Format {
+    Dot,
+    Mermaid,
+}
+
+fn parse_bytes(s: &str) -> Result<u64, String> {
+    let s = s.trim();
+    let split = s
+        .find(|c: char| !c.is_ascii_digit() && c != '.')
+        .unwrap_or(s.len());
+    let (num, unit) = s.split_at(split);
+    let n: f64 = num
+        .parse()
+        .map_err(|_| format!("expected a size like 500M or 2G, found {s:?}"))?;
+    let mult: u64 = match unit.trim().to_ascii_lowercase().as_str() {
+        "" | "b" => 1,
+        "k" | "kb" => 1_000,
+        "kib" => 1 << 10,
+        "m" | "mb" => 1_000_000,
+        "mib" => 1 << 20,
+        "g" | "gb" => 1_000_000_000,
+        "gib" => 1 << 30,
+        "t" | "tb" => 1_000_000_000_000,
+        "tib" => 1 << 40,
+        other => {
+            return Err(format!(
+                "unknown size unit {other:?}; expected K, M, G, T, KiB, MiB, GiB or TiB"
+            ));
+        }
+    };
+    Ok((n * mult as f64) as u64)
+}
+
+/// A failure the CLI reports: message and exit code.
+struct Fail(u8, String);
+
+impl From<RunError> for Fail {
+    fn from(e: RunError) -> Fail {
+        match e {
+            RunError::Usage(m) => Fail(2, format!("error: {m}")),
+            RunError::Io(m) => Fail(1, format!("error: {m}")),
+        }
+    }
+}
+
+fn load_graph(args: &GraphArgs) -> Result<Graph, Fail> {
+    let opts = LoadOptions {
+        data_dir: args.data.clone(),
+        sets: args.sets.clone(),
+    };
+    if let Some(d) = &args.data {
+        if !d.is_dir() {
+            return Err(Fail(
+                2,
+                format!("error: --data {}: not a directory", d.display()),
+            ));
+        }
+    }
+    load(&args.graph, &opts).map_err(|e| Fail(2, e.to_string()))
+}
+
+fn open_cache(dir: Option<PathBuf>) -> Result<Cache, Fail> {
+    let dir = dir
+        .or_else(|| std::env::var_os("KODAMA_DAG_CACHE").map(PathBuf::from))
+        .unwrap_or_else(|| PathBuf::from("cache"));
+    Cache::open(&dir).map_err(|e| {
+        Fail(
+            1,
+            format!("error: cannot open the cache at {}: {e}", dir.display()),
+        )
+    })
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::from_env("KODAMA_DAG_LOG"))
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match dispatch(cli.command) {
+        Ok(code) => ExitCode::from(code),
+        Err(Fail(code, msg)) => {
+            eprintln!("{msg}");
+            ExitCode::from(code)
+        }
+    }
+}
+
+fn dispatch(cmd: Command) -> Result<u8, Fail> {
+    match cmd {
+        Command::Run {
+            graph,
+            cache,
+            out,
+            targets,
+            jobs,
+            json,
+            quiet,
+        } => {
+            let g = load_graph(&graph)?;
+            let cache = open_cache(cache)?;
+            let out_dir = out.unwrap_or_else(|| Path::new("out").join(&g.name));
+            let total = g
+                .needed(&kodama_dag::exec::target_indices(&g, &targets)?)
+                .iter()
+                .filter(|x| **x)
+                .count();
+            let reporter = Reporter::new(Mode::detect(quiet), total);
+            let record = run(
+                &g,
+                &cache,
+                &RunOptions {
+                    jobs,
+                    targets,
+                    out_dir,
+                },
+                &reporter,
+            )?;
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string(&record).expect("records serialize")
+                );
+            }
+            let failed: Vec<_> = record
+                .nodes
+                .iter()
+                .filter(|n| n.status == Status::Failed)
+                .collect();
+            for n in &failed {
+                eprintln!(
+                    "error: node \"{}\" ({}) failed: {}",
+                    n.id,
+                    n.kind,
+                    n.error.as_deref().unwrap_or("?")
+                );
+            }
+            Ok(match () {
+                _ if failed.iter().any(|n| n.user_error) => 2,
+                _ if !failed.is_empty() => 1,
+                _ => 0,
+            })
+        }
+        Command::Explain {
+            graph,
+            cache,
+            targets,
+            json,
+        } => {
+            let g = load_graph(&graph)?;
+            let cache = open_cache(cache)?;
+            let plan = explain(&g, &cache, &targets)?;
+            if json {
+                println!(
+                    "{}",
+                    serde_json::json!({ "graph": g.path.display().to_string(), "nodes": plan })
+                );
+            } else {
+                for e in &plan {
+                    let word = match e.plan {
+                        Plan::Cached => "cached",
+                        Plan::Run => "run",
+                        Plan::Maybe => "maybe",
+                    };
+                    println!("{word:<7} {} ({}): {}", e.id, e.kind, e.reason);
+                }
+            }
+            Ok(0)
+        }
+        Command::Gc { cache, max_bytes } => {
+            let cache = open_cache(cache)?;
+            let report = gc(&cache, max_bytes, &BTreeSet::new(), || {
+                eprintln!("waiting for running jobs to release the cache...")
+            })
+            .map_err(|e| {
+                Fail(
+                    1,
+                    format!("error: gc of {} failed: {e}", cache.root().display()),
+                )
+            })?;
+            println!(
+                "{} -> {} bytes; removed {} artifacts and {} stale action entries",
+                report.bytes_before,
+                report.bytes_after,
+                report.blobs_removed,
+                report.actions_removed
+            );
+            Ok(0)
+        }
+        Command::Graph { graph, format } => {
+            let g = load_graph(&graph)?;
+            print!(
+                "{}",
+                match format {
+                    Format::Dot => to_dot(&g),
+                    Format::Mermaid => to_mermaid(&g),
+                }
+            );
+            Ok(0)
+        }
+        Command::Kinds => {
+            for k in registry::kinds() {
+                let inputs: Vec<String> = k
+                    .inputs
+                    .iter()
+                    .map(|i| format!("{}: {}", i.name, i.ty))
+                    .collect();
+                println!(
+                    "{} v{} ({}) -> {}\n    {}",
+                    k.name,
+                    k.version,
+                    inputs.join(", "),
+                    k.output,
+                    k.doc
+                );
+            }
+            Ok(0)
+        }
+    }
+}

@@ -1,0 +1,188 @@
+//! What the user sees while a graph runs: indicatif bars on a terminal, one plain line per event
+//! otherwise (CI logs, pipes), nothing but warnings with `--quiet`. Everything goes to stderr;
+//! stdout is reserved for `--json`.
+
+use std::io::IsTerminal;
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Duration;
+
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use crate::record::{NodeRecord, Status};
+
+/// How to report.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    /// Progress bars (stderr is a terminal).
+    Bars,
+    /// One line per node that ran, failed or was skipped.
+    Lines,
+    /// Warnings and errors only.
+    Quiet,
+}
+
+impl Mode {
+    /// Bars on a terminal, lines otherwise; quiet if asked.
+    pub fn detect(quiet: bool) -> Mode {
+        if quiet {
+            Mode::Quiet
+        } else if std::io::stderr().is_terminal() {
+            Mode::Bars
+        } else {
+            Mode::Lines
+        }
+    }
+}
+
+/// The run's reporter.
+pub struct Reporter {
+    mode: Mode,
+    multi: MultiProgress,
+    overall: Option<ProgressBar>,
+    done: AtomicUsize,
+    total: usize,
+}
+
+impl Reporter {
+    /// A reporter for a run of `total` nodes.
+    pub fn new(mode: Mode, total: usize) -> Reporter {
+        let multi = MultiProgress::with_draw_target(ProgressDrawTarget::stderr());
+        let overall = (mode == Mode::Bars).then(|| {
+            let bar = multi.add(ProgressBar::new(total as u64));
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "{prefix:>8.bold} [{bar:30}] {pos}/{len} nodes {elapsed} {msg}",
+                )
+                .expect("valid template")
+                .progress_chars("=> "),
+            );
+            bar.set_prefix("graph");
+            bar.enable_steady_tick(Duration::from_millis(200));
+            bar
+        });
+        Reporter {
+            mode,
+            multi,
+            overall,
+            done: AtomicUsize::new(0),
+            total,
+        }
+    }
+
+    fn line(&self, text: &str) {
+        if self.mode == Mode::Bars {
+            let _ = self.multi.println(text);
+        } else {
+            eprintln!("{text}");
+        }
+    }
+
+    /// A warning, shown in every mode.
+    pub fn warn(&self, msg: &str) {
+        self.line(&format!("warning: {msg}"));
+    }
+
+    /// A node's stage starts running; the handle is its progress.
+    pub fn started(&self, id: &str, kind: &str) -> NodeProgress<'_> {
+        if self.mode == Mode::Lines {
+            eprintln!("running  {id} ({kind})");
+        }
+        NodeProgress {
+            reporter: self,
+            label: format!("{id} ({kind})"),
+            bar: OnceLock::new(),
+        }
+    }
+
+    /// A node is done, whatever happened to it.
+    pub fn finished(&self, rec: &NodeRecord) {
+        let n = self.done.fetch_add(1, Ordering::Relaxed) + 1;
+        if let Some(bar) = &self.overall {
+            bar.set_position(n as u64);
+        }
+        let status = match rec.status {
+            Status::Ran => "ran",
+            Status::Failed => "FAILED",
+            Status::Skipped => "skipped",
+            Status::Cutoff => "cutoff",
+            Status::Cached => return,
+        };
+        let show = match self.mode {
+            Mode::Quiet => rec.status == Status::Failed,
+            _ => true,
+        };
+        if show {
+            let mut text = format!(
+                "{status:<8} {} ({}) {:.0} ms: {}",
+                rec.id, rec.kind, rec.ms, rec.reason
+            );
+            if let Some(e) = &rec.error {
+                text.push_str(&format!("\n         error: {e}"));
+            }
+            self.line(&text);
+        }
+    }
+
+    /// The run is over: clear the bars and print a one-line summary.
+    pub fn finish(&self, records: &[NodeRecord], seconds: f64) {
+        if let Some(bar) = &self.overall {
+            bar.finish_and_clear();
+        }
+        if self.mode == Mode::Quiet {
+            return;
+        }
+        let count = |s: Status| records.iter().filter(|r| r.status == s).count();
+        eprintln!(
+            "{} nodes: {} ran, {} cached, {} cut off, {} failed, {} skipped in {seconds:.2} s",
+            self.total,
+            count(Status::Ran),
+            count(Status::Cached),
+            count(Status::Cutoff),
+            count(Status::Failed),
+            count(Status::Skipped)
+        );
+    }
+}
+
+/// One running node's progress; a bar appears when the stage says how much work there is.
+pub struct NodeProgress<'a> {
+    reporter: &'a Reporter,
+    label: String,
+    bar: OnceLock<ProgressBar>,
+}
+
+impl kodama_nodes::Progress for NodeProgress<'_> {
+    fn set_total(&self, total: u64) {
+        if self.reporter.mode != Mode::Bars {
+            return;
+        }
+        let bar = self.bar.get_or_init(|| {
+            let bar = self.reporter.multi.add(ProgressBar::new(total));
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "  {msg:30!} [{bar:30.cyan/blue}] {percent:>3}% {eta}",
+                )
+                .expect("valid template")
+                .progress_chars("=> "),
+            );
+            bar.set_message(self.label.clone());
+            bar
+        });
+        bar.set_length(total);
+    }
+    fn advance(&self, n: u64) {
+        if let Some(bar) = self.bar.get() {
+            bar.inc(n);
+        }
+    }
+}
+
+impl Drop for NodeProgress<'_> {
+    fn drop(&mut self) {
+        if let Some(bar) = self.bar.get() {
+            bar.finish_and_clear();
+            self.reporter.multi.remove(bar);
+        }
+    }
+}

@@ -1,0 +1,488 @@
+//! `serde::Deserializer` for [`Ast`]: params structs are read from the spanned tree, and every
+//! error carries the span of the value (or field name) it is about.
+
+use std::fmt;
+
+use serde::de::{
+    self, DeserializeOwned, DeserializeSeed, EnumAccess, IntoDeserializer, MapAccess, SeqAccess,
+    VariantAccess, Visitor,
+};
+use serde::forward_to_deserialize_any;
+
+use super::{Ast, Name, Span, Value, did_you_mean};
+
+/// A deserialization error, with the span of the value it is about when known.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DeError {
+    /// What was expected and found.
+    pub message: String,
+    /// Where.
+    pub span: Option<Span>,
+}
+
+impl DeError {
+    fn at(mut self, span: Span) -> Self {
+        self.span.get_or_insert(span);
+        self
+    }
+}
+
+impl fmt::Display for DeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for DeError {}
+
+fn suggest(word: &str, expected: &'static [&'static str], what: &str) -> String {
+    match did_you_mean(word, expected.iter().copied()) {
+        Some(m) => format!("unknown {what} `{word}`; did you mean `{m}`?"),
+        None if expected.is_empty() => format!("unknown {what} `{word}`; there are none"),
+        None => format!(
+            "unknown {what} `{word}`; expected one of: {}",
+            expected.join(", ")
+        ),
+    }
+}
+
+impl de::Error for DeError {
+    fn custom<T: fmt::Display>(msg: T) -> Self {
+        DeError {
+            message: msg.to_string(),
+            span: None,
+        }
+    }
+    fn unknown_field(field: &str, expected: &'static [&'static str]) -> Self {
+        Self::custom(suggest(field, expected, "field"))
+    }
+    fn unknown_variant(variant: &str, expected: &'static [&'static str]) -> Self {
+        Self::custom(suggest(variant, expected, "variant"))
+    }
+    fn missing_field(field: &'static str) -> Self {
+        Self::custom(format!("missing field `{field}`"))
+    }
+}
+
+/// Deserializes a `T` from `ast`.
+pub fn from_ast<T: DeserializeOwned>(ast: &Ast) -> Result<T, DeError> {
+    T::deserialize(ast)
+}
+
+fn invalid(ast: &Ast, expected: &str) -> DeError {
+    DeError {
+        message: format!("expected {expected}, found {}", ast.v.describe()),
+        span: Some(ast.span),
+    }
+}
+
+impl<'de, 'a> de::Deserializer<'de> for &'a Ast {
+    type Error = DeError;
+
+    fn deserialize_any<V: Visitor<'de>>(self, v: V) -> Result<V::Value, DeError> {
+        let r = match &self.v {
+            Value::Bool(b) => v.visit_bool(*b),
+            Value::Int(i) => match i64::try_from(*i) {
+                Ok(i) => v.visit_i64(i),
+                Err(_) => match u64::try_from(*i) {
+                    Ok(u) => v.visit_u64(u),
+                    Err(_) => v.visit_i128(*i),
+                },
+            },
+            Value::Float(f) => v.visit_f64(*f),
+            Value::Str(s) => v.visit_str(s),
+            Value::Char(c) => v.visit_char(*c),
+            Value::Unit => v.visit_unit(),
+            Value::Ident(s) if s == "None" => v.visit_none(),
+            Value::Ident(s) => v.visit_str(s),
+            Value::List(items) | Value::Tuple(items) => v.visit_seq(Seq(items.iter())),
+            Value::Map(entries) => v.visit_map(Entries {
+                it: entries.iter(),
+                value: None,
+            }),
+            Value::Struct { fields, .. } => v.visit_map(Fields {
+                it: fields.iter(),
+                value: None,
+            }),
+            Value::Call { name, args } if name.name == "Some" && args.len() == 1 => {
+                v.visit_some(&args[0])
+            }
+            Value::Call { args, .. } => v.visit_seq(Seq(args.iter())),
+        };
+        r.map_err(|e| e.at(self.span))
+    }
+
+    fn deserialize_f64<V: Visitor<'de>>(self, v: V) -> Result<V::Value, DeError> {
+        match &self.v {
+            // Integers are fine where a float is expected: `cell_m: 1` means 1.0.
+            Value::Int(i) => v.visit_f64(*i as f64).map_err(|e: DeError| e.at(self.span)),
+            Value::Float(f) => v.visit_f64(*f).map_err(|e: DeError| e.at(self.span)),
+            _ => Err(invalid(self, "a number")),
+        }
+    }
+    fn deserialize_f32<V: Visitor<'de>>(self, v: V) -> Result<V::Value, DeError> {
+        self.deserialize_f64(v)
+    }
+
+    fn deserialize_option<V: Visitor<'de>>(self, v: V) -> Result<V::Value, DeError> {
+        let r = match &self.v {
+            Value::Ident(s) if s == "None" => v.visit_none(),
+            Value::Call { name, args } if name.name == "Some" && args.len() == 1 => {
+                v.visit_some(&args[0])
+            }
+            // A bare value where an option is expected means Some(value).
+            _ => v.visit_some(self),
+        };
+        r.map_err(|e| e.at(self.span))
+    }
+
+    fn deserialize_unit<V: Visitor<'de>>(self, v: V) -> Result<V::Value, DeError> {
+        match &self.v {
+            Value::Unit => v.visit_unit(),
+            Value::Tuple(t) | Value::List(t) if t.is_empty() => v.visit_unit(),
+            _ => Err(invalid(self, "`()`")),
+        }
+    }
+    fn deserialize_unit_struct<V: Visitor<'de>>(
+        self,
+        _: &'static str,
+        v: V,
+    ) -> Result<V::Value, DeError> {
+        self.deserialize_unit(v)
+    }
+
+    fn deserialize_newtype_struct<V: Visitor<'de>>(
+        self,
+        name: &'static str,
+        v: V,
+    ) -> Result<V::Value, DeError> {
+        match &self.v {
+            Value::Call { name: n, args } if n.name == name && args.len() == 1 => {
+                v.visit_newtype_struct(&args[0])
+            }
+            _ => v.visit_newtype_struct(self),
+        }
+        .map_err(|e| e.at(self.span))
+    }
+
+    fn deserialize_seq<V: Visitor<'de>>(self, v: V) -> Result<V::Value, DeError> {
+        match &self.v {
+            Value::List(items) | Value::Tuple(items) => {
+                v.visit_seq(Seq(items.iter())).map_err(|e| e.at(self.span))
+            }
+            _ => Err(invalid(self, "a list")),
+        }
+    }
+    fn deserialize_tuple<V: Visitor<'de>>(self, len: usize, v: V) -> Result<V::Value, DeError> {
+        match &self.v {
+            Value::List(items) | Value::Tuple(items) if items.len() == len => {
+                v.visit_seq(Seq(items.iter())).map_err(|e| e.at(self.span))
+            }
+            _ => Err(invalid(self, &format!("a tuple of {len}"))),
+        }
+    }
+    fn deserialize_tuple_struct<V: Visitor<'de>>(
+        self,
+        name: &'static str,
+        len: usize,
+        v: V,
+    ) -> Result<V::Value, DeError> {
+        match &self.v {
+            Value::Call { name: n, args } if n.name == name && args.len() == len => {
+                v.visit_seq(Seq(args.iter())).map_err(|e| e.at(self.span))
+            }
+            _ => self.deserialize_tuple(len, v),
+        }
+    }
+
+    fn deserialize_map<V: Visitor<'de>>(self, v: V) -> Result<V::Value, DeError> {
+        match &self.v {
+            Value::Map(entries) => v.visit_map(Entries {
+                it: entries.iter(),
+                value: None,
+            }),
+            Value::Struct { name: None, fields } => v.visit_map(Fields {
+                it: fields.iter(),
+                value: None,
+            }),
+            _ => return Err(invalid(self, "a map `{key: value, ...}`")),
+        }
+        .map_err(|e| e.at(self.span))
+    }
+
+    fn deserialize_struct<V: Visitor<'de>>(
+        self,
+        name: &'static str,
+        _fields: &'static [&'static str],
+        v: V,
+    ) -> Result<V::Value, DeError> {
+        match &self.v {
+            Value::Struct { name: Some(n), .. } if n.name != name => Err(DeError {
+                message: format!("expected `{name}(...)`, found `{}(...)`", n.name),
+                span: Some(n.span),
+            }),
+            Value::Struct { fields, .. } => v
+                .visit_map(Fields {
+                    it: fields.iter(),
+                    value: None,
+                })
+                .map_err(|e| e.at(self.span)),
+            Value::Unit => v
+                .visit_map(Fields {
+                    it: [].iter(),
+                    value: None,
+                })
+                .map_err(|e| e.at(self.span)),
+            _ => Err(invalid(self, &format!("`{name}(field: value, ...)`"))),
+        }
+    }
+
+    fn deserialize_enum<V: Visitor<'de>>(
+        self,
+        _name: &'static str,
+        _variants: &'static [&'static str],
+        v: V,
+    ) -> Result<V::Value, DeError> {
+        match &self.v {
+            Value::Ident(s) | Value::Str(s) => v.visit_enum(Variant {
+                name: Name {
+                    name: s.clone(),
+                    span: self.span,
+                },
+                body: None,
+            }),
+            Value::Call { name, .. }
+            | Value::Struct {
+                name: Some(name), ..
+            } => v.visit_enum(Variant {
+                name: name.clone(),
+                body: Some(self),
+            }),
+            _ => return Err(invalid(self, "an enum variant")),
+        }
+        .map_err(|e| e.at(self.span))
+    }
+
+    fn deserialize_identifier<V: Visitor<'de>>(self, v: V) -> Result<V::Value, DeError> {
+        match &self.v {
+            Value::Ident(s) | Value::Str(s) => v.visit_str(s).map_err(|e: DeError| e.at(self.span)),
+            _ => Err(invalid(self, "an identifier")),
+        }
+    }
+
+    fn deserialize_ignored_any<V: Visitor<'de>>(self, v: V) -> Result<V::Value, DeError> {
+        v.visit_unit()
+    }
+
+    forward_to_deserialize_any! {
+        bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 char str string bytes byte_buf
+    }
+}
+
+struct Seq<'a>(std::slice::Iter<'a, Ast>);
+
+impl<'de, 'a> SeqAccess<'de> for Seq<'a> {
+    type Error = DeError;
+    fn next_element_seed<T: DeserializeSeed<'de>>(
+        &mut self,
+        seed: T,
+    ) -> Result<Option<T::Value>, DeError> {
+        self.0.next().map(|a| seed.deserialize(a)).transpose()
+    }
+    fn size_hint(&self) -> Option<usize> {
+        Some(self.0.len())
+    }
+}
+
+struct Entries<'a> {
+    it: std::slice::Iter<'a, (Ast, Ast)>,
+    value: Option<&'a Ast>,
+}
+
+impl<'de, 'a> MapAccess<'de> for Entries<'a> {
+    type Error = DeError;
+    fn next_key_seed<K: DeserializeSeed<'de>>(
+        &mut self,
+        seed: K,
+    ) -> Result<Option<K::Value>, DeError> {
+        let Some((k, v)) = self.it.next() else {
+            return Ok(None);
+        };
+        self.value = Some(v);
+        seed.deserialize(k).map(Some)
+    }
+    fn next_value_seed<T: DeserializeSeed<'de>>(&mut self, seed: T) -> Result<T::Value, DeError> {
+        seed.deserialize(self.value.take().expect("next_key before next_value"))
+    }
+}
+
+struct Fields<'a> {
+    it: std::slice::Iter<'a, (Name, Ast)>,
+    value: Option<&'a Ast>,
+}
+
+impl<'de, 'a> MapAccess<'de> for Fields<'a> {
+    type Error = DeError;
+    fn next_key_seed<K: DeserializeSeed<'de>>(
+        &mut self,
+        seed: K,
+    ) -> Result<Option<K::Value>, DeError> {
+        let Some((k, v)) = self.it.next() else {
+            return Ok(None);
+        };
+        self.value = Some(v);
+        let key: de::value::StrDeserializer<'_, DeError> = k.name.as_str().into_deserializer();
+        seed.deserialize(key).map(Some).map_err(|e| e.at(k.span))
+    }
+    fn next_value_seed<T: DeserializeSeed<'de>>(&mut self, seed: T) -> Result<T::Value, DeError> {
+        seed.deserialize(self.value.take().expect("next_key before next_value"))
+    }
+}
+
+struct Variant<'a> {
+    name: Name,
+    body: Option<&'a Ast>,
+}
+
+impl<'de, 'a> EnumAccess<'de> for Variant<'a> {
+    type Error = DeError;
+    type Variant = Self;
+    fn variant_seed<T: DeserializeSeed<'de>>(self, seed: T) -> Result<(T::Value, Self), DeError> {
+        let key: de::value::StrDeserializer<'_, DeError> =
+            self.name.name.as_str().into_deserializer();
+        let v = seed.deserialize(key).map_err(|e| e.at(self.name.span))?;
+        Ok((v, self))
+    }
+}
+
+impl<'de, 'a> VariantAccess<'de> for Variant<'a> {
+    type Error = DeError;
+    fn unit_variant(self) -> Result<(), DeError> {
+        match self.body {
+            None => Ok(()),
+            Some(b) => Err(invalid(
+                b,
+                &format!("the bare variant `{}`", self.name.name),
+            )),
+        }
+    }
+    fn newtype_variant_seed<T: DeserializeSeed<'de>>(self, seed: T) -> Result<T::Value, DeError> {
+        match self.body.map(|b| (b, &b.v)) {
+            Some((_, Value::Call { args, .. })) if args.len() == 1 => seed.deserialize(&args[0]),
+            Some((b, _)) => Err(invalid(b, &format!("`{}(value)`", self.name.name))),
+            None => Err(DeError {
+                message: format!("expected `{}(value)`", self.name.name),
+                span: Some(self.name.span),
+            }),
+        }
+    }
+    fn tuple_variant<V: Visitor<'de>>(self, len: usize, v: V) -> Result<V::Value, DeError> {
+        match self.body.map(|b| (b, &b.v)) {
+            Some((_, Value::Call { args, .. })) if args.len() == len => {
+                v.visit_seq(Seq(args.iter()))
+            }
+            Some((b, _)) => Err(invalid(
+                b,
+                &format!("`{}(...)` with {len} values", self.name.name),
+            )),
+            None => Err(DeError {
+                message: format!("expected `{}(...)`", self.name.name),
+                span: Some(self.name.span),
+            }),
+        }
+    }
+    fn struct_variant<V: Visitor<'de>>(
+        self,
+        _fields: &'static [&'static str],
+        v: V,
+    ) -> Result<V::Value, DeError> {
+        match self.body.map(|b| (b, &b.v)) {
+            Some((_, Value::Struct { fields, .. })) => v.visit_map(Fields {
+                it: fields.iter(),
+                value: None,
+            }),
+            Some((b, _)) => Err(invalid(
+                b,
+                &format!("`{}(field: value, ...)`", self.name.name),
+            )),
+            None => Err(DeError {
+                message: format!("expected `{}(field: value, ...)`", self.name.name),
+                span: Some(self.name.span),
+            }),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::syntax::parse;
+    use serde::Deserialize;
+    use std::collections::BTreeMap;
+
+    #[derive(Debug, Deserialize, PartialEq)]
+    enum Mode {
+        Max,
+        Min,
+        Pct(f64),
+    }
+
+    #[derive(Debug, Deserialize, PartialEq)]
+    #[serde(deny_unknown_fields)]
+    struct P {
+        sigma_m: f64,
+        mode: Mode,
+        #[serde(default)]
+        cap: Option<u32>,
+        #[serde(default)]
+        weights: BTreeMap<String, f64>,
+        size: (f64, f64),
+    }
+
+    fn de(s: &str) -> Result<P, DeError> {
+        from_ast(&parse(s, 0, 1, 1).unwrap())
+    }
+
+    #[test]
+    fn reads_structs_enums_options_maps() {
+        let p =
+            de("P(sigma_m: 2, mode: Pct(5.0), cap: 3, weights: {\"glass\": 1.2}, size: (1, 2.5))")
+                .unwrap();
+        assert_eq!(p.sigma_m, 2.0);
+        assert_eq!(p.mode, Mode::Pct(5.0));
+        assert_eq!(p.cap, Some(3));
+        assert_eq!(p.weights["glass"], 1.2);
+        assert_eq!(p.size, (1.0, 2.5));
+        let p = de("(sigma_m: 1.0, mode: Min, cap: None, size: (0, 0))").unwrap();
+        assert_eq!((p.mode, p.cap), (Mode::Min, None));
+        assert_eq!(
+            de("(sigma_m: 1.0, mode: Max, cap: Some(4), size: (0, 0))")
+                .unwrap()
+                .cap,
+            Some(4)
+        );
+    }
+
+    #[test]
+    fn errors_point_at_the_value() {
+        let e = de("(sigma_m: 1.0,\n mode: Mx, size: (0, 0))").unwrap_err();
+        assert_eq!(e.message, "unknown variant `Mx`; did you mean `Max`?");
+        assert_eq!(e.span.map(|s| (s.line, s.col)), Some((2, 8)));
+        let e = de("(sigma_m: 1.0, mode: Max, sigma: 2, size: (0, 0))").unwrap_err();
+        assert_eq!(e.message, "unknown field `sigma`; did you mean `sigma_m`?");
+        assert_eq!(e.span.map(|s| s.col), Some(27));
+        let e = de("(sigma_m: \"x\", mode: Max, size: (0, 0))").unwrap_err();
+        assert_eq!(e.message, "expected a number, found string \"x\"");
+        assert_eq!(e.span.map(|s| s.col), Some(11));
+        let e = de("(sigma_m: 1, mode: Max, cap: -1, size: (0, 0))").unwrap_err();
+        assert!(
+            e.message.contains("invalid value: integer `-1`"),
+            "{}",
+            e.message
+        );
+        assert_eq!(e.span.map(|s| s.col), Some(30));
+        let e = de("(mode: Max, size: (0, 0))").unwrap_err();
+        assert_eq!(e.message, "missing field `sigma_m`");
+        assert_eq!(e.span.map(|s| s.col), Some(1));
+    }
+}
