@@ -149,14 +149,13 @@ fn load_graph(args: &GraphArgs) -> Result<Graph, Fail> {
         data_dir: args.data.clone(),
         sets: args.sets.clone(),
     };
-    if let Some(d) = &args.data {
-        if !d.is_dir() {
+    if let Some(d) = &args.data
+        && !d.is_dir() {
             return Err(Fail(
                 2,
                 format!("error: --data {}: not a directory", d.display()),
             ));
         }
-    }
     load(&args.graph, &opts).map_err(|e| Fail(2, e.to_string()))
 }
 

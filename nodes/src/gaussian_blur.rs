@@ -95,7 +95,7 @@ pub fn gaussian_blur(r: &Raster, sigma_m: f64, fill: bool) -> Raster {
         });
     let mut out = vec![0f32; w * h];
     out.par_chunks_mut(w).enumerate().for_each(|(row, o)| {
-        for c in 0..w {
+        for (c, out_cell) in o.iter_mut().enumerate() {
             let (mut a, mut b) = (0.0, 0.0);
             for (k, kw) in kernel.iter().enumerate() {
                 let rr = row as i64 + k as i64 - radius;
@@ -107,7 +107,7 @@ pub fn gaussian_blur(r: &Raster, sigma_m: f64, fill: bool) -> Raster {
                 b += kw * wsum[i];
             }
             let keep = fill || r.data[row * w + c].is_finite();
-            o[c] = if keep && b > 0.0 {
+            *out_cell = if keep && b > 0.0 {
                 (a / b) as f32
             } else {
                 f32::NAN

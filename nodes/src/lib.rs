@@ -9,6 +9,8 @@
 //! stage sees its parameters, its inputs, the site frame and a progress handle ([`Ctx`]), and nothing
 //! else; it reads only the files its `files` function declares.
 #![deny(missing_docs)]
+// `!(x > 0.0)` is how params reject NaN along with non-positive values.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 #[cfg(target_endian = "big")]
 compile_error!(

@@ -35,14 +35,13 @@ impl Stage for Clamp {
     type Output = Raster;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        if let (Some(lo), Some(hi)) = (p.min, p.max) {
-            if lo > hi {
+        if let (Some(lo), Some(hi)) = (p.min, p.max)
+            && lo > hi {
                 return Err(ParamError::new(
                     "max",
                     format!("expected max >= min ({lo}), found {hi}"),
                 ));
             }
-        }
         Ok(())
     }
 

@@ -48,16 +48,14 @@ impl Cache {
         let mtime_ns = meta.mtime() as i128 * 1_000_000_000 + meta.mtime_nsec() as i128;
         let name = blake3::hash(abs.as_os_str().as_encoded_bytes()).to_hex();
         let entry_path = self.root.join("stat").join(name.as_str());
-        if let Ok(bytes) = fs::read(&entry_path) {
-            if let Ok(e) = serde_json::from_slice::<StatEntry>(&bytes) {
+        if let Ok(bytes) = fs::read(&entry_path)
+            && let Ok(e) = serde_json::from_slice::<StatEntry>(&bytes) {
                 let same = e.size == meta.len() && e.mtime_ns == mtime_ns && e.inode == meta.ino();
-                if same && e.checked_ns - e.mtime_ns > RACY_NS {
-                    if let Ok(d) = Digest::from_hex(&e.digest) {
+                if same && e.checked_ns - e.mtime_ns > RACY_NS
+                    && let Ok(d) = Digest::from_hex(&e.digest) {
                         return Ok(d);
                     }
-                }
             }
-        }
         let checked_ns = now_ns();
         let digest = hash_file(&abs)?;
         let entry = StatEntry {

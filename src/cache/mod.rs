@@ -162,6 +162,9 @@ impl Cache {
             Err(e) => return Err(BlobError::Io(e)),
         };
         if digest_bytes(&bytes) != *digest {
+            // Remove it, or the rebuilt blob would be taken for already stored (same name, same
+            // size) and the bad bytes would stay.
+            let _ = fs::remove_file(&path);
             return Err(BlobError::Corrupt);
         }
         touch(&path);

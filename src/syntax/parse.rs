@@ -449,10 +449,10 @@ mod tests {
             Span {
                 src: 0,
                 line: 3,
-                col: 27
+                col: 26
             }
         );
-        assert_eq!(fields[1].1.span.col, 35);
+        assert_eq!(fields[1].1.span.col, 34);
     }
 
     #[test]

@@ -71,7 +71,7 @@ impl<'de, T: Pod> Visitor<'de> for PodVisitor<T> {
     }
     fn visit_bytes<E: Error>(self, bytes: &[u8]) -> Result<Self::Value, E> {
         let size = std::mem::size_of::<T>();
-        if bytes.len() % size != 0 {
+        if !bytes.len().is_multiple_of(size) {
             return Err(E::custom(format!(
                 "{} bytes is not a whole number of {size}-byte values",
                 bytes.len()

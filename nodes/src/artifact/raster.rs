@@ -40,7 +40,7 @@ impl Grid {
         let c = ((x - self.x0) / self.cell_m).floor();
         let r = ((self.y0 - y) / self.cell_m).floor();
         (c >= 0.0 && r >= 0.0 && c < self.width as f64 && r < self.height as f64)
-            .then(|| (c as u32, r as u32))
+            .then_some((c as u32, r as u32))
     }
     /// The smallest grid with cells of `cell_m`, aligned to multiples of `cell_m` from the site
     /// origin, that covers the box `[lo, hi]`.

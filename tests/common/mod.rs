@@ -1,0 +1,178 @@
+//! Helpers for tests that run the real `kodama-dag` binary in a temporary folder.
+#![allow(dead_code)]
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+pub const BIN: &str = env!("CARGO_BIN_EXE_kodama-dag");
+
+/// A small graph with a chain, a diamond and two leaves; runs in well under a second.
+pub const CHAIN: &str = r#"
+Graph(
+    site: Site(crs: "EPSG:32618", origin: (583200.0, 4506600.0), cell_m: 0.5),
+    nodes: {
+        "truth":  SynthTerrain(seed: 3, size_m: (120.0, 80.0), relief_m: 2.0),
+        "lidar":  SynthScan(surface: "truth", density_per_m2: 4.0, noise_m: 0.05, seed: 3),
+        "dsm":    RasterizeSurface(points: "lidar", mode: Max),
+        "capped": Clamp(raster: "dsm", max: 1000.0),
+        "smooth": GaussianBlur(raster: "capped", sigma_m: 2.0),
+        "resid":  Difference(a: "capped", b: "smooth"),
+        "stats":  RasterStats(raster: "resid"),
+        "pstats": PointStats(points: "lidar"),
+    },
+    outputs: { "dsm": "dsm", "stats": "stats" },
+)
+"#;
+
+/// A temporary working folder with its own cache and output folder.
+pub struct Env {
+    pub dir: tempfile::TempDir,
+}
+
+/// One finished command.
+pub struct Run {
+    pub code: i32,
+    pub stdout: String,
+    pub stderr: String,
+}
+
+impl Env {
+    pub fn new() -> Env {
+        Env {
+            dir: tempfile::tempdir().expect("temp dir"),
+        }
+    }
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+    pub fn write(&self, name: &str, text: &str) -> PathBuf {
+        let p = self.path(name);
+        std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+    pub fn cache(&self) -> PathBuf {
+        self.path("cache")
+    }
+    pub fn out(&self) -> PathBuf {
+        self.path("out")
+    }
+    /// `kodama-dag run GRAPH --cache <env>/cache --out <env>/out --json --quiet EXTRA...`
+    pub fn run(&self, graph: &Path, extra: &[&str]) -> Run {
+        let mut cmd = self.run_cmd(graph, extra);
+        finish(cmd.output().expect("spawn kodama-dag"))
+    }
+    pub fn run_cmd(&self, graph: &Path, extra: &[&str]) -> Command {
+        let mut cmd = Command::new(BIN);
+        cmd.arg("run")
+            .arg(graph)
+            .arg("--cache")
+            .arg(self.cache())
+            .arg("--out")
+            .arg(self.out())
+            .args(["--json", "--quiet"]);
+        cmd.args(extra).current_dir(self.dir.path());
+        cmd
+    }
+    pub fn cli(&self, args: &[&str]) -> Run {
+        finish(
+            Command::new(BIN)
+                .args(args)
+                .current_dir(self.dir.path())
+                .output()
+                .expect("spawn kodama-dag"),
+        )
+    }
+    /// Every blob file in the cache's store.
+    pub fn blobs(&self) -> Vec<PathBuf> {
+        let mut out = Vec::new();
+        for shard in std::fs::read_dir(self.cache().join("cas")).unwrap() {
+            for f in std::fs::read_dir(shard.unwrap().path()).unwrap() {
+                out.push(f.unwrap().path());
+            }
+        }
+        out.sort();
+        out
+    }
+    pub fn blob(&self, digest: &str) -> PathBuf {
+        self.cache().join("cas").join(&digest[..2]).join(digest)
+    }
+}
+
+pub fn finish(o: Output) -> Run {
+    Run {
+        code: o.status.code().unwrap_or(-1),
+        stdout: String::from_utf8_lossy(&o.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&o.stderr).into_owned(),
+    }
+}
+
+impl Run {
+    pub fn ok(self) -> Run {
+        assert_eq!(self.code, 0, "exit {}\nstderr:\n{}", self.code, self.stderr);
+        self
+    }
+    pub fn json(&self) -> Value {
+        serde_json::from_str(&self.stdout)
+            .unwrap_or_else(|e| panic!("not JSON ({e}): {}\nstderr: {}", self.stdout, self.stderr))
+    }
+    fn nodes(&self) -> Vec<Value> {
+        self.json()["nodes"]
+            .as_array()
+            .expect("nodes array")
+            .clone()
+    }
+    /// Node id -> status.
+    pub fn statuses(&self) -> BTreeMap<String, String> {
+        self.nodes()
+            .iter()
+            .map(|n| {
+                (
+                    n["id"].as_str().unwrap().to_owned(),
+                    n["status"].as_str().unwrap().to_owned(),
+                )
+            })
+            .collect()
+    }
+    /// Node id -> output digest.
+    pub fn digests(&self) -> BTreeMap<String, String> {
+        self.nodes()
+            .iter()
+            .map(|n| {
+                (
+                    n["id"].as_str().unwrap().to_owned(),
+                    n["digest"].as_str().unwrap_or("").to_owned(),
+                )
+            })
+            .collect()
+    }
+    pub fn node(&self, id: &str) -> Value {
+        self.nodes()
+            .into_iter()
+            .find(|n| n["id"] == id)
+            .unwrap_or_else(|| panic!("no node {id} in the record"))
+    }
+    pub fn status(&self, id: &str) -> String {
+        self.node(id)["status"].as_str().unwrap().to_owned()
+    }
+    pub fn reason(&self, id: &str) -> String {
+        self.node(id)["reason"].as_str().unwrap().to_owned()
+    }
+    /// Ids with the given status, sorted.
+    pub fn with_status(&self, status: &str) -> Vec<String> {
+        self.statuses()
+            .into_iter()
+            .filter(|(_, s)| s == status)
+            .map(|(id, _)| id)
+            .collect()
+    }
+}
+
+pub fn ids(list: &[&str]) -> Vec<String> {
+    let mut v: Vec<String> = list.iter().map(|s| s.to_string()).collect();
+    v.sort();
+    v
+}

@@ -1,0 +1,186 @@
+//! Every kind of graph error: exit 2, before anything runs, with file:line:col, the node, and what
+//! was expected.
+
+mod common;
+use common::*;
+
+const SITE: &str = r#"site: Site(crs: "EPSG:32618", origin: (0.0, 0.0), cell_m: 1.0)"#;
+
+/// Runs a graph whose `nodes` block is `nodes`; asserts exit 2, nothing cached, and returns stderr.
+fn fails(nodes: &str, extra: &[&str]) -> String {
+    let env = Env::new();
+    let g = env.write(
+        "g.ron",
+        &format!("Graph(\n    {SITE},\n    nodes: {{\n{nodes}\n    }},\n)\n"),
+    );
+    let r = env.run(&g, extra);
+    assert_eq!(r.code, 2, "stderr: {}", r.stderr);
+    assert!(r.stdout.is_empty(), "no run record for an invalid graph");
+    assert!(
+        !env.cache().join("cas").exists() || env.blobs().is_empty(),
+        "nothing ran"
+    );
+    r.stderr
+}
+
+fn has(stderr: &str, needle: &str) {
+    assert!(stderr.contains(needle), "expected {needle:?} in:\n{stderr}");
+}
+
+#[test]
+fn unknown_node_kind_suggests_the_nearest() {
+    let e = fails(r#"        "t": SynthTerain(size_m: (50.0, 40.0)),"#, &[]);
+    has(
+        &e,
+        "g.ron:4:14: node \"t\": unknown node kind `SynthTerain`; did you mean `SynthTerrain`?",
+    );
+}
+
+#[test]
+fn unknown_field_suggests_the_nearest() {
+    let e = fails(
+        r#"        "t": SynthTerrain(size_m: (50.0, 40.0), releif_m: 3.0),"#,
+        &[],
+    );
+    has(
+        &e,
+        "g.ron:4:49: node \"t\": unknown field `releif_m`; did you mean `relief_m`?",
+    );
+}
+
+#[test]
+fn missing_input() {
+    let e = fails(r#"        "b": GaussianBlur(sigma_m: 1.0),"#, &[]);
+    has(
+        &e,
+        "g.ron:4:14: node \"b\": missing input `raster`: expected the id of a Raster node",
+    );
+}
+
+#[test]
+fn input_naming_an_unknown_node() {
+    let e = fails(
+        "        \"t\": SynthTerrain(),\n        \"b\": GaussianBlur(raster: \"tt\", sigma_m: 1.0),",
+        &[],
+    );
+    has(
+        &e,
+        "g.ron:5:35: node \"b\": input `raster`: unknown node `tt`; did you mean `t`?",
+    );
+}
+
+#[test]
+fn input_of_the_wrong_type() {
+    let e = fails(
+        "        \"t\": SynthTerrain(),\n        \"p\": PointStats(points: \"t\"),",
+        &[],
+    );
+    has(
+        &e,
+        "g.ron:5:33: node \"p\": input `points` expects a Points node, but \"t\" (SynthTerrain) produces Raster",
+    );
+}
+
+#[test]
+fn cycle_is_printed() {
+    let e = fails(
+        "        \"t\": SynthTerrain(),\n        \"a\": Difference(a: \"t\", b: \"c\"),\n        \"b\": GaussianBlur(raster: \"a\", sigma_m: 1.0),\n        \"c\": Clamp(raster: \"b\", min: 0.0),",
+        &[],
+    );
+    has(
+        &e,
+        "g.ron:5:14: node \"a\": cycle: \"a\" -> \"b\" -> \"c\" -> \"a\"",
+    );
+}
+
+#[test]
+fn invalid_values() {
+    let e = fails(
+        "        \"t\": SynthTerrain(),\n        \"b\": GaussianBlur(raster: \"t\", sigma_m: -1.0),",
+        &[],
+    );
+    has(
+        &e,
+        "g.ron:5:49: node \"b\": invalid `sigma_m`: expected a non-negative sigma in metres, found -1",
+    );
+    let e = fails(r#"        "t": SynthTerrain(octaves: "four"),"#, &[]);
+    has(
+        &e,
+        "g.ron:4:36: node \"t\": expected u32, found string \"four\"",
+    );
+    let e = fails(
+        r#"        "d": RasterizeSurface(points: "d", mode: Maximum),"#,
+        &[],
+    );
+    has(&e, "unknown variant `Maximum`");
+}
+
+#[test]
+fn bad_site() {
+    let env = Env::new();
+    let g = env.write(
+        "g.ron",
+        "Graph(\n  site: Site(crs: \"WGS84\", origin: (0.0, 0.0), cell_m: 1.0),\n  nodes: {},\n)\n",
+    );
+    let r = env.run(&g, &[]);
+    assert_eq!(r.code, 2);
+    has(
+        &r.stderr,
+        "g.ron:2:19: invalid `crs`: expected a CRS of the form \"EPSG:<code>\"",
+    );
+}
+
+#[test]
+fn syntax_error() {
+    let e = fails(r#"        "t": SynthTerrain(size_m: (50.0, 40.0),"#, &[]);
+    has(&e, "g.ron:5:5: expected a field name, found `}`");
+}
+
+#[test]
+fn missing_data_file_names_every_one() {
+    let e = fails(
+        "        \"a\": ReadXyz(path: \"a.xyz\"),\n        \"b\": ReadXyz(path: \"sub/b.xyz\"),",
+        &[],
+    );
+    has(&e, "g.ron:4:28: node \"a\": file not found:");
+    has(&e, "g.ron:5:28: node \"b\": file not found:");
+    has(
+        &e,
+        "sub/b.xyz (`path` resolves against the graph file's folder)",
+    );
+}
+
+#[test]
+fn bad_set_arguments() {
+    let nodes =
+        "        \"t\": SynthTerrain(),\n        \"b\": GaussianBlur(raster: \"t\", sigma_m: 1.0),";
+    has(
+        &fails(nodes, &["--set", "bb.sigma_m=2"]),
+        "--set bb.sigma_m=2 (column 1): unknown node `bb`; did you mean `b`?",
+    );
+    has(
+        &fails(nodes, &["--set", "b.sigma=2"]),
+        "node \"b\": unknown field `sigma`; did you mean `sigma_m`?",
+    );
+    has(
+        &fails(nodes, &["--set", "b.sigma_m=abc"]),
+        "--set b.sigma_m=abc (column 11): node \"b\": expected a number, found identifier `abc`",
+    );
+    has(
+        &fails(nodes, &["--set", "b=2"]),
+        "expected NODE.PARAM=VALUE",
+    );
+}
+
+#[test]
+fn data_paths_resolve_against_data_dir() {
+    let env = Env::new();
+    env.write("elsewhere/pts.xyz", "x y z\n1 1 1\n2 2 2\n");
+    let g = env.write("g.ron", &format!("Graph(\n    {SITE},\n    nodes: {{ \"p\": ReadXyz(path: \"pts.xyz\"), \"s\": PointStats(points: \"p\") }},\n)\n"));
+    let r = env.run(&g, &[]);
+    assert_eq!(r.code, 2);
+    let r = env
+        .run(&g, &["--data", env.path("elsewhere").to_str().unwrap()])
+        .ok();
+    assert_eq!(r.status("s"), "ran");
+}
