@@ -174,3 +174,21 @@ fn graph_renders_as_dot_and_mermaid() {
     assert!(mermaid.starts_with("flowchart LR"));
     assert_eq!(mermaid.matches(" --> ").count(), 8);
 }
+
+#[test]
+fn unchanged_outputs_are_not_rewritten_but_edited_ones_are() {
+    let env = Env::new();
+    let g = env.write("chain.ron", CHAIN);
+    env.run(&g, &[]).ok();
+    let tif = env.out().join("dsm.tif");
+    let mtime = || std::fs::metadata(&tif).unwrap().modified().unwrap();
+    let first = mtime();
+    std::thread::sleep(std::time::Duration::from_millis(20));
+    env.run(&g, &[]).ok();
+    assert_eq!(mtime(), first, "a no-op rerun leaves the output file alone");
+    let original = std::fs::read(&tif).unwrap();
+    std::fs::write(&tif, b"edited by hand").unwrap();
+    let r = env.run(&g, &[]).ok();
+    assert_eq!(std::fs::read(&tif).unwrap(), original, "an edited output is rewritten from the cache");
+    assert_eq!(r.json()["outputs"]["dsm"].as_str().unwrap(), tif.to_str().unwrap());
+}
