@@ -20,9 +20,20 @@ static TMP: LazyLock<tempfile::TempDir> = LazyLock::new(|| tempfile::tempdir().u
 
 /// A 2000 x 2000 f32 raster (16 MB), non-constant so nothing compresses or short-circuits.
 fn raster_4m(seed: u32) -> Artifact {
-    let grid = Grid { x0: 0.0, y0: 1000.0, cell_m: 0.5, width: 2000, height: 2000 };
-    let data = (0..grid.len() as u32).map(|i| ((i ^ seed).wrapping_mul(2_654_435_761) >> 8) as f32 * 1e-3).collect();
-    Artifact::Raster(Raster { grid, data: PodVec(data) })
+    let grid = Grid {
+        x0: 0.0,
+        y0: 1000.0,
+        cell_m: 0.5,
+        width: 2000,
+        height: 2000,
+    };
+    let data = (0..grid.len() as u32)
+        .map(|i| ((i ^ seed).wrapping_mul(2_654_435_761) >> 8) as f32 * 1e-3)
+        .collect();
+    Artifact::Raster(Raster {
+        grid,
+        data: PodVec(data),
+    })
 }
 
 const RASTER_BYTES: u64 = 2000 * 2000 * 4;
@@ -68,7 +79,9 @@ fn raster_4m_load_verify_decode(b: Bencher) {
 fn big_file() -> PathBuf {
     let p = TMP.path().join("input.bin");
     if !p.exists() {
-        let data: Vec<u8> = (0..256u32 << 20 >> 2).flat_map(|i| i.wrapping_mul(2_654_435_761).to_le_bytes()).collect();
+        let data: Vec<u8> = (0..256u32 << 20 >> 2)
+            .flat_map(|i| i.wrapping_mul(2_654_435_761).to_le_bytes())
+            .collect();
         std::fs::write(&p, data).unwrap();
     }
     p
@@ -78,7 +91,8 @@ fn big_file() -> PathBuf {
 #[divan::bench(sample_count = 10)]
 fn input_file_digest_256mib(b: Bencher) {
     let p = big_file();
-    b.counter(BytesCount::new(256u64 << 20)).bench(|| kodama_dag::cache::hash_file(&p).unwrap());
+    b.counter(BytesCount::new(256u64 << 20))
+        .bench(|| kodama_dag::cache::hash_file(&p).unwrap());
 }
 
 /// The same file through the stat cache: what an unchanged input costs.
@@ -96,10 +110,16 @@ fn input_file_digest_stat_hit(b: Bencher) {
 /// bound so every node has its own key and output. Stage work is microseconds, so a cold run
 /// measures the engine: keys, scheduling, encoding, hashing, atomic writes.
 fn tree_graph(dir: &Path, n: usize) -> PathBuf {
-    let mut s = String::from("Graph(\n  site: Site(crs: \"EPSG:32618\", origin: (0.0, 0.0), cell_m: 1.0),\n  nodes: {\n");
+    let mut s = String::from(
+        "Graph(\n  site: Site(crs: \"EPSG:32618\", origin: (0.0, 0.0), cell_m: 1.0),\n  nodes: {\n",
+    );
     s.push_str("    \"n0\": SynthTerrain(size_m: (4.0, 4.0)),\n");
     for i in 1..n {
-        s.push_str(&format!("    \"n{i}\": Clamp(raster: \"n{}\", max: {}.5),\n", (i - 1) / 2, 1000 + i));
+        s.push_str(&format!(
+            "    \"n{i}\": Clamp(raster: \"n{}\", max: {}.5),\n",
+            (i - 1) / 2,
+            1000 + i
+        ));
     }
     s.push_str("  },\n)\n");
     let p = dir.join(format!("tree{n}.ron"));
@@ -109,7 +129,11 @@ fn tree_graph(dir: &Path, n: usize) -> PathBuf {
 
 fn run_quiet(g: &Graph, cache: &Cache) {
     let reporter = Reporter::new(Mode::Quiet, g.nodes.len());
-    let opts = RunOptions { jobs: None, targets: vec![], out_dir: TMP.path().join("out") };
+    let opts = RunOptions {
+        jobs: None,
+        targets: vec![],
+        out_dir: TMP.path().join("out"),
+    };
     run(g, cache, &opts, &reporter).unwrap();
 }
 

@@ -548,18 +548,31 @@ impl<'a> Exec<'a> {
                 written.insert(name.clone(), path.display().to_string());
                 continue;
             }
-            let art = self.artifact(*i).map_err(|e| RunError::Io(format!("output \"{name}\": {e}")))?;
-            let (ext, bytes) = kodama_nodes::export::encode(&art, &self.graph.site).map_err(|e| RunError::Io(format!("output \"{name}\": {e}")))?;
-            std::fs::create_dir_all(dir).map_err(|e| RunError::Io(format!("cannot create {}: {e}", dir.display())))?;
+            let art = self
+                .artifact(*i)
+                .map_err(|e| RunError::Io(format!("output \"{name}\": {e}")))?;
+            let (ext, bytes) = kodama_nodes::export::encode(&art, &self.graph.site)
+                .map_err(|e| RunError::Io(format!("output \"{name}\": {e}")))?;
+            std::fs::create_dir_all(dir)
+                .map_err(|e| RunError::Io(format!("cannot create {}: {e}", dir.display())))?;
             let path = dir.join(format!("{name}.{ext}"));
-            write_atomic(dir, &path, &bytes).map_err(|e| RunError::Io(format!("cannot write {}: {e}", path.display())))?;
+            write_atomic(dir, &path, &bytes)
+                .map_err(|e| RunError::Io(format!("cannot write {}: {e}", path.display())))?;
             // The artifact may have been rebuilt while loading; record the digest it has now.
-            let digest = lock(&self.state).outcomes[*i].as_ref().and_then(|o| o.digest).unwrap_or(digest);
+            let digest = lock(&self.state).outcomes[*i]
+                .as_ref()
+                .and_then(|o| o.digest)
+                .unwrap_or(digest);
             manifest.record(name, &digest, &path);
             written.insert(name.clone(), path.display().to_string());
         }
         if !written.is_empty() {
-            manifest.save(dir).map_err(|e| RunError::Io(format!("cannot write the output manifest in {}: {e}", dir.display())))?;
+            manifest.save(dir).map_err(|e| {
+                RunError::Io(format!(
+                    "cannot write the output manifest in {}: {e}",
+                    dir.display()
+                ))
+            })?;
         }
         Ok(written)
     }
@@ -598,26 +611,44 @@ const MANIFEST: &str = ".kodama-outputs.json";
 
 fn size_and_mtime(path: &Path) -> Option<(u64, u128)> {
     let m = std::fs::metadata(path).ok()?;
-    let t = m.modified().ok()?.duration_since(std::time::UNIX_EPOCH).ok()?;
+    let t = m
+        .modified()
+        .ok()?
+        .duration_since(std::time::UNIX_EPOCH)
+        .ok()?;
     Some((m.len(), t.as_nanos()))
 }
 
 impl OutputManifest {
     fn load(dir: &Path) -> OutputManifest {
-        std::fs::read(dir.join(MANIFEST)).ok().and_then(|b| serde_json::from_slice(&b).ok()).unwrap_or_default()
+        std::fs::read(dir.join(MANIFEST))
+            .ok()
+            .and_then(|b| serde_json::from_slice(&b).ok())
+            .unwrap_or_default()
     }
     fn unchanged(&self, name: &str, digest: &Digest) -> Option<PathBuf> {
         let e = self.outputs.get(name)?;
         let path = PathBuf::from(&e.file);
-        (e.digest == digest.to_hex().as_str() && size_and_mtime(&path) == Some((e.size, e.mtime_ns))).then_some(path)
+        (e.digest == digest.to_hex().as_str()
+            && size_and_mtime(&path) == Some((e.size, e.mtime_ns)))
+        .then_some(path)
     }
     fn record(&mut self, name: &str, digest: &Digest, path: &Path) {
         if let Some((size, mtime_ns)) = size_and_mtime(path) {
-            let entry = ManifestEntry { digest: digest.to_hex().to_string(), file: path.display().to_string(), size, mtime_ns };
+            let entry = ManifestEntry {
+                digest: digest.to_hex().to_string(),
+                file: path.display().to_string(),
+                size,
+                mtime_ns,
+            };
             self.outputs.insert(name.to_owned(), entry);
         }
     }
     fn save(&self, dir: &Path) -> std::io::Result<()> {
-        write_atomic(dir, &dir.join(MANIFEST), &serde_json::to_vec_pretty(self).expect("manifest serializes"))
+        write_atomic(
+            dir,
+            &dir.join(MANIFEST),
+            &serde_json::to_vec_pretty(self).expect("manifest serializes"),
+        )
     }
 }

@@ -150,12 +150,13 @@ fn load_graph(args: &GraphArgs) -> Result<Graph, Fail> {
         sets: args.sets.clone(),
     };
     if let Some(d) = &args.data
-        && !d.is_dir() {
-            return Err(Fail(
-                2,
-                format!("error: --data {}: not a directory", d.display()),
-            ));
-        }
+        && !d.is_dir()
+    {
+        return Err(Fail(
+            2,
+            format!("error: --data {}: not a directory", d.display()),
+        ));
+    }
     load(&args.graph, &opts).map_err(|e| Fail(2, e.to_string()))
 }
 

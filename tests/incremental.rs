@@ -189,6 +189,13 @@ fn unchanged_outputs_are_not_rewritten_but_edited_ones_are() {
     let original = std::fs::read(&tif).unwrap();
     std::fs::write(&tif, b"edited by hand").unwrap();
     let r = env.run(&g, &[]).ok();
-    assert_eq!(std::fs::read(&tif).unwrap(), original, "an edited output is rewritten from the cache");
-    assert_eq!(r.json()["outputs"]["dsm"].as_str().unwrap(), tif.to_str().unwrap());
+    assert_eq!(
+        std::fs::read(&tif).unwrap(),
+        original,
+        "an edited output is rewritten from the cache"
+    );
+    assert_eq!(
+        r.json()["outputs"]["dsm"].as_str().unwrap(),
+        tif.to_str().unwrap()
+    );
 }

@@ -47,7 +47,12 @@ impl Stage for GaussianBlur {
 
     fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Raster, StageError> {
         let r: &Raster = inputs.one("raster")?;
-        Ok(gaussian_blur_with_progress(r, p.sigma_m, p.fill, ctx.progress))
+        Ok(gaussian_blur_with_progress(
+            r,
+            p.sigma_m,
+            p.fill,
+            ctx.progress,
+        ))
     }
 }
 
@@ -59,37 +64,47 @@ pub fn gaussian_blur(r: &Raster, sigma_m: f64, fill: bool) -> Raster {
 }
 
 /// [`gaussian_blur`], reporting one unit of progress per row of each of the two passes.
-pub fn gaussian_blur_with_progress(r: &Raster, sigma_m: f64, fill: bool, progress: &dyn Progress) -> Raster {
+pub fn gaussian_blur_with_progress(
+    r: &Raster,
+    sigma_m: f64,
+    fill: bool,
+    progress: &dyn Progress,
+) -> Raster {
     let g = r.grid;
     let sigma = sigma_m / g.cell_m;
     if sigma < 1e-6 || g.is_empty() {
         return r.clone();
     }
     let radius = (3.0 * sigma).ceil() as i64;
-    let kernel: Vec<f64> = (-radius..=radius).map(|k| (-0.5 * (k as f64 / sigma).powi(2)).exp()).collect();
+    let kernel: Vec<f64> = (-radius..=radius)
+        .map(|k| (-0.5 * (k as f64 / sigma).powi(2)).exp())
+        .collect();
     let (w, h) = (g.width as usize, g.height as usize);
     progress.set_total(2 * h as u64);
     // Horizontal pass: weighted sums and weights, kept apart so the vertical pass can renormalise.
     let mut sum = vec![0f64; w * h];
     let mut wsum = vec![0f64; w * h];
-    sum.par_chunks_mut(w).zip(wsum.par_chunks_mut(w)).enumerate().for_each(|(row, (s, ws))| {
-        let src = &r.data[row * w..(row + 1) * w];
-        for (c, (s, ws)) in s.iter_mut().zip(ws.iter_mut()).enumerate() {
-            let lo = (c as i64 - radius).max(0) as usize;
-            let hi = ((c as i64 + radius) as usize).min(w - 1);
-            let (mut a, mut b) = (0.0, 0.0);
-            for (cc, &v) in src.iter().enumerate().take(hi + 1).skip(lo) {
-                if v.is_finite() {
-                    let kw = kernel[(cc as i64 - c as i64 + radius) as usize];
-                    a += kw * v as f64;
-                    b += kw;
+    sum.par_chunks_mut(w)
+        .zip(wsum.par_chunks_mut(w))
+        .enumerate()
+        .for_each(|(row, (s, ws))| {
+            let src = &r.data[row * w..(row + 1) * w];
+            for (c, (s, ws)) in s.iter_mut().zip(ws.iter_mut()).enumerate() {
+                let lo = (c as i64 - radius).max(0) as usize;
+                let hi = ((c as i64 + radius) as usize).min(w - 1);
+                let (mut a, mut b) = (0.0, 0.0);
+                for (cc, &v) in src.iter().enumerate().take(hi + 1).skip(lo) {
+                    if v.is_finite() {
+                        let kw = kernel[(cc as i64 - c as i64 + radius) as usize];
+                        a += kw * v as f64;
+                        b += kw;
+                    }
                 }
+                *s = a;
+                *ws = b;
             }
-            *s = a;
-            *ws = b;
-        }
-        progress.advance(1);
-    });
+            progress.advance(1);
+        });
     // Vertical pass: whole rows at a time, so memory is read contiguously.
     let mut out = vec![0f32; w * h];
     out.par_chunks_mut(w).enumerate().for_each(|(row, o)| {
@@ -108,11 +123,18 @@ pub fn gaussian_blur_with_progress(r: &Raster, sigma_m: f64, fill: bool, progres
         }
         for (c, out_cell) in o.iter_mut().enumerate() {
             let keep = fill || r.data[row * w + c].is_finite();
-            *out_cell = if keep && b[c] > 0.0 { (a[c] / b[c]) as f32 } else { f32::NAN };
+            *out_cell = if keep && b[c] > 0.0 {
+                (a[c] / b[c]) as f32
+            } else {
+                f32::NAN
+            };
         }
         progress.advance(1);
     });
-    Raster { grid: g, data: PodVec(out) }
+    Raster {
+        grid: g,
+        data: PodVec(out),
+    }
 }
 
 #[cfg(test)]

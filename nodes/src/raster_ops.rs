@@ -36,12 +36,13 @@ impl Stage for Clamp {
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         if let (Some(lo), Some(hi)) = (p.min, p.max)
-            && lo > hi {
-                return Err(ParamError::new(
-                    "max",
-                    format!("expected max >= min ({lo}), found {hi}"),
-                ));
-            }
+            && lo > hi
+        {
+            return Err(ParamError::new(
+                "max",
+                format!("expected max >= min ({lo}), found {hi}"),
+            ));
+        }
         Ok(())
     }
 

@@ -49,13 +49,16 @@ impl Cache {
         let name = blake3::hash(abs.as_os_str().as_encoded_bytes()).to_hex();
         let entry_path = self.root.join("stat").join(name.as_str());
         if let Ok(bytes) = fs::read(&entry_path)
-            && let Ok(e) = serde_json::from_slice::<StatEntry>(&bytes) {
-                let same = e.size == meta.len() && e.mtime_ns == mtime_ns && e.inode == meta.ino();
-                if same && e.checked_ns - e.mtime_ns > RACY_NS
-                    && let Ok(d) = Digest::from_hex(&e.digest) {
-                        return Ok(d);
-                    }
+            && let Ok(e) = serde_json::from_slice::<StatEntry>(&bytes)
+        {
+            let same = e.size == meta.len() && e.mtime_ns == mtime_ns && e.inode == meta.ino();
+            if same
+                && e.checked_ns - e.mtime_ns > RACY_NS
+                && let Ok(d) = Digest::from_hex(&e.digest)
+            {
+                return Ok(d);
             }
+        }
         let checked_ns = now_ns();
         let digest = hash_file(&abs)?;
         let entry = StatEntry {
@@ -73,5 +76,63 @@ impl Cache {
             &serde_json::to_vec(&entry).expect("stat entry serializes"),
         );
         Ok(digest)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Duration;
+
+    fn set_mtime(path: &Path, t: SystemTime) {
+        fs::File::options()
+            .write(true)
+            .open(path)
+            .unwrap()
+            .set_modified(t)
+            .unwrap();
+    }
+
+    #[test]
+    fn changed_files_are_rehashed_and_settled_ones_trusted() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = Cache::open(&dir.path().join("cache")).unwrap();
+        let f = dir.path().join("data.bin");
+        let old = SystemTime::now() - Duration::from_secs(3600);
+        fs::write(&f, b"first").unwrap();
+        set_mtime(&f, old);
+        let d1 = cache.file_digest(&f).unwrap();
+        assert_eq!(d1, blake3::hash(b"first"));
+
+        // Same size, different content, new mtime: seen.
+        fs::write(&f, b"other").unwrap();
+        let d2 = cache.file_digest(&f).unwrap();
+        assert_eq!(d2, blake3::hash(b"other"));
+
+        // Settle it (old mtime), record it, then change the bytes but restore size and mtime: the
+        // stat cache answers without reading, which is exactly what it is for.
+        set_mtime(&f, old);
+        assert_eq!(cache.file_digest(&f).unwrap(), blake3::hash(b"other"));
+        fs::write(&f, b"third").unwrap();
+        set_mtime(&f, old);
+        assert_eq!(
+            cache.file_digest(&f).unwrap(),
+            blake3::hash(b"other"),
+            "trusted by stat"
+        );
+    }
+
+    #[test]
+    fn a_file_modified_just_before_hashing_is_not_trusted() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = Cache::open(&dir.path().join("cache")).unwrap();
+        let f = dir.path().join("data.bin");
+        fs::write(&f, b"first").unwrap();
+        cache.file_digest(&f).unwrap();
+        // Rewritten within the same timestamp, same size: only the racy-window rule catches it.
+        let m = fs::metadata(&f).unwrap().modified().unwrap();
+        fs::write(&f, b"secnd").unwrap();
+        set_mtime(&f, m);
+        assert_eq!(cache.file_digest(&f).unwrap(), blake3::hash(b"secnd"));
     }
 }
