@@ -102,14 +102,8 @@ impl<'de> de::Deserializer<'de> for &Ast {
             Value::Ident(s) if s == "None" => v.visit_none(),
             Value::Ident(s) => v.visit_str(s),
             Value::List(items) | Value::Tuple(items) => v.visit_seq(Seq(items.iter())),
-            Value::Map(entries) => v.visit_map(Entries {
-                it: entries.iter(),
-                value: None,
-            }),
-            Value::Struct { fields, .. } => v.visit_map(Fields {
-                it: fields.iter(),
-                value: None,
-            }),
+            Value::Map(entries) => v.visit_map(map_pairs(entries)),
+            Value::Struct { fields, .. } => v.visit_map(struct_pairs(fields)),
             Value::Call { name, args } if name.name == "Some" && args.len() == 1 => {
                 v.visit_some(&args[0])
             }
@@ -203,14 +197,8 @@ impl<'de> de::Deserializer<'de> for &Ast {
 
     fn deserialize_map<V: Visitor<'de>>(self, v: V) -> Result<V::Value, DeError> {
         match &self.v {
-            Value::Map(entries) => v.visit_map(Entries {
-                it: entries.iter(),
-                value: None,
-            }),
-            Value::Struct { name: None, fields } => v.visit_map(Fields {
-                it: fields.iter(),
-                value: None,
-            }),
+            Value::Map(entries) => v.visit_map(map_pairs(entries)),
+            Value::Struct { name: None, fields } => v.visit_map(struct_pairs(fields)),
             _ => return Err(invalid(self, "a map `{key: value, ...}`")),
         }
         .map_err(|e| e.at(self.span))
@@ -228,17 +216,9 @@ impl<'de> de::Deserializer<'de> for &Ast {
                 span: Some(n.span),
             }),
             Value::Struct { fields, .. } => v
-                .visit_map(Fields {
-                    it: fields.iter(),
-                    value: None,
-                })
+                .visit_map(struct_pairs(fields))
                 .map_err(|e| e.at(self.span)),
-            Value::Unit => v
-                .visit_map(Fields {
-                    it: [].iter(),
-                    value: None,
-                })
-                .map_err(|e| e.at(self.span)),
+            Value::Unit => v.visit_map(struct_pairs(&[])).map_err(|e| e.at(self.span)),
             _ => Err(invalid(self, &format!("`{name}(field: value, ...)`"))),
         }
     }
@@ -300,12 +280,34 @@ impl<'de, 'a> SeqAccess<'de> for Seq<'a> {
     }
 }
 
-struct Entries<'a> {
-    it: std::slice::Iter<'a, (Ast, Ast)>,
+/// A map key: a value (`{k: v}` maps) or a field name (structs).
+#[derive(Clone, Copy)]
+enum Key<'a> {
+    Value(&'a Ast),
+    Field(&'a Name),
+}
+
+/// Entries of a map or fields of a struct, as serde map access.
+struct Pairs<'a, I: Iterator<Item = (Key<'a>, &'a Ast)>> {
+    it: I,
     value: Option<&'a Ast>,
 }
 
-impl<'de, 'a> MapAccess<'de> for Entries<'a> {
+fn map_pairs(e: &[(Ast, Ast)]) -> Pairs<'_, impl Iterator<Item = (Key<'_>, &Ast)>> {
+    Pairs {
+        it: e.iter().map(|(k, v)| (Key::Value(k), v)),
+        value: None,
+    }
+}
+
+fn struct_pairs(f: &[(Name, Ast)]) -> Pairs<'_, impl Iterator<Item = (Key<'_>, &Ast)>> {
+    Pairs {
+        it: f.iter().map(|(k, v)| (Key::Field(k), v)),
+        value: None,
+    }
+}
+
+impl<'de, 'a, I: Iterator<Item = (Key<'a>, &'a Ast)>> MapAccess<'de> for Pairs<'a, I> {
     type Error = DeError;
     fn next_key_seed<K: DeserializeSeed<'de>>(
         &mut self,
@@ -315,30 +317,14 @@ impl<'de, 'a> MapAccess<'de> for Entries<'a> {
             return Ok(None);
         };
         self.value = Some(v);
-        seed.deserialize(k).map(Some)
-    }
-    fn next_value_seed<T: DeserializeSeed<'de>>(&mut self, seed: T) -> Result<T::Value, DeError> {
-        seed.deserialize(self.value.take().expect("next_key before next_value"))
-    }
-}
-
-struct Fields<'a> {
-    it: std::slice::Iter<'a, (Name, Ast)>,
-    value: Option<&'a Ast>,
-}
-
-impl<'de, 'a> MapAccess<'de> for Fields<'a> {
-    type Error = DeError;
-    fn next_key_seed<K: DeserializeSeed<'de>>(
-        &mut self,
-        seed: K,
-    ) -> Result<Option<K::Value>, DeError> {
-        let Some((k, v)) = self.it.next() else {
-            return Ok(None);
-        };
-        self.value = Some(v);
-        let key: de::value::StrDeserializer<'_, DeError> = k.name.as_str().into_deserializer();
-        seed.deserialize(key).map(Some).map_err(|e| e.at(k.span))
+        match k {
+            Key::Value(k) => seed.deserialize(k).map(Some),
+            Key::Field(k) => {
+                let key: de::value::StrDeserializer<'_, DeError> =
+                    k.name.as_str().into_deserializer();
+                seed.deserialize(key).map(Some).map_err(|e| e.at(k.span))
+            }
+        }
     }
     fn next_value_seed<T: DeserializeSeed<'de>>(&mut self, seed: T) -> Result<T::Value, DeError> {
         seed.deserialize(self.value.take().expect("next_key before next_value"))
@@ -403,10 +389,7 @@ impl<'de, 'a> VariantAccess<'de> for Variant<'a> {
         v: V,
     ) -> Result<V::Value, DeError> {
         match self.body.map(|b| (b, &b.v)) {
-            Some((_, Value::Struct { fields, .. })) => v.visit_map(Fields {
-                it: fields.iter(),
-                value: None,
-            }),
+            Some((_, Value::Struct { fields, .. })) => v.visit_map(struct_pairs(fields)),
             Some((b, _)) => Err(invalid(
                 b,
                 &format!("`{}(field: value, ...)`", self.name.name),
