@@ -18,6 +18,7 @@ compile_error!(
 );
 
 pub mod artifact;
+pub mod crs;
 pub mod export;
 pub mod rng;
 pub mod site;
@@ -26,6 +27,7 @@ pub mod stage;
 pub mod gaussian_blur;
 pub mod raster_ops;
 pub mod rasterize_surface;
+pub mod read_las;
 pub mod read_xyz;
 pub mod stats;
 pub mod synth_scan;
@@ -43,6 +45,7 @@ macro_rules! for_each_stage {
         $m! {
             $crate::synth_terrain::SynthTerrain,
             $crate::synth_scan::SynthScan,
+            $crate::read_las::ReadLas,
             $crate::read_xyz::ReadXyz,
             $crate::rasterize_surface::RasterizeSurface,
             $crate::gaussian_blur::GaussianBlur,

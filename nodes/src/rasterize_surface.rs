@@ -125,7 +125,7 @@ mod tests {
     fn max_min_mean_count_on_known_points() {
         let pts = PointSet {
             xyz: PodVec(vec![[0.2, 0.2, 1.0], [0.7, 0.3, 3.0], [1.5, 0.5, 5.0]]),
-            class: PodVec(vec![]),
+            ..Default::default()
         };
         let g = Grid::covering((0.2, 0.2), (1.5, 0.5), 1.0);
         assert_eq!((g.x0, g.y0, g.width, g.height), (0.0, 1.0, 2, 1));

@@ -124,6 +124,7 @@ pub fn parse_xyz(path: &Path, text: &str, origin: (f64, f64)) -> Result<PointSet
     Ok(PointSet {
         xyz: PodVec(xyz),
         class: PodVec(class),
+        ..Default::default()
     })
 }
 

@@ -94,6 +94,7 @@ impl Stage for SynthScan {
         Ok(PointSet {
             xyz: PodVec(xyz),
             class: PodVec(class),
+            ..Default::default()
         })
     }
 }

@@ -12,6 +12,18 @@ pub struct PointSet {
     pub xyz: PodVec<[f32; 3]>,
     /// ASPRS classification per point (0 = never classified); empty when the source has none.
     pub class: PodVec<u8>,
+    /// Return intensity per point; empty when the source has none.
+    #[serde(default)]
+    pub intensity: PodVec<u16>,
+    /// Return number (1-based) per point; empty when the source has none.
+    #[serde(default)]
+    pub return_number: PodVec<u8>,
+    /// Number of returns of the pulse per point; empty when the source has none.
+    #[serde(default)]
+    pub number_of_returns: PodVec<u8>,
+    /// 16-bit RGB per point; empty when the source has none.
+    #[serde(default)]
+    pub rgb: PodVec<[u16; 3]>,
 }
 
 impl PointSet {
