@@ -29,7 +29,8 @@ fn delft_through_the_cli_with_data_dir() {
     let data = shared_data();
     let r = env.run(&g, &["--data", data.to_str().unwrap()]).ok();
     assert_eq!(r.status("lidar"), "ran");
-    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(env.out().join("stats.json")).unwrap()).unwrap();
+    let stats: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(env.out().join("stats.json")).unwrap()).unwrap();
     assert_eq!(stats["count"], 640_510.0);
     assert_eq!(stats["class_6"], 246_753.0);
     // 192 x 229 m at 0.5 m: the DSM covers the tile.
@@ -64,9 +65,19 @@ fn unknown_epsg_code_is_rejected_before_running() {
     );
     let r = env.run(&g, &[]);
     assert_eq!(r.code, 2);
-    assert!(r.stderr.contains("g.ron:3:45: node \"p\": invalid `crs`: unknown EPSG code 1"), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("g.ron:3:45: node \"p\": invalid `crs`: unknown EPSG code 1"),
+        "{}",
+        r.stderr
+    );
     let g = env.write("s.ron", "Graph(\n  site: Site(crs: \"EPSG:2994\", origin: (0.0, 0.0), cell_m: 1.0),\n  nodes: {},\n)\n");
     let r = env.run(&g, &[]);
     assert_eq!(r.code, 2);
-    assert!(r.stderr.contains("s.ron:2:19: invalid `crs`: EPSG:2994 is in units of 0.3048 m"), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("s.ron:2:19: invalid `crs`: EPSG:2994 is in units of 0.3048 m"),
+        "{}",
+        r.stderr
+    );
 }

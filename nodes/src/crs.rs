@@ -375,6 +375,26 @@ impl ToSite {
     }
 }
 
+impl ToSite {
+    /// The source-CRS (x, y) of a site-frame point (degrees for geographic sources).
+    pub fn inverse(&self, x: f64, y: f64) -> Result<(f64, f64), String> {
+        let (e, n) = (x + self.origin.0, y + self.origin.1);
+        match &self.src {
+            None => Ok((e, n)),
+            Some((src, geographic)) => {
+                let mut p = (e, n, 0.0);
+                transform(&self.dst, src, &mut p)
+                    .map_err(|err| format!("cannot reproject site point ({x}, {y}): {err:?}"))?;
+                Ok(if *geographic {
+                    (p.0.to_degrees(), p.1.to_degrees())
+                } else {
+                    (p.0, p.1)
+                })
+            }
+        }
+    }
+}
+
 /// The site frame's projection, checked to be projected and metric.
 pub fn check_site_crs(crs: &str) -> Result<(), String> {
     let c = Crs::from_user(crs)?;
@@ -416,6 +436,21 @@ mod tests {
         let (e, n, _) = t.apply(-75.0, 40.0, 0.0).unwrap();
         assert!((e - 500_000.0).abs() < 1e-3, "{e}");
         assert!((n - 4_427_757.22).abs() < 0.05, "{n}");
+    }
+
+    #[test]
+    fn inverse_undoes_apply() {
+        let t = ToSite::new(
+            &Crs::from_epsg(4326).unwrap(),
+            &site("EPSG:32618", (583000.0, 4506000.0)),
+        )
+        .unwrap();
+        let (x, y, _) = t.apply(-74.01, 40.70, 0.0).unwrap();
+        let (lon, lat) = t.inverse(x, y).unwrap();
+        assert!(
+            (lon + 74.01).abs() < 1e-9 && (lat - 40.70).abs() < 1e-9,
+            "{lon} {lat}"
+        );
     }
 
     #[test]

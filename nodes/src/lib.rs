@@ -20,14 +20,18 @@ compile_error!(
 pub mod artifact;
 pub mod crs;
 pub mod export;
+pub mod geotiff;
 pub mod rng;
 pub mod site;
 pub mod stage;
+pub mod warp;
 
 pub mod gaussian_blur;
 pub mod raster_ops;
 pub mod rasterize_surface;
 pub mod read_las;
+pub mod read_ortho;
+pub mod read_raster;
 pub mod read_xyz;
 pub mod stats;
 pub mod synth_scan;
@@ -46,6 +50,8 @@ macro_rules! for_each_stage {
             $crate::synth_terrain::SynthTerrain,
             $crate::synth_scan::SynthScan,
             $crate::read_las::ReadLas,
+            $crate::read_raster::ReadRaster,
+            $crate::read_ortho::ReadOrtho,
             $crate::read_xyz::ReadXyz,
             $crate::rasterize_surface::RasterizeSurface,
             $crate::gaussian_blur::GaussianBlur,

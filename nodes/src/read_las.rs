@@ -154,5 +154,19 @@ pub fn read_las(path: &Path, crs: Option<&str>, ctx: &Ctx) -> Result<PointSet, S
         done += pd.len() as u64;
         ctx.progress.advance(pd.len() as u64);
     }
+    normalize_rgb(&mut out.rgb);
     Ok(out)
+}
+
+/// LAS colours are 16-bit, but many writers store 8-bit values in them. When no channel of any
+/// point exceeds 255 the file is taken to be 8-bit and scaled by 257, so every [`PointSet`] colour
+/// spans 0..=65535.
+fn normalize_rgb(rgb: &mut [[u16; 3]]) {
+    if rgb.iter().all(|c| c.iter().all(|&v| v <= 255)) {
+        for c in rgb.iter_mut() {
+            for v in c.iter_mut() {
+                *v *= 257;
+            }
+        }
+    }
 }

@@ -2,6 +2,7 @@
 
 mod array;
 mod metrics;
+mod ortho;
 mod points;
 mod raster;
 
@@ -9,6 +10,7 @@ use serde::{Deserialize, Serialize};
 
 pub use array::PodVec;
 pub use metrics::Metrics;
+pub use ortho::Ortho;
 pub use points::PointSet;
 pub use raster::{Grid, Raster};
 
@@ -21,6 +23,8 @@ pub enum ArtifactType {
     Points,
     /// [`Metrics`]: named numbers.
     Metrics,
+    /// An [`Ortho`]: an RGB orthophoto in the site frame.
+    Ortho,
 }
 
 impl std::fmt::Display for ArtifactType {
@@ -38,6 +42,8 @@ pub enum Artifact {
     Points(PointSet),
     /// See [`Metrics`].
     Metrics(Metrics),
+    /// See [`Ortho`].
+    Ortho(Ortho),
 }
 
 impl Artifact {
@@ -47,6 +53,7 @@ impl Artifact {
             Artifact::Raster(_) => ArtifactType::Raster,
             Artifact::Points(_) => ArtifactType::Points,
             Artifact::Metrics(_) => ArtifactType::Metrics,
+            Artifact::Ortho(_) => ArtifactType::Ortho,
         }
     }
 }
@@ -72,7 +79,7 @@ macro_rules! typed {
         }
     )*};
 }
-typed!(Raster, Metrics);
+typed!(Raster, Metrics, Ortho);
 
 impl Typed for PointSet {
     const TYPE: ArtifactType = ArtifactType::Points;

@@ -1,11 +1,9 @@
 //! Artifacts as ordinary files that other tools open: GeoTIFF, JSON, text.
 
-mod geotiff;
-
 use crate::artifact::Artifact;
 use crate::site::Site;
 
-pub use geotiff::write_geotiff;
+use crate::geotiff::{write_geotiff, write_geotiff_rgb};
 
 /// Encodes `a` in the standard format for its type; returns the file extension and the bytes.
 pub fn encode(a: &Artifact, site: &Site) -> Result<(&'static str, Vec<u8>), String> {
@@ -13,6 +11,11 @@ pub fn encode(a: &Artifact, site: &Site) -> Result<(&'static str, Vec<u8>), Stri
         Artifact::Raster(r) => {
             let mut buf = std::io::Cursor::new(Vec::new());
             write_geotiff(r, site, &mut buf)?;
+            Ok(("tif", buf.into_inner()))
+        }
+        Artifact::Ortho(o) => {
+            let mut buf = std::io::Cursor::new(Vec::new());
+            write_geotiff_rgb(&o.rgb, &o.grid, site, &mut buf)?;
             Ok(("tif", buf.into_inner()))
         }
         Artifact::Metrics(m) => {

@@ -1,0 +1,324 @@
+//! Raster and orthophoto ingest: files written by GDAL (tests/fixtures, made by
+//! scripts/make_geotiff_fixtures.py), our own GeoTIFFs read back, warping, and the real Autzen
+//! orthophoto checked against the colours stored in the Autzen LiDAR points.
+
+use std::path::{Path, PathBuf};
+
+use kodama_nodes::artifact::{Grid, Ortho, PodVec, Raster};
+use kodama_nodes::crs::{Crs, ToSite};
+use kodama_nodes::geotiff::{read_geotiff, write_geotiff, write_geotiff_rgb};
+use kodama_nodes::read_ortho::{ReadOrtho, ReadOrthoParams};
+use kodama_nodes::read_raster::{ReadRaster, ReadRasterParams};
+use kodama_nodes::warp::Resample;
+use kodama_nodes::{Ctx, Inputs, Site, Stage};
+
+fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/fixtures")
+        .join(name)
+}
+
+fn shared(rel: &str) -> PathBuf {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data")
+        .join(rel);
+    assert!(p.exists(), "real test data missing: {}", p.display());
+    p
+}
+
+fn raster_params(path: &str) -> ReadRasterParams {
+    ReadRasterParams {
+        path: path.into(),
+        crs: None,
+        band: 1,
+        cell_m: None,
+        resample: Resample::Bilinear,
+        nodata: None,
+    }
+}
+
+fn read_raster(p: &ReadRasterParams, file: PathBuf, site: &Site) -> Raster {
+    let files = [file];
+    ReadRaster::run(p, &Inputs::new(), &Ctx::new(site, &files)).unwrap()
+}
+
+#[test]
+fn gdal_float_dem_with_nodata_on_its_native_grid() {
+    let site = Site {
+        crs: "EPSG:32618".into(),
+        origin: (583200.0, 4506600.0),
+        cell_m: 0.5,
+    };
+    let r = read_raster(&raster_params("x"), fixture("gdal_dem_f32.tif"), &site);
+    assert_eq!(
+        r.grid,
+        Grid {
+            x0: 0.0,
+            y0: 60.0,
+            cell_m: 2.0,
+            width: 40,
+            height: 30
+        }
+    );
+    for row in 0..30 {
+        for col in 0..40 {
+            let v = r.at(col, row);
+            if (col, row) == (3, 4) || (col, row) == (10, 20) {
+                assert!(v.is_nan(), "no-data at ({col}, {row})");
+            } else {
+                assert_eq!(v, 100.0 + 0.5 * col as f32 - 0.25 * row as f32);
+            }
+        }
+    }
+}
+
+#[test]
+fn gdal_tiled_lzw_uint16() {
+    let site = Site {
+        crs: "EPSG:28992".into(),
+        origin: (84800.0, 447600.0),
+        cell_m: 0.5,
+    };
+    let r = read_raster(&raster_params("x"), fixture("gdal_u16_tiled.tif"), &site);
+    assert_eq!(
+        r.grid,
+        Grid {
+            x0: 0.0,
+            y0: 50.0,
+            cell_m: 0.5,
+            width: 64,
+            height: 48
+        }
+    );
+    assert!((0..48).all(|row| (0..64).all(|col| r.at(col, row) == (7 * col + 3 * row) as f32)));
+}
+
+#[test]
+fn gdal_rgb_orthophoto() {
+    let site = Site {
+        crs: "EPSG:32618".into(),
+        origin: (583200.0, 4506600.0),
+        cell_m: 0.5,
+    };
+    let p = ReadOrthoParams {
+        path: "o.tif".into(),
+        world_file: None,
+        crs: None,
+        cell_m: None,
+    };
+    let files = [fixture("gdal_ortho_rgb.tif")];
+    let o: Ortho = ReadOrtho::run(&p, &Inputs::new(), &Ctx::new(&site, &files)).unwrap();
+    assert_eq!(
+        o.grid,
+        Grid {
+            x0: 10.0,
+            y0: 50.0,
+            cell_m: 1.0,
+            width: 20,
+            height: 10
+        }
+    );
+    for row in 0..10 {
+        for col in 0..20 {
+            assert_eq!(o.rgb[row * 20 + col], [10 * col as u8, 20 * row as u8, 7]);
+        }
+    }
+}
+
+#[test]
+fn our_geotiffs_read_back_with_identical_georeferencing() {
+    let site = Site {
+        crs: "EPSG:32618".into(),
+        origin: (583200.0, 4506600.0),
+        cell_m: 0.5,
+    };
+    let grid = Grid {
+        x0: 12.5,
+        y0: 80.0,
+        cell_m: 0.5,
+        width: 7,
+        height: 5,
+    };
+    let data: Vec<f32> = (0..35)
+        .map(|i| {
+            if i == 9 {
+                f32::NAN
+            } else {
+                i as f32 * 0.25 - 3.0
+            }
+        })
+        .collect();
+    let raster = Raster {
+        grid,
+        data: PodVec(data),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("r.tif");
+    let mut f = std::fs::File::create(&path).unwrap();
+    write_geotiff(&raster, &site, &mut f).unwrap();
+    drop(f);
+    let tif = read_geotiff(&path).unwrap();
+    assert_eq!(tif.crs, Some(Crs::from_epsg(32618).unwrap()));
+    assert_eq!(
+        (
+            tif.pixels.west,
+            tif.pixels.north,
+            tif.pixels.dx,
+            tif.pixels.dy
+        ),
+        (583212.5, 4506680.0, 0.5, 0.5)
+    );
+    let back = read_raster(&raster_params("r.tif"), path, &site);
+    assert_eq!(back.grid, grid);
+    assert!(
+        back.data
+            .iter()
+            .zip(raster.data.iter())
+            .all(|(a, b)| a == b || (a.is_nan() && b.is_nan()))
+    );
+
+    let rgb: Vec<[u8; 3]> = (0..35)
+        .map(|i| [i as u8, 2 * i as u8, 255 - i as u8])
+        .collect();
+    let path = dir.path().join("o.tif");
+    let mut f = std::fs::File::create(&path).unwrap();
+    write_geotiff_rgb(&rgb, &grid, &site, &mut f).unwrap();
+    drop(f);
+    let p = ReadOrthoParams {
+        path: "o.tif".into(),
+        world_file: None,
+        crs: None,
+        cell_m: None,
+    };
+    let files = [path];
+    let o = ReadOrtho::run(&p, &Inputs::new(), &Ctx::new(&site, &files)).unwrap();
+    assert_eq!((o.grid, o.rgb.0), (grid, rgb));
+}
+
+#[test]
+fn tiff_without_georeferencing_is_an_error_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("plain.tif");
+    let mut f = std::fs::File::create(&path).unwrap();
+    let mut enc = tiff::encoder::TiffEncoder::new(&mut f).unwrap();
+    enc.write_image::<tiff::encoder::colortype::Gray32Float>(2, 2, &[1.0, 2.0, 3.0, 4.0])
+        .unwrap();
+    drop(f);
+    let site = Site {
+        crs: "EPSG:32618".into(),
+        origin: (0.0, 0.0),
+        cell_m: 1.0,
+    };
+    let files = [path];
+    let e = ReadRaster::run(
+        &raster_params("plain.tif"),
+        &Inputs::new(),
+        &Ctx::new(&site, &files),
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("plain.tif: georeferencing: no ModelTiepoint"),
+        "{e}"
+    );
+    assert!(e.is_user_error());
+}
+
+/// Resampling onto another CRS: the lattice-interpolated mapping against an exact per-cell
+/// reprojection of the same plane.
+#[test]
+fn warp_into_another_utm_zone_matches_exact_reprojection() {
+    let site = Site {
+        crs: "EPSG:32617".into(),
+        origin: (1_090_000.0, 4_514_000.0),
+        cell_m: 1.0,
+    };
+    let p = ReadRasterParams {
+        cell_m: Some(1.0),
+        ..raster_params("x")
+    };
+    let r = read_raster(&p, fixture("gdal_dem_f32.tif"), &site);
+    let exact = ToSite::new(&Crs::from_epsg(32618).unwrap(), &site).unwrap();
+    let mut checked = 0;
+    for row in 0..r.grid.height {
+        for col in 0..r.grid.width {
+            let v = r.at(col, row);
+            if !v.is_finite() {
+                continue;
+            }
+            let (x, y) = r.grid.center(col, row);
+            let (e, n) = exact.inverse(x, y).unwrap();
+            let (u, w) = ((e - 583200.0) / 2.0, (4506660.0 - n) / 2.0);
+            // Inside the plane region, away from the border and the two no-data pixels.
+            if !(1.0..38.0).contains(&u)
+                || !(1.0..28.0).contains(&w)
+                || ((u - 3.5).abs() < 2.0 && (w - 4.5).abs() < 2.0)
+                || ((u - 10.5).abs() < 2.0 && (w - 20.5).abs() < 2.0)
+            {
+                continue;
+            }
+            let expected = 100.0 + 0.5 * (u - 0.5) - 0.25 * (w - 0.5);
+            assert!(
+                (v as f64 - expected).abs() < 2e-3,
+                "({col}, {row}): {v} vs {expected}"
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 3000, "{checked}");
+}
+
+/// Autzen's LiDAR points carry RGB sampled from an orthophoto of the same area. Reading the JPEG +
+/// world file (EPSG:2994) and the LAS (user-defined keys) into one UTM site, each point must find
+/// its own colour in the orthophoto; a 10 m misregistration must not.
+#[test]
+fn autzen_orthophoto_registers_with_the_lidar_colours() {
+    let site = Site {
+        crs: "EPSG:3740".into(),
+        origin: (494000.0, 4877000.0),
+        cell_m: 0.5,
+    };
+    let p = ReadOrthoParams {
+        path: "autzen.jpg".into(),
+        world_file: None,
+        crs: Some("EPSG:2994".into()),
+        cell_m: Some(0.5),
+    };
+    let files = [shared("autzen/autzen.jpg"), shared("autzen/autzen.wld")];
+    let o = ReadOrtho::run(&p, &Inputs::new(), &Ctx::new(&site, &files)).unwrap();
+    let pts = kodama_nodes::read_las::read_las(
+        &shared("autzen/autzen_trim.las"),
+        None,
+        &Ctx::new(&site, &[]),
+    )
+    .unwrap();
+    let mean_diff = |dx: f64| {
+        let (mut sum, mut n) = (0.0, 0usize);
+        for (q, c) in pts.xyz.iter().zip(pts.rgb.iter()).step_by(7) {
+            let Some((col, row)) = o.grid.cell_of(q[0] as f64 + dx, q[1] as f64) else {
+                continue;
+            };
+            let i = row as usize * o.grid.width as usize + col as usize;
+            if o.valid[i] == 0 {
+                continue;
+            }
+            let px = o.rgb[i];
+            sum += (0..3)
+                .map(|k| (px[k] as f64 - (c[k] >> 8) as f64).abs())
+                .sum::<f64>()
+                / 3.0;
+            n += 1;
+        }
+        assert!(n > 10_000, "{n} points inside the orthophoto");
+        sum / n as f64
+    };
+    let registered = mean_diff(0.0);
+    let shifted = mean_diff(10.0);
+    println!(
+        "autzen: mean |RGB difference| {registered:.1} registered, {shifted:.1} with a 10 m shift"
+    );
+    assert!(
+        registered < 5.0 && registered < 0.3 * shifted,
+        "{registered} vs {shifted}"
+    );
+}
