@@ -43,7 +43,7 @@ pub struct PixelGrid {
 impl PixelGrid {
     /// The same grid in the site frame, if the pixels are square and the CRS is the site's.
     pub fn as_site_grid(&self, origin: (f64, f64)) -> Option<Grid> {
-        ((self.dx - self.dy).abs() <= 1e-9 * self.dx.abs()).then(|| Grid {
+        ((self.dx - self.dy).abs() <= 1e-9 * self.dx.abs()).then_some(Grid {
             x0: self.west - origin.0,
             y0: self.north - origin.1,
             cell_m: self.dx,

@@ -30,6 +30,7 @@ pub mod gaussian_blur;
 pub mod raster_ops;
 pub mod rasterize_surface;
 pub mod read_las;
+pub mod read_measurements;
 pub mod read_ortho;
 pub mod read_raster;
 pub mod read_xyz;
@@ -51,6 +52,7 @@ macro_rules! for_each_stage {
             $crate::synth_scan::SynthScan,
             $crate::read_las::ReadLas,
             $crate::read_raster::ReadRaster,
+            $crate::read_measurements::ReadMeasurements,
             $crate::read_ortho::ReadOrtho,
             $crate::read_xyz::ReadXyz,
             $crate::rasterize_surface::RasterizeSurface,

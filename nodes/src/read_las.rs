@@ -146,10 +146,10 @@ pub fn read_las(path: &Path, crs: Option<&str>, ctx: &Ctx) -> Result<PointSet, S
         out.intensity.extend(pd.intensity());
         out.return_number.extend(pd.return_number());
         out.number_of_returns.extend(pd.number_of_returns());
-        if format.has_color {
-            if let Some(rgb) = pd.rgb() {
-                out.rgb.extend(rgb.map(|(r, g, b)| [r, g, b]));
-            }
+        if format.has_color
+            && let Some(rgb) = pd.rgb()
+        {
+            out.rgb.extend(rgb.map(|(r, g, b)| [r, g, b]));
         }
         done += pd.len() as u64;
         ctx.progress.advance(pd.len() as u64);

@@ -1,6 +1,7 @@
 //! The artifact types that flow along graph edges. Plain data, serializable, deterministic.
 
 mod array;
+mod measurements;
 mod metrics;
 mod ortho;
 mod points;
@@ -9,6 +10,7 @@ mod raster;
 use serde::{Deserialize, Serialize};
 
 pub use array::PodVec;
+pub use measurements::{Endpoint, Height, Link, Measurements};
 pub use metrics::Metrics;
 pub use ortho::Ortho;
 pub use points::PointSet;
@@ -25,6 +27,8 @@ pub enum ArtifactType {
     Metrics,
     /// An [`Ortho`]: an RGB orthophoto in the site frame.
     Ortho,
+    /// [`Measurements`]: measured radio links.
+    Measurements,
 }
 
 impl std::fmt::Display for ArtifactType {
@@ -44,6 +48,8 @@ pub enum Artifact {
     Metrics(Metrics),
     /// See [`Ortho`].
     Ortho(Ortho),
+    /// See [`Measurements`].
+    Measurements(Measurements),
 }
 
 impl Artifact {
@@ -54,6 +60,7 @@ impl Artifact {
             Artifact::Points(_) => ArtifactType::Points,
             Artifact::Metrics(_) => ArtifactType::Metrics,
             Artifact::Ortho(_) => ArtifactType::Ortho,
+            Artifact::Measurements(_) => ArtifactType::Measurements,
         }
     }
 }
@@ -79,7 +86,7 @@ macro_rules! typed {
         }
     )*};
 }
-typed!(Raster, Metrics, Ortho);
+typed!(Raster, Metrics, Ortho, Measurements);
 
 impl Typed for PointSet {
     const TYPE: ArtifactType = ArtifactType::Points;

@@ -1,0 +1,54 @@
+//! Radio measurements (drive tests): one link per row, in the site frame.
+
+use serde::{Deserialize, Serialize};
+
+/// The height of an endpoint: absolute in the site frame, or above the local ground (resolved
+/// against the terrain by the stage that needs it).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Height {
+    /// Site-frame z, metres.
+    Absolute(f64),
+    /// Metres above the terrain at (x, y).
+    AboveGround(f64),
+}
+
+/// A transmitter or receiver.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Endpoint {
+    /// Identifier (a cell or transmitter id; for receivers, may be empty).
+    pub id: String,
+    /// Site-frame x, metres.
+    pub x: f64,
+    /// Site-frame y, metres.
+    pub y: f64,
+    /// Height.
+    pub z: Height,
+    /// Antenna azimuth, degrees clockwise from north, when known.
+    pub azimuth_deg: Option<f64>,
+}
+
+/// One measured link.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Link {
+    /// Transmitter.
+    pub tx: Endpoint,
+    /// Receiver.
+    pub rx: Endpoint,
+    /// Carrier frequency, Hz.
+    pub freq_hz: f64,
+    /// Measured path loss, dB, when known.
+    pub path_loss_db: Option<f64>,
+    /// Measured received power, dBm, when that is what was measured.
+    pub rx_power_dbm: Option<f64>,
+    /// Transmit EIRP, dBm, when known (unknown EIRP: metrics fit one offset per transmitter).
+    pub tx_eirp_dbm: Option<f64>,
+    /// Line of sight, when known.
+    pub los: Option<bool>,
+}
+
+/// A drive test or any set of measured links.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Measurements {
+    /// The links, in file order.
+    pub links: Vec<Link>,
+}
