@@ -136,14 +136,14 @@ fn csv_errors_name_the_file_line_and_column() {
         "tx_x,tx_y,tx_z,rx_x,rx_y,rx_z,path_loss_db\n0,0,10,5,5,1.5,80\n",
     )
     .unwrap();
-    let e = read(Layout::Links, &[csv.clone()], &durham()).unwrap_err();
+    let e = read(Layout::Links, std::slice::from_ref(&csv), &durham()).unwrap_err();
     assert!(
         e.to_string()
             .contains("m.csv: header: expected a column `freq_hz`; found: tx_x, tx_y"),
         "{e}"
     );
     std::fs::write(&csv, "tx_x,tx_y,tx_z,rx_x,rx_y,rx_z,freq_hz,path_loss_db\n0,0,10,5,5,1.5,3e9,80\n0,0,10,5,x5,1.5,3e9,80\n").unwrap();
-    let e = read(Layout::Links, &[csv.clone()], &durham()).unwrap_err();
+    let e = read(Layout::Links, std::slice::from_ref(&csv), &durham()).unwrap_err();
     assert_eq!(
         e.to_string(),
         format!(
