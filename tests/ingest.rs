@@ -81,3 +81,28 @@ fn unknown_epsg_code_is_rejected_before_running() {
         r.stderr
     );
 }
+
+#[test]
+fn csv_with_a_missing_column_exits_2() {
+    let env = Env::new();
+    env.write(
+        "m.csv",
+        "tx_x,tx_y,tx_z,rx_x,rx_y,rx_z,path_loss_db\n0,0,10,5,5,1.5,80\n",
+    );
+    let g = env.write(
+        "g.ron",
+        "Graph(\n  site: Site(crs: \"EPSG:32618\", origin: (0.0, 0.0), cell_m: 1.0),\n  nodes: { \"m\": ReadMeasurements(path: \"m.csv\") },\n  outputs: { \"m\": \"m\" },\n)\n",
+    );
+    let r = env.run(&g, &[]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("m.csv: header: expected a column `freq_hz`"),
+        "{}",
+        r.stderr
+    );
+    assert!(
+        !env.out().join("m.csv").exists(),
+        "nothing written for a failed node"
+    );
+}

@@ -20,6 +20,7 @@ compile_error!(
 pub mod artifact;
 pub mod crs;
 pub mod export;
+pub mod geojson;
 pub mod geotiff;
 pub mod rng;
 pub mod site;
@@ -29,9 +30,11 @@ pub mod warp;
 pub mod gaussian_blur;
 pub mod raster_ops;
 pub mod rasterize_surface;
+pub mod read_footprints;
 pub mod read_las;
 pub mod read_measurements;
 pub mod read_ortho;
+pub mod read_osm;
 pub mod read_raster;
 pub mod read_xyz;
 pub mod stats;
@@ -53,6 +56,8 @@ macro_rules! for_each_stage {
             $crate::read_las::ReadLas,
             $crate::read_raster::ReadRaster,
             $crate::read_measurements::ReadMeasurements,
+            $crate::read_footprints::ReadFootprints,
+            $crate::read_osm::ReadOsmBuildings,
             $crate::read_ortho::ReadOrtho,
             $crate::read_xyz::ReadXyz,
             $crate::rasterize_surface::RasterizeSurface,

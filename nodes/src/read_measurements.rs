@@ -76,9 +76,10 @@ impl Stage for ReadMeasurements {
             rx_height_m,
             ..
         } = p.layout
-            && !(tx_height_m >= 0.0 && rx_height_m >= 0.0) {
-                return Err(ParamError::new("layout", "expected non-negative heights"));
-            }
+            && !(tx_height_m >= 0.0 && rx_height_m >= 0.0)
+        {
+            return Err(ParamError::new("layout", "expected non-negative heights"));
+        }
         Ok(())
     }
 

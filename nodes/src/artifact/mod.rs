@@ -1,6 +1,7 @@
 //! The artifact types that flow along graph edges. Plain data, serializable, deterministic.
 
 mod array;
+mod footprints;
 mod measurements;
 mod metrics;
 mod ortho;
@@ -10,6 +11,7 @@ mod raster;
 use serde::{Deserialize, Serialize};
 
 pub use array::PodVec;
+pub use footprints::{Footprint, Footprints, Polygon, ring_area};
 pub use measurements::{Endpoint, Height, Link, Measurements};
 pub use metrics::Metrics;
 pub use ortho::Ortho;
@@ -29,6 +31,8 @@ pub enum ArtifactType {
     Ortho,
     /// [`Measurements`]: measured radio links.
     Measurements,
+    /// [`Footprints`]: building footprints.
+    Footprints,
 }
 
 impl std::fmt::Display for ArtifactType {
@@ -50,6 +54,8 @@ pub enum Artifact {
     Ortho(Ortho),
     /// See [`Measurements`].
     Measurements(Measurements),
+    /// See [`Footprints`].
+    Footprints(Footprints),
 }
 
 impl Artifact {
@@ -61,6 +67,7 @@ impl Artifact {
             Artifact::Metrics(_) => ArtifactType::Metrics,
             Artifact::Ortho(_) => ArtifactType::Ortho,
             Artifact::Measurements(_) => ArtifactType::Measurements,
+            Artifact::Footprints(_) => ArtifactType::Footprints,
         }
     }
 }
@@ -86,7 +93,7 @@ macro_rules! typed {
         }
     )*};
 }
-typed!(Raster, Metrics, Ortho, Measurements);
+typed!(Raster, Metrics, Ortho, Measurements, Footprints);
 
 impl Typed for PointSet {
     const TYPE: ArtifactType = ArtifactType::Points;

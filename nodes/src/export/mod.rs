@@ -18,6 +18,10 @@ pub fn encode(a: &Artifact, site: &Site) -> Result<(&'static str, Vec<u8>), Stri
             write_geotiff_rgb(&o.rgb, &o.grid, site, &mut buf)?;
             Ok(("tif", buf.into_inner()))
         }
+        Artifact::Footprints(f) => Ok((
+            "geojson",
+            crate::geojson::write_footprints(f, site)?.into_bytes(),
+        )),
         Artifact::Measurements(m) => Ok(("csv", measurements_csv(m).into_bytes())),
         Artifact::Metrics(m) => {
             let mut s = serde_json::to_string_pretty(&m.values).map_err(|e| e.to_string())?;
