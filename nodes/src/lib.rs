@@ -27,6 +27,7 @@ pub mod site;
 pub mod stage;
 pub mod warp;
 
+pub mod composite_height;
 pub mod gaussian_blur;
 pub mod raster_ops;
 pub mod rasterize_surface;
@@ -61,6 +62,7 @@ macro_rules! for_each_stage {
             $crate::read_ortho::ReadOrtho,
             $crate::read_xyz::ReadXyz,
             $crate::rasterize_surface::RasterizeSurface,
+            $crate::composite_height::CompositeHeight,
             $crate::gaussian_blur::GaussianBlur,
             $crate::raster_ops::Clamp,
             $crate::raster_ops::Difference,

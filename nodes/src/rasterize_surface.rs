@@ -1,13 +1,14 @@
 //! Point sets onto the site grid as a height field H_s (paper Sec. 4: one field per source, ⊥ where
 //! the source observed nothing).
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Grid, PodVec, PointSet, Raster};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// How the points falling into one cell become its value.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum CellMode {
     /// Highest z: a digital surface model.
     Max,
@@ -17,6 +18,8 @@ pub enum CellMode {
     Mean,
     /// Number of points (0 where empty, never no-data).
     Count,
+    /// The given percentile (0-100) of z, linearly interpolated between ranks.
+    Percentile(f64),
 }
 
 /// Params of [`RasterizeSurface`].
@@ -28,6 +31,19 @@ pub struct RasterizeSurfaceParams {
     /// Cell size in metres; default: the site's.
     #[serde(default)]
     pub cell_m: Option<f64>,
+    /// Only points of these ASPRS classes; default: all.
+    #[serde(default)]
+    pub classes: Option<Vec<u8>>,
+    /// Points of these classes are dropped. Default: [7, 18] (low and high noise).
+    #[serde(default = "noise_classes")]
+    pub exclude_classes: Vec<u8>,
+    /// Fill no-data cells up to this distance from observed ones, metres. Default 0 (no fill).
+    #[serde(default)]
+    pub max_gap_m: f64,
+}
+
+fn noise_classes() -> Vec<u8> {
+    vec![7, 18]
 }
 
 /// Rasterizes points onto a grid aligned with the site origin, covering the points' extent.
@@ -76,13 +92,87 @@ impl Stage for RasterizeSurface {
                 ),
             )));
         }
-        Ok(rasterize(points, grid, p.mode))
+        let mut r = rasterize(points, grid, p.mode);
+        let steps = (p.max_gap_m / cell).floor() as u32;
+        if steps > 0 && p.mode != CellMode::Count {
+            fill_gaps(&mut r, steps);
+        }
+        Ok(r)
+    }
+}
+
+/// The points for which `keep(index)` holds, with all their attributes.
+pub fn select(p: &PointSet, keep: impl Fn(usize) -> bool) -> PointSet {
+    let idx: Vec<usize> = (0..p.len()).filter(|&i| keep(i)).collect();
+    fn pick<T: bytemuck::Pod>(v: &[T], idx: &[usize]) -> crate::artifact::PodVec<T> {
+        if v.is_empty() {
+            Default::default()
+        } else {
+            crate::artifact::PodVec(idx.iter().map(|&i| v[i]).collect())
+        }
+    }
+    PointSet {
+        xyz: pick(&p.xyz, &idx),
+        class: pick(&p.class, &idx),
+        intensity: pick(&p.intensity, &idx),
+        return_number: pick(&p.return_number, &idx),
+        number_of_returns: pick(&p.number_of_returns, &idx),
+        rgb: pick(&p.rgb, &idx),
+    }
+}
+
+/// Bounded gap filling: `steps` times, every no-data cell with valid 8-neighbours takes their mean,
+/// so holes shrink by one cell per step from their rim and nothing is invented further than
+/// `steps` cells from an observation. Double-buffered, so the result does not depend on order.
+pub fn fill_gaps(r: &mut Raster, steps: u32) {
+    let (w, h) = (r.grid.width as i64, r.grid.height as i64);
+    for _ in 0..steps {
+        let src = r.data.clone();
+        let mut changed = false;
+        for row in 0..h {
+            for col in 0..w {
+                let i = (row * w + col) as usize;
+                if src[i].is_finite() {
+                    continue;
+                }
+                let (mut sum, mut n) = (0.0f64, 0u32);
+                for (dr, dc) in [
+                    (-1, -1),
+                    (-1, 0),
+                    (-1, 1),
+                    (0, -1),
+                    (0, 1),
+                    (1, -1),
+                    (1, 0),
+                    (1, 1),
+                ] {
+                    let (rr, cc) = (row + dr, col + dc);
+                    if rr >= 0 && rr < h && cc >= 0 && cc < w {
+                        let v = src[(rr * w + cc) as usize];
+                        if v.is_finite() {
+                            sum += v as f64;
+                            n += 1;
+                        }
+                    }
+                }
+                if n > 0 {
+                    r.data[i] = (sum / n as f64) as f32;
+                    changed = true;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
     }
 }
 
 /// Combines the points of each cell of `grid` with `mode`; cells without points are NaN
 /// (0 for `Count`). Points outside the grid are ignored.
 pub fn rasterize(points: &PointSet, grid: Grid, mode: CellMode) -> Raster {
+    if let CellMode::Percentile(q) = mode {
+        return rasterize_percentile(points, grid, q);
+    }
     let n = grid.len();
     let mut acc = vec![0f64; n];
     let mut count = vec![0u32; n];
@@ -98,6 +188,7 @@ pub fn rasterize(points: &PointSet, grid: Grid, mode: CellMode) -> Raster {
             (CellMode::Max, _) => acc[i].max(z),
             (CellMode::Min, _) => acc[i].min(z),
             (CellMode::Mean, _) => acc[i] + z,
+            (CellMode::Percentile(_), _) => unreachable!("handled by rasterize_percentile"),
         };
         count[i] += 1;
     }
@@ -111,6 +202,31 @@ pub fn rasterize(points: &PointSet, grid: Grid, mode: CellMode) -> Raster {
             _ => a as f32,
         })
         .collect();
+    Raster {
+        grid,
+        data: PodVec(data),
+    }
+}
+
+/// Per-cell percentile `q` of z (linear between closest ranks, as numpy's default): points are
+/// sorted by (cell, z) once, then each cell's run is read off.
+fn rasterize_percentile(points: &PointSet, grid: Grid, q: f64) -> Raster {
+    let mut keyed: Vec<(u32, f32)> = points
+        .xyz
+        .iter()
+        .filter_map(|p| {
+            grid.cell_of(p[0] as f64, p[1] as f64)
+                .map(|(c, r)| (r * grid.width + c, p[2]))
+        })
+        .collect();
+    keyed.par_sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    let mut data = vec![f32::NAN; grid.len()];
+    for run in keyed.chunk_by(|a, b| a.0 == b.0) {
+        let pos = q / 100.0 * (run.len() - 1) as f64;
+        let (lo, t) = (pos.floor() as usize, pos.fract());
+        let hi = (lo + 1).min(run.len() - 1);
+        data[run[0].0 as usize] = (run[lo].1 as f64 * (1.0 - t) + run[hi].1 as f64 * t) as f32;
+    }
     Raster {
         grid,
         data: PodVec(data),
@@ -133,5 +249,43 @@ mod tests {
         assert_eq!(rasterize(&pts, g, CellMode::Min).data.0, vec![1.0, 5.0]);
         assert_eq!(rasterize(&pts, g, CellMode::Mean).data.0, vec![2.0, 5.0]);
         assert_eq!(rasterize(&pts, g, CellMode::Count).data.0, vec![2.0, 1.0]);
+        assert_eq!(
+            rasterize(&pts, g, CellMode::Percentile(50.0)).data.0,
+            vec![2.0, 5.0]
+        );
+        assert_eq!(
+            rasterize(&pts, g, CellMode::Percentile(25.0)).data.0,
+            vec![1.5, 5.0]
+        );
+    }
+
+    #[test]
+    fn gaps_fill_only_up_to_the_bound() {
+        let grid = Grid {
+            x0: 0.0,
+            y0: 1.0,
+            cell_m: 1.0,
+            width: 7,
+            height: 1,
+        };
+        let mut r = Raster {
+            grid,
+            data: PodVec(vec![
+                1.0,
+                f32::NAN,
+                f32::NAN,
+                f32::NAN,
+                f32::NAN,
+                f32::NAN,
+                3.0,
+            ]),
+        };
+        fill_gaps(&mut r, 2);
+        assert_eq!(&r.data[..3], &[1.0, 1.0, 1.0]);
+        assert!(
+            r.data[3].is_nan(),
+            "the middle of a 5-cell gap is 3 cells from data"
+        );
+        assert_eq!(&r.data[4..], &[3.0, 3.0, 3.0]);
     }
 }

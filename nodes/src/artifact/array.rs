@@ -12,13 +12,19 @@ use serde::de::{Error, Visitor};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 /// A `Vec<T>` of plain numbers stored as little-endian bytes.
-#[derive(Clone, Default, PartialEq)]
+#[derive(Clone, PartialEq)]
 pub struct PodVec<T: Pod>(pub Vec<T>);
 
 impl<T: Pod> PodVec<T> {
     /// An array of `n` copies of `v`.
     pub fn filled(v: T, n: usize) -> Self {
         PodVec(vec![v; n])
+    }
+}
+
+impl<T: Pod> Default for PodVec<T> {
+    fn default() -> Self {
+        PodVec(Vec::new())
     }
 }
 
