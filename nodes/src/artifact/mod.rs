@@ -7,6 +7,7 @@ mod metrics;
 mod ortho;
 mod points;
 mod raster;
+mod scene;
 
 use serde::{Deserialize, Serialize};
 
@@ -17,6 +18,7 @@ pub use metrics::Metrics;
 pub use ortho::Ortho;
 pub use points::PointSet;
 pub use raster::{Grid, Raster};
+pub use scene::{Mesh, ObjectClass, Scene, SceneObject};
 
 /// The type of an artifact, as the loader checks it on every edge.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -33,6 +35,8 @@ pub enum ArtifactType {
     Measurements,
     /// [`Footprints`]: building footprints.
     Footprints,
+    /// A [`Scene`]: objects as triangle meshes with materials.
+    Scene,
 }
 
 impl std::fmt::Display for ArtifactType {
@@ -56,6 +60,8 @@ pub enum Artifact {
     Measurements(Measurements),
     /// See [`Footprints`].
     Footprints(Footprints),
+    /// See [`Scene`].
+    Scene(Scene),
 }
 
 impl Artifact {
@@ -68,6 +74,7 @@ impl Artifact {
             Artifact::Ortho(_) => ArtifactType::Ortho,
             Artifact::Measurements(_) => ArtifactType::Measurements,
             Artifact::Footprints(_) => ArtifactType::Footprints,
+            Artifact::Scene(_) => ArtifactType::Scene,
         }
     }
 }
@@ -93,7 +100,7 @@ macro_rules! typed {
         }
     )*};
 }
-typed!(Raster, Metrics, Ortho, Measurements, Footprints);
+typed!(Raster, Metrics, Ortho, Measurements, Footprints, Scene);
 
 impl Typed for PointSet {
     const TYPE: ArtifactType = ArtifactType::Points;

@@ -1,7 +1,11 @@
 //! Artifacts as ordinary files that other tools open: GeoTIFF, JSON, text.
 
+mod glb;
+
 use crate::artifact::Artifact;
+
 use crate::site::Site;
+pub use glb::{material_color, write_glb};
 
 use crate::geotiff::{write_geotiff, write_geotiff_rgb};
 
@@ -18,6 +22,7 @@ pub fn encode(a: &Artifact, site: &Site) -> Result<(&'static str, Vec<u8>), Stri
             write_geotiff_rgb(&o.rgb, &o.grid, site, &mut buf)?;
             Ok(("tif", buf.into_inner()))
         }
+        Artifact::Scene(s) => Ok(("glb", write_glb(s)?)),
         Artifact::Footprints(f) => Ok((
             "geojson",
             crate::geojson::write_footprints(f, site)?.into_bytes(),

@@ -1,0 +1,86 @@
+//! Triangle-mesh scenes in the site frame: what ray tracers and exporters consume.
+
+use serde::{Deserialize, Serialize};
+
+use super::PodVec;
+
+/// A triangle mesh: vertices in the site frame (metres, z up), triangles counter-clockwise seen
+/// from outside (normals point out of closed solids).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Mesh {
+    /// Vertex positions.
+    pub positions: PodVec<[f32; 3]>,
+    /// Vertex indices, three per triangle.
+    pub triangles: PodVec<[u32; 3]>,
+    /// [`crate::materials::Material`] discriminant per triangle.
+    pub materials: PodVec<u8>,
+}
+
+impl Mesh {
+    /// Appends `other`, shifting its indices.
+    pub fn append(&mut self, other: &Mesh) {
+        let base = self.positions.len() as u32;
+        self.positions.extend_from_slice(&other.positions);
+        self.triangles.extend(
+            other
+                .triangles
+                .iter()
+                .map(|t| [t[0] + base, t[1] + base, t[2] + base]),
+        );
+        self.materials.extend_from_slice(&other.materials);
+    }
+
+    /// Number of triangles.
+    pub fn len(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// True when there are no triangles.
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// Signed volume (positive for a closed, outward-oriented solid), m³.
+    pub fn volume(&self) -> f64 {
+        self.triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.positions[i as usize].map(|v| v as f64));
+                (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                    + a[2] * (b[0] * c[1] - b[1] * c[0]))
+                    / 6.0
+            })
+            .sum()
+    }
+}
+
+/// What an object is, for LiDAR classes, materials and the scene graph.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub enum ObjectClass {
+    /// The ground surface.
+    Terrain,
+    /// A building (one or more closed shells).
+    Building,
+    /// Tree crowns and trunks: absorbing volumes for radio.
+    Vegetation,
+    /// Cars, poles, signs, shelters.
+    Clutter,
+}
+
+/// One object of a scene.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneObject {
+    /// Stable identifier (e.g. `building-12`).
+    pub id: String,
+    /// What it is.
+    pub class: ObjectClass,
+    /// Its geometry.
+    pub mesh: Mesh,
+}
+
+/// A scene: objects with meshes and per-triangle materials.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Scene {
+    /// In a stable order.
+    pub objects: Vec<SceneObject>,
+}

@@ -1,0 +1,213 @@
+//! Radio materials: the ITU-R P.2040 classes (Table 3) as Sionna RT names them, plus foliage.
+//!
+//! # References
+//! ITU-R P.2040-3, Table 3; the same values as Sionna RT v1.0.1 `radio_materials/itu.py`
+//! (../shared/reference/rf.md §1).
+
+use serde::{Deserialize, Serialize};
+
+/// A surface or volume material. Stored per triangle as its `u8` discriminant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[repr(u8)]
+pub enum Material {
+    /// ITU concrete.
+    Concrete = 0,
+    /// ITU brick.
+    Brick = 1,
+    /// ITU plasterboard.
+    Plasterboard = 2,
+    /// ITU wood.
+    Wood = 3,
+    /// ITU glass.
+    Glass = 4,
+    /// ITU ceiling board.
+    CeilingBoard = 5,
+    /// ITU chipboard.
+    Chipboard = 6,
+    /// ITU plywood.
+    Plywood = 7,
+    /// ITU marble.
+    Marble = 8,
+    /// ITU floorboard.
+    Floorboard = 9,
+    /// ITU metal.
+    Metal = 10,
+    /// ITU very dry ground.
+    VeryDryGround = 11,
+    /// ITU medium dry ground.
+    MediumDryGround = 12,
+    /// ITU wet ground.
+    WetGround = 13,
+    /// Foliage: not a P.2040 surface but an absorbing volume (ITU-R P.833 loss along paths).
+    Foliage = 14,
+}
+
+/// P.2040 Table 3 row: eps_r' = a f^b, sigma = c f^d (f in GHz), valid for f in (lo, hi) GHz.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ItuLaw {
+    /// a.
+    pub a: f64,
+    /// b.
+    pub b: f64,
+    /// c, S/m.
+    pub c: f64,
+    /// d.
+    pub d: f64,
+    /// Lower end of the frequency range, GHz.
+    pub lo_ghz: f64,
+    /// Upper end, GHz.
+    pub hi_ghz: f64,
+}
+
+impl Material {
+    /// Every material, in discriminant order.
+    pub const ALL: [Material; 15] = [
+        Material::Concrete,
+        Material::Brick,
+        Material::Plasterboard,
+        Material::Wood,
+        Material::Glass,
+        Material::CeilingBoard,
+        Material::Chipboard,
+        Material::Plywood,
+        Material::Marble,
+        Material::Floorboard,
+        Material::Metal,
+        Material::VeryDryGround,
+        Material::MediumDryGround,
+        Material::WetGround,
+        Material::Foliage,
+    ];
+
+    /// The material with discriminant `v`.
+    pub fn from_u8(v: u8) -> Option<Material> {
+        Material::ALL.get(v as usize).copied()
+    }
+
+    /// Sionna RT's `itu_type` (the `itu_` prefix of scene ids removed); foliage has none.
+    pub fn itu_type(self) -> Option<&'static str> {
+        Some(match self {
+            Material::Concrete => "concrete",
+            Material::Brick => "brick",
+            Material::Plasterboard => "plasterboard",
+            Material::Wood => "wood",
+            Material::Glass => "glass",
+            Material::CeilingBoard => "ceiling_board",
+            Material::Chipboard => "chipboard",
+            Material::Plywood => "plywood",
+            Material::Marble => "marble",
+            Material::Floorboard => "floorboard",
+            Material::Metal => "metal",
+            Material::VeryDryGround => "very_dry_ground",
+            Material::MediumDryGround => "medium_dry_ground",
+            Material::WetGround => "wet_ground",
+            Material::Foliage => return None,
+        })
+    }
+
+    /// The material named by a Sionna id (`itu_concrete`, `mat-itu_concrete`, `concrete`).
+    pub fn from_name(name: &str) -> Option<Material> {
+        let n = name.strip_prefix("mat-").unwrap_or(name);
+        let n = n.strip_prefix("itu_").unwrap_or(n);
+        Material::ALL
+            .into_iter()
+            .find(|m| m.itu_type() == Some(n) || (n == "foliage" && *m == Material::Foliage))
+    }
+
+    /// The P.2040 Table 3 law (first band), `None` for foliage.
+    pub fn law(self) -> Option<ItuLaw> {
+        let l = |a, b, c, d, lo_ghz, hi_ghz| {
+            Some(ItuLaw {
+                a,
+                b,
+                c,
+                d,
+                lo_ghz,
+                hi_ghz,
+            })
+        };
+        match self {
+            Material::Concrete => l(5.24, 0.0, 0.0462, 0.7822, 1.0, 100.0),
+            Material::Brick => l(3.91, 0.0, 0.0238, 0.16, 1.0, 40.0),
+            Material::Plasterboard => l(2.73, 0.0, 0.0085, 0.9395, 1.0, 100.0),
+            Material::Wood => l(1.99, 0.0, 0.0047, 1.0718, 0.001, 100.0),
+            Material::Glass => l(6.31, 0.0, 0.0036, 1.3394, 0.1, 100.0),
+            Material::CeilingBoard => l(1.48, 0.0, 0.0011, 1.0750, 1.0, 100.0),
+            Material::Chipboard => l(2.58, 0.0, 0.0217, 0.7800, 1.0, 100.0),
+            Material::Plywood => l(2.71, 0.0, 0.33, 0.0, 1.0, 40.0),
+            Material::Marble => l(7.074, 0.0, 0.0055, 0.9262, 1.0, 60.0),
+            Material::Floorboard => l(3.66, 0.0, 0.0044, 1.3515, 50.0, 100.0),
+            Material::Metal => l(1.0, 0.0, 1e7, 0.0, 1.0, 100.0),
+            Material::VeryDryGround => l(3.0, 0.0, 0.00015, 2.52, 1.0, 10.0),
+            Material::MediumDryGround => l(15.0, -0.1, 0.035, 1.63, 1.0, 10.0),
+            Material::WetGround => l(30.0, -0.4, 0.15, 1.30, 1.0, 10.0),
+            Material::Foliage => None,
+        }
+    }
+
+    /// Relative permittivity eps_r' and conductivity sigma (S/m) at `freq_hz` (P.2040 eqs (58),
+    /// (59) as cited by MathWorks; Sionna `itu.py`). Outside the table's range this is an error
+    /// unless `extrapolate` (Sionna refuses; MathWorks extrapolates).
+    pub fn eps_sigma(self, freq_hz: f64, extrapolate: bool) -> Result<(f64, f64), String> {
+        let law = self
+            .law()
+            .ok_or_else(|| format!("{self:?} has no P.2040 law"))?;
+        let f = freq_hz / 1e9;
+        if !extrapolate && !(law.lo_ghz < f && f < law.hi_ghz) {
+            return Err(format!(
+                "{} is specified for {}-{} GHz by ITU-R P.2040, not {f} GHz (allow extrapolation to use it anyway)",
+                self.itu_type().unwrap_or("?"),
+                law.lo_ghz,
+                law.hi_ghz
+            ));
+        }
+        Ok((law.a * f.powf(law.b), law.c * f.powf(law.d)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// rf.md §8 / compute_checks.out: concrete at 3.5 GHz eps 5.24, sigma 0.1231; at 28 GHz
+    /// sigma 0.626; medium-dry ground at 3.5 GHz eta = 13.234 - j1.385.
+    #[test]
+    fn table_3_test_vectors() {
+        let (e, s) = Material::Concrete.eps_sigma(3.5e9, false).unwrap();
+        assert!(
+            (e - 5.24).abs() < 1e-12 && (s - 0.1231).abs() < 5e-5,
+            "{e} {s}"
+        );
+        let (_, s) = Material::Concrete.eps_sigma(28e9, false).unwrap();
+        assert!((s - 0.626).abs() < 5e-4, "{s}");
+        let (e, s) = Material::MediumDryGround.eps_sigma(3.5e9, false).unwrap();
+        let im = 17.98 * s / 3.5;
+        assert!(
+            (e - 13.234).abs() < 5e-4 && (im - 1.385).abs() < 1e-3,
+            "{e} {im}"
+        );
+    }
+
+    #[test]
+    fn out_of_range_is_an_error_unless_extrapolating() {
+        let e = Material::Brick.eps_sigma(60e9, false).unwrap_err();
+        assert!(e.contains("1-40 GHz"), "{e}");
+        assert!(Material::Brick.eps_sigma(60e9, true).is_ok());
+    }
+
+    #[test]
+    fn names_round_trip() {
+        for m in Material::ALL {
+            assert_eq!(Material::from_u8(m as u8), Some(m));
+            let name = m
+                .itu_type()
+                .map(|t| format!("itu_{t}"))
+                .unwrap_or("foliage".into());
+            assert_eq!(Material::from_name(&name), Some(m));
+        }
+        assert_eq!(
+            Material::from_name("mat-itu_concrete"),
+            Some(Material::Concrete)
+        );
+    }
+}
