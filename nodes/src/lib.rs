@@ -30,10 +30,13 @@ pub mod site;
 pub mod stage;
 pub mod warp;
 
+pub mod city_footprints;
 pub mod composite_height;
 pub mod gaussian_blur;
 pub mod raster_ops;
+pub mod rasterize_scene;
 pub mod rasterize_surface;
+pub mod raycast;
 pub mod read_footprints;
 pub mod read_las;
 pub mod read_measurements;
@@ -42,8 +45,11 @@ pub mod read_osm;
 pub mod read_raster;
 pub mod read_xyz;
 pub mod stats;
+pub mod synth_city;
+pub mod synth_lidar;
 pub mod synth_scan;
 pub mod synth_terrain;
+pub mod truth_scene;
 
 pub use artifact::{Artifact, ArtifactType};
 pub use site::Site;
@@ -57,6 +63,12 @@ macro_rules! for_each_stage {
         $m! {
             $crate::synth_terrain::SynthTerrain,
             $crate::synth_scan::SynthScan,
+            $crate::synth_city::SynthCity,
+            $crate::truth_scene::TruthScene,
+            $crate::synth_lidar::SynthLidar,
+            $crate::rasterize_scene::RasterizeScene,
+            $crate::rasterize_scene::RenderOrtho,
+            $crate::city_footprints::CityFootprints,
             $crate::read_las::ReadLas,
             $crate::read_raster::ReadRaster,
             $crate::read_measurements::ReadMeasurements,

@@ -153,7 +153,8 @@ impl Material {
             .law()
             .ok_or_else(|| format!("{self:?} has no P.2040 law"))?;
         let f = freq_hz / 1e9;
-        if !extrapolate && !(law.lo_ghz < f && f < law.hi_ghz) {
+        let in_range = law.lo_ghz < f && f < law.hi_ghz;
+        if !in_range && !extrapolate {
             return Err(format!(
                 "{} is specified for {}-{} GHz by ITU-R P.2040, not {f} GHz (allow extrapolation to use it anyway)",
                 self.itu_type().unwrap_or("?"),

@@ -63,20 +63,46 @@ impl Stage for RasterizeSurface {
     type Output = Raster;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        match p.cell_m {
-            Some(c) if !(c > 0.0) => Err(ParamError::new(
+        if p.cell_m.is_some_and(|c| !(c > 0.0)) {
+            return Err(ParamError::new(
                 "cell_m",
                 "expected a positive cell size in metres",
-            )),
-            _ => Ok(()),
+            ));
         }
+        if let CellMode::Percentile(q) = p.mode
+            && !(0.0..=100.0).contains(&q)
+        {
+            return Err(ParamError::new(
+                "mode",
+                format!("expected a percentile in [0, 100], found {q}"),
+            ));
+        }
+        if !(p.max_gap_m >= 0.0 && p.max_gap_m.is_finite()) {
+            return Err(ParamError::new(
+                "max_gap_m",
+                "expected a non-negative distance in metres",
+            ));
+        }
+        Ok(())
     }
 
     fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Raster, StageError> {
-        let points: &PointSet = inputs.one("points")?;
+        let all: &PointSet = inputs.one("points")?;
         let cell = p.cell_m.unwrap_or(ctx.site.cell_m);
+        let keep = |c: u8| {
+            p.classes.as_ref().is_none_or(|k| k.contains(&c)) && !p.exclude_classes.contains(&c)
+        };
+        let filtered;
+        let points = if all.class.is_empty() || all.class.iter().all(|&c| keep(c)) {
+            all
+        } else {
+            filtered = select(all, |i| keep(all.class[i]));
+            &filtered
+        };
         let (lo, hi) = points.bounds().ok_or_else(|| {
-            StageError::Failed("the point set is empty: nothing to rasterize".into())
+            StageError::Failed(
+                "no points to rasterize (the set is empty, or every point was filtered out by class)".into(),
+            )
         })?;
         let grid = Grid::covering(
             (lo[0] as f64, lo[1] as f64),
@@ -257,6 +283,79 @@ mod tests {
             rasterize(&pts, g, CellMode::Percentile(25.0)).data.0,
             vec![1.5, 5.0]
         );
+    }
+
+    #[test]
+    fn class_filter_keeps_only_the_chosen_classes_and_drops_noise() {
+        use crate::site::Site;
+        use crate::stage::Slot;
+        let pts = PointSet {
+            xyz: PodVec(vec![
+                [0.5, 0.5, 1.0],
+                [0.6, 0.5, 30.0],
+                [0.7, 0.5, -50.0],
+                [1.5, 0.5, 2.0],
+            ]),
+            class: PodVec(vec![2, 6, 7, 2]),
+            ..Default::default()
+        };
+        let inputs = Inputs::new().with(
+            "points",
+            Slot::One(std::sync::Arc::new(crate::Artifact::Points(pts))),
+        );
+        let site = Site {
+            crs: "EPSG:32618".into(),
+            origin: (0.0, 0.0),
+            cell_m: 1.0,
+        };
+        let run = |classes: Option<Vec<u8>>, mode| {
+            let p = RasterizeSurfaceParams {
+                mode,
+                cell_m: None,
+                classes,
+                exclude_classes: vec![7, 18],
+                max_gap_m: 0.0,
+            };
+            RasterizeSurface::run(&p, &inputs, &Ctx::new(&site, &[]))
+                .unwrap()
+                .data
+                .0
+        };
+        assert_eq!(
+            run(Some(vec![2]), CellMode::Max),
+            vec![1.0, 2.0],
+            "ground only"
+        );
+        assert_eq!(run(None, CellMode::Max), vec![30.0, 2.0], "all but noise");
+        assert_eq!(
+            run(None, CellMode::Min),
+            vec![1.0, 2.0],
+            "the noise point at -50 m is dropped"
+        );
+    }
+
+    #[test]
+    fn out_of_range_values_are_rejected() {
+        let p = |mode, max_gap_m| RasterizeSurfaceParams {
+            mode,
+            cell_m: None,
+            classes: None,
+            exclude_classes: vec![],
+            max_gap_m,
+        };
+        assert_eq!(
+            RasterizeSurface::validate(&p(CellMode::Percentile(120.0), 0.0))
+                .unwrap_err()
+                .field,
+            "mode"
+        );
+        assert_eq!(
+            RasterizeSurface::validate(&p(CellMode::Max, -1.0))
+                .unwrap_err()
+                .field,
+            "max_gap_m"
+        );
+        assert!(RasterizeSurface::validate(&p(CellMode::Percentile(5.0), 2.0)).is_ok());
     }
 
     #[test]

@@ -7,7 +7,7 @@ use crate::artifact::{Grid, PodVec, Raster};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`SynthTerrain`].
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SynthTerrainParams {
     /// Noise seed. Default 1.

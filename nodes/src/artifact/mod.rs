@@ -1,6 +1,7 @@
 //! The artifact types that flow along graph edges. Plain data, serializable, deterministic.
 
 mod array;
+mod city;
 mod footprints;
 mod measurements;
 mod metrics;
@@ -12,6 +13,7 @@ mod scene;
 use serde::{Deserialize, Serialize};
 
 pub use array::PodVec;
+pub use city::{BuildingSpec, City, ClutterSpec, Rect, Roof, RoofBox, TreeSpec};
 pub use footprints::{Footprint, Footprints, Polygon, ring_area};
 pub use measurements::{Endpoint, Height, Link, Measurements};
 pub use metrics::Metrics;
@@ -37,6 +39,8 @@ pub enum ArtifactType {
     Footprints,
     /// A [`Scene`]: objects as triangle meshes with materials.
     Scene,
+    /// A [`City`]: the synthetic site's ground truth.
+    City,
 }
 
 impl std::fmt::Display for ArtifactType {
@@ -62,6 +66,8 @@ pub enum Artifact {
     Footprints(Footprints),
     /// See [`Scene`].
     Scene(Scene),
+    /// See [`City`].
+    City(City),
 }
 
 impl Artifact {
@@ -75,6 +81,7 @@ impl Artifact {
             Artifact::Measurements(_) => ArtifactType::Measurements,
             Artifact::Footprints(_) => ArtifactType::Footprints,
             Artifact::Scene(_) => ArtifactType::Scene,
+            Artifact::City(_) => ArtifactType::City,
         }
     }
 }
@@ -100,7 +107,15 @@ macro_rules! typed {
         }
     )*};
 }
-typed!(Raster, Metrics, Ortho, Measurements, Footprints, Scene);
+typed!(
+    Raster,
+    Metrics,
+    Ortho,
+    Measurements,
+    Footprints,
+    Scene,
+    City
+);
 
 impl Typed for PointSet {
     const TYPE: ArtifactType = ArtifactType::Points;

@@ -57,7 +57,7 @@ pub fn write_glb(scene: &Scene) -> Result<Vec<u8>, String> {
         })
         .collect::<Result<_, String>>()?;
     let mut push_view = |bin: &mut Vec<u8>, bytes: &[u8], target: u32| {
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len(), "target": target}));
@@ -99,7 +99,7 @@ pub fn write_glb(scene: &Scene) -> Result<Vec<u8>, String> {
         meshes.push(json!({"name": obj.id, "primitives": primitives}));
         nodes.push(json!({"name": obj.id, "mesh": meshes.len() - 1, "extras": {"class": format!("{:?}", obj.class)}}));
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let doc = json!({

@@ -1,11 +1,13 @@
 //! Artifacts as ordinary files that other tools open: GeoTIFF, JSON, text.
 
 mod glb;
+mod las;
 
 use crate::artifact::Artifact;
 
 use crate::site::Site;
 pub use glb::{material_color, write_glb};
+pub use las::write_las;
 
 use crate::geotiff::{write_geotiff, write_geotiff_rgb};
 
@@ -22,6 +24,10 @@ pub fn encode(a: &Artifact, site: &Site) -> Result<(&'static str, Vec<u8>), Stri
             write_geotiff_rgb(&o.rgb, &o.grid, site, &mut buf)?;
             Ok(("tif", buf.into_inner()))
         }
+        Artifact::City(c) => Ok((
+            "json",
+            serde_json::to_vec_pretty(c).map_err(|e| e.to_string())?,
+        )),
         Artifact::Scene(s) => Ok(("glb", write_glb(s)?)),
         Artifact::Footprints(f) => Ok((
             "geojson",
@@ -33,24 +39,7 @@ pub fn encode(a: &Artifact, site: &Site) -> Result<(&'static str, Vec<u8>), Stri
             s.push('\n');
             Ok(("json", s.into_bytes()))
         }
-        Artifact::Points(p) => {
-            // ASCII XYZ in absolute CRS coordinates: what PDAL's text writer and CloudCompare read.
-            use std::fmt::Write;
-            let mut s = String::with_capacity(p.len() * 40);
-            s.push_str("x y z class\n");
-            let (ox, oy) = site.origin;
-            for (i, q) in p.xyz.iter().enumerate() {
-                let class = p.class.get(i).copied().unwrap_or(0);
-                let _ = writeln!(
-                    s,
-                    "{:.3} {:.3} {:.3} {class}",
-                    ox + q[0] as f64,
-                    oy + q[1] as f64,
-                    q[2]
-                );
-            }
-            Ok(("xyz", s.into_bytes()))
-        }
+        Artifact::Points(p) => Ok(("las", write_las(p, site)?)),
     }
 }
 

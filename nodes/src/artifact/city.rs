@@ -1,0 +1,178 @@
+//! The synthetic site's ground truth: what exists, described, before any sensor sees it.
+
+use serde::{Deserialize, Serialize};
+
+use super::Polygon;
+use crate::materials::Material;
+use crate::synth_terrain::SynthTerrainParams;
+
+/// An oriented rectangle: south-west corner (before rotation), length along `heading`, width.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Rect {
+    /// The corner the rectangle is rotated about.
+    pub corner: [f64; 2],
+    /// Along `heading`, metres.
+    pub length: f64,
+    /// Across, metres.
+    pub width: f64,
+    /// Radians, counter-clockwise from +x.
+    pub heading: f64,
+}
+
+impl Rect {
+    /// The four corners, counter-clockwise.
+    pub fn corners(&self) -> Vec<[f64; 2]> {
+        let (s, c) = self.heading.sin_cos();
+        [
+            (0.0, 0.0),
+            (self.length, 0.0),
+            (self.length, self.width),
+            (0.0, self.width),
+        ]
+        .iter()
+        .map(|&(u, v)| {
+            [
+                self.corner[0] + c * u - s * v,
+                self.corner[1] + s * u + c * v,
+            ]
+        })
+        .collect()
+    }
+}
+
+/// A roof shape.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Roof {
+    /// Flat at the eave.
+    Flat,
+    /// Two slopes meeting at a ridge along the rectangle's length.
+    Gabled {
+        /// The rectangle the roof covers (also the footprint).
+        rect: Rect,
+        /// Ridge height above the eave, metres.
+        ridge_m: f64,
+    },
+    /// Four slopes (a pyramid when square).
+    Hipped {
+        /// The rectangle the roof covers (also the footprint).
+        rect: Rect,
+        /// Ridge height above the eave, metres.
+        ridge_m: f64,
+    },
+    /// A smaller upper tier on a flat roof.
+    Stepped {
+        /// The tier's footprint.
+        upper: Polygon,
+        /// Its height above the eave, metres.
+        upper_m: f64,
+    },
+    /// A dome on a flat roof.
+    Domed {
+        /// Dome centre.
+        center: [f64; 2],
+        /// Dome radius, metres.
+        radius_m: f64,
+        /// Dome height above the eave, metres.
+        height_m: f64,
+    },
+}
+
+/// Roof furniture: the small things KODAMA keeps (chimneys, HVAC units).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RoofBox {
+    /// What it is.
+    pub kind: String,
+    /// Centre.
+    pub center: [f64; 2],
+    /// Length, width, height, metres.
+    pub size: [f64; 3],
+}
+
+/// One building of the truth.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BuildingSpec {
+    /// `building-<n>`.
+    pub id: String,
+    /// Outline (with courtyards as holes).
+    pub footprint: Polygon,
+    /// Highest terrain under the outline: heights are measured from here.
+    pub ground_z: f64,
+    /// Bottom of the solid, below the lowest terrain under the outline.
+    pub base_z: f64,
+    /// Eave (flat roof) height above `ground_z`, metres.
+    pub eave_m: f64,
+    /// Roof shape.
+    pub roof: Roof,
+    /// Roof furniture, standing on the eave level.
+    pub furniture: Vec<RoofBox>,
+    /// Façade material.
+    pub facade: Material,
+    /// Roof material.
+    pub roof_material: Material,
+}
+
+impl BuildingSpec {
+    /// Highest point of the roof above `ground_z`, furniture excluded.
+    pub fn top_m(&self) -> f64 {
+        self.eave_m
+            + match &self.roof {
+                Roof::Flat => 0.0,
+                Roof::Gabled { ridge_m, .. } | Roof::Hipped { ridge_m, .. } => *ridge_m,
+                Roof::Stepped { upper_m, .. } => *upper_m,
+                Roof::Domed { height_m, .. } => *height_m,
+            }
+    }
+}
+
+/// A tree: trunk and ellipsoidal crown.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TreeSpec {
+    /// `tree-<n>`.
+    pub id: String,
+    /// Trunk position.
+    pub pos: [f64; 2],
+    /// Terrain height there.
+    pub ground_z: f64,
+    /// Height of the crown's bottom above ground.
+    pub trunk_m: f64,
+    /// Horizontal crown radius.
+    pub crown_radius_m: f64,
+    /// Crown height.
+    pub crown_m: f64,
+}
+
+/// Street clutter.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClutterSpec {
+    /// `<kind>-<n>`.
+    pub id: String,
+    /// `car`, `pole`, `sign`, `shelter`.
+    pub kind: String,
+    /// Centre.
+    pub center: [f64; 2],
+    /// Radians, counter-clockwise from +x.
+    pub heading: f64,
+    /// Terrain height there.
+    pub ground_z: f64,
+    /// Length, width, height, metres.
+    pub size: [f64; 3],
+    /// Height of the bottom above ground (a sign on its pole).
+    pub lift_m: f64,
+    /// Material.
+    pub material: Material,
+}
+
+/// The synthetic site.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct City {
+    /// The terrain (evaluated with [`crate::synth_terrain::height_at`]).
+    pub terrain: SynthTerrainParams,
+    /// Extent (east, north) from the site origin, metres.
+    pub size_m: (f64, f64),
+    /// Buildings.
+    pub buildings: Vec<BuildingSpec>,
+    /// Trees.
+    pub trees: Vec<TreeSpec>,
+    /// Clutter.
+    pub clutter: Vec<ClutterSpec>,
+}

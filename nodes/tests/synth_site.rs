@@ -1,0 +1,380 @@
+//! The synthetic site against its own ground truth: the city description, the meshes made from
+//! it, and the sensors that observe it.
+
+use std::sync::Arc;
+
+use kodama_nodes::artifact::{City, ObjectClass, PointSet, Roof, Scene};
+use kodama_nodes::city_footprints::{CityFootprints, CityFootprintsParams};
+use kodama_nodes::export::{write_glb, write_las};
+use kodama_nodes::mesh_check::check_closed_solid;
+use kodama_nodes::rasterize_scene::{RasterizeScene, RasterizeSceneParams};
+use kodama_nodes::read_osm::point_in_ring;
+use kodama_nodes::stage::Slot;
+use kodama_nodes::synth_city::{SynthCityParams, generate};
+use kodama_nodes::synth_lidar::{SynthLidar, SynthLidarParams};
+use kodama_nodes::synth_terrain::{SynthTerrainParams, height_at};
+use kodama_nodes::truth_scene::{TruthScene, TruthSceneParams};
+use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
+
+fn site() -> Site {
+    Site {
+        crs: "EPSG:32618".into(),
+        origin: (583200.0, 4506600.0),
+        cell_m: 0.5,
+    }
+}
+
+fn small_city() -> SynthCityParams {
+    SynthCityParams {
+        size_m: (200.0, 150.0),
+        blocks: (2, 2),
+        terrain: SynthTerrainParams {
+            seed: 3,
+            size_m: (200.0, 150.0),
+            relief_m: 2.0,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
+fn scene_of(city: &City) -> Scene {
+    let inputs = Inputs::new().with("city", Slot::One(Arc::new(Artifact::City(city.clone()))));
+    TruthScene::run(
+        &TruthSceneParams::default(),
+        &inputs,
+        &Ctx::new(&site(), &[]),
+    )
+    .unwrap()
+}
+
+fn scan(scene: &Scene, p: &SynthLidarParams) -> PointSet {
+    let inputs = Inputs::new().with("scene", Slot::One(Arc::new(Artifact::Scene(scene.clone()))));
+    SynthLidar::run(p, &inputs, &Ctx::new(&site(), &[])).unwrap()
+}
+
+#[test]
+fn the_demo_city_has_every_roof_type_and_closed_buildings() {
+    let p = SynthCityParams::default();
+    let city = generate(&p);
+    assert_eq!(city, generate(&p), "deterministic");
+    let n = |f: &dyn Fn(&Roof) -> bool| city.buildings.iter().filter(|b| f(&b.roof)).count();
+    let counts = [
+        n(&|r| matches!(r, Roof::Flat)),
+        n(&|r| matches!(r, Roof::Gabled { .. })),
+        n(&|r| matches!(r, Roof::Hipped { .. })),
+        n(&|r| matches!(r, Roof::Stepped { .. })),
+        n(&|r| matches!(r, Roof::Domed { .. })),
+    ];
+    let courtyards = city
+        .buildings
+        .iter()
+        .filter(|b| !b.footprint.holes.is_empty())
+        .count();
+    let furniture: usize = city.buildings.iter().map(|b| b.furniture.len()).sum();
+    println!(
+        "{} buildings (flat, gabled, hipped, stepped, domed) = {counts:?}, {courtyards} courtyards, {furniture} roof units, {} trees, {} clutter",
+        city.buildings.len(),
+        city.trees.len(),
+        city.clutter.len()
+    );
+    assert!(counts.iter().all(|&c| c > 0), "{counts:?}");
+    assert!(courtyards > 0 && furniture > 10);
+    assert!(city.trees.len() > 50 && city.clutter.iter().filter(|c| c.kind == "car").count() > 20);
+    let scene = scene_of(&city);
+    for obj in scene
+        .objects
+        .iter()
+        .filter(|o| o.class != ObjectClass::Terrain)
+    {
+        check_closed_solid(&obj.mesh).unwrap_or_else(|e| panic!("{}: {e}", obj.id));
+    }
+    // Every building stands on the ground however the terrain slopes: its base is below the
+    // lowest terrain point under it.
+    for b in &city.buildings {
+        let lowest = b
+            .footprint
+            .exterior
+            .iter()
+            .map(|q| height_at(&city.terrain, q[0], q[1]))
+            .fold(f64::INFINITY, f64::min);
+        assert!(b.base_z < lowest, "{}", b.id);
+    }
+}
+
+#[test]
+fn lidar_density_classes_occlusion_and_returns() {
+    let city = generate(&small_city());
+    let scene = scene_of(&city);
+    let p = SynthLidarParams {
+        density_per_m2: 8.0,
+        ..Default::default()
+    };
+    let pts = scan(&scene, &p);
+    let count = |c: u8| pts.class.iter().filter(|&&k| k == c).count();
+    println!(
+        "{} points: ground {}, building {}, vegetation {}, clutter {}",
+        pts.len(),
+        count(2),
+        count(6),
+        count(5),
+        count(1)
+    );
+    assert!(count(2) > 0 && count(6) > 0 && count(5) > 0 && count(1) > 0);
+    // Open-ground density: first returns on ground, away from buildings and trees, per m².
+    let open = |x: f64, y: f64| {
+        city.buildings.iter().all(|b| {
+            let (lo, hi) =
+                b.footprint
+                    .exterior
+                    .iter()
+                    .fold(([f64::MAX; 2], [f64::MIN; 2]), |(lo, hi), q| {
+                        (
+                            [lo[0].min(q[0]), lo[1].min(q[1])],
+                            [hi[0].max(q[0]), hi[1].max(q[1])],
+                        )
+                    });
+            x < lo[0] - 15.0 || x > hi[0] + 15.0 || y < lo[1] - 15.0 || y > hi[1] + 15.0
+        }) && city
+            .trees
+            .iter()
+            .all(|t| (t.pos[0] - x).hypot(t.pos[1] - y) > t.crown_radius_m + 2.0)
+    };
+    let mut open_area = 0.0;
+    for i in 0..200 {
+        for j in 0..150 {
+            if open(i as f64 + 0.5, j as f64 + 0.5) {
+                open_area += 1.0;
+            }
+        }
+    }
+    let open_pts = pts
+        .xyz
+        .iter()
+        .zip(pts.class.iter())
+        .filter(|(q, c)| **c == 2 && open(q[0] as f64, q[1] as f64))
+        .count();
+    let density = open_pts as f64 / open_area;
+    println!("open ground: {open_area} m², {density:.2} points/m²");
+    assert!(
+        open_area > 1000.0 && (density - 8.0).abs() < 1.6,
+        "{density}"
+    );
+    // Occlusion: no ground return inside a building's outline, more than 0.3 m from its walls
+    // (position noise moves returns at the foot of a wall by centimetres).
+    let edge_distance = |p: [f64; 2], ring: &[[f64; 2]]| {
+        (0..ring.len())
+            .map(|i| {
+                let (a, b) = (ring[i], ring[(i + 1) % ring.len()]);
+                let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                let t = (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / (dx * dx + dy * dy))
+                    .clamp(0.0, 1.0);
+                (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    for b in &city.buildings {
+        let inner = pts
+            .xyz
+            .iter()
+            .zip(pts.class.iter())
+            .map(|(q, c)| ([q[0] as f64, q[1] as f64], *c))
+            .filter(|(q, c)| {
+                *c == 2
+                    && point_in_ring(*q, &b.footprint.exterior)
+                    && edge_distance(*q, &b.footprint.exterior) > 0.3
+            })
+            .filter(|(q, _)| {
+                b.footprint
+                    .holes
+                    .iter()
+                    .all(|h| !point_in_ring(*q, h) && edge_distance(*q, h) > 0.3)
+            })
+            .count();
+        assert_eq!(inner, 0, "{}: ground points under the roof", b.id);
+    }
+    // Multiple returns come from foliage, and numbering is consistent.
+    let multi = (0..pts.len())
+        .filter(|&i| pts.number_of_returns[i] > 1)
+        .count();
+    assert!(multi > 100);
+    assert!(
+        (0..pts.len())
+            .all(|i| pts.return_number[i] >= 1 && pts.return_number[i] <= pts.number_of_returns[i])
+    );
+    assert!(
+        (0..pts.len())
+            .filter(|&i| pts.return_number[i] < pts.number_of_returns[i])
+            .all(|i| pts.class[i] == 5),
+        "only foliage lets a pulse through"
+    );
+}
+
+#[test]
+fn lidar_is_identical_at_one_and_two_threads() {
+    let scene = scene_of(&generate(&small_city()));
+    let p = SynthLidarParams {
+        density_per_m2: 2.0,
+        ..Default::default()
+    };
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(|| scan(&scene, &p));
+    let two = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap()
+        .install(|| scan(&scene, &p));
+    assert_eq!(one, two);
+}
+
+#[test]
+fn truth_dem_and_dsm_match_the_city_description() {
+    let city = generate(&small_city());
+    let scene = scene_of(&city);
+    let inputs = Inputs::new().with("scene", Slot::One(Arc::new(Artifact::Scene(scene))));
+    let ctx_site = Site {
+        cell_m: 1.0,
+        ..site()
+    };
+    let dem = RasterizeScene::run(
+        &RasterizeSceneParams {
+            cell_m: None,
+            classes: Some(vec![ObjectClass::Terrain]),
+        },
+        &inputs,
+        &Ctx::new(&ctx_site, &[]),
+    )
+    .unwrap();
+    let dsm = RasterizeScene::run(
+        &RasterizeSceneParams::default(),
+        &inputs,
+        &Ctx::new(&ctx_site, &[]),
+    )
+    .unwrap();
+    // The DEM is the terrain function, up to the 2 m mesh's linear interpolation.
+    let mut worst: f64 = 0.0;
+    for row in 0..dem.grid.height {
+        for col in 0..dem.grid.width {
+            let (x, y) = dem.grid.center(col, row);
+            worst = worst.max((dem.at(col, row) as f64 - height_at(&city.terrain, x, y)).abs());
+        }
+    }
+    assert!(worst < 0.05, "DEM off by {worst} m");
+    // Flat roofs, cell by cell: inside each outline the DSM is the eave, except under roof
+    // furniture and overhanging crowns.
+    let mut roof_cells = 0;
+    let mut at_eave = 0;
+    for b in city
+        .buildings
+        .iter()
+        .filter(|b| matches!(b.roof, Roof::Flat))
+    {
+        for row in 0..dsm.grid.height {
+            for col in 0..dsm.grid.width {
+                let (x, y) = dsm.grid.center(col, row);
+                if !point_in_ring([x, y], &b.footprint.exterior)
+                    || b.footprint.holes.iter().any(|h| point_in_ring([x, y], h))
+                {
+                    continue;
+                }
+                roof_cells += 1;
+                if (dsm.at(col, row) as f64 - (b.ground_z + b.eave_m)).abs() < 1e-3 {
+                    at_eave += 1;
+                }
+            }
+        }
+    }
+    println!("{at_eave} of {roof_cells} flat-roof cells at the eave");
+    assert!(
+        roof_cells > 1000 && at_eave as f64 > 0.9 * roof_cells as f64,
+        "{at_eave} / {roof_cells}"
+    );
+}
+
+#[test]
+fn las_round_trip_through_our_reader() {
+    let scene = scene_of(&generate(&small_city()));
+    let pts = scan(
+        &scene,
+        &SynthLidarParams {
+            density_per_m2: 1.0,
+            ..Default::default()
+        },
+    );
+    let s = site();
+    let bytes = write_las(&pts, &s).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scan.las");
+    std::fs::write(&path, bytes).unwrap();
+    let back = kodama_nodes::read_las::read_las(&path, None, &Ctx::new(&s, &[])).unwrap();
+    assert_eq!(back.len(), pts.len());
+    assert_eq!(
+        (
+            back.class.0.clone(),
+            back.return_number.0.clone(),
+            back.intensity.0.clone()
+        ),
+        (
+            pts.class.0.clone(),
+            pts.return_number.0.clone(),
+            pts.intensity.0.clone()
+        )
+    );
+    assert!(
+        back.xyz
+            .iter()
+            .zip(pts.xyz.iter())
+            .all(|(a, b)| (0..3).all(|k| (a[k] - b[k]).abs() <= 1e-3)),
+        "millimetre resolution"
+    );
+}
+
+#[test]
+fn glb_loads_in_the_gltf_crate_with_a_node_per_object() {
+    let city = generate(&small_city());
+    let scene = scene_of(&city);
+    let glb = write_glb(&scene).unwrap();
+    let (doc, buffers, _) = gltf::import_slice(&glb).unwrap();
+    assert_eq!(doc.nodes().count(), scene.objects.len());
+    assert!(
+        doc.nodes()
+            .filter(|n| n.name().is_some_and(|s| s.contains("building")))
+            .count()
+            == city.buildings.len()
+    );
+    let names: Vec<String> = doc
+        .materials()
+        .filter_map(|m| m.name().map(str::to_owned))
+        .collect();
+    assert!(
+        names.contains(&"itu_concrete".to_string()) && names.contains(&"foliage".to_string()),
+        "{names:?}"
+    );
+    // Triangle count survives: every primitive's indices, summed.
+    let tris: usize = doc
+        .meshes()
+        .flat_map(|m| m.primitives())
+        .map(|p| {
+            p.reader(|b| Some(&buffers[b.index()]))
+                .read_indices()
+                .unwrap()
+                .into_u32()
+                .count()
+                / 3
+        })
+        .sum();
+    assert_eq!(
+        tris,
+        scene.objects.iter().map(|o| o.mesh.len()).sum::<usize>()
+    );
+    let fp = CityFootprints::run(
+        &CityFootprintsParams::default(),
+        &Inputs::new().with("city", Slot::One(Arc::new(Artifact::City(city.clone())))),
+        &Ctx::new(&site(), &[]),
+    )
+    .unwrap();
+    assert_eq!(fp.items.len(), city.buildings.len());
+}
