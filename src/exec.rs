@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
+use kodama_nodes::export::{Encoded, encode, output_file};
 use kodama_nodes::stage::{Arity, Slot};
 use kodama_nodes::{Artifact, Ctx, Inputs, StageError};
 use rayon::prelude::*;
@@ -551,19 +552,20 @@ impl<'a> Exec<'a> {
             let art = self
                 .artifact(*i)
                 .map_err(|e| RunError::Io(format!("output \"{name}\": {e}")))?;
-            let (ext, bytes) = kodama_nodes::export::encode(&art, &self.graph.site)
-                .map_err(|e| RunError::Io(format!("output \"{name}\": {e}")))?;
+            let fail = |e: String| RunError::Io(format!("output \"{name}\": {e}"));
+            let (file_name, format) = output_file(name, art.ty()).map_err(fail)?;
+            let encoded = encode(&art, &self.graph.site, format).map_err(fail)?;
             std::fs::create_dir_all(dir)
                 .map_err(|e| RunError::Io(format!("cannot create {}: {e}", dir.display())))?;
-            let path = dir.join(format!("{name}.{ext}"));
-            write_atomic(dir, &path, &bytes)
+            let path = dir.join(&file_name);
+            let probe = write_output(dir, &path, encoded)
                 .map_err(|e| RunError::Io(format!("cannot write {}: {e}", path.display())))?;
             // The artifact may have been rebuilt while loading; record the digest it has now.
             let digest = lock(&self.state).outcomes[*i]
                 .as_ref()
                 .and_then(|o| o.digest)
                 .unwrap_or(digest);
-            manifest.record(name, &digest, &path);
+            manifest.record(name, &digest, &path, &probe);
             written.insert(name.clone(), path.display().to_string());
         }
         if !written.is_empty() {
@@ -602,7 +604,10 @@ struct OutputManifest {
 #[derive(serde::Serialize, serde::Deserialize)]
 struct ManifestEntry {
     digest: String,
+    /// The output as reported: a file, or a folder.
     file: String,
+    /// The file whose size and mtime stand for it (the folder's entry point).
+    probe: String,
     size: u64,
     mtime_ns: u128,
 }
@@ -628,16 +633,16 @@ impl OutputManifest {
     }
     fn unchanged(&self, name: &str, digest: &Digest) -> Option<PathBuf> {
         let e = self.outputs.get(name)?;
-        let path = PathBuf::from(&e.file);
-        (e.digest == digest.to_hex().as_str()
-            && size_and_mtime(&path) == Some((e.size, e.mtime_ns)))
-        .then_some(path)
+        let same = e.digest == digest.to_hex().as_str()
+            && size_and_mtime(Path::new(&e.probe)) == Some((e.size, e.mtime_ns));
+        same.then(|| PathBuf::from(&e.file))
     }
-    fn record(&mut self, name: &str, digest: &Digest, path: &Path) {
-        if let Some((size, mtime_ns)) = size_and_mtime(path) {
+    fn record(&mut self, name: &str, digest: &Digest, path: &Path, probe: &Path) {
+        if let Some((size, mtime_ns)) = size_and_mtime(probe) {
             let entry = ManifestEntry {
                 digest: digest.to_hex().to_string(),
                 file: path.display().to_string(),
+                probe: probe.display().to_string(),
                 size,
                 mtime_ns,
             };
@@ -650,5 +655,37 @@ impl OutputManifest {
             &dir.join(MANIFEST),
             &serde_json::to_vec_pretty(self).expect("manifest serializes"),
         )
+    }
+}
+
+/// Writes an encoded output at `path` so that it never exists half-written: a file through a temp
+/// file and rename; a folder assembled under a hidden temp name, then renamed over the old one.
+/// Returns the file whose size and mtime stand for the output.
+fn write_output(dir: &Path, path: &Path, encoded: Encoded) -> std::io::Result<PathBuf> {
+    match encoded {
+        Encoded::File(bytes) => {
+            write_atomic(dir, path, &bytes)?;
+            Ok(path.to_path_buf())
+        }
+        Encoded::Folder(files) => {
+            let name = path
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let tmp = dir.join(format!(".kodama-{name}-{}.tmp", std::process::id()));
+            let _ = std::fs::remove_dir_all(&tmp);
+            for (rel, bytes) in &files {
+                let f = tmp.join(rel);
+                std::fs::create_dir_all(f.parent().unwrap_or(&tmp))?;
+                std::fs::write(&f, bytes)?;
+            }
+            if path.is_dir() {
+                std::fs::remove_dir_all(path)?;
+            } else if path.exists() {
+                std::fs::remove_file(path)?;
+            }
+            std::fs::rename(&tmp, path)?;
+            Ok(path.join(files.first().map(|f| f.0.as_str()).unwrap_or("")))
+        }
     }
 }

@@ -184,3 +184,15 @@ fn data_paths_resolve_against_data_dir() {
         .ok();
     assert_eq!(r.status("s"), "ran");
 }
+
+#[test]
+fn an_output_format_the_type_cannot_take() {
+    let env = Env::new();
+    let g = env.write("g.ron", &format!("Graph(\n    {SITE},\n    nodes: {{ \"t\": SynthTerrain() }},\n    outputs: {{ \"t.las\": \"t\" }},\n)\n"));
+    let r = env.run(&g, &[]);
+    assert_eq!(r.code, 2);
+    has(
+        &r.stderr,
+        "g.ron:4:16: output \"t.las\": Raster outputs are written as tif, not .las",
+    );
+}

@@ -199,3 +199,45 @@ fn unchanged_outputs_are_not_rewritten_but_edited_ones_are() {
         tif.to_str().unwrap()
     );
 }
+
+#[test]
+fn an_output_name_can_choose_the_format_and_folders_are_written_whole() {
+    let env = Env::new();
+    let g = env.write(
+        "g.ron",
+        r#"Graph(
+    site: Site(crs: "EPSG:32618", origin: (583200.0, 4506600.0), cell_m: 1.0),
+    nodes: {
+        "city":  SynthCity(size_m: (120.0, 100.0), blocks: (2, 2), street_m: 14.0, terrain: (size_m: (120.0, 100.0))),
+        "truth": TruthScene(city: "city"),
+    },
+    outputs: { "truth": "truth", "tiles.3dtiles": "truth" },
+)"#,
+    );
+    let r = env.run(&g, &[]).ok();
+    let outputs = r.json()["outputs"].clone();
+    assert!(outputs["truth"].as_str().unwrap().ends_with("truth.glb"));
+    let tiles = std::path::PathBuf::from(outputs["tiles.3dtiles"].as_str().unwrap());
+    assert!(tiles.join("tileset.json").is_file() && tiles.join("tiles").is_dir());
+    let entries = std::fs::read_dir(env.out())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect::<Vec<_>>();
+    assert!(
+        entries.iter().all(|e| !e.contains(".tmp")),
+        "no temp folders left: {entries:?}"
+    );
+    let before = std::fs::metadata(tiles.join("tileset.json"))
+        .unwrap()
+        .modified()
+        .unwrap();
+    env.run(&g, &[]).ok();
+    assert_eq!(
+        std::fs::metadata(tiles.join("tileset.json"))
+            .unwrap()
+            .modified()
+            .unwrap(),
+        before,
+        "not rewritten"
+    );
+}

@@ -19,6 +19,7 @@ compile_error!(
 
 pub mod artifact;
 pub mod crs;
+pub mod ecef;
 pub mod export;
 pub mod geojson;
 pub mod geotiff;
@@ -43,6 +44,7 @@ pub mod read_measurements;
 pub mod read_ortho;
 pub mod read_osm;
 pub mod read_raster;
+pub mod read_tiles;
 pub mod read_xyz;
 pub mod stats;
 pub mod synth_city;
@@ -74,6 +76,7 @@ macro_rules! for_each_stage {
             $crate::read_measurements::ReadMeasurements,
             $crate::read_footprints::ReadFootprints,
             $crate::read_osm::ReadOsmBuildings,
+            $crate::read_tiles::ReadTileset,
             $crate::read_ortho::ReadOrtho,
             $crate::read_xyz::ReadXyz,
             $crate::rasterize_surface::RasterizeSurface,

@@ -139,7 +139,7 @@ fn asprs_class(c: ObjectClass) -> u8 {
         ObjectClass::Terrain => 2,
         ObjectClass::Building => 6,
         ObjectClass::Vegetation => 5,
-        ObjectClass::Clutter => 1,
+        ObjectClass::Clutter | ObjectClass::Unsegmented => 1,
     }
 }
 

@@ -41,8 +41,26 @@ pub fn hash_file(path: &Path) -> io::Result<Digest> {
 
 impl Cache {
     /// The content digest of the file at `path`, read only if its size, mtime or inode changed
-    /// since it was last digested.
+    /// since it was last digested. A folder's digest covers the relative paths and digests of
+    /// every file below it, in sorted order.
     pub fn file_digest(&self, path: &Path) -> io::Result<Digest> {
+        if path.is_dir() {
+            let mut files = Vec::new();
+            collect_files(path, path, &mut files)?;
+            files.sort();
+            let mut h = blake3::Hasher::new();
+            h.update(b"kodama-dag folder 1\0");
+            for (rel, full) in files {
+                h.update(&(rel.len() as u64).to_le_bytes());
+                h.update(rel.as_bytes());
+                h.update(self.regular_file_digest(&full)?.as_bytes());
+            }
+            return Ok(h.finalize());
+        }
+        self.regular_file_digest(path)
+    }
+
+    fn regular_file_digest(&self, path: &Path) -> io::Result<Digest> {
         let abs = fs::canonicalize(path)?;
         let meta = fs::metadata(&abs)?;
         let mtime_ns = meta.mtime() as i128 * 1_000_000_000 + meta.mtime_nsec() as i128;
@@ -77,6 +95,27 @@ impl Cache {
         );
         Ok(digest)
     }
+}
+
+fn collect_files(
+    root: &Path,
+    dir: &Path,
+    out: &mut Vec<(String, std::path::PathBuf)>,
+) -> io::Result<()> {
+    for entry in fs::read_dir(dir)? {
+        let p = entry?.path();
+        if p.is_dir() {
+            collect_files(root, &p, out)?;
+        } else {
+            let rel = p
+                .strip_prefix(root)
+                .unwrap_or(&p)
+                .to_string_lossy()
+                .replace('\\', "/");
+            out.push((rel, p));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -120,6 +159,23 @@ mod tests {
             blake3::hash(b"other"),
             "trusted by stat"
         );
+    }
+
+    #[test]
+    fn folders_digest_their_files_and_names() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = Cache::open(&dir.path().join("cache")).unwrap();
+        let t = dir.path().join("tiles");
+        fs::create_dir_all(t.join("sub")).unwrap();
+        fs::write(t.join("tileset.json"), b"{}").unwrap();
+        fs::write(t.join("sub/a.glb"), b"aaaa").unwrap();
+        let d1 = cache.file_digest(&t).unwrap();
+        assert_eq!(d1, cache.file_digest(&t).unwrap());
+        fs::write(t.join("sub/a.glb"), b"aaab").unwrap();
+        let d2 = cache.file_digest(&t).unwrap();
+        assert_ne!(d1, d2, "content change");
+        fs::rename(t.join("sub/a.glb"), t.join("sub/b.glb")).unwrap();
+        assert_ne!(d2, cache.file_digest(&t).unwrap(), "rename");
     }
 
     #[test]

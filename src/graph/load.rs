@@ -157,7 +157,7 @@ fn check(
     }
 
     let outputs = outputs_ast
-        .map(|a| check_outputs(a, &index, &ids, diags))
+        .map(|a| check_outputs(a, &index, &ids, &raw, diags))
         .unwrap_or_default();
     if !diags.is_empty() {
         return None;
@@ -499,7 +499,7 @@ fn build_node(
         } else {
             base.join(&f.path)
         };
-        if !path.is_file() {
+        if !path.exists() {
             let span = params
                 .iter()
                 .find(|(n, _)| n.name == f.field)
@@ -510,16 +510,11 @@ fn build_node(
             } else {
                 "the graph file's folder"
             };
-            let what = if path.exists() {
-                "is not a file"
-            } else {
-                "not found"
-            };
             diags.push(Diagnostic::at(
                 span,
                 id,
                 format!(
-                    "file {what}: {} (`{}` resolves against {against})",
+                    "file not found: {} (`{}` resolves against {against})",
                     path.display(),
                     f.field
                 ),
@@ -548,6 +543,7 @@ fn check_outputs(
     a: &Ast,
     index: &HashMap<&str, usize>,
     ids: &[&str],
+    raw: &[RawNode],
     diags: &mut Vec<Diagnostic>,
 ) -> Vec<(String, usize)> {
     let Value::Map(entries) = &a.v else {
@@ -580,7 +576,17 @@ fn check_outputs(
             continue;
         }
         match index.get(node.as_str()) {
-            Some(&i) => out.push((name.clone(), i)),
+            Some(&i) => {
+                let ty = registry::kind(&raw[i].kind.name).map(|k| k.output);
+                match ty.map(|t| kodama_nodes::export::output_file(name, t)) {
+                    Some(Err(m)) => diags.push(Diagnostic::at(
+                        k.span,
+                        None,
+                        format!("output \"{name}\": {m}"),
+                    )),
+                    _ => out.push((name.clone(), i)),
+                }
+            }
             None => diags.push(Diagnostic::at(
                 v.span,
                 None,

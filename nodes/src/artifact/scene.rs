@@ -65,6 +65,8 @@ pub enum ObjectClass {
     Vegetation,
     /// Cars, poles, signs, shelters.
     Clutter,
+    /// A surface not yet split into objects (photogrammetry, a DSM mesh).
+    Unsegmented,
 }
 
 /// One object of a scene.

@@ -6,7 +6,7 @@
 
 use serde_json::{Value, json};
 
-use crate::artifact::Scene;
+use crate::artifact::{Scene, SceneObject};
 use crate::materials::Material;
 
 /// A display colour per material (linear RGB), so classes are told apart at a glance.
@@ -36,13 +36,21 @@ fn material_name(m: Material) -> String {
         .unwrap_or_else(|| "foliage".into())
 }
 
-/// Encodes `scene` as a GLB file.
+/// Encodes `scene` as a GLB file, z-up site coordinates written y-up.
 pub fn write_glb(scene: &Scene) -> Result<Vec<u8>, String> {
+    let objects: Vec<&SceneObject> = scene.objects.iter().collect();
+    write_glb_objects(&objects, |p| [p[0], p[2], -p[1]])
+}
+
+/// Encodes `objects` as a GLB file, each vertex mapped by `to_gltf` into glTF's y-up space.
+pub fn write_glb_objects(
+    objects: &[&SceneObject],
+    to_gltf: impl Fn([f32; 3]) -> [f32; 3],
+) -> Result<Vec<u8>, String> {
     let mut bin: Vec<u8> = Vec::new();
     let (mut accessors, mut views, mut meshes, mut nodes) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    let used: std::collections::BTreeSet<u8> = scene
-        .objects
+    let used: std::collections::BTreeSet<u8> = objects
         .iter()
         .flat_map(|o| o.mesh.materials.iter().copied())
         .collect();
@@ -64,12 +72,12 @@ pub fn write_glb(scene: &Scene) -> Result<Vec<u8>, String> {
         bin.extend_from_slice(bytes);
         views.len() - 1
     };
-    for obj in &scene.objects {
+    for obj in objects {
         let m = &obj.mesh;
         if m.is_empty() {
             continue;
         }
-        let pos: Vec<[f32; 3]> = m.positions.iter().map(|p| [p[0], p[2], -p[1]]).collect();
+        let pos: Vec<[f32; 3]> = m.positions.iter().map(|p| to_gltf(*p)).collect();
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
         for p in &pos {
             for k in 0..3 {

@@ -1,46 +1,109 @@
-//! Artifacts as ordinary files that other tools open: GeoTIFF, JSON, text.
+//! Artifacts as ordinary files that other tools open: GeoTIFF, LAS, glTF, 3D Tiles, GeoJSON, CSV,
+//! JSON.
 
 mod glb;
 mod las;
+mod tiles;
 
-use crate::artifact::Artifact;
-
-use crate::site::Site;
-pub use glb::{material_color, write_glb};
-pub use las::write_las;
-
+use crate::artifact::{Artifact, ArtifactType};
 use crate::geotiff::{write_geotiff, write_geotiff_rgb};
+use crate::site::Site;
 
-/// Encodes `a` in the standard format for its type; returns the file extension and the bytes.
-pub fn encode(a: &Artifact, site: &Site) -> Result<(&'static str, Vec<u8>), String> {
-    match a {
-        Artifact::Raster(r) => {
+pub use glb::{material_color, write_glb, write_glb_objects};
+pub use las::write_las;
+pub use tiles::write_tileset;
+
+/// An encoded output.
+pub enum Encoded {
+    /// One file.
+    File(Vec<u8>),
+    /// A folder of files, by relative path; the first is its entry point (e.g. `tileset.json`).
+    Folder(Vec<(String, Vec<u8>)>),
+}
+
+/// The formats (file extensions) an artifact type can be written in; the first is the default.
+pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
+    match ty {
+        ArtifactType::Raster | ArtifactType::Ortho => &["tif"],
+        ArtifactType::City | ArtifactType::Metrics => &["json"],
+        ArtifactType::Scene => &["glb", "3dtiles"],
+        ArtifactType::Footprints => &["geojson"],
+        ArtifactType::Measurements => &["csv"],
+        ArtifactType::Points => &["las", "xyz"],
+    }
+}
+
+/// The file name and format of output `name` of type `ty`: a name ending in one of the type's
+/// formats (`truth.3dtiles`) picks it; otherwise the default format's extension is appended.
+pub fn output_file(name: &str, ty: ArtifactType) -> Result<(String, &'static str), String> {
+    let fmts = formats(ty);
+    match name.rsplit_once('.') {
+        Some((_, ext)) => match fmts.iter().find(|f| **f == ext) {
+            Some(f) => Ok((name.to_owned(), f)),
+            None => Err(format!(
+                "{ty} outputs are written as {}, not .{ext}",
+                fmts.join(" or ")
+            )),
+        },
+        None => Ok((format!("{name}.{}", fmts[0]), fmts[0])),
+    }
+}
+
+/// Encodes `a` in `format`, one of [`formats`] for its type.
+pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String> {
+    let file = |bytes: Vec<u8>| Ok(Encoded::File(bytes));
+    match (a, format) {
+        (Artifact::Raster(r), "tif") => {
             let mut buf = std::io::Cursor::new(Vec::new());
             write_geotiff(r, site, &mut buf)?;
-            Ok(("tif", buf.into_inner()))
+            file(buf.into_inner())
         }
-        Artifact::Ortho(o) => {
+        (Artifact::Ortho(o), "tif") => {
             let mut buf = std::io::Cursor::new(Vec::new());
             write_geotiff_rgb(&o.rgb, &o.grid, site, &mut buf)?;
-            Ok(("tif", buf.into_inner()))
+            file(buf.into_inner())
         }
-        Artifact::City(c) => Ok((
-            "json",
-            serde_json::to_vec_pretty(c).map_err(|e| e.to_string())?,
-        )),
-        Artifact::Scene(s) => Ok(("glb", write_glb(s)?)),
-        Artifact::Footprints(f) => Ok((
-            "geojson",
-            crate::geojson::write_footprints(f, site)?.into_bytes(),
-        )),
-        Artifact::Measurements(m) => Ok(("csv", measurements_csv(m).into_bytes())),
-        Artifact::Metrics(m) => {
+        (Artifact::City(c), "json") => {
+            file(serde_json::to_vec_pretty(c).map_err(|e| e.to_string())?)
+        }
+        (Artifact::Scene(s), "glb") => file(write_glb(s)?),
+        (Artifact::Scene(s), "3dtiles") => Ok(Encoded::Folder(write_tileset(s, site, 100.0)?)),
+        (Artifact::Footprints(f), "geojson") => {
+            file(crate::geojson::write_footprints(f, site)?.into_bytes())
+        }
+        (Artifact::Measurements(m), "csv") => file(measurements_csv(m).into_bytes()),
+        (Artifact::Metrics(m), "json") => {
             let mut s = serde_json::to_string_pretty(&m.values).map_err(|e| e.to_string())?;
             s.push('\n');
-            Ok(("json", s.into_bytes()))
+            file(s.into_bytes())
         }
-        Artifact::Points(p) => Ok(("las", write_las(p, site)?)),
+        (Artifact::Points(p), "las") => file(write_las(p, site)?),
+        (Artifact::Points(p), "xyz") => file(xyz_text(p, site).into_bytes()),
+        (a, f) => Err(format!(
+            "{} cannot be written as {f:?}; formats: {}",
+            a.ty(),
+            formats(a.ty()).join(", ")
+        )),
     }
+}
+
+/// ASCII XYZ in absolute CRS coordinates: what PDAL's text writer and CloudCompare read.
+fn xyz_text(p: &crate::artifact::PointSet, site: &Site) -> String {
+    use std::fmt::Write;
+    let mut s = String::with_capacity(p.len() * 40);
+    s.push_str("x y z class\n");
+    let (ox, oy) = site.origin;
+    for (i, q) in p.xyz.iter().enumerate() {
+        let class = p.class.get(i).copied().unwrap_or(0);
+        let _ = writeln!(
+            s,
+            "{:.3} {:.3} {:.3} {class}",
+            ox + q[0] as f64,
+            oy + q[1] as f64,
+            q[2]
+        );
+    }
+    s
 }
 
 /// Measurements in the project's CSV layout, site-frame coordinates.
