@@ -62,7 +62,7 @@ impl Stage for ReadTileset {
     fn run(p: &Self::Params, _: &Inputs, ctx: &Ctx) -> Result<Scene, StageError> {
         let folder = ctx.file(0)?;
         let json = folder.join(Path::new(&p.path).file_name().unwrap_or_default());
-        let place: Box<dyn Fn([f64; 3]) -> Result<[f64; 3], String> + Sync> = match &p.crs {
+        let place: Box<Placer> = match &p.crs {
             None => {
                 let wgs84 =
                     ToSite::new(&Crs::from_epsg(4326).expect("EPSG:4326 is known"), ctx.site)

@@ -108,9 +108,15 @@ fn links_layout_in_site_and_geographic_coordinates_round_trips_through_export() 
         ),
         (10.5, -20.25, 3.5e9, Some(-80.5), Some(46.0), Some(true))
     );
-    let (ext, bytes) =
-        kodama_nodes::export::encode(&Artifact::Measurements(m.clone()), &site).unwrap();
-    assert_eq!(ext, "csv");
+    assert_eq!(
+        kodama_nodes::export::formats(kodama_nodes::ArtifactType::Measurements),
+        ["csv"]
+    );
+    let kodama_nodes::export::Encoded::File(bytes) =
+        kodama_nodes::export::encode(&Artifact::Measurements(m.clone()), &site, "csv").unwrap()
+    else {
+        panic!("a file")
+    };
     let again = dir.path().join("again.csv");
     std::fs::write(&again, bytes).unwrap();
     let back = read(Layout::Links, &[again], &site).unwrap();

@@ -151,7 +151,7 @@ fn b3dm_content_with_rtc_center() {
     let glb = &files[1].1;
     let mut ft =
         serde_json::to_vec(&serde_json::json!({"BATCH_LENGTH": 0, "RTC_CENTER": local})).unwrap();
-    while (28 + ft.len()) % 8 != 0 {
+    while !(28 + ft.len()).is_multiple_of(8) {
         ft.push(b' ');
     }
     let mut b3dm = Vec::new();
