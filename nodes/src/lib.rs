@@ -21,6 +21,7 @@ pub mod artifact;
 pub mod crs;
 pub mod ecef;
 pub mod export;
+pub mod exrio;
 pub mod geojson;
 pub mod geotiff;
 pub mod materials;
@@ -45,13 +46,16 @@ pub mod read_ortho;
 pub mod read_osm;
 pub mod read_raster;
 pub mod read_tiles;
+pub mod read_views;
 pub mod read_xyz;
 pub mod stats;
 pub mod synth_city;
 pub mod synth_lidar;
 pub mod synth_scan;
 pub mod synth_terrain;
+pub mod synth_views;
 pub mod truth_scene;
+pub mod views_io;
 
 pub use artifact::{Artifact, ArtifactType};
 pub use site::Site;
@@ -71,12 +75,14 @@ macro_rules! for_each_stage {
             $crate::rasterize_scene::RasterizeScene,
             $crate::rasterize_scene::RenderOrtho,
             $crate::city_footprints::CityFootprints,
+            $crate::synth_views::SynthViews,
             $crate::read_las::ReadLas,
             $crate::read_raster::ReadRaster,
             $crate::read_measurements::ReadMeasurements,
             $crate::read_footprints::ReadFootprints,
             $crate::read_osm::ReadOsmBuildings,
             $crate::read_tiles::ReadTileset,
+            $crate::read_views::ReadViews,
             $crate::read_ortho::ReadOrtho,
             $crate::read_xyz::ReadXyz,
             $crate::rasterize_surface::RasterizeSurface,

@@ -8,7 +8,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{BuildingSpec, City, ClutterSpec, Polygon, Rect, Roof, RoofBox, TreeSpec};
+use crate::artifact::{
+    BuildingSpec, City, ClutterSpec, Polygon, Rect, Roof, RoofBox, Street, TreeSpec,
+};
 use crate::materials::Material;
 use crate::rng::{mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
@@ -158,7 +160,24 @@ pub fn generate(p: &SynthCityParams) -> City {
         buildings: vec![],
         trees: vec![],
         clutter: vec![],
+        streets: vec![],
     };
+    for k in 0..=nby {
+        let y = k as f64 * (bh + p.street_m) + p.street_m / 2.0;
+        city.streets.push(Street {
+            a: [0.0, y],
+            b: [p.size_m.0, y],
+            width_m: p.street_m,
+        });
+    }
+    for k in 0..=nbx {
+        let x = k as f64 * (bw + p.street_m) + p.street_m / 2.0;
+        city.streets.push(Street {
+            a: [x, 0.0],
+            b: [x, p.size_m.1],
+            width_m: p.street_m,
+        });
+    }
     let mut lot_id = 0u64;
     for by in 0..nby {
         for bx in 0..nbx {

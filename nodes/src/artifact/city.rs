@@ -162,6 +162,17 @@ pub struct ClutterSpec {
     pub material: Material,
 }
 
+/// A straight street: centre line and width.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Street {
+    /// One end of the centre line.
+    pub a: [f64; 2],
+    /// The other end.
+    pub b: [f64; 2],
+    /// Kerb-to-kerb width, metres.
+    pub width_m: f64,
+}
+
 /// The synthetic site.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct City {
@@ -175,4 +186,6 @@ pub struct City {
     pub trees: Vec<TreeSpec>,
     /// Clutter.
     pub clutter: Vec<ClutterSpec>,
+    /// Street centre lines (where cameras drive and phones are carried).
+    pub streets: Vec<Street>,
 }

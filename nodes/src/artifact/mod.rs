@@ -9,11 +9,12 @@ mod ortho;
 mod points;
 mod raster;
 mod scene;
+mod views;
 
 use serde::{Deserialize, Serialize};
 
 pub use array::PodVec;
-pub use city::{BuildingSpec, City, ClutterSpec, Rect, Roof, RoofBox, TreeSpec};
+pub use city::{BuildingSpec, City, ClutterSpec, Rect, Roof, RoofBox, Street, TreeSpec};
 pub use footprints::{Footprint, Footprints, Polygon, ring_area};
 pub use measurements::{Endpoint, Height, Link, Measurements};
 pub use metrics::Metrics;
@@ -21,6 +22,7 @@ pub use ortho::Ortho;
 pub use points::PointSet;
 pub use raster::{Grid, Raster};
 pub use scene::{Mesh, ObjectClass, Scene, SceneObject};
+pub use views::{Instances, Intrinsics, Pose, View, ViewSet};
 
 /// The type of an artifact, as the loader checks it on every edge.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -41,6 +43,8 @@ pub enum ArtifactType {
     Scene,
     /// A [`City`]: the synthetic site's ground truth.
     City,
+    /// A [`ViewSet`]: street-level views with model outputs.
+    Views,
 }
 
 impl std::fmt::Display for ArtifactType {
@@ -68,6 +72,8 @@ pub enum Artifact {
     Scene(Scene),
     /// See [`City`].
     City(City),
+    /// See [`ViewSet`].
+    Views(ViewSet),
 }
 
 impl Artifact {
@@ -82,6 +88,7 @@ impl Artifact {
             Artifact::Footprints(_) => ArtifactType::Footprints,
             Artifact::Scene(_) => ArtifactType::Scene,
             Artifact::City(_) => ArtifactType::City,
+            Artifact::Views(_) => ArtifactType::Views,
         }
     }
 }
@@ -125,6 +132,19 @@ impl Typed for PointSet {
     fn from_artifact(a: &Artifact) -> Option<&Self> {
         match a {
             Artifact::Points(x) => Some(x),
+            _ => None,
+        }
+    }
+}
+
+impl Typed for ViewSet {
+    const TYPE: ArtifactType = ArtifactType::Views;
+    fn into_artifact(self) -> Artifact {
+        Artifact::Views(self)
+    }
+    fn from_artifact(a: &Artifact) -> Option<&Self> {
+        match a {
+            Artifact::Views(x) => Some(x),
             _ => None,
         }
     }

@@ -30,6 +30,7 @@ pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
         ArtifactType::Footprints => &["geojson"],
         ArtifactType::Measurements => &["csv"],
         ArtifactType::Points => &["las", "xyz"],
+        ArtifactType::Views => &["views"],
     }
 }
 
@@ -79,6 +80,7 @@ pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String
         }
         (Artifact::Points(p), "las") => file(write_las(p, site)?),
         (Artifact::Points(p), "xyz") => file(xyz_text(p, site).into_bytes()),
+        (Artifact::Views(v), "views") => Ok(Encoded::Folder(crate::views_io::write_viewset(v)?)),
         (a, f) => Err(format!(
             "{} cannot be written as {f:?}; formats: {}",
             a.ty(),

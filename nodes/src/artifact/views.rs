@@ -1,0 +1,150 @@
+//! Street-level view sets with the outputs of the models run on them (paper Sec. 4.2).
+//!
+//! Camera conventions: the camera frame is OpenCV's (x right, y down, z forward); `heading_deg`
+//! is clockwise from north, `pitch_deg` positive up, `roll_deg` clockwise seen from behind; the
+//! position is in the site frame. Depth is along the optical axis (z), not along the ray.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use super::PodVec;
+
+/// Pinhole intrinsics, pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Intrinsics {
+    /// Focal length along x.
+    pub fx: f64,
+    /// Focal length along y.
+    pub fy: f64,
+    /// Principal point x.
+    pub cx: f64,
+    /// Principal point y.
+    pub cy: f64,
+}
+
+/// Where a camera was and where it looked.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Pose {
+    /// Site-frame position, metres.
+    pub position: [f64; 3],
+    /// Rotation camera frame -> site frame, rows of a 3x3 matrix (columns are right, down,
+    /// forward).
+    pub rotation: [[f64; 3]; 3],
+}
+
+/// Instance segmentation: an id per pixel (0 = none) and each id's class.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Instances {
+    /// Per pixel, row-major.
+    pub ids: PodVec<u16>,
+    /// Instance id -> class name.
+    pub classes: BTreeMap<u16, String>,
+}
+
+/// One street-level view and the model outputs for it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct View {
+    /// Identifier; file names derive from it.
+    pub id: String,
+    /// Pixels across.
+    pub width: u32,
+    /// Pixels down.
+    pub height: u32,
+    /// Camera intrinsics.
+    pub intrinsics: Intrinsics,
+    /// Camera pose.
+    pub pose: Pose,
+    /// Capture time (ISO 8601), when known.
+    pub captured_at: Option<String>,
+    /// 8-bit RGB, row-major.
+    pub image: PodVec<[u8; 3]>,
+    /// Architectural instances (walls, roofs, windows, doors, balconies...).
+    pub arch: Option<Instances>,
+    /// Clutter instances (cars, poles, signs, trees...).
+    pub clutter: Option<Instances>,
+    /// Material class per pixel: an index into [`ViewSet::material_classes`], 255 = none.
+    pub material: Option<PodVec<u8>>,
+    /// Depth along the optical axis per pixel (metric, or relative up to a scale); inf = sky.
+    pub depth: Option<PodVec<f32>>,
+    /// Camera-frame unit normals per pixel.
+    pub normal: Option<PodVec<[f32; 3]>>,
+}
+
+/// A set of views sharing a material class table.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ViewSet {
+    /// The views, in file order.
+    pub views: Vec<View>,
+    /// Material class names, indexed by the material maps.
+    pub material_classes: Vec<String>,
+}
+
+impl Pose {
+    /// A pose from heading (clockwise from north), pitch (up) and roll, in degrees.
+    pub fn from_angles(
+        position: [f64; 3],
+        heading_deg: f64,
+        pitch_deg: f64,
+        roll_deg: f64,
+    ) -> Pose {
+        let (h, p, r) = (
+            heading_deg.to_radians(),
+            pitch_deg.to_radians(),
+            roll_deg.to_radians(),
+        );
+        let f = [h.sin() * p.cos(), h.cos() * p.cos(), p.sin()];
+        // Level right and down, then rolled about the forward axis.
+        let right0 = [h.cos(), -h.sin(), 0.0];
+        let down0 = [
+            f[1] * right0[2] - f[2] * right0[1],
+            f[2] * right0[0] - f[0] * right0[2],
+            f[0] * right0[1] - f[1] * right0[0],
+        ];
+        let (s, c) = r.sin_cos();
+        let right: [f64; 3] = std::array::from_fn(|k| c * right0[k] + s * down0[k]);
+        let down: [f64; 3] = std::array::from_fn(|k| -s * right0[k] + c * down0[k]);
+        Pose {
+            position,
+            rotation: std::array::from_fn(|row| [right[row], down[row], f[row]]),
+        }
+    }
+
+    /// A pose from a unit quaternion (w, x, y, z) rotating camera-frame vectors into the site frame.
+    pub fn from_quaternion(position: [f64; 3], q: [f64; 4]) -> Pose {
+        let n = q.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let [w, x, y, z] = q.map(|v| v / n);
+        let rotation = [
+            [
+                1.0 - 2.0 * (y * y + z * z),
+                2.0 * (x * y - w * z),
+                2.0 * (x * z + w * y),
+            ],
+            [
+                2.0 * (x * y + w * z),
+                1.0 - 2.0 * (x * x + z * z),
+                2.0 * (y * z - w * x),
+            ],
+            [
+                2.0 * (x * z - w * y),
+                2.0 * (y * z + w * x),
+                1.0 - 2.0 * (x * x + y * y),
+            ],
+        ];
+        Pose { position, rotation }
+    }
+
+    /// Site-frame direction of camera-frame vector `v`.
+    pub fn to_site(&self, v: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|r| {
+            self.rotation[r][0] * v[0] + self.rotation[r][1] * v[1] + self.rotation[r][2] * v[2]
+        })
+    }
+
+    /// Camera-frame direction of site-frame vector `v`.
+    pub fn to_camera(&self, v: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|c| {
+            self.rotation[0][c] * v[0] + self.rotation[1][c] * v[1] + self.rotation[2][c] * v[2]
+        })
+    }
+}

@@ -1,0 +1,64 @@
+//! OpenEXR images of f32 channels (depth maps, normals), through the `exr` crate.
+
+use std::path::Path;
+
+use exr::prelude::{
+    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec,
+    WritableImage, read_first_flat_layer_from_file,
+};
+
+use crate::stage::StageError;
+
+/// Encodes `channels` (name, row-major samples) of a `width` x `height` image as an EXR file.
+pub fn write_exr(
+    width: usize,
+    height: usize,
+    channels: Vec<(&str, Vec<f32>)>,
+) -> Result<Vec<u8>, String> {
+    let list: Vec<AnyChannel<FlatSamples>> = channels
+        .into_iter()
+        .map(|(name, v)| AnyChannel::new(name, FlatSamples::F32(v)))
+        .collect();
+    let layer = Layer::new(
+        (width, height),
+        LayerAttributes::default(),
+        Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(SmallVec::from_vec(list)),
+    );
+    let mut out = std::io::Cursor::new(Vec::new());
+    Image::from_layer(layer)
+        .write()
+        .to_buffered(&mut out)
+        .map_err(|e| format!("EXR encoding failed: {e}"))?;
+    Ok(out.into_inner())
+}
+
+/// Named f32 channels of an image.
+pub type Channels = Vec<(String, Vec<f32>)>;
+
+/// The first layer of an EXR file: width, height and every channel as f32, by name.
+pub fn read_exr(path: &Path) -> Result<(usize, usize, Channels), StageError> {
+    let img = read_first_flat_layer_from_file(path).map_err(|e| {
+        StageError::bad_input(
+            path,
+            "EXR",
+            format!("expected a readable OpenEXR image: {e}"),
+        )
+    })?;
+    let layer = img.layer_data;
+    let (w, h) = (layer.size.width(), layer.size.height());
+    let channels = layer
+        .channel_data
+        .list
+        .into_iter()
+        .map(|c| {
+            let v: Vec<f32> = match c.sample_data {
+                FlatSamples::F32(v) => v,
+                FlatSamples::F16(v) => v.into_iter().map(|x| x.to_f32()).collect(),
+                FlatSamples::U32(v) => v.into_iter().map(|x| x as f32).collect(),
+            };
+            (c.name.to_string(), v)
+        })
+        .collect();
+    Ok((w, h, channels))
+}

@@ -1,0 +1,239 @@
+//! Street views: the synthetic renderer checked against the terrain it looks at, the on-disk
+//! layout round trip, the error knobs, and bad view sets.
+
+use std::sync::Arc;
+
+use kodama_nodes::artifact::{City, Scene, ViewSet};
+use kodama_nodes::materials::Material;
+use kodama_nodes::stage::Slot;
+use kodama_nodes::synth_city::{SynthCityParams, generate};
+use kodama_nodes::synth_terrain::{SynthTerrainParams, height_at};
+use kodama_nodes::synth_views::{SynthViews, SynthViewsParams};
+use kodama_nodes::truth_scene::{TruthScene, TruthSceneParams};
+use kodama_nodes::views_io::{read_viewset, write_viewset};
+use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
+
+fn site() -> Site {
+    Site {
+        crs: "EPSG:32618".into(),
+        origin: (583200.0, 4506600.0),
+        cell_m: 0.5,
+    }
+}
+
+fn city_and_scene() -> (City, Scene) {
+    let p = SynthCityParams {
+        size_m: (200.0, 150.0),
+        blocks: (2, 2),
+        terrain: SynthTerrainParams {
+            seed: 3,
+            size_m: (200.0, 150.0),
+            relief_m: 2.0,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let city = generate(&p);
+    let inputs = Inputs::new().with("city", Slot::One(Arc::new(Artifact::City(city.clone()))));
+    let scene = TruthScene::run(
+        &TruthSceneParams::default(),
+        &inputs,
+        &Ctx::new(&site(), &[]),
+    )
+    .unwrap();
+    (city, scene)
+}
+
+fn render(p: &SynthViewsParams) -> (City, ViewSet) {
+    let (city, scene) = city_and_scene();
+    let inputs = Inputs::new()
+        .with("scene", Slot::One(Arc::new(Artifact::Scene(scene))))
+        .with("city", Slot::One(Arc::new(Artifact::City(city.clone()))));
+    (
+        city.clone(),
+        SynthViews::run(p, &inputs, &Ctx::new(&site(), &[])).unwrap(),
+    )
+}
+
+fn small(p: SynthViewsParams) -> SynthViewsParams {
+    SynthViewsParams {
+        size: (160, 120),
+        max_views: 6,
+        ..p
+    }
+}
+
+#[test]
+fn ground_pixels_back_project_onto_the_terrain() {
+    let (city, set) = render(&small(SynthViewsParams {
+        depth_noise: 0.0,
+        material_error: 0.0,
+        instance_miss: 0.0,
+        ..Default::default()
+    }));
+    assert_eq!(set.views.len(), 6);
+    let ground = Material::MediumDryGround as u8;
+    let mut checked = 0;
+    for v in &set.views {
+        let (depth, material) = (v.depth.as_ref().unwrap(), v.material.as_ref().unwrap());
+        for (i, (&d, &m)) in depth.iter().zip(material.iter()).enumerate() {
+            if m != ground || !d.is_finite() {
+                continue;
+            }
+            let (u, w) = (
+                (i as u32 % v.width) as f64 + 0.5,
+                (i as u32 / v.width) as f64 + 0.5,
+            );
+            let cam = [
+                (u - v.intrinsics.cx) / v.intrinsics.fx * d as f64,
+                (w - v.intrinsics.cy) / v.intrinsics.fy * d as f64,
+                d as f64,
+            ];
+            let r = v.pose.to_site(cam);
+            let (x, y, z) = (
+                v.pose.position[0] + r[0],
+                v.pose.position[1] + r[1],
+                v.pose.position[2] + r[2],
+            );
+            // The terrain mesh interpolates the function linearly between 2 m vertices.
+            assert!(
+                (z - height_at(&city.terrain, x, y)).abs() < 0.08,
+                "{} pixel {i}: z {z} vs terrain {}",
+                v.id,
+                height_at(&city.terrain, x, y)
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 5000, "{checked}");
+}
+
+#[test]
+fn views_round_trip_through_the_on_disk_layout() {
+    let (_, set) = render(&small(SynthViewsParams::default()));
+    let files = write_viewset(&set).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    for (rel, bytes) in files {
+        let f = dir.path().join(rel);
+        std::fs::create_dir_all(f.parent().unwrap()).unwrap();
+        std::fs::write(f, bytes).unwrap();
+    }
+    let back = read_viewset(&dir.path().join("views.json"), &site()).unwrap();
+    assert_eq!(back.material_classes, set.material_classes);
+    assert_eq!(back.views.len(), set.views.len());
+    for (a, b) in back.views.iter().zip(&set.views) {
+        assert_eq!(
+            (&a.id, a.width, a.height, &a.intrinsics),
+            (&b.id, b.width, b.height, &b.intrinsics)
+        );
+        assert!(a.image == b.image, "{}: image", a.id);
+        assert!(a.material == b.material, "{}: material", a.id);
+        assert!(a.arch == b.arch, "{}: arch instances", a.id);
+        assert!(a.clutter == b.clutter, "{}: clutter instances", a.id);
+        assert!(
+            a.depth
+                .as_ref()
+                .unwrap()
+                .iter()
+                .zip(b.depth.as_ref().unwrap().iter())
+                .all(|(x, y)| x == y)
+        );
+        assert_eq!(a.normal, b.normal);
+        for r in 0..3 {
+            for c in 0..3 {
+                assert!(
+                    (a.pose.rotation[r][c] - b.pose.rotation[r][c]).abs() < 1e-9,
+                    "rotation through the quaternion"
+                );
+            }
+        }
+        assert_eq!(a.pose.position, b.pose.position);
+    }
+}
+
+#[test]
+fn error_knobs_act() {
+    let exact = render(&small(SynthViewsParams {
+        depth_noise: 0.0,
+        material_error: 0.0,
+        instance_miss: 0.0,
+        ..Default::default()
+    }))
+    .1;
+    let missed = render(&small(SynthViewsParams {
+        instance_miss: 1.0,
+        ..Default::default()
+    }))
+    .1;
+    assert!(
+        exact
+            .views
+            .iter()
+            .any(|v| v.arch.as_ref().unwrap().ids.iter().any(|&i| i > 0))
+    );
+    assert!(
+        missed
+            .views
+            .iter()
+            .all(|v| v.arch.as_ref().unwrap().ids.iter().all(|&i| i == 0))
+    );
+    let relative = render(&small(SynthViewsParams {
+        depth_noise: 0.0,
+        depth_scale: 0.5,
+        material_error: 0.0,
+        instance_miss: 0.0,
+        ..Default::default()
+    }))
+    .1;
+    let (d0, d1) = (
+        exact.views[0].depth.as_ref().unwrap(),
+        relative.views[0].depth.as_ref().unwrap(),
+    );
+    assert!(
+        d0.iter()
+            .zip(d1.iter())
+            .filter(|(a, _)| a.is_finite())
+            .all(|(a, b)| (a * 0.5 - b).abs() <= 1e-4 * a)
+    );
+    let noisy = render(&small(SynthViewsParams {
+        material_error: 0.5,
+        ..Default::default()
+    }))
+    .1;
+    let differ = noisy
+        .views
+        .iter()
+        .zip(&exact.views)
+        .map(|(a, b)| {
+            a.material
+                .as_ref()
+                .unwrap()
+                .iter()
+                .zip(b.material.as_ref().unwrap().iter())
+                .filter(|(x, y)| x != y)
+                .count()
+        })
+        .sum::<usize>();
+    assert!(differ > 0);
+}
+
+#[test]
+fn a_view_pointing_at_a_missing_image_names_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("views.json");
+    std::fs::write(&json, r#"[{"id": "a", "image": "img/a.jpg", "width": 4, "height": 3, "intrinsics": {"hfov_deg": 90}, "pose": {"x": 0, "y": 0, "z": 2}, "orientation": {"heading_deg": 0}}]"#).unwrap();
+    let e = read_viewset(&json, &site()).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("views.json: view \"a\", image: the image")
+            && e.to_string().contains("img/a.jpg does not exist"),
+        "{e}"
+    );
+    std::fs::write(&json, r#"[{"id": "a", "image": "img/a.jpg", "width": 4, "height": 3, "pose": {"x": 0, "y": 0, "z": 2}, "orientation": {"heading_deg": 0}}]"#).unwrap();
+    assert!(
+        read_viewset(&json, &site())
+            .unwrap_err()
+            .to_string()
+            .contains("intrinsics")
+    );
+}
