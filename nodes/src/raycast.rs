@@ -63,6 +63,10 @@ impl SceneRays {
     /// The closest hit of the ray from `origin` along the unit vector `dir` within (`tmin`, `tmax`).
     pub fn cast(&self, origin: [f32; 3], dir: [f32; 3], tmin: f32, tmax: f32) -> Option<Hit> {
         let bvh = self.bvh.as_ref()?;
+        // obvhs picks the traversal octant from the direction's sign bits: a -0.0 component
+        // (common in computed directions) sends it the wrong way and the ray misses everything.
+        // Adding +0.0 turns -0.0 into +0.0 and leaves every other value as it is.
+        let dir = dir.map(|c| c + 0.0);
         let ray = Ray::new(Vec3A::from(origin), Vec3A::from(dir), tmin, tmax);
         let mut hit = RayHit::none();
         if !bvh.ray_traverse(ray, &mut hit, |r, id| {
@@ -124,5 +128,25 @@ mod tests {
             rays.cast([50.0, 1.0, 5.0], [1.0, 0.0, 0.0], 0.0, f32::INFINITY)
                 .is_none()
         );
+    }
+
+    /// Regression: a direction with a -0.0 component missed everything (found by the façade
+    /// relief test, whose probe directions were computed as -outward).
+    #[test]
+    fn negative_zero_components_hit_like_positive_ones() {
+        let scene = Scene {
+            objects: vec![SceneObject {
+                id: "a".into(),
+                class: ObjectClass::Building,
+                mesh: cuboid([0.0, 5.0], [10.0, 2.0, 10.0], 0.0, 0.0, Material::Concrete),
+            }],
+        };
+        let rays = SceneRays::new(&scene);
+        for o in [[0.0f32, -3.0, 1.0], [2.7, -3.0, 4.2], [-4.9, -3.0, 9.9]] {
+            let plus = rays.cast(o, [0.0, 1.0, 0.0], 0.0, 100.0);
+            let minus = rays.cast(o, [-0.0, 1.0, -0.0], 0.0, 100.0);
+            assert!(plus.is_some());
+            assert_eq!(plus, minus);
+        }
     }
 }

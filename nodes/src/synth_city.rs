@@ -9,7 +9,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{
-    BuildingSpec, City, ClutterSpec, Polygon, Rect, Roof, RoofBox, Street, TreeSpec,
+    BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, Polygon, Rect, Roof, RoofBox,
+    Street, TreeSpec,
 };
 use crate::materials::Material;
 use crate::rng::{mix, unit};
@@ -406,6 +407,16 @@ fn add_lot(city: &mut City, d: &Draw, p: &SynthCityParams, lot: u64, b: [f64; 4]
             }
         }
     }
+    let features = facade_features(
+        d,
+        lot,
+        &p.terrain,
+        &footprint,
+        hi,
+        lo - 1.0,
+        hi + eave_m,
+        facade,
+    );
     city.buildings.push(BuildingSpec {
         id,
         footprint,
@@ -416,7 +427,95 @@ fn add_lot(city: &mut City, d: &Draw, p: &SynthCityParams, lot: u64, b: [f64; 4]
         furniture,
         facade,
         roof_material,
+        features,
     });
+}
+
+/// Depth of window and door recesses: the thickness of the outer wall layer, metres.
+pub const RECESS_M: f64 = 0.25;
+/// Storey height, metres.
+pub const FLOOR_M: f64 = 3.2;
+
+/// Windows on every storey of every wall long enough (every 3 m, 1.4 x 1.6 m, sill at 0.9 m), a
+/// door in the middle of the first wall, balconies on some taller masonry buildings, and
+/// drainpipes at two corners.
+#[allow(clippy::too_many_arguments)]
+fn facade_features(
+    d: &Draw,
+    lot: u64,
+    t: &SynthTerrainParams,
+    fp: &Polygon,
+    ground_z: f64,
+    base_z: f64,
+    eave_z: f64,
+    facade: Material,
+) -> Vec<FacadeFeature> {
+    let floors = ((eave_z - ground_z) / FLOOR_M).floor().max(1.0) as usize;
+    let balconies = floors >= 3 && facade != Material::Glass && d.u(60, lot) < 0.4;
+    let mut out = Vec::new();
+    let rings: Vec<&Vec<[f64; 2]>> = std::iter::once(&fp.exterior).chain(&fp.holes).collect();
+    for (ri, ring) in rings.iter().enumerate() {
+        for e in 0..ring.len() {
+            let (a, b) = (ring[e], ring[(e + 1) % ring.len()]);
+            let len = (b[0] - a[0]).hypot(b[1] - a[1]);
+            let n_win = ((len - 2.0) / 3.0).floor() as i64;
+            if n_win < 1 {
+                continue;
+            }
+            let first = (len - (n_win - 1) as f64 * 3.0) / 2.0;
+            let door = (ri == 0 && e == 0).then_some(n_win / 2);
+            for f in 0..floors {
+                let z0 = ground_z + f as f64 * FLOOR_M;
+                for k in 0..n_win {
+                    let c = first + k as f64 * 3.0;
+                    let feature = |kind, along, z, depth_m| FacadeFeature {
+                        kind,
+                        ring: ri,
+                        edge: e,
+                        along,
+                        z,
+                        depth_m,
+                    };
+                    if f == 0 && door == Some(k) {
+                        let s = c / len;
+                        let g = height_at(t, a[0] + (b[0] - a[0]) * s, a[1] + (b[1] - a[1]) * s);
+                        out.push(feature(
+                            FeatureKind::Door,
+                            (c - 0.6, c + 0.6),
+                            (g, g + 2.2),
+                            -RECESS_M,
+                        ));
+                        continue;
+                    }
+                    out.push(feature(
+                        FeatureKind::Window,
+                        (c - 0.7, c + 0.7),
+                        (z0 + 0.9, z0 + 2.5),
+                        -RECESS_M,
+                    ));
+                    if balconies && ri == 0 && e == 0 && f >= 1 && k % 2 == 0 {
+                        out.push(feature(
+                            FeatureKind::Balcony,
+                            (c - 1.1, c + 1.1),
+                            (z0, z0 + 1.1),
+                            1.2,
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    for e in 0..2.min(fp.exterior.len()) {
+        out.push(FacadeFeature {
+            kind: FeatureKind::Drainpipe,
+            ring: 0,
+            edge: e,
+            along: (0.1, 0.22),
+            z: (base_z, eave_z),
+            depth_m: 0.15,
+        });
+    }
+    out
 }
 
 fn add_tree(city: &mut City, d: &Draw, p: &SynthCityParams, pos: [f64; 2]) {

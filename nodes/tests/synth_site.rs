@@ -378,3 +378,99 @@ fn glb_loads_in_the_gltf_crate_with_a_node_per_object() {
     .unwrap();
     assert_eq!(fp.items.len(), city.buildings.len());
 }
+
+/// Façade relief, probed with horizontal rays fired at the walls: windows are glazed recesses
+/// 0.25 m deep, the wall between them stands on the outline, doors are wooden recesses,
+/// balconies protrude.
+#[test]
+fn facade_relief_is_where_the_city_says() {
+    use kodama_nodes::artifact::FeatureKind;
+    use kodama_nodes::materials::Material;
+    use kodama_nodes::raycast::SceneRays;
+    let city = generate(&SynthCityParams::default());
+    let count = |k: FeatureKind| {
+        city.buildings
+            .iter()
+            .flat_map(|b| &b.features)
+            .filter(|f| f.kind == k)
+            .count()
+    };
+    let (windows, doors, balconies, pipes) = (
+        count(FeatureKind::Window),
+        count(FeatureKind::Door),
+        count(FeatureKind::Balcony),
+        count(FeatureKind::Drainpipe),
+    );
+    println!("{windows} windows, {doors} doors, {balconies} balconies, {pipes} drainpipes");
+    assert!(windows > 1000 && doors > 30 && balconies > 20 && pipes == 2 * city.buildings.len());
+    let scene = scene_of(&city);
+    let rays = SceneRays::new(&scene);
+    let (mut recessed, mut flush, mut wooden, mut probes) = (0, 0, 0, 0);
+    for b in &city.buildings {
+        let obj = scene.objects.iter().position(|o| o.id == b.id).unwrap();
+        let windows = b
+            .features
+            .iter()
+            .filter(|f| f.ring == 0 && f.kind == FeatureKind::Window)
+            .step_by(5);
+        let doors = b.features.iter().filter(|f| f.kind == FeatureKind::Door);
+        for f in windows.chain(doors) {
+            let ring = &b.footprint.exterior;
+            let (a, c) = (ring[f.edge], ring[(f.edge + 1) % ring.len()]);
+            let len = (c[0] - a[0]).hypot(c[1] - a[1]);
+            let t = [(c[0] - a[0]) / len, (c[1] - a[1]) / len];
+            let out = [t[1], -t[0]]; // outward normal
+            let z = (f.z.0 + f.z.1) / 2.0;
+            // Fire from 3 m outside, towards the wall, at a point along the edge.
+            let shoot = |s: f64| {
+                let p = [
+                    a[0] + t[0] * s + out[0] * 3.0,
+                    a[1] + t[1] * s + out[1] * 3.0,
+                    z,
+                ];
+                rays.cast(
+                    p.map(|v| v as f32),
+                    [-out[0] as f32, -out[1] as f32, 0.0],
+                    0.0,
+                    10.0,
+                )
+            };
+            let mid = (f.along.0 + f.along.1) / 2.0;
+            let Some(h) = shoot(mid) else { continue };
+            if h.object != obj {
+                continue; // a tree, balcony or neighbour in the way
+            }
+            probes += 1;
+            let m = Material::from_u8(scene.objects[obj].mesh.materials[h.triangle]).unwrap();
+            // Windows: glass 0.25 m in. Doors: a wooden leaf 0.20 m in.
+            let depth = if f.kind == FeatureKind::Door {
+                3.20
+            } else {
+                3.25
+            };
+            if (h.t as f64 - depth).abs() < 0.01 {
+                recessed += 1;
+                let expected = if f.kind == FeatureKind::Door {
+                    Material::Wood
+                } else {
+                    Material::Glass
+                };
+                assert_eq!(m, expected, "{}: {:?} shows {m:?}", b.id, f.kind);
+                wooden += (f.kind == FeatureKind::Door) as usize;
+            }
+            // Just beside the opening, the wall stands on the outline.
+            if let Some(h2) = shoot(f.along.1 + 0.3).filter(|h| h.object == obj)
+                && (h2.t as f64 - 3.0).abs() < 0.01 {
+                    flush += 1;
+                }
+        }
+    }
+    println!("{probes} probes: {recessed} recessed, {flush} flush beside, {wooden} wooden doors");
+    assert!(
+        probes > 300
+            && recessed as f64 > 0.95 * probes as f64
+            && flush as f64 > 0.8 * probes as f64
+            && wooden > 30,
+        "{wooden} doors"
+    );
+}

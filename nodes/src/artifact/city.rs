@@ -88,6 +88,37 @@ pub struct RoofBox {
     pub size: [f64; 3],
 }
 
+/// What a façade feature is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum FeatureKind {
+    /// A window: a glazed recess.
+    Window,
+    /// A door: a recess from the ground, with a wooden leaf.
+    Door,
+    /// A balcony: a slab with a railing, protruding.
+    Balcony,
+    /// A drainpipe: a thin vertical pipe, protruding.
+    Drainpipe,
+}
+
+/// A façade feature on one edge of a building's outline: the relief truth (paper Sec. 4.2.2
+/// recovers these as recesses, s = -1, and protrusions, s = +1).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct FacadeFeature {
+    /// What it is.
+    pub kind: FeatureKind,
+    /// Ring of the outline (0 = exterior, then holes) and edge index within it.
+    pub ring: usize,
+    /// Edge index: from vertex `edge` to vertex `edge + 1`.
+    pub edge: usize,
+    /// Extent along the edge, metres from its first vertex.
+    pub along: (f64, f64),
+    /// Extent in height, site-frame z.
+    pub z: (f64, f64),
+    /// Depth: negative into the wall (recess), positive out of it (protrusion), metres.
+    pub depth_m: f64,
+}
+
 /// One building of the truth.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BuildingSpec {
@@ -109,6 +140,8 @@ pub struct BuildingSpec {
     pub facade: Material,
     /// Roof material.
     pub roof_material: Material,
+    /// Façade features (windows, doors, balconies, drainpipes); empty: plain walls.
+    pub features: Vec<FacadeFeature>,
 }
 
 impl BuildingSpec {

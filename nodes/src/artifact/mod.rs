@@ -14,7 +14,10 @@ mod views;
 use serde::{Deserialize, Serialize};
 
 pub use array::PodVec;
-pub use city::{BuildingSpec, City, ClutterSpec, Rect, Roof, RoofBox, Street, TreeSpec};
+pub use city::{
+    BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, Rect, Roof, RoofBox, Street,
+    TreeSpec,
+};
 pub use footprints::{Footprint, Footprints, Polygon, ring_area};
 pub use measurements::{Endpoint, Height, Link, Measurements};
 pub use metrics::Metrics;
