@@ -295,7 +295,7 @@ fn truth_dem_and_dsm_match_the_city_description() {
 }
 
 #[test]
-fn las_round_trip_through_our_reader() {
+fn las_and_laz_round_trip_through_our_reader() {
     let scene = scene_of(&generate(&small_city()));
     let pts = scan(
         &scene,
@@ -305,30 +305,31 @@ fn las_round_trip_through_our_reader() {
         },
     );
     let s = site();
-    let bytes = write_las(&pts, &s).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("scan.las");
-    std::fs::write(&path, bytes).unwrap();
-    let back = kodama_nodes::read_las::read_las(&path, None, &Ctx::new(&s, &[])).unwrap();
-    assert_eq!(back.len(), pts.len());
-    assert_eq!(
-        (
-            back.class.0.clone(),
-            back.return_number.0.clone(),
-            back.intensity.0.clone()
-        ),
-        (
-            pts.class.0.clone(),
-            pts.return_number.0.clone(),
-            pts.intensity.0.clone()
-        )
-    );
+    for compressed in [false, true] {
+        let path = dir
+            .path()
+            .join(if compressed { "scan.laz" } else { "scan.las" });
+        std::fs::write(&path, write_las(&pts, &s, compressed).unwrap()).unwrap();
+        let back = kodama_nodes::read_las::read_las(&path, None, &Ctx::new(&s, &[])).unwrap();
+        assert_eq!(back.len(), pts.len());
+        assert_eq!(back.class, pts.class);
+        assert_eq!(back.return_number, pts.return_number);
+        assert_eq!(back.intensity, pts.intensity);
+        assert!(
+            back.xyz
+                .iter()
+                .zip(pts.xyz.iter())
+                .all(|(a, b)| (0..3).all(|k| (a[k] - b[k]).abs() <= 1e-3)),
+            "millimetre resolution"
+        );
+    }
+    let size = |f: &str| std::fs::metadata(dir.path().join(f)).unwrap().len();
     assert!(
-        back.xyz
-            .iter()
-            .zip(pts.xyz.iter())
-            .all(|(a, b)| (0..3).all(|k| (a[k] - b[k]).abs() <= 1e-3)),
-        "millimetre resolution"
+        size("scan.laz") * 3 < size("scan.las"),
+        "LAZ compresses: {} vs {} bytes",
+        size("scan.laz"),
+        size("scan.las")
     );
 }
 
@@ -460,9 +461,10 @@ fn facade_relief_is_where_the_city_says() {
             }
             // Just beside the opening, the wall stands on the outline.
             if let Some(h2) = shoot(f.along.1 + 0.3).filter(|h| h.object == obj)
-                && (h2.t as f64 - 3.0).abs() < 0.01 {
-                    flush += 1;
-                }
+                && (h2.t as f64 - 3.0).abs() < 0.01
+            {
+                flush += 1;
+            }
         }
     }
     println!("{probes} probes: {recessed} recessed, {flush} flush beside, {wooden} wooden doors");

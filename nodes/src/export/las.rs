@@ -1,4 +1,4 @@
-//! LAS 1.2 export of point sets: point format 1 (3 with colour), coordinates in the site CRS at
+//! LAS 1.2 (or LAZ) export of point sets: point format 1 (3 with colour), coordinates in the site CRS at
 //! millimetre resolution, the CRS as a GeoTIFF GeoKeyDirectory record (as PDAL and LAStools write
 //! it), so PDAL, CloudCompare, QGIS and our own reader place the points.
 
@@ -10,12 +10,13 @@ use las::{Builder, Color, Point, Transform, Vector, Version, Vlr, Writer};
 use crate::artifact::PointSet;
 use crate::site::Site;
 
-/// Encodes `p` as a LAS file.
-pub fn write_las(p: &PointSet, site: &Site) -> Result<Vec<u8>, String> {
+/// Encodes `p` as a LAS file, or LAZ (LASzip-compressed) when `compressed`.
+pub fn write_las(p: &PointSet, site: &Site, compressed: bool) -> Result<Vec<u8>, String> {
     let err = |e: las::Error| format!("LAS encoding failed: {e}");
     let epsg = site.epsg()?;
     let mut b = Builder::from(Version::new(1, 2));
     b.point_format = Format::new(if p.rgb.is_empty() { 1 } else { 3 }).map_err(err)?;
+    b.point_format.is_compressed = compressed;
     b.generating_software = concat!("kodama-dag ", env!("CARGO_PKG_VERSION")).into();
     let (ox, oy) = (site.origin.0.round(), site.origin.1.round());
     b.transforms = Vector {

@@ -29,7 +29,7 @@ pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
         ArtifactType::Scene => &["glb", "3dtiles"],
         ArtifactType::Footprints => &["geojson"],
         ArtifactType::Measurements => &["csv"],
-        ArtifactType::Points => &["las", "xyz"],
+        ArtifactType::Points => &["las", "laz", "xyz"],
         ArtifactType::Views => &["views"],
     }
 }
@@ -78,7 +78,8 @@ pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String
             s.push('\n');
             file(s.into_bytes())
         }
-        (Artifact::Points(p), "las") => file(write_las(p, site)?),
+        (Artifact::Points(p), "las") => file(write_las(p, site, false)?),
+        (Artifact::Points(p), "laz") => file(write_las(p, site, true)?),
         (Artifact::Points(p), "xyz") => file(xyz_text(p, site).into_bytes()),
         (Artifact::Views(v), "views") => Ok(Encoded::Folder(crate::views_io::write_viewset(v)?)),
         (a, f) => Err(format!(
