@@ -112,12 +112,20 @@ fn geotiff_without_georeferencing_exits_2() {
     let env = Env::new();
     // A plain TIFF: the fixture's pixels re-encoded without any GeoTIFF tags.
     let mut buf = std::io::Cursor::new(Vec::new());
-    tiff::encoder::TiffEncoder::new(&mut buf).unwrap().write_image::<tiff::encoder::colortype::Gray32Float>(3, 2, &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
+    tiff::encoder::TiffEncoder::new(&mut buf)
+        .unwrap()
+        .write_image::<tiff::encoder::colortype::Gray32Float>(3, 2, &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0])
+        .unwrap();
     std::fs::write(env.path("plain.tif"), buf.into_inner()).unwrap();
     let g = env.write("g.ron", "Graph(\n  site: Site(crs: \"EPSG:32618\", origin: (0.0, 0.0), cell_m: 1.0),\n  nodes: { \"dem\": ReadRaster(path: \"plain.tif\") },\n)\n");
     let r = env.run(&g, &[]);
     assert_eq!(r.code, 2, "{}", r.stderr);
-    assert!(r.stderr.contains("plain.tif: georeferencing: no ModelTiepoint + ModelPixelScale"), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("plain.tif: georeferencing: no ModelTiepoint + ModelPixelScale"),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]
@@ -132,5 +140,11 @@ fn views_file_pointing_at_a_missing_image_exits_2() {
     let g = env.write("g.ron", "Graph(\n  site: Site(crs: \"EPSG:32618\", origin: (583000.0, 4506000.0), cell_m: 1.0),\n  nodes: { \"v\": ReadViews(path: \"views/views.json\") },\n)\n");
     let r = env.run(&g, &[]);
     assert_eq!(r.code, 2, "{}", r.stderr);
-    assert!(r.stderr.contains("views.json: view \"0001\", image: the image") && r.stderr.contains("img/0001.jpg does not exist"), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("views.json: view \"0001\", image: the image")
+            && r.stderr.contains("img/0001.jpg does not exist"),
+        "{}",
+        r.stderr
+    );
 }

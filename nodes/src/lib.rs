@@ -27,6 +27,7 @@ pub mod geotiff;
 pub mod materials;
 pub mod mesh_build;
 pub mod mesh_check;
+pub mod params;
 pub mod rng;
 pub mod site;
 pub mod stage;

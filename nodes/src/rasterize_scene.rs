@@ -35,12 +35,7 @@ impl Stage for RasterizeScene {
     type Output = Raster;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        if p.cell_m.is_some_and(|c| !(c > 0.0)) {
-            return Err(ParamError::new(
-                "cell_m",
-                "expected a positive cell size in metres",
-            ));
-        }
+        crate::params::check_cell(p.cell_m)?;
         Ok(())
     }
 
@@ -176,12 +171,7 @@ impl Stage for RenderOrtho {
     type Output = Ortho;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        if p.cell_m.is_some_and(|c| !(c > 0.0)) {
-            return Err(ParamError::new(
-                "cell_m",
-                "expected a positive cell size in metres",
-            ));
-        }
+        crate::params::check_cell(p.cell_m)?;
         if !(p.sun_elevation_deg > 0.0 && p.sun_elevation_deg <= 90.0) {
             return Err(ParamError::new(
                 "sun_elevation_deg",

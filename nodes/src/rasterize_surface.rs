@@ -63,12 +63,7 @@ impl Stage for RasterizeSurface {
     type Output = Raster;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        if p.cell_m.is_some_and(|c| !(c > 0.0)) {
-            return Err(ParamError::new(
-                "cell_m",
-                "expected a positive cell size in metres",
-            ));
-        }
+        crate::params::check_cell(p.cell_m)?;
         if let CellMode::Percentile(q) = p.mode
             && !(0.0..=100.0).contains(&q)
         {

@@ -35,9 +35,7 @@ impl Stage for ReadLas {
     type Output = PointSet;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        if let Some(c) = &p.crs {
-            Crs::from_user(c).map_err(|m| ParamError::new("crs", m))?;
-        }
+        crate::params::check_crs(&p.crs)?;
         Ok(())
     }
 

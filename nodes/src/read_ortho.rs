@@ -73,12 +73,7 @@ impl Stage for ReadOrtho {
             }
             None => {}
         }
-        if p.cell_m.is_some_and(|c| !(c > 0.0)) {
-            return Err(ParamError::new(
-                "cell_m",
-                "expected a positive cell size in metres",
-            ));
-        }
+        crate::params::check_cell(p.cell_m)?;
         Ok(())
     }
 

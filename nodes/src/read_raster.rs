@@ -54,18 +54,11 @@ impl Stage for ReadRaster {
     type Output = Raster;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        if let Some(c) = &p.crs {
-            Crs::from_user(c).map_err(|m| ParamError::new("crs", m))?;
-        }
+        crate::params::check_crs(&p.crs)?;
         if p.band == 0 {
             return Err(ParamError::new("band", "bands count from 1"));
         }
-        if p.cell_m.is_some_and(|c| !(c > 0.0)) {
-            return Err(ParamError::new(
-                "cell_m",
-                "expected a positive cell size in metres",
-            ));
-        }
+        crate::params::check_cell(p.cell_m)?;
         Ok(())
     }
 

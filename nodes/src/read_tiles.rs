@@ -38,9 +38,7 @@ impl Stage for ReadTileset {
     type Output = Scene;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        if let Some(c) = &p.crs {
-            Crs::from_user(c).map_err(|m| ParamError::new("crs", m))?;
-        }
+        crate::params::check_crs(&p.crs)?;
         if !p.path.ends_with(".json") {
             return Err(ParamError::new("path", "expected the tileset's .json file"));
         }
@@ -48,11 +46,7 @@ impl Stage for ReadTileset {
     }
 
     fn files(p: &Self::Params) -> Vec<FileRef> {
-        let folder = Path::new(&p.path)
-            .parent()
-            .map(|f| f.to_string_lossy().into_owned())
-            .filter(|f| !f.is_empty())
-            .unwrap_or_else(|| ".".into());
+        let folder = crate::params::folder_of(&p.path);
         vec![FileRef {
             field: "path",
             path: folder,

@@ -36,11 +36,7 @@ impl Stage for ReadViews {
     }
 
     fn files(p: &Self::Params) -> Vec<FileRef> {
-        let folder = Path::new(&p.path)
-            .parent()
-            .map(|f| f.to_string_lossy().into_owned())
-            .filter(|f| !f.is_empty())
-            .unwrap_or_else(|| ".".into());
+        let folder = crate::params::folder_of(&p.path);
         vec![FileRef {
             field: "path",
             path: folder,

@@ -61,12 +61,7 @@ impl Stage for SynthTerrain {
                 "expected a positive extent in metres",
             ));
         }
-        if p.cell_m.is_some_and(|c| !(c > 0.0)) {
-            return Err(ParamError::new(
-                "cell_m",
-                "expected a positive cell size in metres",
-            ));
-        }
+        crate::params::check_cell(p.cell_m)?;
         if !(p.wavelength_m > 0.0) {
             return Err(ParamError::new(
                 "wavelength_m",
