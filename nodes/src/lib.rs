@@ -55,6 +55,7 @@ pub mod synth_lidar;
 pub mod synth_scan;
 pub mod synth_terrain;
 pub mod synth_views;
+pub mod terrain_pass;
 pub mod truth_scene;
 pub mod views_io;
 
@@ -88,6 +89,8 @@ macro_rules! for_each_stage {
             $crate::read_xyz::ReadXyz,
             $crate::rasterize_surface::RasterizeSurface,
             $crate::composite_height::CompositeHeight,
+            $crate::terrain_pass::TerrainPass,
+            $crate::terrain_pass::AboveGround,
             $crate::gaussian_blur::GaussianBlur,
             $crate::raster_ops::Clamp,
             $crate::raster_ops::Difference,

@@ -79,7 +79,7 @@ impl Stage for SynthScan {
                     let h = mix(p.seed ^ mix(j * nx + i));
                     let x = g.x0 + (i as f64 + unit(h)) * step;
                     let y = g.y0 - (j as f64 + unit(mix(h))) * step;
-                    let Some(z) = bilinear(surface, x, y) else {
+                    let Some(z) = surface.bilinear(x, y) else {
                         continue;
                     };
                     let z = z + p.noise_m * gaussian(mix(h ^ 0x5851_F42D_4C95_7F2D));
@@ -97,23 +97,4 @@ impl Stage for SynthScan {
             ..Default::default()
         })
     }
-}
-
-/// Bilinear interpolation between cell centres; `None` where a neighbour is no-data or outside.
-pub fn bilinear(r: &Raster, x: f64, y: f64) -> Option<f64> {
-    let g = r.grid;
-    if g.is_empty() {
-        return None;
-    }
-    let fc = ((x - g.x0) / g.cell_m - 0.5).clamp(0.0, (g.width - 1) as f64);
-    let fr = ((g.y0 - y) / g.cell_m - 0.5).clamp(0.0, (g.height - 1) as f64);
-    let (c0, r0) = (fc.floor() as u32, fr.floor() as u32);
-    let (c1, r1) = ((c0 + 1).min(g.width - 1), (r0 + 1).min(g.height - 1));
-    let (tx, ty) = (fc - c0 as f64, fr - r0 as f64);
-    let z00 = r.at(c0, r0) as f64;
-    let z10 = r.at(c1, r0) as f64;
-    let z01 = r.at(c0, r1) as f64;
-    let z11 = r.at(c1, r1) as f64;
-    let z = (z00 * (1.0 - tx) + z10 * tx) * (1.0 - ty) + (z01 * (1.0 - tx) + z11 * tx) * ty;
-    z.is_finite().then_some(z)
 }

@@ -81,6 +81,25 @@ impl Raster {
     pub fn at(&self, col: u32, row: u32) -> f32 {
         self.data[row as usize * self.grid.width as usize + col as usize]
     }
+    /// Bilinear interpolation between cell centres; `None` where a neighbour is no-data or outside.
+    pub fn bilinear(&self, x: f64, y: f64) -> Option<f64> {
+        let g = self.grid;
+        if g.is_empty() {
+            return None;
+        }
+        let fc = ((x - g.x0) / g.cell_m - 0.5).clamp(0.0, (g.width - 1) as f64);
+        let fr = ((g.y0 - y) / g.cell_m - 0.5).clamp(0.0, (g.height - 1) as f64);
+        let (c0, r0) = (fc.floor() as u32, fr.floor() as u32);
+        let (c1, r1) = ((c0 + 1).min(g.width - 1), (r0 + 1).min(g.height - 1));
+        let (tx, ty) = (fc - c0 as f64, fr - r0 as f64);
+        let z00 = self.at(c0, r0) as f64;
+        let z10 = self.at(c1, r0) as f64;
+        let z01 = self.at(c0, r1) as f64;
+        let z11 = self.at(c1, r1) as f64;
+        let z = (z00 * (1.0 - tx) + z10 * tx) * (1.0 - ty) + (z01 * (1.0 - tx) + z11 * tx) * ty;
+        z.is_finite().then_some(z)
+    }
+
     /// Rows as slices.
     pub fn rows(&self) -> std::slice::ChunksExact<'_, f32> {
         self.data.chunks_exact(self.grid.width.max(1) as usize)
