@@ -14,6 +14,7 @@ use kodama_dag::graph::{Graph, LoadOptions, load, to_dot, to_mermaid};
 use kodama_dag::progress::{Mode, Reporter};
 use kodama_dag::record::Status;
 use kodama_dag::registry;
+use kodama_nodes::stage::Arity;
 
 #[derive(Parser)]
 #[command(
@@ -304,7 +305,11 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
                 let inputs: Vec<String> = k
                     .inputs
                     .iter()
-                    .map(|i| format!("{}: {}", i.name, i.ty))
+                    .map(|i| match i.arity {
+                        Arity::One => format!("{}: {}", i.name, i.ty),
+                        Arity::Optional => format!("{}: {}?", i.name, i.ty),
+                        Arity::Many => format!("{}: [{}]", i.name, i.ty),
+                    })
                     .collect();
                 println!(
                     "{} v{} ({}) -> {}\n    {}",

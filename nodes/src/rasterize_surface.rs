@@ -52,8 +52,7 @@ pub struct RasterizeSurface;
 impl Stage for RasterizeSurface {
     const KIND: &'static str = "RasterizeSurface";
     const VERSION: u32 = 1;
-    const DOC: &'static str =
-        "points -> height field H_s on the site grid (max/min/mean/count per cell), Sec. 4";
+    const DOC: &'static str = "points -> height field H_s on the site grid (max/min/mean/percentile/count per cell, class filter, bounded gap fill), Sec. 4";
     const INPUTS: &'static [InputSpec] = &[InputSpec::one(
         "points",
         ArtifactType::Points,
