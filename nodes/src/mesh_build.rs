@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
-use crate::artifact::{Mesh, PodVec, Polygon};
+use crate::artifact::{Mesh, PodVec, Polygon, Rect};
 use crate::materials::Material;
 use crate::read_osm::point_in_ring;
 
@@ -153,38 +153,37 @@ pub fn cuboid(center: [f64; 2], size: [f64; 3], heading: f64, z0: f64, m: Materi
     b.finish()
 }
 
-/// A closed gabled building: a `length` x `width` rectangle with its south-west corner at
-/// `corner`, rotated by `heading`, walls from `z0` to `eave`, ridge along its length at `ridge`.
-#[allow(clippy::too_many_arguments)]
-pub fn gabled(
-    corner: [f64; 2],
-    length: f64,
-    width: f64,
-    heading: f64,
+/// The floor and four walls of an oriented rectangle up to `eave`; returns the eave corners
+/// (counter-clockwise), where the roof closes the solid.
+fn walls_to_eave(
+    b: &mut Builder,
+    p: &impl Fn(f64, f64, f64) -> [f64; 3],
+    l: f64,
+    w: f64,
     z0: f64,
     eave: f64,
-    ridge: f64,
     wall: Material,
-    roof: Material,
-) -> Mesh {
-    let p = place(corner, heading);
-    let (l, w) = (length, width);
-    let mut b = Builder::default();
-    let base: Vec<u32> = [(0.0, 0.0), (l, 0.0), (l, w), (0.0, w)]
-        .iter()
-        .map(|&(u, v)| b.v(p(u, v, z0)))
-        .collect();
-    let e: Vec<u32> = [(0.0, 0.0), (l, 0.0), (l, w), (0.0, w)]
-        .iter()
-        .map(|&(u, v)| b.v(p(u, v, eave)))
-        .collect();
-    let r0 = b.v(p(0.0, w / 2.0, ridge));
-    let r1 = b.v(p(l, w / 2.0, ridge));
+) -> [u32; 4] {
+    let corners = [(0.0, 0.0), (l, 0.0), (l, w), (0.0, w)];
+    let base = corners.map(|(u, v)| b.v(p(u, v, z0)));
+    let e = corners.map(|(u, v)| b.v(p(u, v, eave)));
     b.quad(base[0], base[3], base[2], base[1], wall);
     for i in 0..4 {
         let j = (i + 1) % 4;
         b.quad(base[i], base[j], e[j], e[i], wall);
     }
+    e
+}
+
+/// A closed gabled building on rectangle `r`: walls from `z0` to `eave`, the ridge along its length
+/// at `ridge`, gable ends of `wall`.
+pub fn gabled(r: &Rect, z0: f64, eave: f64, ridge: f64, wall: Material, roof: Material) -> Mesh {
+    let p = place(r.corner, r.heading);
+    let (l, w) = (r.length, r.width);
+    let mut b = Builder::default();
+    let e = walls_to_eave(&mut b, &p, l, w, z0, eave, wall);
+    let r0 = b.v(p(0.0, w / 2.0, ridge));
+    let r1 = b.v(p(l, w / 2.0, ridge));
     b.tri(e[1], e[2], r1, wall);
     b.tri(e[3], e[0], r0, wall);
     b.quad(e[0], e[1], r1, r0, roof);
@@ -192,36 +191,13 @@ pub fn gabled(
     b.finish()
 }
 
-/// A closed hipped building (a pyramid roof when square): like [`gabled`], with the ridge
-/// shortened by half the width at each end. `length` must be at least `width`.
-#[allow(clippy::too_many_arguments)]
-pub fn hipped(
-    corner: [f64; 2],
-    length: f64,
-    width: f64,
-    heading: f64,
-    z0: f64,
-    eave: f64,
-    ridge: f64,
-    wall: Material,
-    roof: Material,
-) -> Mesh {
-    let p = place(corner, heading);
-    let (l, w) = (length.max(width), width);
+/// A closed hipped building on rectangle `r` (a pyramid roof when square): like [`gabled`], with
+/// the ridge shortened by half the width at each end. The length must be at least the width.
+pub fn hipped(r: &Rect, z0: f64, eave: f64, ridge: f64, wall: Material, roof: Material) -> Mesh {
+    let p = place(r.corner, r.heading);
+    let (l, w) = (r.length.max(r.width), r.width);
     let mut b = Builder::default();
-    let base: Vec<u32> = [(0.0, 0.0), (l, 0.0), (l, w), (0.0, w)]
-        .iter()
-        .map(|&(u, v)| b.v(p(u, v, z0)))
-        .collect();
-    let e: Vec<u32> = [(0.0, 0.0), (l, 0.0), (l, w), (0.0, w)]
-        .iter()
-        .map(|&(u, v)| b.v(p(u, v, eave)))
-        .collect();
-    b.quad(base[0], base[3], base[2], base[1], wall);
-    for i in 0..4 {
-        let j = (i + 1) % 4;
-        b.quad(base[i], base[j], e[j], e[i], wall);
-    }
+    let e = walls_to_eave(&mut b, &p, l, w, z0, eave, wall);
     if l - w < 1e-6 {
         let apex = b.v(p(l / 2.0, w / 2.0, ridge));
         for i in 0..4 {
@@ -383,10 +359,12 @@ mod tests {
     fn roofs_boxes_domes_and_ellipsoids_are_closed_solids() {
         let (l, w, e, r) = (24.0, 10.0, 7.0, 11.0);
         let g = gabled(
-            [3.0, 4.0],
-            l,
-            w,
-            0.7,
+            &Rect {
+                corner: [3.0, 4.0],
+                length: l,
+                width: w,
+                heading: 0.7,
+            },
             1.0,
             e,
             r,
@@ -399,10 +377,12 @@ mod tests {
             1e-4,
         );
         let h = hipped(
-            [3.0, 4.0],
-            l,
-            w,
-            -0.3,
+            &Rect {
+                corner: [3.0, 4.0],
+                length: l,
+                width: w,
+                heading: -0.3,
+            },
             1.0,
             e,
             r,
@@ -417,10 +397,12 @@ mod tests {
             1e-4,
         );
         let pyramid = hipped(
-            [0.0, 0.0],
-            10.0,
-            10.0,
-            0.0,
+            &Rect {
+                corner: [0.0, 0.0],
+                length: 10.0,
+                width: 10.0,
+                heading: 0.0,
+            },
             0.0,
             5.0,
             8.0,

@@ -147,10 +147,7 @@ pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
                 hipped
             };
             let mut m = roof(
-                r.corner,
-                r.length,
-                r.width,
-                r.heading,
+                &r,
                 eave - EMBED,
                 eave,
                 eave + ridge_m,
