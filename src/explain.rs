@@ -64,10 +64,12 @@ pub fn explain(
                 .map(|u| format!("\"{u}\""))
                 .collect::<Vec<_>>()
                 .join(", ");
-            out.push(entry(
-                Plan::Maybe,
-                format!("runs unless {list} reproduce their outputs"),
-            ));
+            let verb = if unknown.len() == 1 {
+                "reproduces its output"
+            } else {
+                "reproduce their outputs"
+            };
+            out.push(entry(Plan::Maybe, format!("runs unless {list} {verb}")));
             continue;
         }
         let inputs: Vec<Vec<Digest>> = node
