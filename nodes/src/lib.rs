@@ -33,6 +33,7 @@ pub mod site;
 pub mod stage;
 pub mod warp;
 
+pub mod building_mask;
 pub mod city_footprints;
 pub mod composite_height;
 pub mod gaussian_blur;
@@ -91,6 +92,7 @@ macro_rules! for_each_stage {
             $crate::composite_height::CompositeHeight,
             $crate::terrain_pass::TerrainPass,
             $crate::terrain_pass::AboveGround,
+            $crate::building_mask::BuildingMask,
             $crate::gaussian_blur::GaussianBlur,
             $crate::raster_ops::Clamp,
             $crate::raster_ops::Difference,

@@ -1,0 +1,171 @@
+//! Building masks on the synthetic site against its true outlines, with the LiDAR's building
+//! class and from geometric cues alone.
+
+use std::sync::Arc;
+
+use kodama_nodes::artifact::{PointSet, Raster};
+use kodama_nodes::building_mask::{BuildingMask, BuildingMaskParams};
+use kodama_nodes::rasterize_surface::{CellMode, RasterizeSurface, RasterizeSurfaceParams};
+use kodama_nodes::read_osm::point_in_ring;
+use kodama_nodes::stage::Slot;
+use kodama_nodes::synth_city::{SynthCityParams, generate};
+use kodama_nodes::synth_lidar::{SynthLidar, SynthLidarParams};
+use kodama_nodes::terrain_pass::{AboveGround, AboveGroundParams, TerrainPass, TerrainPassParams};
+use kodama_nodes::truth_scene::{TruthScene, TruthSceneParams};
+use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
+
+fn slot(a: Artifact) -> Slot {
+    Slot::One(Arc::new(a))
+}
+
+#[test]
+fn masks_match_the_true_outlines() {
+    let site = Site {
+        crs: "EPSG:32618".into(),
+        origin: (583200.0, 4506600.0),
+        cell_m: 0.5,
+    };
+    let ctx = Ctx::new(&site, &[]);
+    let city = generate(&SynthCityParams::default());
+    let scene = TruthScene::run(
+        &TruthSceneParams::default(),
+        &Inputs::new().with("city", slot(Artifact::City(city.clone()))),
+        &ctx,
+    )
+    .unwrap();
+    let lidar: PointSet = SynthLidar::run(
+        &SynthLidarParams::default(),
+        &Inputs::new().with("scene", slot(Artifact::Scene(scene))),
+        &ctx,
+    )
+    .unwrap();
+    let dsm_p = RasterizeSurfaceParams {
+        mode: CellMode::Max,
+        cell_m: None,
+        classes: None,
+        exclude_classes: vec![7, 18],
+        max_gap_m: 1.0,
+    };
+    let h = RasterizeSurface::run(
+        &dsm_p,
+        &Inputs::new().with("points", slot(Artifact::Points(lidar.clone()))),
+        &ctx,
+    )
+    .unwrap();
+    let pass = |p: TerrainPassParams, prev: Option<&Raster>| {
+        let inputs = Inputs::new()
+            .with("surface", slot(Artifact::Raster(h.clone())))
+            .with(
+                "previous",
+                Slot::Optional(prev.map(|r| Arc::new(Artifact::Raster(r.clone())))),
+            );
+        TerrainPass::run(&p, &inputs, &ctx).unwrap()
+    };
+    let t1 = pass(
+        TerrainPassParams {
+            coarse_m: 32.0,
+            percentile: 5.0,
+            n_min: 0.9,
+            tau_m: 4.0,
+            sigma_m: 2.0,
+            min_samples: 4,
+        },
+        None,
+    );
+    let t2 = pass(
+        TerrainPassParams {
+            coarse_m: 8.0,
+            percentile: 10.0,
+            n_min: 0.9,
+            tau_m: 1.0,
+            sigma_m: 1.0,
+            min_samples: 4,
+        },
+        Some(&t1),
+    );
+    let a = AboveGround::run(
+        &AboveGroundParams {},
+        &Inputs::new()
+            .with("surface", slot(Artifact::Raster(h.clone())))
+            .with("terrain", slot(Artifact::Raster(t2))),
+        &ctx,
+    )
+    .unwrap();
+    let truth: Vec<bool> = (0..a.grid.len())
+        .map(|i| {
+            let (x, y) = a
+                .grid
+                .center(i as u32 % a.grid.width, i as u32 / a.grid.width);
+            city.buildings.iter().any(|b| {
+                point_in_ring([x, y], &b.footprint.exterior)
+                    && !b.footprint.holes.iter().any(|hl| point_in_ring([x, y], hl))
+            })
+        })
+        .collect();
+    {
+        let rough = kodama_nodes::building_mask::roughness(&a);
+        let pct = |mut v: Vec<f32>| {
+            v.sort_by(f32::total_cmp);
+            [0.5, 0.9, 0.98].map(|q| v[((v.len() - 1) as f64 * q) as usize])
+        };
+        let roof: Vec<f32> = (0..a.grid.len())
+            .filter(|&i| truth[i])
+            .map(|i| rough[i])
+            .collect();
+        let tree: Vec<f32> = (0..a.grid.len())
+            .filter(|&i| {
+                let (x, y) = a
+                    .grid
+                    .center(i as u32 % a.grid.width, i as u32 / a.grid.width);
+                !truth[i]
+                    && a.data[i] > 2.5
+                    && city
+                        .trees
+                        .iter()
+                        .any(|t| (t.pos[0] - x).hypot(t.pos[1] - y) < t.crown_radius_m)
+            })
+            .map(|i| rough[i])
+            .collect();
+        println!(
+            "roughness roof p50/p90/p98 {:?}; tree {:?}",
+            pct(roof),
+            pct(tree)
+        );
+    }
+    for use_classes in [true, false] {
+        let params = BuildingMaskParams {
+            use_classes,
+            ..Default::default()
+        };
+        let inputs = Inputs::new()
+            .with("above", slot(Artifact::Raster(a.clone())))
+            .with(
+                "points",
+                Slot::Optional(Some(Arc::new(Artifact::Points(lidar.clone())))),
+            );
+        let labels = BuildingMask::run(&params, &inputs, &ctx).unwrap();
+        let found: Vec<bool> = labels
+            .data
+            .iter()
+            .map(|&l| l.is_finite() && l > 0.0)
+            .collect();
+        let inter = found.iter().zip(&truth).filter(|(f, t)| **f && **t).count();
+        let union = found.iter().zip(&truth).filter(|(f, t)| **f || **t).count();
+        let iou = inter as f64 / union as f64;
+        let components = labels
+            .data
+            .iter()
+            .filter(|l| l.is_finite())
+            .fold(0.0f32, |m, &l| m.max(l));
+        println!(
+            "{}: footprint IoU {iou:.3}, {components} components for {} buildings",
+            if use_classes {
+                "LiDAR classes"
+            } else {
+                "geometric cues"
+            },
+            city.buildings.len()
+        );
+        assert!(iou >= 0.9, "{iou}");
+    }
+}
