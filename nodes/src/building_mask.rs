@@ -96,9 +96,10 @@ impl Stage for BuildingMask {
                 let mut building = vec![false; g.len()];
                 for (q, &c) in pts.xyz.iter().zip(pts.class.iter()) {
                     if c == 6
-                        && let Some((col, row)) = g.cell_of(q[0] as f64, q[1] as f64) {
-                            building[(row * g.width + col) as usize] = true;
-                        }
+                        && let Some((col, row)) = g.cell_of(q[0] as f64, q[1] as f64)
+                    {
+                        building[(row * g.width + col) as usize] = true;
+                    }
                 }
                 building
                     .iter()

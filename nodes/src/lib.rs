@@ -57,6 +57,7 @@ pub mod synth_scan;
 pub mod synth_terrain;
 pub mod synth_views;
 pub mod terrain_pass;
+pub mod trace_footprints;
 pub mod truth_scene;
 pub mod views_io;
 
@@ -93,6 +94,7 @@ macro_rules! for_each_stage {
             $crate::terrain_pass::TerrainPass,
             $crate::terrain_pass::AboveGround,
             $crate::building_mask::BuildingMask,
+            $crate::trace_footprints::TraceFootprints,
             $crate::gaussian_blur::GaussianBlur,
             $crate::raster_ops::Clamp,
             $crate::raster_ops::Difference,

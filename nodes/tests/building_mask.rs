@@ -167,5 +167,60 @@ fn masks_match_the_true_outlines() {
             city.buildings.len()
         );
         assert!(iou >= 0.9, "{iou}");
+        if use_classes {
+            check_traced_polygons(&labels, &a, &site);
+        }
     }
+}
+
+/// The traced polygons, rasterized back at cell centres, are exactly the mask (outlines and
+/// courtyards), carry heights, and export as GeoJSON.
+fn check_traced_polygons(labels: &Raster, a: &Raster, site: &Site) {
+    use kodama_nodes::trace_footprints::{TraceFootprints, TraceFootprintsParams};
+    let inputs = Inputs::new()
+        .with("labels", slot(Artifact::Raster(labels.clone())))
+        .with(
+            "above",
+            Slot::Optional(Some(Arc::new(Artifact::Raster(a.clone())))),
+        );
+    let fp = TraceFootprints::run(
+        &TraceFootprintsParams::default(),
+        &inputs,
+        &Ctx::new(site, &[]),
+    )
+    .unwrap();
+    let g = labels.grid;
+    let mut mismatches = 0;
+    for i in 0..g.len() {
+        let (x, y) = g.center(i as u32 % g.width, i as u32 / g.width);
+        let inside = fp.items.iter().flat_map(|b| &b.polygons).any(|p| {
+            point_in_ring([x, y], &p.exterior)
+                && !p.holes.iter().any(|hl| point_in_ring([x, y], hl))
+        });
+        let labelled = labels.data[i].is_finite() && labels.data[i] > 0.0;
+        mismatches += (inside != labelled) as usize;
+    }
+    let holes: usize = fp
+        .items
+        .iter()
+        .flat_map(|b| &b.polygons)
+        .map(|p| p.holes.len())
+        .sum();
+    println!(
+        "{} footprints traced, {holes} courtyards, {mismatches} cells differ from the mask",
+        fp.items.len()
+    );
+    assert_eq!(mismatches, 0);
+    assert!(holes >= 3, "the courtyards are holes");
+    assert!(fp.items.iter().all(|b| b.height_m.is_some_and(|h| h > 3.0)));
+    let kodama_nodes::export::Encoded::File(json) =
+        kodama_nodes::export::encode(&Artifact::Footprints(fp), site, "geojson").unwrap()
+    else {
+        panic!()
+    };
+    assert!(
+        String::from_utf8(json)
+            .unwrap()
+            .contains("urn:ogc:def:crs:EPSG::32618")
+    );
 }
