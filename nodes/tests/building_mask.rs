@@ -1,96 +1,26 @@
 //! Building masks on the synthetic site against its true outlines, with the LiDAR's building
 //! class and from geometric cues alone.
 
+mod common;
+use common::*;
+
 use std::sync::Arc;
 
-use kodama_nodes::artifact::{PointSet, Raster};
+use kodama_nodes::artifact::Raster;
 use kodama_nodes::building_mask::{BuildingMask, BuildingMaskParams};
-use kodama_nodes::rasterize_surface::{CellMode, RasterizeSurface, RasterizeSurfaceParams};
 use kodama_nodes::read_osm::point_in_ring;
 use kodama_nodes::stage::Slot;
 use kodama_nodes::synth_city::{SynthCityParams, generate};
-use kodama_nodes::synth_lidar::{SynthLidar, SynthLidarParams};
-use kodama_nodes::terrain_pass::{AboveGround, AboveGroundParams, TerrainPass, TerrainPassParams};
-use kodama_nodes::truth_scene::{TruthScene, TruthSceneParams};
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
-
-fn slot(a: Artifact) -> Slot {
-    Slot::One(Arc::new(a))
-}
 
 #[test]
 fn masks_match_the_true_outlines() {
-    let site = Site {
-        crs: "EPSG:32618".into(),
-        origin: (583200.0, 4506600.0),
-        cell_m: 0.5,
-    };
+    let site = site();
     let ctx = Ctx::new(&site, &[]);
     let city = generate(&SynthCityParams::default());
-    let scene = TruthScene::run(
-        &TruthSceneParams::default(),
-        &Inputs::new().with("city", slot(Artifact::City(city.clone()))),
-        &ctx,
-    )
-    .unwrap();
-    let lidar: PointSet = SynthLidar::run(
-        &SynthLidarParams::default(),
-        &Inputs::new().with("scene", slot(Artifact::Scene(scene))),
-        &ctx,
-    )
-    .unwrap();
-    let dsm_p = RasterizeSurfaceParams {
-        mode: CellMode::Max,
-        cell_m: None,
-        classes: None,
-        exclude_classes: vec![7, 18],
-        max_gap_m: 1.0,
-    };
-    let h = RasterizeSurface::run(
-        &dsm_p,
-        &Inputs::new().with("points", slot(Artifact::Points(lidar.clone()))),
-        &ctx,
-    )
-    .unwrap();
-    let pass = |p: TerrainPassParams, prev: Option<&Raster>| {
-        let inputs = Inputs::new()
-            .with("surface", slot(Artifact::Raster(h.clone())))
-            .with(
-                "previous",
-                Slot::Optional(prev.map(|r| Arc::new(Artifact::Raster(r.clone())))),
-            );
-        TerrainPass::run(&p, &inputs, &ctx).unwrap()
-    };
-    let t1 = pass(
-        TerrainPassParams {
-            coarse_m: 32.0,
-            percentile: 5.0,
-            n_min: 0.9,
-            tau_m: 4.0,
-            sigma_m: 2.0,
-            min_samples: 4,
-        },
-        None,
-    );
-    let t2 = pass(
-        TerrainPassParams {
-            coarse_m: 8.0,
-            percentile: 10.0,
-            n_min: 0.9,
-            tau_m: 1.0,
-            sigma_m: 1.0,
-            min_samples: 4,
-        },
-        Some(&t1),
-    );
-    let a = AboveGround::run(
-        &AboveGroundParams {},
-        &Inputs::new()
-            .with("surface", slot(Artifact::Raster(h.clone())))
-            .with("terrain", slot(Artifact::Raster(t2))),
-        &ctx,
-    )
-    .unwrap();
+    let Reconstruction {
+        lidar, above: a, ..
+    } = reconstruct(&scene_of(&city));
     let truth: Vec<bool> = (0..a.grid.len())
         .map(|i| {
             let (x, y) = a

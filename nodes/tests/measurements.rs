@@ -1,18 +1,13 @@
 //! Measurement ingest: the real Duke CBRS drive test, the project's CSV layout, and its errors.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::*;
+
+use std::path::PathBuf;
 
 use kodama_nodes::artifact::{Height, Measurements};
 use kodama_nodes::read_measurements::{Layout, ReadMeasurements, ReadMeasurementsParams};
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
-
-fn shared(rel: &str) -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
-        .join(rel);
-    assert!(p.exists(), "real test data missing: {}", p.display());
-    p
-}
 
 fn read(
     layout: Layout,

@@ -2,7 +2,10 @@
 //! scripts/make_geotiff_fixtures.py), our own GeoTIFFs read back, warping, and the real Autzen
 //! orthophoto checked against the colours stored in the Autzen LiDAR points.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::*;
+
+use std::path::PathBuf;
 
 use kodama_nodes::artifact::{Grid, Ortho, PodVec, Raster};
 use kodama_nodes::crs::{Crs, ToSite};
@@ -11,20 +14,6 @@ use kodama_nodes::read_ortho::{ReadOrtho, ReadOrthoParams};
 use kodama_nodes::read_raster::{ReadRaster, ReadRasterParams};
 use kodama_nodes::warp::Resample;
 use kodama_nodes::{Ctx, Inputs, Site, Stage};
-
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../tests/fixtures")
-        .join(name)
-}
-
-fn shared(rel: &str) -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
-        .join(rel);
-    assert!(p.exists(), "real test data missing: {}", p.display());
-    p
-}
 
 fn raster_params(path: &str) -> ReadRasterParams {
     ReadRasterParams {

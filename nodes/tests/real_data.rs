@@ -2,29 +2,12 @@
 //! references: published counts, the files' own headers, and PROJ (tests/fixtures, made by
 //! scripts/crs_reference.py).
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::*;
 
 use kodama_nodes::crs::{Crs, ToSite};
 use kodama_nodes::read_las::{header_crs, read_las};
 use kodama_nodes::{Ctx, Site};
-
-fn shared(rel: &str) -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../shared/data")
-        .join(rel);
-    assert!(
-        p.exists(),
-        "real test data missing: {} (shared/ must sit beside the repo)",
-        p.display()
-    );
-    p
-}
-
-fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../tests/fixtures")
-        .join(name)
-}
 
 #[test]
 fn delft_ahn3_tile_counts_classes_and_extent() {

@@ -1,9 +1,12 @@
 //! The synthetic site against its own ground truth: the city description, the meshes made from
 //! it, and the sensors that observe it.
 
+mod common;
+use common::*;
+
 use std::sync::Arc;
 
-use kodama_nodes::artifact::{City, ObjectClass, PointSet, Roof, Scene};
+use kodama_nodes::artifact::{ObjectClass, PointSet, Roof, Scene};
 use kodama_nodes::city_footprints::{CityFootprints, CityFootprintsParams};
 use kodama_nodes::export::{write_glb, write_las};
 use kodama_nodes::mesh_check::check_closed_solid;
@@ -12,41 +15,8 @@ use kodama_nodes::read_osm::point_in_ring;
 use kodama_nodes::stage::Slot;
 use kodama_nodes::synth_city::{SynthCityParams, generate};
 use kodama_nodes::synth_lidar::{SynthLidar, SynthLidarParams};
-use kodama_nodes::synth_terrain::{SynthTerrainParams, height_at};
-use kodama_nodes::truth_scene::{TruthScene, TruthSceneParams};
+use kodama_nodes::synth_terrain::height_at;
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
-
-fn site() -> Site {
-    Site {
-        crs: "EPSG:32618".into(),
-        origin: (583200.0, 4506600.0),
-        cell_m: 0.5,
-    }
-}
-
-fn small_city() -> SynthCityParams {
-    SynthCityParams {
-        size_m: (200.0, 150.0),
-        blocks: (2, 2),
-        terrain: SynthTerrainParams {
-            seed: 3,
-            size_m: (200.0, 150.0),
-            relief_m: 2.0,
-            ..Default::default()
-        },
-        ..Default::default()
-    }
-}
-
-fn scene_of(city: &City) -> Scene {
-    let inputs = Inputs::new().with("city", Slot::One(Arc::new(Artifact::City(city.clone()))));
-    TruthScene::run(
-        &TruthSceneParams::default(),
-        &inputs,
-        &Ctx::new(&site(), &[]),
-    )
-    .unwrap()
-}
 
 fn scan(scene: &Scene, p: &SynthLidarParams) -> PointSet {
     let inputs = Inputs::new().with("scene", Slot::One(Arc::new(Artifact::Scene(scene.clone()))));

@@ -1,96 +1,39 @@
 //! Terrain (eq. (1)) and the above-ground field on the synthetic site, against its ground truth.
 //! Geometric cues only: the surface is rasterized from every LiDAR return, classes unused.
 
-use std::sync::Arc;
+mod common;
+use common::*;
 
-use kodama_nodes::artifact::{ObjectClass, Raster, Roof};
+use kodama_nodes::artifact::{ObjectClass, Roof};
 use kodama_nodes::rasterize_scene::{RasterizeScene, RasterizeSceneParams};
-use kodama_nodes::rasterize_surface::{CellMode, RasterizeSurface, RasterizeSurfaceParams};
 use kodama_nodes::read_osm::point_in_ring;
-use kodama_nodes::stage::Slot;
 use kodama_nodes::synth_city::{SynthCityParams, generate};
-use kodama_nodes::synth_lidar::{SynthLidar, SynthLidarParams};
 use kodama_nodes::synth_terrain::SynthTerrainParams;
-use kodama_nodes::terrain_pass::{AboveGround, AboveGroundParams, TerrainPass, TerrainPassParams};
-use kodama_nodes::truth_scene::{TruthScene, TruthSceneParams};
-use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
-
-fn one(name: &'static str, a: Artifact) -> Inputs {
-    Inputs::new().with(name, Slot::One(Arc::new(a)))
-}
+use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
 
 fn run_case(terrain: SynthTerrainParams) -> (f64, f64, usize) {
-    let site = Site {
-        crs: "EPSG:32618".into(),
-        origin: (583200.0, 4506600.0),
-        cell_m: 0.5,
-    };
-    let ctx = Ctx::new(&site, &[]);
+    let s = site();
+    let ctx = Ctx::new(&s, &[]);
     let city = generate(&SynthCityParams {
         terrain,
         ..Default::default()
     });
-    let scene = TruthScene::run(
-        &TruthSceneParams::default(),
-        &one("city", Artifact::City(city.clone())),
-        &ctx,
-    )
-    .unwrap();
-    let dem = RasterizeScene::run(
-        &RasterizeSceneParams {
-            cell_m: None,
-            classes: Some(vec![ObjectClass::Terrain]),
-        },
-        &one("scene", Artifact::Scene(scene.clone())),
-        &ctx,
-    )
-    .unwrap();
-    let lidar = SynthLidar::run(
-        &SynthLidarParams::default(),
-        &one("scene", Artifact::Scene(scene)),
-        &ctx,
-    )
-    .unwrap();
-    let dsm_params = RasterizeSurfaceParams {
-        mode: CellMode::Max,
+    let scene = scene_of(&city);
+    let dem_params = RasterizeSceneParams {
         cell_m: None,
-        classes: None,
-        exclude_classes: vec![7, 18],
-        max_gap_m: 1.0,
+        classes: Some(vec![ObjectClass::Terrain]),
     };
-    let h =
-        RasterizeSurface::run(&dsm_params, &one("points", Artifact::Points(lidar)), &ctx).unwrap();
-    let pass = |p: TerrainPassParams, prev: Option<&Raster>| {
-        let mut inputs = one("surface", Artifact::Raster(h.clone()));
-        inputs.push(
-            "previous",
-            Slot::Optional(prev.map(|r| Arc::new(Artifact::Raster(r.clone())))),
-        );
-        TerrainPass::run(&p, &inputs, &ctx).unwrap()
-    };
-    // The two passes of graphs/demo.ron (DESIGN's example values).
-    let t1 = pass(
-        TerrainPassParams {
-            coarse_m: 32.0,
-            percentile: 5.0,
-            n_min: 0.9,
-            tau_m: 4.0,
-            sigma_m: 2.0,
-            min_samples: 4,
-        },
-        None,
-    );
-    let t2 = pass(
-        TerrainPassParams {
-            coarse_m: 8.0,
-            percentile: 10.0,
-            n_min: 0.9,
-            tau_m: 1.0,
-            sigma_m: 1.0,
-            min_samples: 4,
-        },
-        Some(&t1),
-    );
+    let dem = RasterizeScene::run(
+        &dem_params,
+        &Inputs::new().with("scene", slot(Artifact::Scene(scene.clone()))),
+        &ctx,
+    )
+    .unwrap();
+    let Reconstruction {
+        terrain: t2,
+        above: a,
+        ..
+    } = reconstruct(&scene);
     let (mut se, mut n) = (0.0, 0usize);
     for row in 0..t2.grid.height {
         for col in 0..t2.grid.width {
@@ -103,9 +46,6 @@ fn run_case(terrain: SynthTerrainParams) -> (f64, f64, usize) {
     }
     let rmse = (se / n as f64).sqrt();
     // No building swallowed: its above-ground height survives the terrain estimate.
-    let mut inputs = one("surface", Artifact::Raster(h.clone()));
-    inputs.push("terrain", Slot::One(Arc::new(Artifact::Raster(t2.clone()))));
-    let a = AboveGround::run(&AboveGroundParams {}, &inputs, &ctx).unwrap();
     let mut worst_ratio: f64 = f64::INFINITY;
     let mut swallowed = 0;
     for b in city

@@ -1,44 +1,19 @@
 //! 3D Tiles: the synthetic site's truth written as a tileset and read back through ReadTileset,
 //! and b3dm content with an RTC_CENTER.
 
+mod common;
+use common::*;
+
 use std::path::Path;
-use std::sync::Arc;
 
 use kodama_nodes::artifact::Scene;
 use kodama_nodes::export::{Encoded, encode, write_glb};
 use kodama_nodes::read_tiles::{ReadTileset, ReadTilesetParams};
-use kodama_nodes::stage::Slot;
-use kodama_nodes::synth_city::{SynthCityParams, generate};
-use kodama_nodes::synth_terrain::SynthTerrainParams;
-use kodama_nodes::truth_scene::{TruthScene, TruthSceneParams};
-use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
-
-fn site() -> Site {
-    Site {
-        crs: "EPSG:32618".into(),
-        origin: (583200.0, 4506600.0),
-        cell_m: 0.5,
-    }
-}
+use kodama_nodes::synth_city::generate;
+use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
 
 fn truth() -> Scene {
-    let p = SynthCityParams {
-        size_m: (200.0, 150.0),
-        blocks: (2, 2),
-        terrain: SynthTerrainParams {
-            seed: 3,
-            size_m: (200.0, 150.0),
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    let inputs = Inputs::new().with("city", Slot::One(Arc::new(Artifact::City(generate(&p)))));
-    TruthScene::run(
-        &TruthSceneParams::default(),
-        &inputs,
-        &Ctx::new(&site(), &[]),
-    )
-    .unwrap()
+    scene_of(&generate(&small_city()))
 }
 
 fn write_folder(dir: &Path, files: Vec<(String, Vec<u8>)>) {

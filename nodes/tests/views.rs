@@ -1,46 +1,23 @@
 //! Street views: the synthetic renderer checked against the terrain it looks at, the on-disk
 //! layout round trip, the error knobs, and bad view sets.
 
+mod common;
+use common::*;
+
 use std::sync::Arc;
 
 use kodama_nodes::artifact::{City, Scene, ViewSet};
 use kodama_nodes::materials::Material;
 use kodama_nodes::stage::Slot;
-use kodama_nodes::synth_city::{SynthCityParams, generate};
-use kodama_nodes::synth_terrain::{SynthTerrainParams, height_at};
+use kodama_nodes::synth_city::generate;
+use kodama_nodes::synth_terrain::height_at;
 use kodama_nodes::synth_views::{SynthViews, SynthViewsParams};
-use kodama_nodes::truth_scene::{TruthScene, TruthSceneParams};
 use kodama_nodes::views_io::{read_viewset, write_viewset};
-use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
-
-fn site() -> Site {
-    Site {
-        crs: "EPSG:32618".into(),
-        origin: (583200.0, 4506600.0),
-        cell_m: 0.5,
-    }
-}
+use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
 
 fn city_and_scene() -> (City, Scene) {
-    let p = SynthCityParams {
-        size_m: (200.0, 150.0),
-        blocks: (2, 2),
-        terrain: SynthTerrainParams {
-            seed: 3,
-            size_m: (200.0, 150.0),
-            relief_m: 2.0,
-            ..Default::default()
-        },
-        ..Default::default()
-    };
-    let city = generate(&p);
-    let inputs = Inputs::new().with("city", Slot::One(Arc::new(Artifact::City(city.clone()))));
-    let scene = TruthScene::run(
-        &TruthSceneParams::default(),
-        &inputs,
-        &Ctx::new(&site(), &[]),
-    )
-    .unwrap();
+    let city = generate(&small_city());
+    let scene = scene_of(&city);
     (city, scene)
 }
 

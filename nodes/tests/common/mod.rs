@@ -1,0 +1,154 @@
+//! Helpers shared by the stage tests: where the real data and fixtures are, the demo site, and the
+//! synthetic chain the reconstruction tests start from.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use kodama_nodes::artifact::{City, PointSet, Raster, Scene};
+use kodama_nodes::rasterize_surface::{CellMode, RasterizeSurface, RasterizeSurfaceParams};
+use kodama_nodes::stage::Slot;
+use kodama_nodes::synth_city::SynthCityParams;
+use kodama_nodes::synth_lidar::{SynthLidar, SynthLidarParams};
+use kodama_nodes::synth_terrain::SynthTerrainParams;
+use kodama_nodes::terrain_pass::{AboveGround, AboveGroundParams, TerrainPass, TerrainPassParams};
+use kodama_nodes::truth_scene::{TruthScene, TruthSceneParams};
+use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
+
+/// A file of the real test data, which sits in `shared/data` beside the repository.
+pub fn shared(rel: &str) -> PathBuf {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/data")
+        .join(rel);
+    assert!(
+        p.exists(),
+        "real test data missing: {} (shared/ must sit beside the repo)",
+        p.display()
+    );
+    p
+}
+
+/// A committed fixture in `tests/fixtures` (each made by a script in `scripts/`).
+pub fn fixture(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/fixtures")
+        .join(name)
+}
+
+/// The demo graph's site frame.
+pub fn site() -> Site {
+    Site {
+        crs: "EPSG:32618".into(),
+        origin: (583200.0, 4506600.0),
+        cell_m: 0.5,
+    }
+}
+
+/// An input slot holding one artifact.
+pub fn slot(a: Artifact) -> Slot {
+    Slot::One(Arc::new(a))
+}
+
+/// A 200 x 150 m city of four blocks: quick to scan and render.
+pub fn small_city() -> SynthCityParams {
+    SynthCityParams {
+        size_m: (200.0, 150.0),
+        blocks: (2, 2),
+        terrain: SynthTerrainParams {
+            seed: 3,
+            size_m: (200.0, 150.0),
+            relief_m: 2.0,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
+/// The truth scene of `city`.
+pub fn scene_of(city: &City) -> Scene {
+    let inputs = Inputs::new().with("city", slot(Artifact::City(city.clone())));
+    TruthScene::run(
+        &TruthSceneParams::default(),
+        &inputs,
+        &Ctx::new(&site(), &[]),
+    )
+    .unwrap()
+}
+
+/// What the demo graph makes of a scene before the building stages.
+pub struct Reconstruction {
+    /// The default survey.
+    pub lidar: PointSet,
+    /// H: every return's maximum per 0.5 m cell, 1 m gap fill.
+    pub dsm: Raster,
+    /// T: the two passes of eq. (1) in graphs/demo.ron (DESIGN's example values).
+    pub terrain: Raster,
+    /// A = max(H - T, 0).
+    pub above: Raster,
+}
+
+/// Surveys `scene` and runs the demo's height-field chain on the survey.
+pub fn reconstruct(scene: &Scene) -> Reconstruction {
+    let s = site();
+    let ctx = Ctx::new(&s, &[]);
+    let lidar = SynthLidar::run(
+        &SynthLidarParams::default(),
+        &Inputs::new().with("scene", slot(Artifact::Scene(scene.clone()))),
+        &ctx,
+    )
+    .unwrap();
+    let dsm_params = RasterizeSurfaceParams {
+        mode: CellMode::Max,
+        cell_m: None,
+        classes: None,
+        exclude_classes: vec![7, 18],
+        max_gap_m: 1.0,
+    };
+    let dsm = RasterizeSurface::run(
+        &dsm_params,
+        &Inputs::new().with("points", slot(Artifact::Points(lidar.clone()))),
+        &ctx,
+    )
+    .unwrap();
+    let pass = |p: TerrainPassParams, prev: Option<&Raster>| {
+        let inputs = Inputs::new()
+            .with("surface", slot(Artifact::Raster(dsm.clone())))
+            .with(
+                "previous",
+                Slot::Optional(prev.map(|r| Arc::new(Artifact::Raster(r.clone())))),
+            );
+        TerrainPass::run(&p, &inputs, &ctx).unwrap()
+    };
+    let t1 = pass(
+        TerrainPassParams {
+            coarse_m: 32.0,
+            percentile: 5.0,
+            n_min: 0.9,
+            tau_m: 4.0,
+            sigma_m: 2.0,
+            min_samples: 4,
+        },
+        None,
+    );
+    let terrain = pass(
+        TerrainPassParams {
+            coarse_m: 8.0,
+            percentile: 10.0,
+            n_min: 0.9,
+            tau_m: 1.0,
+            sigma_m: 1.0,
+            min_samples: 4,
+        },
+        Some(&t1),
+    );
+    let inputs = Inputs::new()
+        .with("surface", slot(Artifact::Raster(dsm.clone())))
+        .with("terrain", slot(Artifact::Raster(terrain.clone())));
+    let above = AboveGround::run(&AboveGroundParams {}, &inputs, &ctx).unwrap();
+    Reconstruction {
+        lidar,
+        dsm,
+        terrain,
+        above,
+    }
+}
