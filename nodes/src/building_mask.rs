@@ -244,13 +244,20 @@ pub fn erode(mask: &[bool], w: u32, h: u32, radius: i64) -> Vec<bool> {
 /// 4-connected components of at least `min_cells`, labelled 1, 2, ... in raster order of their
 /// first cell; 0 elsewhere.
 pub fn label_components(mask: &[bool], w: u32, h: u32, min_cells: usize) -> Vec<u32> {
+    let key: Vec<u32> = mask.iter().map(|&m| m as u32).collect();
+    label_regions(&key, w, h, min_cells)
+}
+
+/// 4-connected regions of equal non-zero `key` of at least `min_cells`, labelled 1, 2, ... in
+/// raster order of their first cell; 0 elsewhere.
+pub fn label_regions(key: &[u32], w: u32, h: u32, min_cells: usize) -> Vec<u32> {
     let (w, h) = (w as usize, h as usize);
     let mut labels = vec![0u32; w * h];
     let mut seen = vec![false; w * h];
     let mut next = 1u32;
     let (mut stack, mut members) = (Vec::new(), Vec::new());
     for start in 0..w * h {
-        if !mask[start] || seen[start] {
+        if key[start] == 0 || seen[start] {
             continue;
         }
         members.clear();
@@ -266,7 +273,7 @@ pub fn label_components(mask: &[bool], w: u32, h: u32, min_cells: usize) -> Vec<
                 (r + 1 < h).then(|| i + w),
             ];
             for j in neighbours.into_iter().flatten() {
-                if mask[j] && !seen[j] {
+                if key[j] == key[start] && !seen[j] {
                     seen[j] = true;
                     stack.push(j);
                 }

@@ -34,6 +34,7 @@ pub mod stage;
 pub mod warp;
 
 pub mod building_mask;
+pub mod building_solids;
 pub mod city_footprints;
 pub mod composite_height;
 pub mod gaussian_blur;
@@ -50,6 +51,7 @@ pub mod read_raster;
 pub mod read_tiles;
 pub mod read_views;
 pub mod read_xyz;
+pub mod roof_clean;
 pub mod stats;
 pub mod synth_city;
 pub mod synth_lidar;
@@ -95,6 +97,8 @@ macro_rules! for_each_stage {
             $crate::terrain_pass::AboveGround,
             $crate::building_mask::BuildingMask,
             $crate::trace_footprints::TraceFootprints,
+            $crate::roof_clean::RoofClean,
+            $crate::building_solids::BuildingSolids,
             $crate::gaussian_blur::GaussianBlur,
             $crate::raster_ops::Clamp,
             $crate::raster_ops::Difference,

@@ -6,6 +6,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::ObjectClass;
+
 /// A surface or volume material. Stored per triangle as its `u8` discriminant.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[repr(u8)]
@@ -57,6 +59,18 @@ pub struct ItuLaw {
     pub lo_ghz: f64,
     /// Upper end, GHz.
     pub hi_ghz: f64,
+}
+
+/// The ITU material an object of `class` gets until the material stages assign per-surface ones:
+/// ground for the terrain, concrete for buildings (and surfaces not yet split into objects),
+/// foliage for vegetation, metal for street clutter (cars, poles, signs).
+pub fn default_material(class: ObjectClass) -> Material {
+    match class {
+        ObjectClass::Terrain => Material::MediumDryGround,
+        ObjectClass::Building | ObjectClass::Unsegmented => Material::Concrete,
+        ObjectClass::Vegetation => Material::Foliage,
+        ObjectClass::Clutter => Material::Metal,
+    }
 }
 
 impl Material {

@@ -3,7 +3,8 @@
 
 use std::collections::HashMap;
 
-use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
+use spade::handles::FixedVertexHandle;
+use spade::{ConstrainedDelaunayTriangulation, HasPosition, Point2, Triangulation};
 
 use crate::artifact::{Mesh, PodVec, Polygon, Rect};
 use crate::materials::Material;
@@ -11,26 +12,26 @@ use crate::read_osm::point_in_ring;
 
 /// A mesh under construction.
 #[derive(Default)]
-struct Builder {
+pub(crate) struct Builder {
     positions: Vec<[f32; 3]>,
     triangles: Vec<[u32; 3]>,
     materials: Vec<u8>,
 }
 
 impl Builder {
-    fn v(&mut self, p: [f64; 3]) -> u32 {
+    pub(crate) fn v(&mut self, p: [f64; 3]) -> u32 {
         self.positions.push([p[0] as f32, p[1] as f32, p[2] as f32]);
         self.positions.len() as u32 - 1
     }
-    fn tri(&mut self, a: u32, b: u32, c: u32, m: Material) {
+    pub(crate) fn tri(&mut self, a: u32, b: u32, c: u32, m: Material) {
         self.triangles.push([a, b, c]);
         self.materials.push(m as u8);
     }
-    fn quad(&mut self, a: u32, b: u32, c: u32, d: u32, m: Material) {
+    pub(crate) fn quad(&mut self, a: u32, b: u32, c: u32, d: u32, m: Material) {
         self.tri(a, b, c, m);
         self.tri(a, c, d, m);
     }
-    fn finish(self) -> Mesh {
+    pub(crate) fn finish(self) -> Mesh {
         Mesh {
             positions: PodVec(self.positions),
             triangles: PodVec(self.triangles),
@@ -39,27 +40,50 @@ impl Builder {
     }
 }
 
+/// Inserts the rings of `poly` (exterior first, then each hole) into `cdt` as closed chains of
+/// constraint edges; `vertex` makes a vertex from a ring point and its index in the concatenated
+/// rings. Returns the handles in that order. Rings that repeat a point, touch or cross are an error
+/// (user polygons can do all three; spade would panic on crossing constraints).
+pub fn insert_rings<V: HasPosition<Scalar = f64>>(
+    cdt: &mut ConstrainedDelaunayTriangulation<V>,
+    poly: &Polygon,
+    mut vertex: impl FnMut([f64; 2], usize) -> V,
+) -> Result<Vec<FixedVertexHandle>, String> {
+    let mut handles = Vec::new();
+    for ring in std::iter::once(&poly.exterior).chain(&poly.holes) {
+        let first = handles.len();
+        for p in ring {
+            let before = cdt.num_vertices();
+            let h = cdt
+                .insert(vertex(*p, handles.len()))
+                .map_err(|e| format!("cannot triangulate vertex {p:?}: {e:?}"))?;
+            if cdt.num_vertices() == before {
+                return Err(format!("the polygon's rings repeat the point {p:?}"));
+            }
+            handles.push(h);
+        }
+        let ring_handles = &handles[first..];
+        for (i, &h) in ring_handles.iter().enumerate() {
+            let next = ring_handles[(i + 1) % ring_handles.len()];
+            if !cdt.can_add_constraint(h, next) {
+                return Err(format!("the polygon's rings cross near {:?}", ring[i]));
+            }
+            cdt.add_constraint(h, next);
+        }
+    }
+    Ok(handles)
+}
+
 /// Triangles covering a polygon with holes (indices into the concatenated rings: exterior first,
 /// then each hole), counter-clockwise seen from above.
 pub fn triangulate(poly: &Polygon) -> Result<Vec<[u32; 3]>, String> {
-    let rings: Vec<&Vec<[f64; 2]>> = std::iter::once(&poly.exterior).chain(&poly.holes).collect();
     let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
-    let mut index_of = HashMap::new();
-    let mut next = 0u32;
-    for ring in &rings {
-        let handles = ring
-            .iter()
-            .map(|p| {
-                cdt.insert(Point2::new(p[0], p[1]))
-                    .map_err(|e| format!("cannot triangulate vertex {p:?}: {e:?}"))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        for (i, h) in handles.iter().enumerate() {
-            index_of.entry(h.index()).or_insert(next + i as u32);
-            cdt.add_constraint(*h, handles[(i + 1) % handles.len()]);
-        }
-        next += ring.len() as u32;
-    }
+    let handles = insert_rings(&mut cdt, poly, |p, _| Point2::new(p[0], p[1]))?;
+    let index_of: HashMap<usize, u32> = handles
+        .iter()
+        .enumerate()
+        .map(|(k, h)| (h.index(), k as u32))
+        .collect();
     let mut out = Vec::new();
     for f in cdt.inner_faces() {
         let vs = f.vertices();
@@ -432,6 +456,25 @@ mod tests {
             4.0 / 3.0 * std::f64::consts::PI * 36.0,
             0.02,
         );
+    }
+
+    #[test]
+    fn crossing_or_repeating_rings_are_errors_not_panics() {
+        let bowtie = Polygon {
+            exterior: vec![[0.0, 0.0], [10.0, 10.0], [10.0, 0.0], [0.0, 10.0]],
+            holes: vec![],
+        };
+        assert!(triangulate(&bowtie).unwrap_err().contains("cross"));
+        let hole_out = Polygon {
+            exterior: square(0.0, 0.0, 10.0),
+            holes: vec![square(5.0, 5.0, 10.0).into_iter().rev().collect()],
+        };
+        assert!(triangulate(&hole_out).unwrap_err().contains("cross"));
+        let repeated = Polygon {
+            exterior: vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [10.0, 0.0]],
+            holes: vec![],
+        };
+        assert!(triangulate(&repeated).unwrap_err().contains("repeat"));
     }
 
     #[test]

@@ -34,7 +34,7 @@ pub struct TraceFootprints;
 
 impl Stage for TraceFootprints {
     const KIND: &'static str = "TraceFootprints";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const DOC: &'static str = "footprint polygons (outlines and courtyards) traced from a building label raster, Sec. 4.1";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -219,7 +219,7 @@ fn merge_collinear(ring: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
 }
 
 /// Douglas-Peucker on each ring (closed), keeping at least a triangle.
-fn simplify_polygon(p: Polygon, tol: f64) -> Polygon {
+pub(crate) fn simplify_polygon(p: Polygon, tol: f64) -> Polygon {
     if tol <= 0.0 {
         return p;
     }
@@ -229,9 +229,18 @@ fn simplify_polygon(p: Polygon, tol: f64) -> Polygon {
         }
         let mut keep = vec![false; r.len() + 1];
         let closed: Vec<[f64; 2]> = r.iter().copied().chain(std::iter::once(r[0])).collect();
+        // The chord of a closed ring from its first point to itself has no direction: start from
+        // the point furthest from the first.
+        let far = (1..r.len())
+            .max_by(|&i, &j| {
+                let d = |k: usize| (r[k][0] - r[0][0]).hypot(r[k][1] - r[0][1]);
+                d(i).total_cmp(&d(j)).then(j.cmp(&i))
+            })
+            .expect("more than four points");
         keep[0] = true;
+        keep[far] = true;
         keep[r.len()] = true;
-        let mut stack = vec![(0usize, r.len())];
+        let mut stack = vec![(0usize, far), (far, r.len())];
         while let Some((i, j)) = stack.pop() {
             let (a, b) = (closed[i], closed[j]);
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
@@ -319,6 +328,25 @@ mod tests {
             (p[0].area() - 8.0).abs() < 1e-12,
             "9 cells minus the courtyard"
         );
+    }
+
+    #[test]
+    fn simplifying_straightens_the_stairs_of_a_diagonal_outline() {
+        // A band one cell wide running diagonally: stairs along both long sides.
+        let rows: Vec<String> = (0..12)
+            .map(|r| {
+                (0..14)
+                    .map(|c| if c == r || c == r + 1 { '1' } else { '0' })
+                    .collect()
+            })
+            .collect();
+        let r = grid_of(&rows.iter().map(String::as_str).collect::<Vec<_>>());
+        let exact = trace(&r)[&1][0].clone();
+        assert!(exact.exterior.len() > 40, "{}", exact.exterior.len());
+        let simple = simplify_polygon(exact.clone(), 1.0);
+        assert!(simple.exterior.len() <= 6, "{:?}", simple.exterior);
+        assert!((simple.area() - exact.area()).abs() < 0.2 * exact.area());
+        assert_eq!(simplify_polygon(exact.clone(), 0.0), exact);
     }
 
     #[test]
