@@ -176,6 +176,9 @@ impl kodama_nodes::Progress for NodeProgress<'_> {
             bar.inc(n);
         }
     }
+    fn warn(&self, message: &str) {
+        self.reporter.warn(&format!("{}: {message}", self.label));
+    }
 }
 
 impl Drop for NodeProgress<'_> {

@@ -251,13 +251,25 @@ pub fn label_components(mask: &[bool], w: u32, h: u32, min_cells: usize) -> Vec<
 /// 4-connected regions of equal non-zero `key` of at least `min_cells`, labelled 1, 2, ... in
 /// raster order of their first cell; 0 elsewhere.
 pub fn label_regions(key: &[u32], w: u32, h: u32, min_cells: usize) -> Vec<u32> {
+    flood_regions(w, h, min_cells, |i| key[i] != 0, |i, j| key[i] == key[j])
+}
+
+/// 4-connected regions of `active` cells, neighbours joined where `connect(cell, neighbour)`,
+/// of at least `min_cells`, labelled 1, 2, ... in raster order of their first cell; 0 elsewhere.
+pub fn flood_regions(
+    w: u32,
+    h: u32,
+    min_cells: usize,
+    active: impl Fn(usize) -> bool,
+    connect: impl Fn(usize, usize) -> bool,
+) -> Vec<u32> {
     let (w, h) = (w as usize, h as usize);
     let mut labels = vec![0u32; w * h];
     let mut seen = vec![false; w * h];
     let mut next = 1u32;
     let (mut stack, mut members) = (Vec::new(), Vec::new());
     for start in 0..w * h {
-        if key[start] == 0 || seen[start] {
+        if !active(start) || seen[start] {
             continue;
         }
         members.clear();
@@ -273,7 +285,7 @@ pub fn label_regions(key: &[u32], w: u32, h: u32, min_cells: usize) -> Vec<u32> 
                 (r + 1 < h).then(|| i + w),
             ];
             for j in neighbours.into_iter().flatten() {
-                if key[j] == key[start] && !seen[j] {
+                if !seen[j] && active(j) && connect(i, j) {
                     seen[j] = true;
                     stack.push(j);
                 }

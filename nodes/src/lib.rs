@@ -33,11 +33,15 @@ pub mod site;
 pub mod stage;
 pub mod warp;
 
+pub mod assemble_scene;
 pub mod building_mask;
 pub mod building_solids;
 pub mod city_footprints;
+pub mod coarsen;
 pub mod composite_height;
+pub mod footprint_score;
 pub mod gaussian_blur;
+pub mod osm_baseline;
 pub mod raster_ops;
 pub mod rasterize_scene;
 pub mod rasterize_surface;
@@ -52,6 +56,7 @@ pub mod read_tiles;
 pub mod read_views;
 pub mod read_xyz;
 pub mod roof_clean;
+pub mod split_buildings;
 pub mod stats;
 pub mod synth_city;
 pub mod synth_lidar;
@@ -98,10 +103,15 @@ macro_rules! for_each_stage {
             $crate::building_mask::BuildingMask,
             $crate::trace_footprints::TraceFootprints,
             $crate::roof_clean::RoofClean,
+            $crate::split_buildings::SplitBuildings,
             $crate::building_solids::BuildingSolids,
+            $crate::osm_baseline::OsmBaseline,
+            $crate::assemble_scene::AssembleScene,
+            $crate::coarsen::Coarsen,
             $crate::gaussian_blur::GaussianBlur,
             $crate::raster_ops::Clamp,
             $crate::raster_ops::Difference,
+            $crate::footprint_score::FootprintScore,
             $crate::stats::RasterStats,
             $crate::stats::PointStats,
         }

@@ -263,20 +263,7 @@ pub fn read_osm_buildings(path: &Path, wgs84: &ToSite) -> Result<Footprints, Sta
     Ok(out)
 }
 
-/// Even-odd point-in-polygon test.
-pub fn point_in_ring(p: [f64; 2], ring: &[[f64; 2]]) -> bool {
-    let mut inside = false;
-    let n = ring.len();
-    for i in 0..n {
-        let (a, b) = (ring[i], ring[(i + n - 1) % n]);
-        if (a[1] > p[1]) != (b[1] > p[1])
-            && p[0] < (b[0] - a[0]) * (p[1] - a[1]) / (b[1] - a[1]) + a[0]
-        {
-            inside = !inside;
-        }
-    }
-    inside
-}
+pub use crate::artifact::point_in_ring;
 
 #[cfg(test)]
 mod tests {

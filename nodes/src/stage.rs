@@ -158,6 +158,11 @@ pub trait Progress: Sync {
     fn set_total(&self, total: u64);
     /// Marks `n` more units done.
     fn advance(&self, n: u64);
+    /// Something the user should know that does not stop the stage (input records skipped, a
+    /// fallback taken). Shown once, when the stage runs.
+    fn warn(&self, message: &str) {
+        let _ = message;
+    }
 }
 
 /// A `Progress` that reports nowhere, for tests and library callers.

@@ -7,16 +7,20 @@ use common::*;
 
 use std::sync::Arc;
 
-use kodama_nodes::artifact::{ObjectClass, PointSet, Raster, Scene};
+use kodama_nodes::artifact::{Metrics, ObjectClass, PointSet, Raster, Scene};
 use kodama_nodes::building_mask::{BuildingMask, BuildingMaskParams};
 use kodama_nodes::building_solids::{BuildingSolids, BuildingSolidsParams};
+use kodama_nodes::city_footprints::CityFootprints;
+use kodama_nodes::footprint_score::FootprintScore;
 use kodama_nodes::mesh_check::check_solid;
 use kodama_nodes::raycast::SceneRays;
 use kodama_nodes::read_osm::point_in_ring;
 use kodama_nodes::roof_clean::{RoofClean, RoofCleanParams};
+use kodama_nodes::split_buildings::{SplitBuildings, SplitBuildingsParams};
 use kodama_nodes::stage::Slot;
 use kodama_nodes::synth_city::{SynthCityParams, generate};
 use kodama_nodes::synth_terrain::SynthTerrainParams;
+use kodama_nodes::trace_footprints::{TraceFootprints, TraceFootprintsParams};
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
 
 /// What the chain made of one site, scored.
@@ -28,6 +32,9 @@ struct Score {
     solids: usize,
     triangles: usize,
     swallowed: usize,
+    /// Mean IoU of each true footprint with the traced outline overlapping it most, before and
+    /// after SplitBuildings.
+    building_iou: [f64; 2],
 }
 
 fn optional(a: Artifact) -> Slot {
@@ -58,6 +65,15 @@ fn run_chain(params: &SynthCityParams, use_classes: bool) -> Score {
     )
     .unwrap();
     let roofs = clean(&labels, &above, &lidar, &terrain, use_classes);
+    let unsplit = labels.clone();
+    let labels = SplitBuildings::run(
+        &SplitBuildingsParams::default(),
+        &Inputs::new()
+            .with("labels", slot(Artifact::Raster(labels)))
+            .with("roofs", slot(Artifact::Raster(roofs.clone()))),
+        &ctx,
+    )
+    .unwrap();
     let solids = BuildingSolids::run(
         &BuildingSolidsParams::default(),
         &Inputs::new()
@@ -74,7 +90,43 @@ fn run_chain(params: &SynthCityParams, use_classes: bool) -> Score {
         check_solid(&o.mesh).unwrap_or_else(|e| panic!("{}: {e}", o.id));
         triangles += o.mesh.len();
     }
-    score(&city, &truth, &solids, &terrain, triangles)
+    let per_building = |labels: &Raster| {
+        let outlines = TraceFootprints::run(
+            &TraceFootprintsParams {
+                simplify_m: 0.5,
+                ..Default::default()
+            },
+            &Inputs::new()
+                .with("labels", slot(Artifact::Raster(labels.clone())))
+                .with("above", Slot::Optional(None)),
+            &ctx,
+        )
+        .unwrap();
+        let truth_fp = CityFootprints::run(
+            &Default::default(),
+            &Inputs::new().with("city", slot(Artifact::City(city.clone()))),
+            &ctx,
+        )
+        .unwrap();
+        FootprintScore::run(
+            &Default::default(),
+            &Inputs::new()
+                .with("predicted", slot(Artifact::Footprints(outlines)))
+                .with("reference", slot(Artifact::Footprints(truth_fp)))
+                .with("region", optional(Artifact::Raster(terrain.clone()))),
+            &ctx,
+        )
+        .unwrap()
+    };
+    let (whole, split) = (per_building(&unsplit), per_building(&labels));
+    score(
+        &city,
+        &truth,
+        &solids,
+        &terrain,
+        triangles,
+        [&whole, &split],
+    )
 }
 
 fn clean(
@@ -107,6 +159,7 @@ fn score(
     solids: &Scene,
     terrain: &Raster,
     triangles: usize,
+    per_building: [&Metrics; 2],
 ) -> Score {
     let only = |class: ObjectClass| Scene {
         objects: truth
@@ -168,14 +221,18 @@ fn score(
         solids: solids.objects.len(),
         triangles,
         swallowed: covered.iter().filter(|(hit, n)| *hit * 2 < *n).count(),
+        building_iou: per_building.map(|m| m.get("building_iou_mean").unwrap_or(0.0)),
     }
 }
 
 fn report(name: &str, s: &Score) {
     println!(
-        "{name}: footprint IoU {:.3}, roof height RMSE {:.3} m, terrain RMSE {:.3} m; \
-         {} solids for {} buildings, {} triangles ({:.0} per solid), {} buildings swallowed",
+        "{name}: footprint IoU {:.3}, per-building IoU {:.3} ({:.3} unsplit), roof height RMSE \
+         {:.3} m, terrain RMSE {:.3} m; {} solids for {} buildings, {} triangles ({:.0} per \
+         solid), {} buildings swallowed",
         s.iou,
+        s.building_iou[1],
+        s.building_iou[0],
         s.roof_rmse,
         s.terrain_rmse,
         s.solids,
@@ -185,6 +242,11 @@ fn report(name: &str, s: &Score) {
         s.swallowed
     );
     assert!(s.iou >= 0.9, "{name}: IoU {}", s.iou);
+    assert!(
+        s.building_iou[1] >= 0.85,
+        "{name}: per-building IoU {}",
+        s.building_iou[1]
+    );
     assert!(s.roof_rmse <= 0.5, "{name}: roof RMSE {}", s.roof_rmse);
     assert!(
         s.terrain_rmse <= 0.3,

@@ -18,7 +18,7 @@ pub use city::{
     BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, Rect, Roof, RoofBox, Street,
     TreeSpec,
 };
-pub use footprints::{Footprint, Footprints, Polygon, ring_area};
+pub use footprints::{Footprint, Footprints, Polygon, point_in_ring, ring_area};
 pub use measurements::{Endpoint, Height, Link, Measurements};
 pub use metrics::Metrics;
 pub use ortho::Ortho;

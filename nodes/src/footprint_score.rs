@@ -1,0 +1,337 @@
+//! Footprints scored against reference footprints (an official cadastre such as the Dutch BGT, or
+//! the synthetic site's truth): the overall footprint IoU and each reference building's IoU with
+//! the derived footprint that overlaps it most.
+
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{ArtifactType, Footprints, Grid, Metrics, Raster};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+
+/// Params of [`FootprintScore`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FootprintScoreParams {
+    /// Evaluation cell, metres. Default 0.25.
+    pub cell_m: f64,
+    /// A reference building is scored when at least this fraction of its area lies in the
+    /// evaluated region (references cut by the edge of a tile are not the method's fault).
+    /// Default 0.9.
+    pub min_inside: f64,
+}
+
+impl Default for FootprintScoreParams {
+    fn default() -> Self {
+        FootprintScoreParams {
+            cell_m: 0.25,
+            min_inside: 0.9,
+        }
+    }
+}
+
+/// Metrics: per reference building, `building_iou/<id>` with the prediction overlapping it most,
+/// summarised as `building_iou_mean`, `building_iou_median`, `buildings_scored`,
+/// `buildings_found` (IoU >= 0.5) and `buildings_cut_by_region`; merge-tolerant, over blocks of
+/// overlapping references and predictions, `block_iou_mean`, `blocks_scored` and `iou` (all cells of
+/// the scored blocks); `iou_all` (every cell of the region); `predicted_footprints`.
+pub struct FootprintScore;
+
+impl Stage for FootprintScore {
+    const KIND: &'static str = "FootprintScore";
+    const VERSION: u32 = 2;
+    const DOC: &'static str =
+        "footprint IoU against reference footprints, overall and per building";
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::one(
+            "predicted",
+            ArtifactType::Footprints,
+            "the derived footprints",
+        ),
+        InputSpec::one(
+            "reference",
+            ArtifactType::Footprints,
+            "the reference footprints",
+        ),
+        InputSpec::optional(
+            "region",
+            ArtifactType::Raster,
+            "where the data reaches (cells with data); default: everywhere",
+        ),
+    ];
+    type Params = FootprintScoreParams;
+    type Output = Metrics;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        crate::params::check_cell(Some(p.cell_m))?;
+        if !(0.0..=1.0).contains(&p.min_inside) {
+            return Err(ParamError::new(
+                "min_inside",
+                "expected a fraction in [0, 1]",
+            ));
+        }
+        Ok(())
+    }
+
+    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Metrics, StageError> {
+        let predicted: &Footprints = inputs.one("predicted")?;
+        let reference: &Footprints = inputs.one("reference")?;
+        let region: Option<&Raster> = inputs.optional("region")?;
+        let grid = match region {
+            Some(r) => Grid {
+                cell_m: p.cell_m,
+                width: (r.grid.width as f64 * r.grid.cell_m / p.cell_m).ceil() as u32,
+                height: (r.grid.height as f64 * r.grid.cell_m / p.cell_m).ceil() as u32,
+                ..r.grid
+            },
+            None => extent(&[predicted, reference], p.cell_m)
+                .ok_or_else(|| StageError::Failed("neither footprint set has a polygon".into()))?,
+        };
+        let in_region: Vec<bool> = (0..grid.len())
+            .map(|i| {
+                let (x, y) = grid.center(i as u32 % grid.width, i as u32 / grid.width);
+                region.is_none_or(|r| {
+                    r.grid
+                        .cell_of(x, y)
+                        .is_some_and(|(c, row)| r.at(c, row).is_finite())
+                })
+            })
+            .collect();
+        Ok(score(predicted, reference, &grid, &in_region, p.min_inside))
+    }
+}
+
+/// A grid covering every polygon of `sets`.
+fn extent(sets: &[&Footprints], cell_m: f64) -> Option<Grid> {
+    let pts = sets
+        .iter()
+        .flat_map(|s| &s.items)
+        .flat_map(|f| &f.polygons)
+        .flat_map(|p| &p.exterior);
+    let (lo, hi) = pts.fold(None, |acc: Option<([f64; 2], [f64; 2])>, p| {
+        Some(match acc {
+            None => (*p, *p),
+            Some((lo, hi)) => (
+                [lo[0].min(p[0]), lo[1].min(p[1])],
+                [hi[0].max(p[0]), hi[1].max(p[1])],
+            ),
+        })
+    })?;
+    Some(Grid {
+        x0: lo[0] - cell_m,
+        y0: hi[1] + cell_m,
+        cell_m,
+        width: ((hi[0] - lo[0]) / cell_m).ceil() as u32 + 2,
+        height: ((hi[1] - lo[1]) / cell_m).ceil() as u32 + 2,
+    })
+}
+
+/// The scores on `grid`, counting only cells `in_region`.
+pub fn score(
+    predicted: &Footprints,
+    reference: &Footprints,
+    grid: &Grid,
+    in_region: &[bool],
+    min_inside: f64,
+) -> Metrics {
+    let pred = predicted.rasterize(grid);
+    let refs = reference.rasterize(grid);
+    let cell_area = grid.cell_m * grid.cell_m;
+    let (mut inter, mut union) = (0usize, 0usize);
+    let mut pred_cells = vec![0usize; predicted.items.len() + 1];
+    // overlap[(r, p)]: cells of reference r covered by prediction p.
+    let mut overlap = std::collections::BTreeMap::<(u32, u32), usize>::new();
+    let mut ref_cells = vec![0usize; reference.items.len() + 1];
+    for i in (0..grid.len()).filter(|&i| in_region[i]) {
+        let (r, p) = (refs[i], pred[i]);
+        inter += (r > 0 && p > 0) as usize;
+        union += (r > 0 || p > 0) as usize;
+        pred_cells[p as usize] += 1;
+        ref_cells[r as usize] += 1;
+        if r > 0 && p > 0 {
+            *overlap.entry((r, p)).or_default() += 1;
+        }
+    }
+    let mut m = Metrics::default();
+    m.set(
+        "iou_all",
+        if union > 0 {
+            inter as f64 / union as f64
+        } else {
+            0.0
+        },
+    );
+    m.set("predicted_footprints", predicted.items.len() as f64);
+    let mut ious = Vec::new();
+    let mut cut = 0usize;
+    let mut scored = vec![false; reference.items.len() + 1];
+    for (k, f) in reference.items.iter().enumerate() {
+        let r = k as u32 + 1;
+        let area: f64 = f.polygons.iter().map(|p| p.area()).sum();
+        if area <= 0.0 || (ref_cells[r as usize] as f64 * cell_area) < min_inside * area {
+            cut += 1;
+            continue;
+        }
+        scored[r as usize] = true;
+        // The prediction that covers most of it (the lowest index on ties).
+        let best = overlap
+            .range((r, 0)..=(r, u32::MAX))
+            .max_by(|a, b| a.1.cmp(b.1).then(b.0.1.cmp(&a.0.1)))
+            .map(|(&(_, p), &n)| (p, n));
+        let iou = best.map_or(0.0, |(p, n)| {
+            n as f64 / (ref_cells[r as usize] + pred_cells[p as usize] - n) as f64
+        });
+        m.set(format!("building_iou/{}", f.id), iou);
+        ious.push(iou);
+    }
+    block_scores(&mut m, &refs, &pred, in_region, &overlap, &scored);
+    m.set("buildings_scored", ious.len() as f64);
+    m.set("buildings_cut_by_region", cut as f64);
+    m.set(
+        "buildings_found",
+        ious.iter().filter(|&&v| v >= 0.5).count() as f64,
+    );
+    if !ious.is_empty() {
+        m.set(
+            "building_iou_mean",
+            ious.iter().sum::<f64>() / ious.len() as f64,
+        );
+        let mut s = ious.clone();
+        s.sort_by(f64::total_cmp);
+        m.set("building_iou_median", s[s.len() / 2]);
+    }
+    m
+}
+
+/// Merge-tolerant scores: references and predictions that overlap form blocks (connected
+/// components of the overlap graph, e.g. a terrace of cadastral houses and the one LiDAR footprint
+/// covering it), and each block is scored by the IoU of its references' union with its
+/// predictions' union. Party walls are invisible from the air and do not change how radio sees the
+/// building mass; a missing, extra or misshapen building still costs. Blocks holding a reference
+/// cut by the region are left out, as are predictions overlapping no reference (the reference may
+/// not cover the whole region): `iou` is over the scored blocks.
+fn block_scores(
+    m: &mut Metrics,
+    refs: &[u32],
+    pred: &[u32],
+    in_region: &[bool],
+    overlap: &std::collections::BTreeMap<(u32, u32), usize>,
+    scored: &[bool],
+) {
+    let n_ref = scored.len() - 1;
+    let n_pred = pred.iter().copied().max().unwrap_or(0) as usize;
+    // Union-find over references 1..=n_ref and predictions n_ref+1..
+    let mut parent: Vec<usize> = (0..=n_ref + n_pred).collect();
+    fn find(parent: &mut [usize], mut a: usize) -> usize {
+        while parent[a] != a {
+            parent[a] = parent[parent[a]];
+            a = parent[a];
+        }
+        a
+    }
+    for &(r, p) in overlap.keys() {
+        let (a, b) = (
+            find(&mut parent, r as usize),
+            find(&mut parent, n_ref + p as usize),
+        );
+        if a != b {
+            parent[a.max(b)] = a.min(b);
+        }
+    }
+    let mut valid = vec![None::<bool>; parent.len()];
+    for (r, &ok) in scored.iter().enumerate().skip(1) {
+        let c = find(&mut parent, r);
+        valid[c] = Some(valid[c].unwrap_or(true) && ok);
+    }
+    let mut acc = std::collections::BTreeMap::<usize, (usize, usize)>::new();
+    for i in (0..refs.len()).filter(|&i| in_region[i]) {
+        let cr = (refs[i] > 0).then(|| find(&mut parent, refs[i] as usize));
+        let cp = (pred[i] > 0).then(|| find(&mut parent, n_ref + pred[i] as usize));
+        let mut blocks = [cr, cp];
+        if cr == cp {
+            blocks[1] = None;
+        }
+        for c in blocks.into_iter().flatten() {
+            if valid[c] == Some(true) {
+                let e = acc.entry(c).or_default();
+                e.1 += 1;
+                e.0 += (cr == Some(c) && cp == Some(c)) as usize;
+            }
+        }
+    }
+    let (inter, union) = acc.values().fold((0, 0), |a, v| (a.0 + v.0, a.1 + v.1));
+    m.set(
+        "iou",
+        if union > 0 {
+            inter as f64 / union as f64
+        } else {
+            0.0
+        },
+    );
+    m.set("blocks_scored", acc.len() as f64);
+    if !acc.is_empty() {
+        let ious: Vec<f64> = acc.values().map(|&(i, u)| i as f64 / u as f64).collect();
+        m.set(
+            "block_iou_mean",
+            ious.iter().sum::<f64>() / ious.len() as f64,
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::artifact::{Footprint, Polygon};
+
+    fn square(id: &str, x: f64, y: f64, s: f64) -> Footprint {
+        Footprint {
+            id: id.into(),
+            polygons: vec![Polygon {
+                exterior: vec![[x, y], [x + s, y], [x + s, y + s], [x, y + s]],
+                holes: vec![],
+            }],
+            height_m: None,
+            min_height_m: None,
+            levels: None,
+            min_level: None,
+        }
+    }
+
+    #[test]
+    fn ious_of_known_overlaps() {
+        // Reference a: 10 x 10 at the origin, predicted shifted 2 m: IoU 80 / 120. Reference b
+        // has no prediction; c's predicted square merges it with its neighbour d.
+        let reference = Footprints {
+            items: vec![
+                square("a", 0.0, 0.0, 10.0),
+                square("b", 20.0, 0.0, 4.0),
+                square("c", 0.0, 20.0, 5.0),
+                square("d", 5.0, 20.0, 5.0),
+            ],
+        };
+        let predicted = Footprints {
+            items: vec![
+                square("p", 2.0, 0.0, 10.0),
+                Footprint {
+                    polygons: vec![Polygon {
+                        exterior: vec![[0.0, 20.0], [10.0, 20.0], [10.0, 25.0], [0.0, 25.0]],
+                        holes: vec![],
+                    }],
+                    ..square("q", 0.0, 0.0, 1.0)
+                },
+            ],
+        };
+        let grid = extent(&[&predicted, &reference], 0.25).unwrap();
+        let m = score(&predicted, &reference, &grid, &vec![true; grid.len()], 0.9);
+        let close = |k: &str, v: f64| assert!((m.get(k).unwrap() - v).abs() < 1e-9, "{k}: {m:?}");
+        close("building_iou/a", 80.0 / 120.0);
+        close("building_iou/b", 0.0);
+        close("building_iou/c", 0.5);
+        close("building_iou/d", 0.5);
+        close("buildings_scored", 4.0);
+        close("buildings_found", 3.0);
+        close("iou_all", (80.0 + 50.0) / (120.0 + 16.0 + 50.0));
+        // Blocks: {a, p}, {b}, {c, d, q}.
+        close("blocks_scored", 3.0);
+        close("block_iou_mean", (80.0 / 120.0 + 0.0 + 1.0) / 3.0);
+        close("iou", (80.0 + 50.0) / (120.0 + 16.0 + 50.0));
+    }
+}
