@@ -70,14 +70,17 @@ impl Stage for TraceFootprints {
     fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Footprints, StageError> {
         let labels: &Raster = inputs.one("labels")?;
         let above: Option<&Raster> = inputs.optional("above")?;
+        let heights = above.map(|a| label_heights(labels, a));
         let mut items = Vec::new();
         for (label, polygons) in trace(labels) {
             let polygons: Vec<Polygon> = polygons
                 .into_iter()
                 .map(|poly| simplify_polygon(poly, p.simplify_m))
                 .collect();
-            let height_m =
-                above.and_then(|a| label_percentile(labels, a, label, p.height_percentile));
+            let height_m = heights
+                .as_ref()
+                .and_then(|h| h.get(&label))
+                .map(|v| percentile(v, p.height_percentile));
             items.push(Footprint {
                 id: format!("building-{label}"),
                 polygons,
@@ -268,24 +271,33 @@ pub(crate) fn simplify_polygon(p: Polygon, tol: f64) -> Polygon {
     }
 }
 
-fn label_percentile(labels: &Raster, above: &Raster, label: u32, q: f64) -> Option<f64> {
+/// The finite values of `above` at the centre of each labelled cell, sorted, per label.
+fn label_heights(labels: &Raster, above: &Raster) -> BTreeMap<u32, Vec<f32>> {
     let g = labels.grid;
-    let mut v: Vec<f32> = (0..g.len())
-        .filter(|&i| labels.data[i] == label as f32)
-        .filter_map(|i| {
-            let (x, y) = g.center(i as u32 % g.width, i as u32 / g.width);
-            above
-                .grid
-                .cell_of(x, y)
-                .map(|(c, r)| above.at(c, r))
-                .filter(|a| a.is_finite())
-        })
-        .collect();
-    if v.is_empty() {
-        return None;
+    let mut out: BTreeMap<u32, Vec<f32>> = BTreeMap::new();
+    for (i, &l) in labels.data.iter().enumerate() {
+        if !(l.is_finite() && l > 0.0) {
+            continue;
+        }
+        let (x, y) = g.center(i as u32 % g.width, i as u32 / g.width);
+        if let Some(a) = above
+            .grid
+            .cell_of(x, y)
+            .map(|(c, r)| above.at(c, r))
+            .filter(|a| a.is_finite())
+        {
+            out.entry(l as u32).or_default().push(a);
+        }
     }
-    v.sort_by(f32::total_cmp);
-    Some(v[((v.len() - 1) as f64 * q / 100.0).round() as usize] as f64)
+    for v in out.values_mut() {
+        v.sort_by(f32::total_cmp);
+    }
+    out
+}
+
+/// The `q`-th percentile of sorted, non-empty `v`.
+fn percentile(v: &[f32], q: f64) -> f64 {
+    v[((v.len() - 1) as f64 * q / 100.0).round() as usize] as f64
 }
 
 #[cfg(test)]
