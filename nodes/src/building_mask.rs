@@ -1,11 +1,12 @@
 //! Building masks F_b (paper Sec. 4.1): which cells of the site belong to which building, from
-//! the LiDAR's building class where the data has one, else from geometric cues on the above-ground
-//! field A, so that trees do not become buildings.
+//! an external mask or footprints when given (the paper runs a footprint network on the
+//! orthophoto), else the LiDAR's building class where the data has one, else geometric cues on the
+//! above-ground field A, so that trees do not become buildings.
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, PodVec, PointSet, Raster};
+use crate::artifact::{ArtifactType, Footprints, PodVec, PointSet, Raster};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`BuildingMask`].
@@ -61,6 +62,16 @@ impl Stage for BuildingMask {
             ArtifactType::Points,
             "classified LiDAR points (class 6 = building)",
         ),
+        InputSpec::optional(
+            "mask",
+            ArtifactType::Raster,
+            "an external building mask (> 0.5 = building), e.g. a footprint network's output",
+        ),
+        InputSpec::optional(
+            "footprints",
+            ArtifactType::Footprints,
+            "external footprint polygons: one label per footprint, used as they are",
+        ),
     ];
     type Params = BuildingMaskParams;
     type Output = Raster;
@@ -90,9 +101,29 @@ impl Stage for BuildingMask {
             .iter()
             .map(|&v| v.is_finite() && v as f64 >= p.min_height_m)
             .collect();
+        let external: Option<&Raster> = inputs.optional("mask")?;
+        let footprints: Option<&Footprints> = inputs.optional("footprints")?;
+        let min_cells = (p.min_area_m2 / (g.cell_m * g.cell_m)).ceil() as usize;
+        if let Some(f) = footprints {
+            // Trusted outlines: each footprint is its own building, even where two touch.
+            let key: Vec<u32> = f
+                .rasterize(&g)
+                .into_iter()
+                .zip(a.data.iter())
+                .map(|(k, v)| if v.is_finite() { k } else { 0 })
+                .collect();
+            let labels = label_regions(&key, g.width, g.height, min_cells);
+            return Ok(label_raster(&labels, a));
+        }
         let classes = points.filter(|pts| p.use_classes && pts.class.contains(&6));
-        let mut mask = match classes {
-            Some(pts) => {
+        let mut mask = match (external, classes) {
+            (Some(m), _) => (0..g.len())
+                .map(|i| {
+                    let (x, y) = g.center(i as u32 % g.width, i as u32 / g.width);
+                    m.grid.cell_of(x, y).is_some_and(|(c, r)| m.at(c, r) > 0.5)
+                })
+                .collect(),
+            (None, Some(pts)) => {
                 let mut building = vec![false; g.len()];
                 for (q, &c) in pts.xyz.iter().zip(pts.class.iter()) {
                     if c == 6
@@ -107,7 +138,7 @@ impl Stage for BuildingMask {
                     .map(|(b, h)| *b && *h)
                     .collect::<Vec<bool>>()
             }
-            None => {
+            (None, None) => {
                 let rough = roughness(a);
                 let core: Vec<bool> = high
                     .iter()
@@ -138,25 +169,29 @@ impl Stage for BuildingMask {
             g.height,
             radius(p.open_m),
         );
-        let min_cells = (p.min_area_m2 / (g.cell_m * g.cell_m)).ceil() as usize;
         let labels = label_components(&mask, g.width, g.height, min_cells);
-        let data = labels
-            .iter()
-            .zip(a.data.iter())
-            .map(|(&l, &v)| {
-                if v.is_finite() || l > 0 {
-                    l as f32
-                } else {
-                    f32::NAN
-                }
-            })
-            .collect();
         ctx.progress.set_total(1);
         ctx.progress.advance(1);
-        Ok(Raster {
-            grid: g,
-            data: PodVec(data),
+        Ok(label_raster(&labels, a))
+    }
+}
+
+/// Labels on A's grid: NaN where A has no data and no building.
+fn label_raster(labels: &[u32], a: &Raster) -> Raster {
+    let data = labels
+        .iter()
+        .zip(a.data.iter())
+        .map(|(&l, &v)| {
+            if v.is_finite() || l > 0 {
+                l as f32
+            } else {
+                f32::NAN
+            }
         })
+        .collect();
+    Raster {
+        grid: a.grid,
+        data: PodVec(data),
     }
 }
 
@@ -299,4 +334,84 @@ pub fn flood_regions(
         }
     }
     labels
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::artifact::{Footprint, Grid, Polygon};
+    use crate::stage::Slot;
+    use crate::{Artifact, Site};
+    use std::sync::Arc;
+
+    fn square(id: &str, x: f64, s: f64) -> Footprint {
+        Footprint {
+            id: id.into(),
+            polygons: vec![Polygon {
+                exterior: vec![[x, 2.0], [x + s, 2.0], [x + s, 2.0 + s], [x, 2.0 + s]],
+                holes: vec![],
+            }],
+            height_m: None,
+            min_height_m: None,
+            levels: None,
+            min_level: None,
+        }
+    }
+
+    fn run(inputs: Inputs) -> Raster {
+        let site = Site {
+            crs: "EPSG:32618".into(),
+            origin: (0.0, 0.0),
+            cell_m: 0.5,
+        };
+        BuildingMask::run(&Default::default(), &inputs, &Ctx::new(&site, &[])).unwrap()
+    }
+
+    #[test]
+    fn external_footprints_keep_touching_buildings_apart_and_masks_are_used() {
+        let grid = Grid {
+            x0: 0.0,
+            y0: 20.0,
+            cell_m: 0.5,
+            width: 60,
+            height: 40,
+        };
+        let above = Raster {
+            grid,
+            data: PodVec(vec![0.3; grid.len()]),
+        };
+        let one = |a: Artifact| Slot::One(Arc::new(a));
+        let some = |a: Artifact| Slot::Optional(Some(Arc::new(a)));
+        // Two 8 m houses sharing a wall: two labels, though A is flat (the footprints decide).
+        let fps = Footprints {
+            items: vec![square("a", 2.0, 8.0), square("b", 10.0, 8.0)],
+        };
+        let labels = run(Inputs::new()
+            .with("above", one(Artifact::Raster(above.clone())))
+            .with("footprints", some(Artifact::Footprints(fps))));
+        let count = |l: f32| labels.data.iter().filter(|&&v| v == l).count();
+        assert_eq!((count(1.0), count(2.0), count(3.0)), (256, 256, 0));
+        // A network's mask: one blob, one label, cleaned like any mask.
+        let mask = Raster {
+            grid,
+            data: PodVec(
+                (0..grid.len())
+                    .map(|i| {
+                        let (c, r) = (i % 60, i / 60);
+                        if (10..30).contains(&c) && (10..30).contains(&r) {
+                            0.9
+                        } else {
+                            0.1
+                        }
+                    })
+                    .collect(),
+            ),
+        };
+        let labels = run(Inputs::new()
+            .with("above", one(Artifact::Raster(above)))
+            .with("mask", some(Artifact::Raster(mask))));
+        let count = |l: f32| labels.data.iter().filter(|&&v| v == l).count();
+        // 20 x 20 cells, less the 3 cells at each corner the 1 m opening disk cannot reach.
+        assert_eq!((count(1.0), count(2.0)), (400 - 4 * 3, 0));
+    }
 }

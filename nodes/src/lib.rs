@@ -66,6 +66,7 @@ pub mod synth_views;
 pub mod terrain_pass;
 pub mod trace_footprints;
 pub mod truth_scene;
+pub mod unassigned;
 pub mod views_io;
 
 pub use artifact::{Artifact, ArtifactType};
@@ -102,6 +103,7 @@ macro_rules! for_each_stage {
             $crate::terrain_pass::AboveGround,
             $crate::building_mask::BuildingMask,
             $crate::trace_footprints::TraceFootprints,
+            $crate::unassigned::UnassignedAbove,
             $crate::roof_clean::RoofClean,
             $crate::split_buildings::SplitBuildings,
             $crate::building_solids::BuildingSolids,

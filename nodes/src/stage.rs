@@ -267,8 +267,12 @@ impl Inputs {
             ))),
         }
     }
-    /// The artifact of an `Arity::Optional` input, if given.
+    /// The artifact of an `Arity::Optional` input, if given. Library callers may leave an
+    /// optional input out altogether (the engine always fills every declared slot).
     pub fn optional<T: Typed>(&self, name: &str) -> Result<Option<&T>, StageError> {
+        if !self.slots.iter().any(|(n, _)| *n == name) {
+            return Ok(None);
+        }
         match self.slot(name)? {
             Slot::Optional(a) => a.as_deref().map(|a| Self::cast(name, a)).transpose(),
             _ => Err(StageError::Failed(format!(
