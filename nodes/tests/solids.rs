@@ -19,7 +19,6 @@ use kodama_nodes::roof_clean::{RoofClean, RoofCleanParams};
 use kodama_nodes::split_buildings::{SplitBuildings, SplitBuildingsParams};
 use kodama_nodes::stage::Slot;
 use kodama_nodes::synth_city::{SynthCityParams, generate};
-use kodama_nodes::synth_terrain::SynthTerrainParams;
 use kodama_nodes::trace_footprints::{TraceFootprints, TraceFootprintsParams};
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
 
@@ -270,15 +269,8 @@ fn demo_site_solids_from_geometric_cues_match_the_truth() {
 
 #[test]
 fn steep_site_solids_match_the_truth() {
-    let steep = SynthTerrainParams {
-        seed: 11,
-        size_m: (400.0, 300.0),
-        slope: (0.06, -0.04),
-        relief_m: 4.0,
-        ..Default::default()
-    };
     let params = SynthCityParams {
-        terrain: steep,
+        terrain: steep_terrain(),
         ..Default::default()
     };
     let s = run_chain(&params, true);

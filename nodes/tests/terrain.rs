@@ -89,14 +89,7 @@ fn two_passes_recover_the_demo_terrain() {
 
 #[test]
 fn a_steeper_site_swallows_no_building() {
-    let steep = SynthTerrainParams {
-        seed: 11,
-        size_m: (400.0, 300.0),
-        slope: (0.06, -0.04),
-        relief_m: 4.0,
-        ..Default::default()
-    };
-    let (rmse, worst, swallowed) = run_case(steep);
+    let (rmse, worst, swallowed) = run_case(steep_terrain());
     println!(
         "steep terrain: RMSE {rmse:.3} m; worst building keeps {:.0}% of its height",
         worst * 100.0

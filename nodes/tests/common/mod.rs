@@ -64,6 +64,18 @@ pub fn small_city() -> SynthCityParams {
     }
 }
 
+/// A steeper variant of the demo's terrain (6 % and 4 % slopes, 4 m relief): where a terrain
+/// filter is most tempted to swallow buildings.
+pub fn steep_terrain() -> SynthTerrainParams {
+    SynthTerrainParams {
+        seed: 11,
+        size_m: (400.0, 300.0),
+        slope: (0.06, -0.04),
+        relief_m: 4.0,
+        ..Default::default()
+    }
+}
+
 /// The truth scene of `city`.
 pub fn scene_of(city: &City) -> Scene {
     let inputs = Inputs::new().with("city", slot(Artifact::City(city.clone())));
