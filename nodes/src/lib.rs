@@ -28,6 +28,7 @@ pub mod materials;
 pub mod mesh_build;
 pub mod mesh_check;
 pub mod params;
+pub mod rf;
 pub mod rng;
 pub mod site;
 pub mod stage;

@@ -1,0 +1,108 @@
+//! Electromagnetic interactions at surfaces (rf.md §1, §2): complex relative permittivity from the
+//! P.2040 laws, Fresnel coefficients of a half-space and of a single-layer slab, free-space loss.
+
+use num_complex::Complex64 as C64;
+
+use crate::materials::Material;
+
+/// Vacuum permittivity, F/m.
+const EPS0: f64 = 8.854_187_812_8e-12;
+
+/// Complex relative permittivity η = ε_r' − j σ / (ε0 ω) of `material` at `freq_hz` (P.2040 eq.
+/// (9b) with the Table 3 laws; time convention e^{+jωt}, as in Sionna).
+pub fn permittivity(material: Material, freq_hz: f64, extrapolate: bool) -> Result<C64, String> {
+    let (eps, sigma) = material.eps_sigma(freq_hz, extrapolate)?;
+    Ok(C64::new(
+        eps,
+        -sigma / (EPS0 * 2.0 * std::f64::consts::PI * freq_hz),
+    ))
+}
+
+/// Fresnel reflection coefficients (r_TE, r_TM) of a half-space of permittivity `eta` for a wave
+/// from vacuum at incidence cosine `cos_theta` (P.2040 eqs (37a), (37b); rf.md §2.1).
+pub fn fresnel(cos_theta: f64, eta: C64) -> (C64, C64) {
+    let sin2 = 1.0 - cos_theta * cos_theta;
+    let a = (eta - sin2).sqrt();
+    let c = C64::from(cos_theta);
+    ((c - a) / (c + a), (eta * c - a) / (eta * c + a))
+}
+
+/// Reflection and transmission coefficients of a slab of thickness `d` (metres) in vacuum, per
+/// polarisation: `((R_TE, R_TM), (T_TE, T_TM))` (P.2040 eqs (43a), (43b), (44); rf.md §2.2).
+pub fn slab(cos_theta: f64, eta: C64, d: f64, wavelength: f64) -> ((C64, C64), (C64, C64)) {
+    let sin2 = 1.0 - cos_theta * cos_theta;
+    let q = 2.0 * std::f64::consts::PI * d / wavelength * (eta - sin2).sqrt();
+    let (r_te, r_tm) = fresnel(cos_theta, eta);
+    let e1 = (-C64::i() * q).exp();
+    let e2 = e1 * e1;
+    let refl = |r: C64| r * (1.0 - e2) / (1.0 - r * r * e2);
+    let trans = |r: C64| (1.0 - r * r) * e1 / (1.0 - r * r * e2);
+    ((refl(r_te), refl(r_tm)), (trans(r_te), trans(r_tm)))
+}
+
+/// Free-space path loss 20 log10(4π d f / c), dB.
+pub fn fspl_db(distance_m: f64, freq_hz: f64) -> f64 {
+    20.0 * (4.0 * std::f64::consts::PI * distance_m * freq_hz / super::SPEED_OF_LIGHT).log10()
+}
+
+/// 20 log10 |z|.
+pub fn db(z: C64) -> f64 {
+    20.0 * z.norm().log10()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: f64, b: f64, tol: f64, what: &str) {
+        assert!((a - b).abs() <= tol, "{what}: {a} vs {b}");
+    }
+
+    /// rf.md §8: concrete at 3.5 GHz, half-space and 0.1 m slab.
+    #[test]
+    fn fresnel_and_slab_test_vectors() {
+        let eta = permittivity(Material::Concrete, 3.5e9, false).unwrap();
+        close(eta.re, 5.240, 5e-4, "eta re");
+        close(eta.im, -0.632, 5e-4, "eta im");
+        let (te, tm) = fresnel(1.0, eta);
+        close(te.re, -0.3938, 5e-4, "r_TE re");
+        close(te.im, 0.0254, 5e-4, "r_TE im");
+        close(tm.re, 0.3938, 5e-4, "r_TM re");
+        close(db(te), -8.08, 0.01, "|r| dB");
+        for (deg, te_db, tm_db) in [
+            (45.0, -5.81, -11.62),
+            (60.0, -4.14, -19.19),
+            (80.0, -1.45, -8.21),
+        ] {
+            let (te, tm) = fresnel(f64::to_radians(deg).cos(), eta);
+            close(db(te), te_db, 0.01, "r_TE dB");
+            close(db(tm), tm_db, 0.01, "r_TM dB");
+        }
+        let lam = crate::rf::wavelength(3.5e9);
+        let ((r, _), (t, _)) = slab(1.0, eta, 0.1, lam);
+        close(db(r), -7.49, 0.01, "slab R");
+        close(db(t), -10.36, 0.01, "slab T");
+        let ((r_te, r_tm), (t_te, t_tm)) = slab(f64::to_radians(45.0).cos(), eta, 0.1, lam);
+        close(db(r_te), -6.48, 0.01, "R_TE 45");
+        close(db(t_te), -11.64, 0.01, "T_TE 45");
+        close(db(r_tm), -12.45, 0.01, "R_TM 45");
+        close(db(t_tm), -9.79, 0.01, "T_TM 45");
+        let eta28 = permittivity(Material::Concrete, 28e9, false).unwrap();
+        let ((r, _), (t, _)) = slab(1.0, eta28, 0.1, crate::rf::wavelength(28e9));
+        close(db(r), -8.11, 0.01, "slab R 28 GHz");
+        close(db(t), -46.16, 0.01, "slab T 28 GHz");
+    }
+
+    /// rf.md §6: FSPL at 1 m is 43.33 dB at 3.5 GHz and 61.39 dB at 28 GHz; +20 dB per decade.
+    #[test]
+    fn free_space_loss() {
+        close(fspl_db(1.0, 3.5e9), 43.33, 0.01, "3.5 GHz");
+        close(fspl_db(1.0, 28e9), 61.39, 0.01, "28 GHz");
+        close(
+            fspl_db(1000.0, 3.5e9) - fspl_db(100.0, 3.5e9),
+            20.0,
+            1e-9,
+            "decade",
+        );
+    }
+}
