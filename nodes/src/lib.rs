@@ -30,6 +30,7 @@ pub mod mesh_check;
 pub mod params;
 pub mod rf;
 pub mod rng;
+pub mod sionna_xml;
 pub mod site;
 pub mod stage;
 pub mod warp;
@@ -53,6 +54,7 @@ pub mod read_measurements;
 pub mod read_ortho;
 pub mod read_osm;
 pub mod read_raster;
+pub mod read_sionna;
 pub mod read_tiles;
 pub mod read_views;
 pub mod read_xyz;
@@ -97,6 +99,7 @@ macro_rules! for_each_stage {
             $crate::read_tiles::ReadTileset,
             $crate::read_views::ReadViews,
             $crate::read_ortho::ReadOrtho,
+            $crate::read_sionna::ReadSionnaScene,
             $crate::read_xyz::ReadXyz,
             $crate::rasterize_surface::RasterizeSurface,
             $crate::composite_height::CompositeHeight,

@@ -26,7 +26,7 @@ pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
     match ty {
         ArtifactType::Raster | ArtifactType::Ortho => &["tif"],
         ArtifactType::City | ArtifactType::Metrics => &["json"],
-        ArtifactType::Scene => &["glb", "3dtiles"],
+        ArtifactType::Scene => &["glb", "3dtiles", "sionna"],
         ArtifactType::Footprints => &["geojson"],
         ArtifactType::Measurements => &["csv"],
         ArtifactType::Points => &["las", "laz", "xyz"],
@@ -69,6 +69,7 @@ pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String
         }
         (Artifact::Scene(s), "glb") => file(write_glb(s)?),
         (Artifact::Scene(s), "3dtiles") => Ok(Encoded::Folder(write_tileset(s, site, 100.0)?)),
+        (Artifact::Scene(s), "sionna") => Ok(Encoded::Folder(crate::sionna_xml::write_scene(s)?)),
         (Artifact::Footprints(f), "geojson") => {
             file(crate::geojson::write_footprints(f, site)?.into_bytes())
         }
