@@ -70,7 +70,7 @@ impl SceneRays {
         let ray = Ray::new(Vec3A::from(origin), Vec3A::from(dir), tmin, tmax);
         let mut hit = RayHit::none();
         if !bvh.ray_traverse(ray, &mut hit, |r, id| {
-            self.tris[bvh.primitive_indices[id] as usize].intersect(r)
+            intersect_watertight(&self.tris[bvh.primitive_indices[id] as usize], r)
         }) {
             return None;
         }
@@ -84,6 +84,56 @@ impl SceneRays {
             triangle: triangle as usize,
             normal: n.into(),
         })
+    }
+}
+
+/// Watertight ray/triangle intersection (Woop, Benthin and Wald, JCGT 2013): a ray through an
+/// edge or vertex shared by two triangles hits at least one of them, which Möller-Trumbore (what
+/// obvhs ships) does not guarantee. Radio paths aim at such points (reflection points on
+/// diagonals, cell centres at vertices), so misses there would let rays through walls. Returns the
+/// distance, or infinity on a miss.
+pub fn intersect_watertight(tri: &Triangle, ray: &Ray) -> f32 {
+    let d = ray.direction;
+    let kz = if d.x.abs() > d.y.abs() {
+        if d.x.abs() > d.z.abs() { 0 } else { 2 }
+    } else if d.y.abs() > d.z.abs() {
+        1
+    } else {
+        2
+    };
+    let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+    if d[kz] < 0.0 {
+        std::mem::swap(&mut kx, &mut ky);
+    }
+    let (sx, sy, sz) = (d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
+    let (a, b, c) = (
+        tri.v0 - ray.origin,
+        tri.v1 - ray.origin,
+        tri.v2 - ray.origin,
+    );
+    let (ax, ay) = (a[kx] - sx * a[kz], a[ky] - sy * a[kz]);
+    let (bx, by) = (b[kx] - sx * b[kz], b[ky] - sy * b[kz]);
+    let (cx, cy) = (c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
+    let (mut u, mut v, mut w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
+    if u == 0.0 || v == 0.0 || w == 0.0 {
+        // On an edge in f32: decide in f64 so both neighbours agree.
+        let f = |p: f32, q: f32, r: f32, s: f32| (p as f64 * q as f64 - r as f64 * s as f64) as f32;
+        u = f(cx, by, cy, bx);
+        v = f(ax, cy, ay, cx);
+        w = f(bx, ay, by, ax);
+    }
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return f32::INFINITY;
+    }
+    let det = u + v + w;
+    if det == 0.0 {
+        return f32::INFINITY;
+    }
+    let t = (u * sz * a[kz] + v * sz * b[kz] + w * sz * c[kz]) / det;
+    if t > ray.tmin && t < ray.tmax {
+        t
+    } else {
+        f32::INFINITY
     }
 }
 
@@ -128,6 +178,35 @@ mod tests {
             rays.cast([50.0, 1.0, 5.0], [1.0, 0.0, 0.0], 0.0, f32::INFINITY)
                 .is_none()
         );
+    }
+
+    /// Rays through the shared diagonal of a quad, and through its shared corner, hit it.
+    #[test]
+    fn rays_through_shared_edges_and_vertices_hit() {
+        let quad = Scene {
+            objects: vec![SceneObject {
+                id: "q".into(),
+                class: ObjectClass::Building,
+                mesh: crate::artifact::Mesh {
+                    positions: crate::artifact::PodVec(vec![
+                        [50.0, -20.0, -20.0],
+                        [50.0, 20.0, -20.0],
+                        [50.0, 20.0, 20.0],
+                        [50.0, -20.0, 20.0],
+                    ]),
+                    triangles: crate::artifact::PodVec(vec![[0, 1, 2], [0, 2, 3]]),
+                    materials: crate::artifact::PodVec(vec![0, 0]),
+                },
+            }],
+        };
+        let rays = SceneRays::new(&quad);
+        for target in [[50.0f32, 0.0, 0.0], [50.0, 7.5, 7.5], [50.0, -20.0, -20.0]] {
+            let o = [0.0f32, 0.3, -0.2];
+            let d = [target[0] - o[0], target[1] - o[1], target[2] - o[2]];
+            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let h = rays.cast(o, d.map(|c| c / l), 0.0, 1e3);
+            assert!(h.is_some(), "missed {target:?}");
+        }
     }
 
     /// Regression: a direction with a -0.0 component missed everything (found by the façade

@@ -21,11 +21,17 @@ pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
         .map_err(|e| bad("file".into(), &format!("a readable XML file ({e})")))?;
     let doc = roxmltree::Document::parse(&text).map_err(|e| {
         let pos = e.pos();
-        bad(format!("line {}, column {}", pos.row, pos.col), &format!("well-formed XML ({e})"))
+        bad(
+            format!("line {}, column {}", pos.row, pos.col),
+            &format!("well-formed XML ({e})"),
+        )
     })?;
     let line = |n: roxmltree::Node| doc.text_pos_at(n.range().start).row;
     let mut materials: BTreeMap<String, Material> = BTreeMap::new();
-    for b in doc.descendants().filter(|n| n.has_tag_name("bsdf") && n.parent().is_some_and(|p| p.has_tag_name("scene"))) {
+    for b in doc
+        .descendants()
+        .filter(|n| n.has_tag_name("bsdf") && n.parent().is_some_and(|p| p.has_tag_name("scene")))
+    {
         let id = b.attribute("id").unwrap_or_default().to_string();
         let kind = b.attribute("type").unwrap_or_default();
         let prop = |tag: &str, name: &str| {
@@ -48,7 +54,10 @@ pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
         })?;
         if let Some(t) = prop("float", "thickness") {
             let t: f64 = t.parse().map_err(|_| {
-                bad(format!("line {}: bsdf \"{id}\" thickness", line(b)), "a number")
+                bad(
+                    format!("line {}: bsdf \"{id}\" thickness", line(b)),
+                    "a number",
+                )
             })?;
             if (t - THICKNESS_M).abs() > 1e-9 {
                 return Err(bad(
@@ -77,9 +86,12 @@ pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
             .find(|c| c.has_tag_name("ref"))
             .and_then(|c| c.attribute("id"))
             .ok_or_else(|| bad(place(), "a <ref id=...> to a material"))?;
-        let material = *materials
-            .get(bsdf)
-            .ok_or_else(|| bad(place(), &format!("a material defined in the file (no bsdf \"{bsdf}\")")))?;
+        let material = *materials.get(bsdf).ok_or_else(|| {
+            bad(
+                place(),
+                &format!("a material defined in the file (no bsdf \"{bsdf}\")"),
+            )
+        })?;
         let mut mesh = read_ply(&dir.join(file))?;
         mesh.materials = PodVec(vec![material as u8; mesh.triangles.len()]);
         objects.push(SceneObject {
@@ -95,7 +107,8 @@ pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
 /// polygon faces (fanned into triangles).
 pub fn read_ply(path: &Path) -> Result<Mesh, StageError> {
     let bad = |place: &str, expected: &str| StageError::bad_input(path, place, expected);
-    let bytes = std::fs::read(path).map_err(|e| bad("file", &format!("a readable PLY file ({e})")))?;
+    let bytes =
+        std::fs::read(path).map_err(|e| bad("file", &format!("a readable PLY file ({e})")))?;
     let end = bytes
         .windows(11)
         .position(|w| w == b"end_header\n")
@@ -123,7 +136,13 @@ pub fn read_ply(path: &Path) -> Result<Mesh, StageError> {
         let w: Vec<&str> = l.split_whitespace().collect();
         match w.as_slice() {
             ["element", name, n] => {
-                element = if *name == "vertex" { "vertex" } else if *name == "face" { "face" } else { "other" };
+                element = if *name == "vertex" {
+                    "vertex"
+                } else if *name == "face" {
+                    "face"
+                } else {
+                    "other"
+                };
                 let n: usize = n.parse().map_err(|_| bad(l, "an element count"))?;
                 match element {
                     "vertex" => n_vertex = n,
@@ -153,11 +172,17 @@ pub fn read_ply(path: &Path) -> Result<Mesh, StageError> {
             }
             off += size(t).unwrap_or(0);
         }
-        Err(bad("vertex properties", &format!("a vertex property {want}")))
+        Err(bad(
+            "vertex properties",
+            &format!("a vertex property {want}"),
+        ))
     };
     let xyz = [offset("x")?, offset("y")?, offset("z")?];
     if body.len() < n_vertex * stride {
-        return Err(bad("vertex data", &format!("{n_vertex} vertices of {stride} bytes")));
+        return Err(bad(
+            "vertex data",
+            &format!("{n_vertex} vertices of {stride} bytes"),
+        ));
     }
     let read_f = |b: &[u8], t: &str| -> f32 {
         match t {
@@ -169,7 +194,8 @@ pub fn read_ply(path: &Path) -> Result<Mesh, StageError> {
         .map(|i| xyz.map(|(off, t)| read_f(&body[i * stride + off..], t)))
         .collect();
     body = &body[n_vertex * stride..];
-    let (count_t, index_t) = face_types.ok_or_else(|| bad("header", "a face vertex_indices list"))?;
+    let (count_t, index_t) =
+        face_types.ok_or_else(|| bad("header", "a face vertex_indices list"))?;
     let (cs, is) = (
         size(&count_t).ok_or_else(|| bad("face list", "a known count type"))?,
         size(&index_t).ok_or_else(|| bad("face list", "a known index type"))?,
@@ -188,11 +214,18 @@ pub fn read_ply(path: &Path) -> Result<Mesh, StageError> {
         let k = read_u(body.get(at..at + cs).ok_or_else(truncated)?, cs) as usize;
         at += cs;
         let idx: Vec<u32> = (0..k)
-            .map(|j| body.get(at + j * is..at + (j + 1) * is).map(|b| read_u(b, is)).ok_or_else(truncated))
+            .map(|j| {
+                body.get(at + j * is..at + (j + 1) * is)
+                    .map(|b| read_u(b, is))
+                    .ok_or_else(truncated)
+            })
             .collect::<Result<_, _>>()?;
         at += k * is;
         if let Some(&bad_index) = idx.iter().find(|&&v| v as usize >= n_vertex) {
-            return Err(bad(&format!("face {f}"), &format!("vertex indices below {n_vertex}, not {bad_index}")));
+            return Err(bad(
+                &format!("face {f}"),
+                &format!("vertex indices below {n_vertex}, not {bad_index}"),
+            ));
         }
         for j in 1..k.saturating_sub(1) {
             triangles.push([idx[0], idx[j], idx[j + 1]]);
@@ -236,13 +269,20 @@ pub fn write_scene(scene: &Scene) -> Result<Vec<(String, Vec<u8>)>, String> {
     let mut shapes = String::new();
     for obj in &scene.objects {
         let by_material: BTreeMap<u8, Vec<usize>> =
-            obj.mesh.materials.iter().enumerate().fold(BTreeMap::new(), |mut m, (k, &mat)| {
-                m.entry(mat).or_insert_with(Vec::new).push(k);
-                m
-            });
+            obj.mesh
+                .materials
+                .iter()
+                .enumerate()
+                .fold(BTreeMap::new(), |mut m, (k, &mat)| {
+                    m.entry(mat).or_insert_with(Vec::new).push(k);
+                    m
+                });
         for (mat, tris) in by_material {
-            let material = Material::from_u8(mat).ok_or_else(|| format!("{}: unknown material id {mat}", obj.id))?;
-            let Some(itu) = material.itu_type() else { continue };
+            let material = Material::from_u8(mat)
+                .ok_or_else(|| format!("{}: unknown material id {mat}", obj.id))?;
+            let Some(itu) = material.itu_type() else {
+                continue;
+            };
             used.insert(material);
             // Only the vertices these triangles use, renumbered.
             let mut remap: BTreeMap<u32, u32> = BTreeMap::new();
@@ -259,7 +299,10 @@ pub fn write_scene(scene: &Scene) -> Result<Vec<(String, Vec<u8>)>, String> {
                 })
                 .collect();
             let name = format!("{}-itu_{itu}", safe_name(&obj.id));
-            files.push((format!("meshes/{name}.ply"), write_ply(&positions, &triangles)));
+            files.push((
+                format!("meshes/{name}.ply"),
+                write_ply(&positions, &triangles),
+            ));
             shapes.push_str(&format!(
                 "\t<shape type=\"ply\" id=\"mesh-{name}\">\n\t\t<string name=\"filename\" value=\"meshes/{name}.ply\"/>\n\t\t<boolean name=\"face_normals\" value=\"true\"/>\n\t\t<ref id=\"itu_{itu}\" name=\"bsdf\"/>\n\t</shape>\n"
             ));
@@ -282,7 +325,13 @@ pub fn write_scene(scene: &Scene) -> Result<Vec<(String, Vec<u8>)>, String> {
 /// Object ids as file names: letters, digits, `-` and `_` kept, anything else `_`.
 fn safe_name(id: &str) -> String {
     id.chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
         .collect()
 }
 
@@ -315,6 +364,12 @@ mod tests {
         let volume: f64 = back.objects.iter().map(|o| o.mesh.volume()).sum();
         assert!((volume - mesh.volume()).abs() < 1e-3);
         assert_eq!(back.objects[0].id, "building-1-itu_brick");
-        assert!(back.objects[1].mesh.materials.iter().all(|&m| m == Material::Glass as u8));
+        assert!(
+            back.objects[1]
+                .mesh
+                .materials
+                .iter()
+                .all(|&m| m == Material::Glass as u8)
+        );
     }
 }

@@ -4,6 +4,9 @@
 
 pub mod antenna;
 pub mod em;
+pub mod field;
+pub mod paths;
+pub mod scene;
 pub mod utd;
 
 /// Speed of light in vacuum, m/s (Sionna's constant).

@@ -1,0 +1,156 @@
+//! A scene prepared for radio tracing: triangles in f64 with unit normals, per-triangle materials
+//! with their complex permittivity at the carrier, and a BVH for casting.
+
+use glam::DVec3;
+use num_complex::Complex64 as C64;
+
+use crate::artifact::Scene;
+use crate::materials::Material;
+use crate::raycast::SceneRays;
+
+use super::em::{permittivity, slab};
+
+/// Sionna's default slab thickness for every surface, metres.
+pub const SLAB_THICKNESS_M: f64 = 0.1;
+
+/// A surface hit along a ray.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceHit {
+    /// Distance along the ray, metres.
+    pub t: f64,
+    /// Global triangle index.
+    pub triangle: u32,
+}
+
+/// The traceable scene.
+pub struct RfScene {
+    rays: SceneRays,
+    offsets: Vec<u32>,
+    /// Triangle vertices.
+    pub tris: Vec<[DVec3; 3]>,
+    /// Unit normals (zero for degenerate triangles).
+    pub normals: Vec<DVec3>,
+    /// Material per triangle.
+    pub material: Vec<Material>,
+    eta: Vec<Option<C64>>,
+    /// The carrier's wavelength, metres.
+    pub wavelength: f64,
+    /// Axis-aligned bounds of every vertex.
+    pub bounds: (DVec3, DVec3),
+}
+
+impl RfScene {
+    /// Prepares `scene` at `freq_hz`. A material outside its P.2040 frequency range is an error
+    /// unless `extrapolate`.
+    pub fn new(scene: &Scene, freq_hz: f64, extrapolate: bool) -> Result<RfScene, String> {
+        if !(freq_hz > 0.0 && freq_hz.is_finite()) {
+            return Err(format!("frequency {freq_hz} Hz is not a positive number"));
+        }
+        let mut offsets = Vec::new();
+        let (mut tris, mut normals, mut material) = (Vec::new(), Vec::new(), Vec::new());
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for obj in &scene.objects {
+            offsets.push(tris.len() as u32);
+            let p = &obj.mesh.positions;
+            for (k, t) in obj.mesh.triangles.iter().enumerate() {
+                let v = t.map(|i| DVec3::from(p[i as usize].map(f64::from)));
+                for q in v {
+                    lo = lo.min(q);
+                    hi = hi.max(q);
+                }
+                tris.push(v);
+                normals.push((v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero());
+                let m = obj
+                    .mesh
+                    .materials
+                    .get(k)
+                    .copied()
+                    .unwrap_or(Material::Concrete as u8);
+                material.push(
+                    Material::from_u8(m)
+                        .ok_or_else(|| format!("{}: unknown material id {m}", obj.id))?,
+                );
+            }
+        }
+        let mut eta = vec![None; Material::ALL.len()];
+        let used: std::collections::BTreeSet<Material> = material.iter().copied().collect();
+        for m in used {
+            if m != Material::Foliage {
+                eta[m as usize] = Some(permittivity(m, freq_hz, extrapolate)?);
+            }
+        }
+        Ok(RfScene {
+            rays: SceneRays::new(scene),
+            offsets,
+            tris,
+            normals,
+            material,
+            eta,
+            wavelength: super::wavelength(freq_hz),
+            bounds: (lo, hi),
+        })
+    }
+
+    /// The closest surface along `o + t d` for t in (`tmin`, `tmax`).
+    pub fn cast(&self, o: DVec3, d: DVec3, tmin: f64, tmax: f64) -> Option<SurfaceHit> {
+        let h = self.rays.cast(
+            o.as_vec3().into(),
+            d.as_vec3().into(),
+            tmin as f32,
+            tmax.min(f32::MAX as f64) as f32,
+        )?;
+        let triangle = self.offsets[h.object] + h.triangle as u32;
+        // Recompute t in f64 against the triangle's plane: the BVH works in f32.
+        let n = self.normals[triangle as usize];
+        let denom = n.dot(d);
+        let t = if denom.abs() > 1e-12 {
+            n.dot(self.tris[triangle as usize][0] - o) / denom
+        } else {
+            h.t as f64
+        };
+        Some(SurfaceHit { t, triangle })
+    }
+
+    /// Every surface crossed strictly between `a` and `b` (`eps` metres kept clear at each end),
+    /// in order.
+    pub fn hits_between(&self, a: DVec3, b: DVec3, eps: f64) -> Vec<SurfaceHit> {
+        let len = (b - a).length();
+        let d = (b - a) / len;
+        let mut out = Vec::new();
+        let mut tmin = eps;
+        while let Some(h) = self.cast(a, d, tmin, len - eps) {
+            if h.t >= len - eps {
+                break;
+            }
+            tmin = h.t.max(tmin) + eps;
+            out.push(h);
+            if out.len() > 10_000 {
+                break;
+            }
+        }
+        out
+    }
+
+    /// Slab reflection and transmission coefficients ((R_TE, R_TM), (T_TE, T_TM)) of triangle
+    /// `tri` at incidence cosine `cos_theta`; foliage is transparent.
+    pub fn slab(&self, tri: u32, cos_theta: f64) -> ((C64, C64), (C64, C64)) {
+        match self.eta[self.material[tri as usize] as usize] {
+            Some(eta) => slab(
+                cos_theta.abs().min(1.0),
+                eta,
+                SLAB_THICKNESS_M,
+                self.wavelength,
+            ),
+            None => {
+                let (zero, one) = (C64::new(0.0, 0.0), C64::new(1.0, 0.0));
+                ((zero, zero), (one, one))
+            }
+        }
+    }
+
+    /// True for foliage triangles: volume boundaries, not surfaces.
+    pub fn is_foliage(&self, tri: u32) -> bool {
+        self.material[tri as usize] == Material::Foliage
+    }
+}

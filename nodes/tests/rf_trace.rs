@@ -1,0 +1,163 @@
+//! The tracer against closed forms (rf.md): free space, the two-ray ground reflection, a wall's
+//! slab transmission loss.
+
+use glam::DVec3;
+use num_complex::Complex64 as C64;
+
+use kodama_nodes::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
+use kodama_nodes::materials::Material;
+use kodama_nodes::rf::antenna::{Antenna, Pattern, Polarization};
+use kodama_nodes::rf::em::{fspl_db, permittivity, slab};
+use kodama_nodes::rf::paths::{InteractionKind, TraceOptions, trace_links};
+use kodama_nodes::rf::scene::RfScene;
+use kodama_nodes::rf::wavelength;
+
+const F: f64 = 3.5e9;
+
+fn quad(id: &str, corners: [[f32; 3]; 4], m: Material) -> SceneObject {
+    SceneObject {
+        id: id.into(),
+        class: ObjectClass::Unsegmented,
+        mesh: Mesh {
+            positions: PodVec(corners.to_vec()),
+            triangles: PodVec(vec![[0, 1, 2], [0, 2, 3]]),
+            materials: PodVec(vec![m as u8; 2]),
+        },
+    }
+}
+
+fn options(max_depth: u32) -> TraceOptions {
+    TraceOptions {
+        max_depth,
+        rays: 20_000,
+        ..Default::default()
+    }
+}
+
+fn horizontal() -> Antenna {
+    Antenna {
+        pattern: Pattern::Isotropic,
+        polarization: Polarization::H,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn free_space_is_friis_exactly() {
+    let scene = RfScene::new(&Scene::default(), F, false).unwrap();
+    let links = [([0.0, 0.0, 10.0], [300.0, 40.0, 1.5])];
+    let r = &trace_links(
+        &scene,
+        &links,
+        &Antenna::default(),
+        &Antenna::default(),
+        &options(3),
+        F,
+    )[0];
+    let d = (DVec3::from(links[0].0) - DVec3::from(links[0].1)).length();
+    assert_eq!(r.paths.len(), 1);
+    // Vertical polarisation on both ends, tilted link: the θ̂ vectors at both ends are parallel.
+    assert!(
+        (r.gain_db + fspl_db(d, F)).abs() < 1e-9,
+        "{} vs {}",
+        r.gain_db,
+        -fspl_db(d, F)
+    );
+}
+
+#[test]
+fn two_ray_ground_reflection_matches_the_closed_form() {
+    // A 2 km metal ground plane; horizontal polarisation across the plane of incidence is pure TE.
+    let g = 1000.0;
+    let ground = quad(
+        "ground",
+        [[-g, -g, 0.0], [g, -g, 0.0], [g, g, 0.0], [-g, g, 0.0]],
+        Material::MediumDryGround,
+    );
+    let scene_in = Scene {
+        objects: vec![ground],
+    };
+    let scene = RfScene::new(&scene_in, F, false).unwrap();
+    let eta = permittivity(Material::MediumDryGround, F, false).unwrap();
+    let k = 2.0 * std::f64::consts::PI / wavelength(F);
+    for (ht, hr, dist) in [(30.0, 1.5, 50.0), (30.0, 1.5, 400.0), (10.0, 2.0, 150.0)] {
+        let links = [([0.0, 0.0, ht], [dist, 0.0, hr])];
+        let r = &trace_links(&scene, &links, &horizontal(), &horizontal(), &options(1), F)[0];
+        assert_eq!(r.paths.len(), 2, "{:?}", r.paths);
+        assert_eq!(r.paths[1].interactions[0].kind, InteractionKind::Reflection);
+        let d1 = (dist * dist + (ht - hr) * (ht - hr)).sqrt();
+        let d2 = (dist * dist + (ht + hr) * (ht + hr)).sqrt();
+        let cos_theta = (ht + hr) / d2;
+        let ((r_te, _), _) = slab(cos_theta, eta, 0.1, wavelength(F));
+        let amp = wavelength(F) / (4.0 * std::f64::consts::PI);
+        let total =
+            amp * (C64::from_polar(1.0, -k * d1) / d1 + r_te * C64::from_polar(1.0, -k * d2) / d2);
+        let expected = 10.0 * total.norm_sqr().log10();
+        assert!(
+            (r.coherent_gain_db - expected).abs() < 1e-6,
+            "ht {ht} hr {hr} d {dist}: traced {} dB, two-ray {expected} dB",
+            r.coherent_gain_db
+        );
+        let incoherent =
+            10.0 * (amp * amp * (1.0 / (d1 * d1) + r_te.norm_sqr() / (d2 * d2))).log10();
+        assert!((r.gain_db - incoherent).abs() < 1e-6);
+    }
+}
+
+#[test]
+fn a_concrete_wall_costs_its_slab_transmission_loss() {
+    // A 0.1 m concrete slab (one surface, as Sionna models walls) across the link at normal
+    // incidence: rf.md §8 gives |T| = -10.36 dB at 3.5 GHz.
+    let wall = quad(
+        "wall",
+        [
+            [50.0, -20.0, -20.0],
+            [50.0, 20.0, -20.0],
+            [50.0, 20.0, 20.0],
+            [50.0, -20.0, 20.0],
+        ],
+        Material::Concrete,
+    );
+    let scene = RfScene::new(
+        &Scene {
+            objects: vec![wall],
+        },
+        F,
+        false,
+    )
+    .unwrap();
+    let links = [([0.0, 0.0, 0.0], [100.0, 0.0, 0.0])];
+    let r = &trace_links(
+        &scene,
+        &links,
+        &Antenna::default(),
+        &Antenna::default(),
+        &options(1),
+        F,
+    )[0];
+    assert_eq!(r.paths.len(), 1);
+    assert_eq!(
+        r.paths[0].interactions[0].kind,
+        InteractionKind::Transmission
+    );
+    assert!(
+        (r.gain_db - (-fspl_db(100.0, F) - 10.36)).abs() < 0.01,
+        "{}",
+        r.gain_db
+    );
+    // Without transmission the wall blocks the only path.
+    let blocked = TraceOptions {
+        transmission: false,
+        ..options(1)
+    };
+    let r = &trace_links(
+        &scene,
+        &links,
+        &Antenna::default(),
+        &Antenna::default(),
+        &blocked,
+        F,
+    )[0];
+    assert!(r.paths.is_empty());
+    assert_eq!(r.gain_db, f64::NEG_INFINITY);
+}
