@@ -7,6 +7,8 @@ use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
+mod rf_commands;
+
 use kodama_dag::cache::{Cache, gc};
 use kodama_dag::exec::{RunError, RunOptions, run};
 use kodama_dag::explain::{Plan, explain};
@@ -29,6 +31,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Trace links through a Sionna RT scene: path gains per tx/rx pair, as CSV.
+    Trace(rf_commands::TraceArgs),
+    /// A radio map of a Sionna RT scene from one transmitter (GeoTIFF, EXR or PNG, dB).
+    Radiomap(rf_commands::RadiomapArgs),
     /// Run a graph: only nodes whose inputs or params changed run; the rest come from the cache.
     Run {
         #[command(flatten)]
@@ -190,6 +196,8 @@ fn main() -> ExitCode {
 
 fn dispatch(cmd: Command) -> Result<u8, Fail> {
     match cmd {
+        Command::Trace(a) => rf_commands::trace(a).map_err(|(c, m)| Fail(c, m)),
+        Command::Radiomap(a) => rf_commands::radiomap(a).map_err(|(c, m)| Fail(c, m)),
         Command::Run {
             graph,
             cache,

@@ -230,7 +230,12 @@ pub fn write_geotiff<W: Write + Seek>(r: &Raster, site: &Site, w: &mut W) -> Res
     let mut img = enc
         .new_image::<colortype::Gray32Float>(g.width, g.height)
         .map_err(err)?;
-    write_georef(img.encoder(), &g, site, site.epsg()?).map_err(err)?;
+    let epsg = if site.crs.is_empty() {
+        None
+    } else {
+        Some(site.epsg()?)
+    };
+    write_georef(img.encoder(), &g, site, epsg).map_err(err)?;
     img.encoder()
         .write_tag(Tag::Unknown(GDAL_NODATA), "nan")
         .map_err(err)?;
@@ -243,7 +248,7 @@ fn write_georef<W: Write + Seek, K: tiff::encoder::TiffKind>(
     e: &mut tiff::encoder::DirectoryEncoder<'_, W, K>,
     g: &Grid,
     site: &Site,
-    epsg: u16,
+    epsg: Option<u16>,
 ) -> Result<(), tiff::TiffError> {
     e.write_tag(
         Tag::Unknown(MODEL_PIXEL_SCALE),
@@ -260,13 +265,17 @@ fn write_georef<W: Write + Seek, K: tiff::encoder::TiffKind>(
             0.0,
         ][..],
     )?;
-    // GeoKeyDirectory: header (version 1.1.0, 3 keys), then (key, location, count, value).
-    let keys: [u16; 16] = [
-        1, 1, 0, 3, //
+    // GeoKeyDirectory: header (version 1.1.0, key count), then (key, location, count, value).
+    // Without an EPSG code (a local frame, e.g. a Sionna scene) the CRS is left unknown.
+    let mut keys: Vec<u16> = vec![
+        1, 1, 0, 2, //
         1024, 0, 1, 1, // GTModelTypeGeoKey = ModelTypeProjected
         1025, 0, 1, 1, // GTRasterTypeGeoKey = RasterPixelIsArea
-        3072, 0, 1, epsg, // ProjectedCSTypeGeoKey
     ];
+    if let Some(code) = epsg {
+        keys[3] = 3;
+        keys.extend([3072, 0, 1, code]); // ProjectedCSTypeGeoKey
+    }
     e.write_tag(Tag::Unknown(GEO_KEY_DIRECTORY), &keys[..])
 }
 
@@ -282,7 +291,7 @@ pub fn write_geotiff_rgb<W: Write + Seek>(
     let mut img = enc
         .new_image::<colortype::RGB8>(g.width, g.height)
         .map_err(err)?;
-    write_georef(img.encoder(), g, site, site.epsg()?).map_err(err)?;
+    write_georef(img.encoder(), g, site, Some(site.epsg()?)).map_err(err)?;
     img.write_data(bytemuck::cast_slice(rgb)).map_err(err)?;
     Ok(())
 }

@@ -6,8 +6,8 @@ use std::time::Duration;
 
 use glam::Vec3A;
 use obvhs::BvhBuildParams;
-use obvhs::cwbvh::CwBvh;
-use obvhs::cwbvh::builder::build_cwbvh_from_tris;
+use obvhs::bvh2::Bvh2;
+use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::ray::{Ray, RayHit};
 use obvhs::triangle::Triangle;
 
@@ -30,7 +30,7 @@ pub struct Hit {
 pub struct SceneRays {
     tris: Vec<Triangle>,
     owner: Vec<(u32, u32)>,
-    bvh: Option<CwBvh>,
+    bvh: Option<Bvh2>,
 }
 
 impl SceneRays {
@@ -51,7 +51,7 @@ impl SceneRays {
             }
         }
         let bvh = (!tris.is_empty()).then(|| {
-            build_cwbvh_from_tris(
+            build_bvh2_from_tris(
                 &tris,
                 BvhBuildParams::medium_build(),
                 &mut Duration::default(),
@@ -69,8 +69,9 @@ impl SceneRays {
         let dir = dir.map(|c| c + 0.0);
         let ray = Ray::new(Vec3A::from(origin), Vec3A::from(dir), tmin, tmax);
         let mut hit = RayHit::none();
+        let sheared = ShearedRay::new(ray.origin, ray.direction, tmin);
         if !bvh.ray_traverse(ray, &mut hit, |r, id| {
-            intersect_watertight(&self.tris[bvh.primitive_indices[id] as usize], r)
+            sheared.intersect(&self.tris[bvh.primitive_indices[id] as usize], r.tmax)
         }) {
             return None;
         }
@@ -87,53 +88,77 @@ impl SceneRays {
     }
 }
 
-/// Watertight ray/triangle intersection (Woop, Benthin and Wald, JCGT 2013): a ray through an
-/// edge or vertex shared by two triangles hits at least one of them, which Möller-Trumbore (what
-/// obvhs ships) does not guarantee. Radio paths aim at such points (reflection points on
-/// diagonals, cell centres at vertices), so misses there would let rays through walls. Returns the
-/// distance, or infinity on a miss.
-pub fn intersect_watertight(tri: &Triangle, ray: &Ray) -> f32 {
-    let d = ray.direction;
-    let kz = if d.x.abs() > d.y.abs() {
-        if d.x.abs() > d.z.abs() { 0 } else { 2 }
-    } else if d.y.abs() > d.z.abs() {
-        1
-    } else {
-        2
-    };
-    let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
-    if d[kz] < 0.0 {
-        std::mem::swap(&mut kx, &mut ky);
+/// The per-ray part of the watertight ray/triangle test (Woop, Benthin and Wald, JCGT 2013):
+/// the dominant axis and the shear that maps the ray onto +z.
+#[derive(Clone, Copy)]
+pub struct ShearedRay {
+    origin: Vec3A,
+    k: [usize; 3],
+    s: [f32; 3],
+    tmin: f32,
+}
+
+impl ShearedRay {
+    /// Prepares the ray `origin + t dir` for [`ShearedRay::intersect`].
+    pub fn new(origin: Vec3A, dir: Vec3A, tmin: f32) -> ShearedRay {
+        let a = dir.abs();
+        let kz = if a.x > a.y {
+            if a.x > a.z { 0 } else { 2 }
+        } else if a.y > a.z {
+            1
+        } else {
+            2
+        };
+        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        if dir[kz] < 0.0 {
+            std::mem::swap(&mut kx, &mut ky);
+        }
+        ShearedRay {
+            origin,
+            k: [kx, ky, kz],
+            s: [dir[kx] / dir[kz], dir[ky] / dir[kz], 1.0 / dir[kz]],
+            tmin,
+        }
     }
-    let (sx, sy, sz) = (d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]);
-    let (a, b, c) = (
-        tri.v0 - ray.origin,
-        tri.v1 - ray.origin,
-        tri.v2 - ray.origin,
-    );
-    let (ax, ay) = (a[kx] - sx * a[kz], a[ky] - sy * a[kz]);
-    let (bx, by) = (b[kx] - sx * b[kz], b[ky] - sy * b[kz]);
-    let (cx, cy) = (c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
-    let (mut u, mut v, mut w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
-    if u == 0.0 || v == 0.0 || w == 0.0 {
-        // On an edge in f32: decide in f64 so both neighbours agree.
-        let f = |p: f32, q: f32, r: f32, s: f32| (p as f64 * q as f64 - r as f64 * s as f64) as f32;
-        u = f(cx, by, cy, bx);
-        v = f(ax, cy, ay, cx);
-        w = f(bx, ay, by, ax);
-    }
-    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-        return f32::INFINITY;
-    }
-    let det = u + v + w;
-    if det == 0.0 {
-        return f32::INFINITY;
-    }
-    let t = (u * sz * a[kz] + v * sz * b[kz] + w * sz * c[kz]) / det;
-    if t > ray.tmin && t < ray.tmax {
-        t
-    } else {
-        f32::INFINITY
+
+    /// Watertight ray/triangle intersection: a ray through an edge or vertex shared by two
+    /// triangles hits at least one of them, which Möller-Trumbore (what obvhs ships) does not
+    /// guarantee. Radio paths aim at such points (reflection points on diagonals, cell centres at
+    /// vertices), so misses there would let rays through walls. Returns the distance, or infinity
+    /// on a miss.
+    pub fn intersect(&self, tri: &Triangle, tmax: f32) -> f32 {
+        let [kx, ky, kz] = self.k;
+        let [sx, sy, sz] = self.s;
+        let (a, b, c) = (
+            tri.v0 - self.origin,
+            tri.v1 - self.origin,
+            tri.v2 - self.origin,
+        );
+        let (ax, ay) = (a[kx] - sx * a[kz], a[ky] - sy * a[kz]);
+        let (bx, by) = (b[kx] - sx * b[kz], b[ky] - sy * b[kz]);
+        let (cx, cy) = (c[kx] - sx * c[kz], c[ky] - sy * c[kz]);
+        let (mut u, mut v, mut w) = (cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax);
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            // On an edge in f32: decide in f64 so both neighbours agree.
+            let f =
+                |p: f32, q: f32, r: f32, s: f32| (p as f64 * q as f64 - r as f64 * s as f64) as f32;
+            u = f(cx, by, cy, bx);
+            v = f(ax, cy, ay, cx);
+            w = f(bx, ay, by, ax);
+        }
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return f32::INFINITY;
+        }
+        let det = u + v + w;
+        if det == 0.0 {
+            return f32::INFINITY;
+        }
+        let t = (u * sz * a[kz] + v * sz * b[kz] + w * sz * c[kz]) / det;
+        if t > self.tmin && t < tmax {
+            t
+        } else {
+            f32::INFINITY
+        }
     }
 }
 

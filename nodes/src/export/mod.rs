@@ -1,6 +1,7 @@
 //! Artifacts as ordinary files that other tools open: GeoTIFF, LAS, glTF, 3D Tiles, GeoJSON, CSV,
 //! JSON.
 
+pub mod colormap;
 mod glb;
 mod las;
 mod tiles;
@@ -24,7 +25,8 @@ pub enum Encoded {
 /// The formats (file extensions) an artifact type can be written in; the first is the default.
 pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
     match ty {
-        ArtifactType::Raster | ArtifactType::Ortho => &["tif"],
+        ArtifactType::Raster => &["tif", "exr", "png"],
+        ArtifactType::Ortho => &["tif"],
         ArtifactType::City | ArtifactType::Metrics => &["json"],
         ArtifactType::Scene => &["glb", "3dtiles", "sionna"],
         ArtifactType::Footprints => &["geojson"],
@@ -59,6 +61,12 @@ pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String
             write_geotiff(r, site, &mut buf)?;
             file(buf.into_inner())
         }
+        (Artifact::Raster(r), "exr") => file(crate::exrio::write_exr(
+            r.grid.width as usize,
+            r.grid.height as usize,
+            vec![("Y", r.data.to_vec())],
+        )?),
+        (Artifact::Raster(r), "png") => file(colormap::raster_png(r)?),
         (Artifact::Ortho(o), "tif") => {
             let mut buf = std::io::Cursor::new(Vec::new());
             write_geotiff_rgb(&o.rgb, &o.grid, site, &mut buf)?;

@@ -70,8 +70,13 @@ impl Antenna {
     /// from the antenna): √G times θ̂ or φ̂ of the site frame (the polarisation stays vertical or
     /// horizontal in the site frame; the pattern is evaluated in the antenna's rotated frame).
     pub fn field(&self, k: [f64; 3]) -> [f64; 3] {
-        let (theta, phi) = self.local_angles(k);
-        let g = gain(self.pattern, theta, phi).sqrt();
+        let g = match self.pattern {
+            Pattern::Isotropic => 1.0,
+            p => {
+                let (theta, phi) = self.local_angles(k);
+                gain(p, theta, phi).sqrt()
+            }
+        };
         let (th, ph) = spherical_basis(k);
         let e = match self.polarization {
             Polarization::V => th,

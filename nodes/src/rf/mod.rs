@@ -5,7 +5,9 @@
 pub mod antenna;
 pub mod em;
 pub mod field;
+pub mod links_csv;
 pub mod paths;
+pub mod radiomap;
 pub mod scene;
 pub mod utd;
 

@@ -1,0 +1,254 @@
+//! `kodama-dag trace` and `kodama-dag radiomap`: the tracer on a Sionna scene without writing a
+//! graph. Thin wrappers over `kodama_nodes::rf` (the same code the graph nodes run); the engine
+//! library itself stays free of radio.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use clap::Args;
+use glam::DVec3;
+
+use kodama_nodes::artifact::{PodVec, Raster};
+use kodama_nodes::export::{Encoded, encode};
+use kodama_nodes::rf::antenna::Antenna;
+use kodama_nodes::rf::links_csv::{read_links, write_results};
+use kodama_nodes::rf::paths::{TraceOptions, trace_links};
+use kodama_nodes::rf::radiomap::{default_plane, radio_map};
+use kodama_nodes::rf::scene::RfScene;
+use kodama_nodes::sionna_xml::read_scene;
+use kodama_nodes::{Artifact, Site, StageError};
+
+/// Interaction switches shared by both commands.
+#[derive(Args, Debug)]
+pub struct Interactions {
+    /// Carrier frequency, Hz.
+    #[arg(long)]
+    freq_hz: f64,
+    /// Most interactions along a path.
+    #[arg(long, default_value_t = 3)]
+    max_depth: u32,
+    /// Rays shot from each transmitter.
+    #[arg(long, default_value_t = 1_000_000)]
+    rays: u32,
+    /// No line-of-sight paths.
+    #[arg(long)]
+    no_los: bool,
+    /// No specular reflection.
+    #[arg(long)]
+    no_reflection: bool,
+    /// No transmission through surfaces.
+    #[arg(long)]
+    no_transmission: bool,
+    /// No diffraction (the tracer does not model it yet: accepted for Sionna-style command lines).
+    #[arg(long)]
+    no_diffraction: bool,
+    /// No diffuse reflection (not modelled yet, as above).
+    #[arg(long)]
+    no_diffuse: bool,
+    /// Use P.2040 material laws outside their frequency ranges.
+    #[arg(long)]
+    extrapolate: bool,
+}
+
+impl Interactions {
+    fn options(&self) -> TraceOptions {
+        TraceOptions {
+            max_depth: self.max_depth,
+            los: !self.no_los,
+            reflection: !self.no_reflection,
+            transmission: !self.no_transmission,
+            rays: self.rays,
+            foliage_db_per_m: None,
+        }
+    }
+}
+
+/// `trace` arguments.
+#[derive(Args, Debug)]
+pub struct TraceArgs {
+    /// A Sionna RT scene (Mitsuba XML + PLY).
+    #[arg(long)]
+    scene: PathBuf,
+    /// Links CSV with columns tx_x,tx_y,tx_z,rx_x,rx_y,rx_z.
+    #[arg(long)]
+    links: PathBuf,
+    #[command(flatten)]
+    interactions: Interactions,
+    /// Where to write the links with path_gain_db (CSV).
+    #[arg(long)]
+    out: PathBuf,
+}
+
+/// `radiomap` arguments.
+#[derive(Args, Debug)]
+pub struct RadiomapArgs {
+    /// A Sionna RT scene (Mitsuba XML + PLY).
+    #[arg(long)]
+    scene: PathBuf,
+    /// Transmitter position X,Y,Z in the scene's frame, metres.
+    #[arg(long, value_parser = parse_point)]
+    tx: [f64; 3],
+    #[command(flatten)]
+    interactions: Interactions,
+    /// Cell size, metres.
+    #[arg(long, default_value_t = 10.0)]
+    cell_m: f64,
+    /// Height of the measurement plane, metres.
+    #[arg(long, default_value_t = 1.5)]
+    height_m: f64,
+    /// The map: .tif (GeoTIFF, scene frame), .exr or .png (with a colour bar); path gain in dB.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+fn parse_point(s: &str) -> Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|c| {
+            c.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("{c:?} is not a number"))
+        })
+        .collect::<Result<_, _>>()?;
+    <[f64; 3]>::try_from(v).map_err(|_| "expected X,Y,Z".to_string())
+}
+
+type Fail = (u8, String);
+
+fn stage_fail(e: StageError) -> Fail {
+    (if e.is_user_error() { 2 } else { 1 }, format!("error: {e}"))
+}
+
+fn load(scene: &Path, i: &Interactions) -> Result<RfScene, Fail> {
+    if !(i.freq_hz > 0.0 && i.freq_hz.is_finite()) {
+        return Err((
+            2,
+            format!("error: --freq-hz {} is not a positive frequency", i.freq_hz),
+        ));
+    }
+    let s = read_scene(scene).map_err(stage_fail)?;
+    RfScene::new(&s, i.freq_hz, i.extrapolate)
+        .map_err(|e| (2, format!("error: {}: {e}", scene.display())))
+}
+
+/// Writes `bytes` to `dest` through a temporary file in the same folder, so a failure never
+/// leaves half a file.
+fn write_file(dest: &Path, bytes: &[u8]) -> Result<(), Fail> {
+    let dir = dest
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)
+        .map_err(|e| (2, format!("error: cannot create {}: {e}", dir.display())))?;
+    let tmp = dir.join(format!(
+        ".{}.tmp",
+        dest.file_name().unwrap_or_default().to_string_lossy()
+    ));
+    std::fs::write(&tmp, bytes)
+        .and_then(|()| std::fs::rename(&tmp, dest))
+        .map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            (2, format!("error: cannot write {}: {e}", dest.display()))
+        })
+}
+
+fn note_unmodelled(i: &Interactions) {
+    if !i.no_diffraction || !i.no_diffuse {
+        eprintln!(
+            "note: diffraction and diffuse reflection are not modelled yet; paths are LOS, specular and transmitted only"
+        );
+    }
+}
+
+/// `kodama-dag trace`.
+pub fn trace(a: TraceArgs) -> Result<u8, Fail> {
+    let scene = load(&a.scene, &a.interactions)?;
+    let links = read_links(&a.links).map_err(stage_fail)?;
+    note_unmodelled(&a.interactions);
+    let t = Instant::now();
+    let ant = Antenna::default();
+    let results = trace_links(
+        &scene,
+        &links,
+        &ant,
+        &ant,
+        &a.interactions.options(),
+        a.interactions.freq_hz,
+    );
+    write_file(&a.out, write_results(&links, &results).as_bytes())?;
+    eprintln!(
+        "traced {} links in {:.2} s -> {}",
+        links.len(),
+        t.elapsed().as_secs_f64(),
+        a.out.display()
+    );
+    Ok(0)
+}
+
+/// `kodama-dag radiomap`.
+pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
+    let format = a
+        .out
+        .extension()
+        .and_then(|e| e.to_str())
+        .filter(|e| ["tif", "exr", "png"].contains(e))
+        .ok_or_else(|| {
+            (
+                2,
+                format!(
+                    "error: {}: expected a .tif, .exr or .png file name",
+                    a.out.display()
+                ),
+            )
+        })?
+        .to_string();
+    if !(a.cell_m > 0.0 && a.cell_m.is_finite()) {
+        return Err((
+            2,
+            format!("error: --cell-m {} is not a positive size", a.cell_m),
+        ));
+    }
+    let scene = load(&a.scene, &a.interactions)?;
+    note_unmodelled(&a.interactions);
+    let plane = default_plane(&scene, a.cell_m, a.height_m);
+    let t = Instant::now();
+    let map = radio_map(
+        &scene,
+        DVec3::from(a.tx),
+        &Antenna::default(),
+        &plane,
+        &a.interactions.options(),
+        a.interactions.freq_hz,
+    );
+    let secs = t.elapsed().as_secs_f64();
+    let db = Raster {
+        grid: map.grid,
+        data: PodVec(
+            map.data
+                .iter()
+                .map(|&g| if g > 0.0 { 10.0 * g.log10() } else { f32::NAN })
+                .collect(),
+        ),
+    };
+    let site = Site {
+        crs: String::new(),
+        origin: (0.0, 0.0),
+        cell_m: a.cell_m,
+    };
+    let Encoded::File(bytes) =
+        encode(&Artifact::Raster(db), &site, &format).map_err(|e| (1, format!("error: {e}")))?
+    else {
+        return Err((1, "error: a raster encodes as one file".into()));
+    };
+    write_file(&a.out, &bytes)?;
+    eprintln!(
+        "radio map {} x {} cells of {} m from {} rays in {secs:.3} s ({:.2} M rays/s) -> {}",
+        map.grid.width,
+        map.grid.height,
+        a.cell_m,
+        a.interactions.rays,
+        a.interactions.rays as f64 / secs / 1e6,
+        a.out.display()
+    );
+    Ok(0)
+}
