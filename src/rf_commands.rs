@@ -86,7 +86,7 @@ pub struct RadiomapArgs {
     #[arg(long)]
     scene: PathBuf,
     /// Transmitter position X,Y,Z in the scene's frame, metres.
-    #[arg(long, value_parser = parse_point)]
+    #[arg(long, value_parser = parse_point, allow_hyphen_values = true)]
     tx: [f64; 3],
     #[command(flatten)]
     interactions: Interactions,

@@ -58,6 +58,7 @@ pub mod read_sionna;
 pub mod read_tiles;
 pub mod read_views;
 pub mod read_xyz;
+pub mod rf_trace;
 pub mod roof_clean;
 pub mod split_buildings;
 pub mod stats;
@@ -117,6 +118,8 @@ macro_rules! for_each_stage {
             $crate::gaussian_blur::GaussianBlur,
             $crate::raster_ops::Clamp,
             $crate::raster_ops::Difference,
+            $crate::rf_trace::Trace,
+            $crate::rf_trace::RadioMap,
             $crate::footprint_score::FootprintScore,
             $crate::stats::RasterStats,
             $crate::stats::PointStats,

@@ -5,10 +5,10 @@ use std::path::Path;
 
 use crate::stage::StageError;
 
-use super::paths::LinkPaths;
+use super::paths::{LinkEnds, LinkPaths};
 
 /// The (tx, rx) pairs of a links CSV.
-pub fn read_links(path: &Path) -> Result<Vec<([f64; 3], [f64; 3])>, StageError> {
+pub fn read_links(path: &Path) -> Result<Vec<LinkEnds>, StageError> {
     let bad = |place: String, expected: &str| StageError::bad_input(path, place, expected);
     let mut r = csv::ReaderBuilder::new()
         .trim(csv::Trim::All)
@@ -54,7 +54,7 @@ pub fn read_links(path: &Path) -> Result<Vec<([f64; 3], [f64; 3])>, StageError> 
 }
 
 /// The links with their traced gains as CSV text.
-pub fn write_results(links: &[([f64; 3], [f64; 3])], results: &[LinkPaths]) -> String {
+pub fn write_results(links: &[LinkEnds], results: &[LinkPaths]) -> String {
     let mut s = String::from(
         "tx_x,tx_y,tx_z,rx_x,rx_y,rx_z,path_gain_db,coherent_path_gain_db,num_paths\n",
     );

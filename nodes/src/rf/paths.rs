@@ -16,6 +16,9 @@ use super::antenna::Antenna;
 use super::field::{self, CVec};
 use super::scene::RfScene;
 
+/// A transmitter and a receiver position, site frame.
+pub type LinkEnds = ([f64; 3], [f64; 3]);
+
 /// Which interactions a trace follows, and how hard it looks.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -117,7 +120,7 @@ pub fn fibonacci_sphere(n: u32) -> impl IndexedParallelIterator<Item = DVec3> {
 /// Traces every link (`tx`, `rx` pairs). Links sharing a transmitter share its ray search.
 pub fn trace_links(
     scene: &RfScene,
-    links: &[([f64; 3], [f64; 3])],
+    links: &[LinkEnds],
     tx_antenna: &Antenna,
     rx_antenna: &Antenna,
     opt: &TraceOptions,

@@ -19,13 +19,90 @@ use super::scene::RfScene;
 
 const EPS: f64 = 1e-3;
 
-/// Where a map is measured: the cells of `grid` on the horizontal plane at height `z`.
-#[derive(Clone, Copy, Debug)]
+/// Where a map is measured: the cells of `grid` on the horizontal plane at height `z`, or on a
+/// surface following the terrain (`lifted`, e.g. 1.5 m above it), which rays cross transparently.
 pub struct MapPlane {
     /// The cells (north-up).
     pub grid: Grid,
-    /// Height of the plane, metres (site frame).
+    /// Height of the plane, metres (site frame); unused with a lifted surface.
     pub z: f64,
+    /// The terrain-following measurement surface, if any.
+    pub lifted: Option<crate::raycast::SceneRays>,
+}
+
+impl MapPlane {
+    /// A horizontal plane at `z` over `grid`.
+    pub fn plane(grid: Grid, z: f64) -> MapPlane {
+        MapPlane {
+            grid,
+            z,
+            lifted: None,
+        }
+    }
+
+    /// The surface `height_m` above `terrain`, over `grid`: the terrain meshed at the grid's
+    /// cell size and lifted.
+    pub fn above_terrain(grid: Grid, terrain: &Raster, height_m: f64) -> Result<MapPlane, String> {
+        let mut mesh = crate::assemble_scene::terrain_mesh(
+            terrain,
+            grid.cell_m,
+            crate::materials::Material::MediumDryGround,
+        )?;
+        for p in mesh.positions.iter_mut() {
+            p[2] += height_m as f32;
+        }
+        let scene = crate::artifact::Scene {
+            objects: vec![crate::artifact::SceneObject {
+                id: "measurement-surface".into(),
+                class: crate::artifact::ObjectClass::Unsegmented,
+                mesh,
+            }],
+        };
+        Ok(MapPlane {
+            grid,
+            z: f64::NAN,
+            lifted: Some(crate::raycast::SceneRays::new(&scene)),
+        })
+    }
+
+    /// Each crossing of the surface by the segment `o + t d`, t in (EPS, t_end): the distance,
+    /// the cell, and 1 / (|cos θ| x the area of the surface over the cell).
+    fn crossings(&self, o: DVec3, d: DVec3, t_end: f64, out: &mut Vec<(f64, u32, f64)>) {
+        let g = self.grid;
+        let cell_area = g.cell_m * g.cell_m;
+        let mut add = |t: f64, n: DVec3| {
+            let p = o + d * t;
+            if let Some((c, r)) = g.cell_of(p.x, p.y) {
+                let cos = d.dot(n).abs().max(1e-6);
+                // A tilted patch over the cell has area A / n_z.
+                let area = cell_area / n.z.abs().max(1e-6);
+                out.push((t, r * g.width + c, 1.0 / (cos * area)));
+            }
+        };
+        match &self.lifted {
+            None => {
+                if d.z != 0.0 {
+                    let t = (self.z - o.z) / d.z;
+                    if t > EPS && t < t_end {
+                        add(t, DVec3::Z);
+                    }
+                }
+            }
+            Some(rays) => {
+                let mut tmin = EPS;
+                while let Some(h) = rays.cast(
+                    o.as_vec3().into(),
+                    d.as_vec3().into(),
+                    tmin as f32,
+                    t_end.min(f32::MAX as f64) as f32,
+                ) {
+                    let t = h.t as f64;
+                    add(t, DVec3::from(h.normal.map(f64::from)));
+                    tmin = t + EPS;
+                }
+            }
+        }
+    }
 }
 
 /// Sionna's default plane: the scene's horizontal extent in cells of `cell_m`, centred on it,
@@ -35,8 +112,8 @@ pub fn default_plane(scene: &RfScene, cell_m: f64, z: f64) -> MapPlane {
     let (cx, cy) = ((lo.x + hi.x) / 2.0, (lo.y + hi.y) / 2.0);
     let nx = ((hi.x - lo.x) / cell_m).ceil().max(1.0) as u32;
     let ny = ((hi.y - lo.y) / cell_m).ceil().max(1.0) as u32;
-    MapPlane {
-        grid: Grid {
+    MapPlane::plane(
+        Grid {
             x0: cx - nx as f64 * cell_m / 2.0,
             y0: cy + ny as f64 * cell_m / 2.0,
             cell_m,
@@ -44,7 +121,7 @@ pub fn default_plane(scene: &RfScene, cell_m: f64, z: f64) -> MapPlane {
             height: ny,
         },
         z,
-    }
+    )
 }
 
 /// The mean path gain (linear) of every cell of `plane` from a transmitter at `tx`; 0 where no
@@ -87,7 +164,7 @@ pub fn radio_map(
     for (cell, v) in chunks.into_iter().flatten() {
         acc[cell as usize] += v;
     }
-    let scale = (scene.wavelength / (4.0 * std::f64::consts::PI)).powi(2) / (g.cell_m * g.cell_m);
+    let scale = (scene.wavelength / (4.0 * std::f64::consts::PI)).powi(2);
     Raster {
         grid: g,
         data: PodVec(acc.into_iter().map(|v| (v * scale) as f32).collect()),
@@ -110,6 +187,7 @@ fn shoot(
     let mut e: CVec = field::real(DVec3::from(antenna.field(d0.to_array())));
     let (mut o, mut d) = (tx, d0);
     let (mut depth, mut in_foliage) = (0u32, 0i32);
+    let mut crossings = Vec::new();
     loop {
         let hit = scene.cast(o, d, EPS, f64::INFINITY);
         let t_end = hit.map_or(f64::INFINITY, |h| h.t);
@@ -120,17 +198,12 @@ fn shoot(
                 1.0
             }
         };
-        if d.z != 0.0 && (depth > 0 || opt.los) {
-            let tp = (plane.z - o.z) / d.z;
-            if tp > EPS && tp < t_end {
-                let p = o + d * tp;
-                if let Some((c, r)) = plane.grid.cell_of(p.x, p.y) {
-                    let a = foliage_amp(tp);
-                    out.push((
-                        r * plane.grid.width + c,
-                        field::norm_sqr(&e) * a * a * omega / d.z.abs(),
-                    ));
-                }
+        if depth > 0 || opt.los {
+            crossings.clear();
+            plane.crossings(o, d, t_end, &mut crossings);
+            for &(t, cell, weight) in &crossings {
+                let a = foliage_amp(t);
+                out.push((cell, field::norm_sqr(&e) * a * a * omega * weight));
             }
         }
         let Some(h) = hit else { return };
@@ -190,16 +263,16 @@ mod tests {
     #[test]
     fn free_space_map_follows_friis() {
         let scene = RfScene::new(&Scene::default(), 3.5e9, false).unwrap();
-        let plane = MapPlane {
-            grid: Grid {
+        let plane = MapPlane::plane(
+            Grid {
                 x0: -200.0,
                 y0: 200.0,
                 cell_m: 10.0,
                 width: 40,
                 height: 40,
             },
-            z: 0.0,
-        };
+            0.0,
+        );
         let tx = DVec3::new(0.0, 0.0, 30.0);
         let opt = TraceOptions {
             rays: 2_000_000,

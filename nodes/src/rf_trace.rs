@@ -1,0 +1,350 @@
+//! The `Trace` and `RadioMap` stages (paper Sec. 5): the native ray tracer of `rf` on a scene,
+//! for the links of a drive test, or over a grid.
+
+use std::collections::BTreeMap;
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{ArtifactType, Grid, Height, Measurements, PodVec, Raster, Scene};
+use crate::rf::antenna::Antenna;
+use crate::rf::paths::{TraceOptions, trace_links};
+use crate::rf::radiomap::{MapPlane, default_plane, radio_map};
+use crate::rf::scene::RfScene;
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+
+/// Params of [`Trace`].
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TraceParams {
+    /// Interactions and effort.
+    pub options: TraceOptions,
+    /// Transmit antenna; a link's own azimuth (from the measurements) turns it. Default
+    /// isotropic, vertical.
+    pub tx_antenna: Antenna,
+    /// Receive antenna. Default isotropic, vertical.
+    pub rx_antenna: Antenna,
+    /// Report the coherent sum |Σ a e^{-j2πfτ}|² instead of Σ |a|². Default false.
+    pub coherent: bool,
+    /// Use P.2040 laws outside their frequency ranges. Default false.
+    pub extrapolate: bool,
+}
+
+fn check_options(o: &TraceOptions) -> Result<(), ParamError> {
+    if o.rays == 0 {
+        return Err(ParamError::new("options", "expected at least one ray"));
+    }
+    if o.foliage_db_per_m
+        .is_some_and(|v| !(v >= 0.0 && v.is_finite()))
+    {
+        return Err(ParamError::new(
+            "options",
+            "expected a non-negative foliage loss in dB/m",
+        ));
+    }
+    Ok(())
+}
+
+/// The links of the measurements with their predicted path loss (`path_loss_db` = −10 log10 of
+/// the path gain; `los` = whether a line-of-sight path exists); measured values are dropped.
+pub struct Trace;
+
+impl Stage for Trace {
+    const KIND: &'static str = "Trace";
+    const VERSION: u32 = 1;
+    const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
+        InputSpec::one(
+            "links",
+            ArtifactType::Measurements,
+            "the links (transmitter and receiver positions, frequency)",
+        ),
+        InputSpec::optional(
+            "terrain",
+            ArtifactType::Raster,
+            "the terrain, for heights given above ground",
+        ),
+    ];
+    type Params = TraceParams;
+    type Output = Measurements;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        check_options(&p.options)
+    }
+
+    fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Measurements, StageError> {
+        let scene: &Scene = inputs.one("scene")?;
+        let links: &Measurements = inputs.one("links")?;
+        let terrain: Option<&Raster> = inputs.optional("terrain")?;
+        let z = |x: f64, y: f64, h: Height| -> Result<f64, StageError> {
+            match h {
+                Height::Absolute(z) => Ok(z),
+                Height::AboveGround(h) => terrain
+                    .and_then(|t| t.bilinear(x, y))
+                    .map(|g| g + h)
+                    .ok_or_else(|| StageError::Failed(format!(
+                        "a height above ground at ({x:.1}, {y:.1}) needs a terrain input covering it"
+                    ))),
+            }
+        };
+        // One scene per carrier, one trace per (carrier, transmitter azimuth).
+        let mut groups: BTreeMap<(u64, u64), Vec<usize>> = BTreeMap::new();
+        let mut ends = Vec::with_capacity(links.links.len());
+        for (i, l) in links.links.iter().enumerate() {
+            ends.push((
+                [l.tx.x, l.tx.y, z(l.tx.x, l.tx.y, l.tx.z)?],
+                [l.rx.x, l.rx.y, z(l.rx.x, l.rx.y, l.rx.z)?],
+            ));
+            let az = l.tx.azimuth_deg.map_or(f64::NAN, |a| 90.0 - a);
+            groups
+                .entry((l.freq_hz.to_bits(), az.to_bits()))
+                .or_default()
+                .push(i);
+        }
+        ctx.progress.set_total(groups.len() as u64);
+        let mut out = links.clone();
+        for ((f_bits, az_bits), idx) in groups {
+            let freq = f64::from_bits(f_bits);
+            let rf = RfScene::new(scene, freq, p.extrapolate).map_err(StageError::Failed)?;
+            let mut tx_antenna = p.tx_antenna;
+            let az = f64::from_bits(az_bits);
+            if az.is_finite() {
+                tx_antenna.azimuth_deg = az;
+            }
+            let pairs: Vec<_> = idx.iter().map(|&i| ends[i]).collect();
+            let res = trace_links(&rf, &pairs, &tx_antenna, &p.rx_antenna, &p.options, freq);
+            for (&i, r) in idx.iter().zip(res) {
+                let g = if p.coherent {
+                    r.coherent_gain_db
+                } else {
+                    r.gain_db
+                };
+                let l = &mut out.links[i];
+                l.path_loss_db = Some(-g);
+                l.rx_power_dbm = None;
+                l.los = Some(r.paths.iter().any(|p| p.interactions.is_empty()));
+            }
+            ctx.progress.advance(1);
+        }
+        Ok(out)
+    }
+}
+
+/// Params of [`RadioMap`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RadioMapParams {
+    /// Transmitter position (x, y) in the site frame and its height: above the terrain when a
+    /// terrain is given, else site-frame z.
+    pub tx: (f64, f64, f64),
+    /// Carrier frequency, Hz.
+    pub freq_hz: f64,
+    /// Cell size, metres. Default 5.
+    #[serde(default = "five")]
+    pub cell_m: f64,
+    /// Height of the map: above the terrain when a terrain is given, else site-frame z. Default 1.5.
+    #[serde(default = "one_and_a_half")]
+    pub height_m: f64,
+    /// Interactions and the number of rays.
+    #[serde(default)]
+    pub options: TraceOptions,
+    /// The transmit antenna. Default isotropic, vertical.
+    #[serde(default)]
+    pub antenna: Antenna,
+    /// Use P.2040 laws outside their frequency ranges. Default false.
+    #[serde(default)]
+    pub extrapolate: bool,
+}
+
+fn five() -> f64 {
+    5.0
+}
+fn one_and_a_half() -> f64 {
+    1.5
+}
+
+/// Path gain (dB, NaN where no ray arrived) over the terrain's extent, on a surface following the
+/// terrain at `height_m`; without a terrain, over the scene on the plane z = `height_m`.
+pub struct RadioMap;
+
+impl Stage for RadioMap {
+    const KIND: &'static str = "RadioMap";
+    const VERSION: u32 = 1;
+    const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
+        InputSpec::optional(
+            "terrain",
+            ArtifactType::Raster,
+            "the terrain: map extent and heights above ground",
+        ),
+    ];
+    type Params = RadioMapParams;
+    type Output = Raster;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        check_options(&p.options)?;
+        if !(p.freq_hz > 0.0 && p.freq_hz.is_finite()) {
+            return Err(ParamError::new(
+                "freq_hz",
+                "expected a positive frequency in Hz",
+            ));
+        }
+        crate::params::check_cell(Some(p.cell_m))
+    }
+
+    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Raster, StageError> {
+        let scene: &Scene = inputs.one("scene")?;
+        let terrain: Option<&Raster> = inputs.optional("terrain")?;
+        let rf = RfScene::new(scene, p.freq_hz, p.extrapolate).map_err(StageError::Failed)?;
+        let (plane, tx) = match terrain {
+            Some(t) => {
+                let tg = t.grid;
+                let grid = Grid {
+                    cell_m: p.cell_m,
+                    width: (tg.width as f64 * tg.cell_m / p.cell_m).ceil() as u32,
+                    height: (tg.height as f64 * tg.cell_m / p.cell_m).ceil() as u32,
+                    ..tg
+                };
+                let ground = t.bilinear(p.tx.0, p.tx.1).ok_or_else(|| {
+                    StageError::Failed(format!(
+                        "the transmitter at ({}, {}) is off the terrain",
+                        p.tx.0, p.tx.1
+                    ))
+                })?;
+                (
+                    MapPlane::above_terrain(grid, t, p.height_m).map_err(StageError::Failed)?,
+                    DVec3::new(p.tx.0, p.tx.1, ground + p.tx.2),
+                )
+            }
+            None => (
+                default_plane(&rf, p.cell_m, p.height_m),
+                DVec3::new(p.tx.0, p.tx.1, p.tx.2),
+            ),
+        };
+        let map = radio_map(&rf, tx, &p.antenna, &plane, &p.options, p.freq_hz);
+        Ok(Raster {
+            grid: map.grid,
+            data: PodVec(
+                map.data
+                    .iter()
+                    .map(|&g| if g > 0.0 { 10.0 * g.log10() } else { f32::NAN })
+                    .collect(),
+            ),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::artifact::{Endpoint, Link};
+    use crate::stage::Slot;
+    use crate::{Artifact, Site};
+    use std::sync::Arc;
+
+    fn site() -> Site {
+        Site {
+            crs: "EPSG:32618".into(),
+            origin: (0.0, 0.0),
+            cell_m: 1.0,
+        }
+    }
+
+    fn flat(z: f32) -> Raster {
+        Raster {
+            grid: Grid {
+                x0: 0.0,
+                y0: 200.0,
+                cell_m: 5.0,
+                width: 40,
+                height: 40,
+            },
+            data: PodVec(vec![z; 1600]),
+        }
+    }
+
+    #[test]
+    fn trace_predicts_friis_in_free_space_with_heights_above_ground() {
+        let end = |x: f64, h: f64| Endpoint {
+            id: String::new(),
+            x,
+            y: 100.0,
+            z: Height::AboveGround(h),
+            azimuth_deg: None,
+        };
+        let links = Measurements {
+            links: vec![Link {
+                tx: end(20.0, 30.0),
+                rx: end(170.0, 1.5),
+                freq_hz: 3.5e9,
+                path_loss_db: Some(99.0),
+                rx_power_dbm: None,
+                tx_eirp_dbm: None,
+                los: None,
+            }],
+        };
+        let inputs = Inputs::new()
+            .with(
+                "scene",
+                Slot::One(Arc::new(Artifact::Scene(Scene::default()))),
+            )
+            .with("links", Slot::One(Arc::new(Artifact::Measurements(links))))
+            .with(
+                "terrain",
+                Slot::Optional(Some(Arc::new(Artifact::Raster(flat(12.0))))),
+            );
+        let s = site();
+        let out = Trace::run(&TraceParams::default(), &inputs, &Ctx::new(&s, &[])).unwrap();
+        let d = (150.0f64 * 150.0 + 28.5 * 28.5).sqrt();
+        let pl = out.links[0].path_loss_db.unwrap();
+        assert!((pl - crate::rf::em::fspl_db(d, 3.5e9)).abs() < 1e-9, "{pl}");
+        assert_eq!(out.links[0].los, Some(true));
+        // Without a terrain, heights above ground are an error, not a guess.
+        let inputs = Inputs::new()
+            .with(
+                "scene",
+                Slot::One(Arc::new(Artifact::Scene(Scene::default()))),
+            )
+            .with("links", Slot::One(Arc::new(Artifact::Measurements(out))));
+        assert!(Trace::run(&TraceParams::default(), &inputs, &Ctx::new(&s, &[])).is_err());
+    }
+
+    #[test]
+    fn radio_map_follows_the_terrain_surface() {
+        // Free space over "terrain" at 12 m: the map at 1.5 m above it is Friis from a transmitter
+        // 30 m above it, averaged over each 5 m cell.
+        let inputs = Inputs::new()
+            .with(
+                "scene",
+                Slot::One(Arc::new(Artifact::Scene(Scene::default()))),
+            )
+            .with(
+                "terrain",
+                Slot::Optional(Some(Arc::new(Artifact::Raster(flat(12.0))))),
+            );
+        let p = RadioMapParams {
+            tx: (100.0, 100.0, 30.0),
+            freq_hz: 3.5e9,
+            cell_m: 5.0,
+            height_m: 1.5,
+            options: TraceOptions {
+                rays: 1_000_000,
+                ..Default::default()
+            },
+            antenna: Antenna::default(),
+            extrapolate: false,
+        };
+        let s = site();
+        let map = RadioMap::run(&p, &inputs, &Ctx::new(&s, &[])).unwrap();
+        let (x, y) = map.grid.center(35, 20);
+        let d2 = (x - 100.0).powi(2) + (y - 100.0).powi(2) + 28.5f64.powi(2);
+        let friis = -crate::rf::em::fspl_db(d2.sqrt(), 3.5e9);
+        assert!(
+            (map.at(35, 20) as f64 - friis).abs() < 0.3,
+            "{} vs {friis}",
+            map.at(35, 20)
+        );
+    }
+}

@@ -1,0 +1,188 @@
+//! `kodama-dag trace` and `radiomap` on a Sionna scene, and their input errors.
+
+mod common;
+use common::*;
+
+use std::path::{Path, PathBuf};
+
+fn canyon() -> PathBuf {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/sionna-scenes/simple_street_canyon/simple_street_canyon.xml");
+    assert!(p.exists(), "real test data missing: {}", p.display());
+    p
+}
+
+#[test]
+fn trace_reproduces_sionna_on_the_street_canyon() {
+    let env = Env::new();
+    let fixture = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/sionna_paths.csv"),
+    )
+    .unwrap();
+    // The fixture's street-canyon rows as a links file (extra columns are ignored).
+    let mut links = String::from(
+        "scene,tx_x,tx_y,tx_z,rx_x,rx_y,rx_z,freq_hz,max_depth,path_gain_db,num_paths\n",
+    );
+    let rows: Vec<&str> = fixture
+        .lines()
+        .filter(|l| l.starts_with("simple_street_canyon,"))
+        .collect();
+    for r in &rows {
+        links.push_str(r);
+        links.push('\n');
+    }
+    let links_file = env.write("links.csv", &links);
+    let out = env.path("paths.csv");
+    let r = env.cli(&[
+        "trace",
+        "--scene",
+        canyon().to_str().unwrap(),
+        "--links",
+        links_file.to_str().unwrap(),
+        "--freq-hz",
+        "3.5e9",
+        "--max-depth",
+        "3",
+        "--no-transmission",
+        "--no-diffraction",
+        "--no-diffuse",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let ours: Vec<f64> = std::fs::read_to_string(&out)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(6).unwrap().parse::<f64>().unwrap())
+        .collect();
+    assert_eq!(ours.len(), rows.len());
+    let mut diffs: Vec<f64> = rows
+        .iter()
+        .zip(&ours)
+        .filter_map(|(row, &g)| {
+            let s: f64 = row
+                .split(',')
+                .nth(9)
+                .unwrap()
+                .parse()
+                .unwrap_or(f64::NEG_INFINITY);
+            assert_eq!(
+                s.is_finite(),
+                g.is_finite(),
+                "paths on one side only: {row} vs {g}"
+            );
+            s.is_finite().then(|| (g - s).abs())
+        })
+        .collect();
+    diffs.sort_by(f64::total_cmp);
+    assert!(diffs[diffs.len() / 2] < 0.1, "{diffs:?}");
+}
+
+#[test]
+fn radiomap_writes_each_format_and_rejects_others() {
+    let env = Env::new();
+    for ext in ["tif", "png", "exr"] {
+        let out = env.path(&format!("map.{ext}"));
+        let r = env.cli(&[
+            "radiomap",
+            "--scene",
+            canyon().to_str().unwrap(),
+            "--tx",
+            "-33,0,32",
+            "--freq-hz",
+            "3.5e9",
+            "--rays",
+            "100000",
+            "--cell-m",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let bytes = std::fs::read(&out).unwrap();
+        let magic: &[u8] = match ext {
+            "tif" => b"II*\0",
+            "png" => b"\x89PNG",
+            _ => b"\x76\x2f\x31\x01",
+        };
+        assert_eq!(&bytes[..4], magic, "{ext}");
+    }
+    let r = env.cli(&[
+        "radiomap",
+        "--scene",
+        canyon().to_str().unwrap(),
+        "--tx",
+        "0,0,30",
+        "--freq-hz",
+        "3.5e9",
+        "--out",
+        env.path("map.jpg").to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr.contains("map.jpg") && r.stderr.contains(".tif, .exr or .png"),
+        "{}",
+        r.stderr
+    );
+}
+
+#[test]
+fn bad_links_exit_2_naming_the_file_and_write_nothing() {
+    let env = Env::new();
+    let links = env.write("links.csv", "tx_x,tx_y,tx_z,rx_x,rx_y\n0,0,10,50,0\n");
+    let out = env.path("paths.csv");
+    let r = env.cli(&[
+        "trace",
+        "--scene",
+        canyon().to_str().unwrap(),
+        "--links",
+        links.to_str().unwrap(),
+        "--freq-hz",
+        "3.5e9",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr.contains("links.csv") && r.stderr.contains("rx_z"),
+        "{}",
+        r.stderr
+    );
+    assert!(!out.exists());
+    let links = env.write(
+        "links2.csv",
+        "tx_x,tx_y,tx_z,rx_x,rx_y,rx_z\n0,0,10,50,0,abc\n",
+    );
+    let r = env.cli(&[
+        "trace",
+        "--scene",
+        canyon().to_str().unwrap(),
+        "--links",
+        links.to_str().unwrap(),
+        "--freq-hz",
+        "3.5e9",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 2);
+    assert!(r.stderr.contains("line 2, column rx_z"), "{}", r.stderr);
+    // A frequency outside the scene's materials' P.2040 ranges is refused unless extrapolating.
+    let links = env.write(
+        "links3.csv",
+        "tx_x,tx_y,tx_z,rx_x,rx_y,rx_z\n0,0,10,50,0,1.5\n",
+    );
+    let r = env.cli(&[
+        "trace",
+        "--scene",
+        canyon().to_str().unwrap(),
+        "--links",
+        links.to_str().unwrap(),
+        "--freq-hz",
+        "60e9",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("GHz"), "{}", r.stderr);
+}
