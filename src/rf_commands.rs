@@ -39,10 +39,13 @@ pub struct Interactions {
     /// No transmission through surfaces.
     #[arg(long)]
     no_transmission: bool,
-    /// No diffraction (the tracer does not model it yet: accepted for Sionna-style command lines).
+    /// First-order UTD edge diffraction (links only; off by default, as in Sionna RT).
+    #[arg(long)]
+    diffraction: bool,
+    /// No diffraction (the default; accepted for Sionna-style command lines).
     #[arg(long)]
     no_diffraction: bool,
-    /// No diffuse reflection (not modelled yet, as above).
+    /// No diffuse reflection (not modelled yet: accepted for Sionna-style command lines).
     #[arg(long)]
     no_diffuse: bool,
     /// Use P.2040 material laws outside their frequency ranges.
@@ -57,6 +60,7 @@ impl Interactions {
             los: !self.no_los,
             reflection: !self.no_reflection,
             transmission: !self.no_transmission,
+            diffraction: self.diffraction && !self.no_diffraction,
             rays: self.rays,
             foliage_db_per_m: None,
         }
@@ -152,11 +156,12 @@ fn write_file(dest: &Path, bytes: &[u8]) -> Result<(), Fail> {
         })
 }
 
-fn note_unmodelled(i: &Interactions) {
-    if !i.no_diffraction || !i.no_diffuse {
-        eprintln!(
-            "note: diffraction and diffuse reflection are not modelled yet; paths are LOS, specular and transmitted only"
-        );
+fn note_unmodelled(i: &Interactions, radio_map: bool) {
+    if !i.no_diffuse {
+        eprintln!("note: diffuse reflection is not modelled yet");
+    }
+    if radio_map && i.diffraction {
+        eprintln!("note: radio maps do not model diffraction yet");
     }
 }
 
@@ -164,7 +169,7 @@ fn note_unmodelled(i: &Interactions) {
 pub fn trace(a: TraceArgs) -> Result<u8, Fail> {
     let scene = load(&a.scene, &a.interactions)?;
     let links = read_links(&a.links).map_err(stage_fail)?;
-    note_unmodelled(&a.interactions);
+    note_unmodelled(&a.interactions, false);
     let t = Instant::now();
     let ant = Antenna::default();
     let results = trace_links(
@@ -209,7 +214,7 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
         ));
     }
     let scene = load(&a.scene, &a.interactions)?;
-    note_unmodelled(&a.interactions);
+    note_unmodelled(&a.interactions, true);
     let plane = default_plane(&scene, a.cell_m, a.height_m);
     let t = Instant::now();
     let map = radio_map(

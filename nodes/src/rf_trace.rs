@@ -185,6 +185,12 @@ impl Stage for RadioMap {
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         check_options(&p.options)?;
+        if p.options.diffraction {
+            return Err(ParamError::new(
+                "options",
+                "radio maps do not model diffraction yet (set diffraction: false)",
+            ));
+        }
         if !(p.freq_hz > 0.0 && p.freq_hz.is_finite()) {
             return Err(ParamError::new(
                 "freq_hz",

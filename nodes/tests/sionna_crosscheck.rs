@@ -61,6 +61,7 @@ fn path_gains_match_sionna_rt() {
             los: true,
             reflection: true,
             transmission: false,
+            diffraction: false,
             rays: 1_000_000,
             foliage_db_per_m: None,
         };

@@ -3,6 +3,7 @@
 //! the ray tracer built on them. Formulas and test vectors: `shared/reference/rf.md`.
 
 pub mod antenna;
+pub mod diffraction;
 pub mod em;
 pub mod field;
 pub mod links_csv;

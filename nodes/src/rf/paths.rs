@@ -31,6 +31,9 @@ pub struct TraceOptions {
     pub reflection: bool,
     /// Transmission through surfaces as thin slabs (P.2040). Default true.
     pub transmission: bool,
+    /// First-order UTD diffraction at convex edges, for links (radio maps do not model it yet).
+    /// Default false, as in Sionna RT.
+    pub diffraction: bool,
     /// Rays shot from each transmitter to find reflection sequences. Default 10^6 (Sionna's).
     pub rays: u32,
     /// Loss inside foliage volumes, dB per metre; default 0.2 dB/m x f in GHz (rf.md §5.1,
@@ -45,6 +48,7 @@ impl Default for TraceOptions {
             los: true,
             reflection: true,
             transmission: true,
+            diffraction: false,
             rays: 1_000_000,
             foliage_db_per_m: None,
         }
@@ -58,6 +62,8 @@ pub enum InteractionKind {
     Reflection,
     /// Transmission through a slab.
     Transmission,
+    /// Diffraction at an edge (UTD).
+    Diffraction,
 }
 
 /// One interaction of a path.
@@ -129,6 +135,11 @@ pub fn trace_links(
     let mut txs: Vec<[u64; 3]> = links.iter().map(|l| l.0.map(f64::to_bits)).collect();
     txs.sort_unstable();
     txs.dedup();
+    let wedges = if opt.diffraction && opt.max_depth > 0 {
+        super::diffraction::wedges(scene)
+    } else {
+        Vec::new()
+    };
     let sequences: Vec<Vec<Vec<u32>>> = txs
         .iter()
         .map(|t| reflection_sequences(scene, DVec3::from(t.map(f64::from_bits)), opt))
@@ -139,16 +150,23 @@ pub fn trace_links(
             let k = txs
                 .binary_search(&tx.map(f64::to_bits))
                 .expect("every tx was listed");
-            link_paths(
+            let (tx, rx) = (DVec3::from(*tx), DVec3::from(*rx));
+            let found = link_paths(
                 scene,
-                DVec3::from(*tx),
-                DVec3::from(*rx),
+                tx,
+                rx,
                 &sequences[k],
                 tx_antenna,
                 rx_antenna,
                 opt,
                 freq_hz,
-            )
+            );
+            if wedges.is_empty() {
+                return found;
+            }
+            let extra =
+                diffracted_paths(scene, &wedges, tx, rx, tx_antenna, rx_antenna, opt, freq_hz);
+            summarize(found.paths.into_iter().chain(extra).collect(), freq_hz)
         })
         .collect()
 }
@@ -225,6 +243,11 @@ fn link_paths(
             paths.push(p);
         }
     }
+    summarize(paths, freq_hz)
+}
+
+/// Paths by delay, with the gains they add up to.
+fn summarize(mut paths: Vec<Path>, freq_hz: f64) -> LinkPaths {
     paths.sort_by(|a, b| {
         a.delay_s
             .total_cmp(&b.delay_s)
@@ -381,4 +404,77 @@ fn evaluate(
         a: [a.re, a.im],
         foliage_m,
     })
+}
+
+/// First-order diffracted paths: over every convex edge whose diffraction point lies on the edge
+/// and sees both ends (rf.md §3.1).
+#[allow(clippy::too_many_arguments)]
+fn diffracted_paths(
+    scene: &RfScene,
+    wedges: &[super::diffraction::Wedge],
+    tx: DVec3,
+    rx: DVec3,
+    tx_antenna: &Antenna,
+    rx_antenna: &Antenna,
+    opt: &TraceOptions,
+    freq_hz: f64,
+) -> Vec<Path> {
+    const EDGE_EPS: f64 = 1e-2;
+    let foliage_db_per_m = opt.foliage_db_per_m.unwrap_or(0.2 * freq_hz / 1e9);
+    let mut out = Vec::new();
+    for w in wedges {
+        let Some(u) = super::diffraction::diffraction_point(w, tx, rx) else {
+            continue;
+        };
+        let q = w.a + w.e * u;
+        let ki = (q - tx).normalize();
+        let e_tx = field::real(DVec3::from(tx_antenna.field(ki.to_array())));
+        let Some(e) = super::diffraction::diffracted_field(scene, w, q, tx, rx, &e_tx) else {
+            continue;
+        };
+        let mut foliage_m = 0.0;
+        let mut clear = true;
+        for (a, b) in [(tx, q), (q, rx)] {
+            let d = (b - a).normalize();
+            let mut inside_since: Option<f64> = None;
+            for h in scene.hits_between(a, b, EDGE_EPS) {
+                if !scene.is_foliage(h.triangle) {
+                    clear = false;
+                    break;
+                }
+                if d.dot(scene.normals[h.triangle as usize]) < 0.0 {
+                    inside_since.get_or_insert(h.t);
+                } else {
+                    foliage_m += h.t - inside_since.take().unwrap_or(0.0);
+                }
+            }
+            if let Some(t0) = inside_since {
+                foliage_m += (b - a).length() - t0;
+            }
+            if !clear {
+                break;
+            }
+        }
+        if !clear {
+            continue;
+        }
+        let ko = (rx - q).normalize();
+        let rx_pattern = DVec3::from(rx_antenna.field((-ko).to_array()));
+        let a = field::dot(&e, rx_pattern)
+            * (scene.wavelength / (4.0 * std::f64::consts::PI))
+            * 10f64.powf(-foliage_db_per_m * foliage_m / 20.0);
+        let length = (q - tx).length() + (rx - q).length();
+        out.push(Path {
+            interactions: vec![Interaction {
+                kind: InteractionKind::Diffraction,
+                point: q.to_array(),
+                triangle: w.tri0,
+            }],
+            length_m: length,
+            delay_s: length / super::SPEED_OF_LIGHT,
+            a: [a.re, a.im],
+            foliage_m,
+        });
+    }
+    out
 }

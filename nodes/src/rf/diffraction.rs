@@ -1,0 +1,186 @@
+//! First-order edge diffraction by the UTD (rf.md §3.1: Kouyoumjian-Pathak, with Luebbers'
+//! finite-conductivity reflection factors): the wedges of a scene's meshes, the diffraction point
+//! on each edge (Keller's cone: equal angles, the shortest path over the edge), and the diffracted
+//! field in the edge-fixed bases.
+
+use std::collections::HashMap;
+use std::f64::consts::PI;
+
+use glam::DVec3;
+use num_complex::Complex64 as C64;
+
+use super::field::{self, CVec};
+use super::scene::RfScene;
+use super::utd::wedge_coefficients;
+
+/// An edge where two faces meet at an exterior angle n π > π (a convex corner).
+#[derive(Clone, Copy, Debug)]
+pub struct Wedge {
+    /// One end of the edge.
+    pub a: DVec3,
+    /// Unit edge direction, n0 × nn.
+    pub e: DVec3,
+    /// Edge length, metres.
+    pub length: f64,
+    /// Outward normal of the 0-face.
+    pub n0: DVec3,
+    /// Outward normal of the n-face.
+    pub nn: DVec3,
+    /// Exterior angle over π.
+    pub n: f64,
+    /// The 0-face's triangle (for its material).
+    pub tri0: u32,
+    /// The n-face's triangle.
+    pub trin: u32,
+}
+
+/// The convex edges of `scene`: edges shared by exactly two triangles (matched by vertex
+/// position, to the micrometre) whose normals differ, with the solid on the inner side.
+pub fn wedges(scene: &RfScene) -> Vec<Wedge> {
+    let key = |p: DVec3| [p.x, p.y, p.z].map(|c| (c * 1e6).round() as i64);
+    let mut edges: HashMap<([i64; 3], [i64; 3]), Vec<(u32, DVec3, DVec3)>> = HashMap::new();
+    for (t, tri) in scene.tris.iter().enumerate() {
+        if scene.normals[t] == DVec3::ZERO || scene.is_foliage(t as u32) {
+            continue;
+        }
+        for k in 0..3 {
+            let (p, q) = (tri[k], tri[(k + 1) % 3]);
+            let (kp, kq) = (key(p), key(q));
+            let (lo, hi, a, b) = if kp < kq {
+                (kp, kq, p, q)
+            } else {
+                (kq, kp, q, p)
+            };
+            edges.entry((lo, hi)).or_default().push((t as u32, a, b));
+        }
+    }
+    let mut out: Vec<Wedge> = Vec::new();
+    let mut keys: Vec<_> = edges.keys().copied().collect();
+    keys.sort_unstable();
+    for k in keys {
+        let faces = &edges[&k];
+        if faces.len() != 2 {
+            continue;
+        }
+        let (t0, a, b) = faces[0];
+        let t1 = faces[1].0;
+        let (n0, nn) = (scene.normals[t0 as usize], scene.normals[t1 as usize]);
+        let c = n0.dot(nn).clamp(-1.0, 1.0);
+        if c > 1.0 - 1e-6 {
+            continue; // flat
+        }
+        // Convex when each face's third vertex lies behind the other face.
+        let third = |t: u32| {
+            scene.tris[t as usize]
+                .iter()
+                .copied()
+                .max_by(|p, q| {
+                    ((*p - a).cross(b - a))
+                        .length()
+                        .total_cmp(&((*q - a).cross(b - a)).length())
+                })
+                .expect("three vertices")
+        };
+        if (third(t1) - a).dot(n0) > 1e-9 || (third(t0) - a).dot(nn) > 1e-9 {
+            continue; // concave
+        }
+        let e = n0.cross(nn);
+        if e.length() < 1e-9 {
+            continue;
+        }
+        let e = e.normalize();
+        let (a, b) = if (b - a).dot(e) >= 0.0 {
+            (a, b)
+        } else {
+            (b, a)
+        };
+        out.push(Wedge {
+            a,
+            e,
+            length: (b - a).length(),
+            n0,
+            nn,
+            n: 1.0 + c.acos() / PI,
+            tri0: t0,
+            trin: t1,
+        });
+    }
+    out
+}
+
+/// The point of the edge where the path `s1 -> Q -> s2` is shortest, as a distance along it, if
+/// strictly inside the edge.
+pub fn diffraction_point(w: &Wedge, s1: DVec3, s2: DVec3) -> Option<f64> {
+    let f = |u: f64| (s1 - (w.a + w.e * u)).length() + (s2 - (w.a + w.e * u)).length();
+    let (mut lo, mut hi) = (-w.length, 2.0 * w.length);
+    for _ in 0..100 {
+        let (m1, m2) = (lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0);
+        if f(m1) < f(m2) {
+            hi = m2;
+        } else {
+            lo = m1;
+        }
+    }
+    let u = (lo + hi) / 2.0;
+    (u > 1e-6 && u < w.length - 1e-6).then_some(u)
+}
+
+/// The angle of `s` (a unit direction away from the edge, projected across it) from the 0-face,
+/// in [0, 2π) (rf.md §3.1).
+fn face_angle(w: &Wedge, s: DVec3) -> f64 {
+    let t0 = w.n0.cross(w.e);
+    let st = (s - w.e * s.dot(w.e)).normalize_or_zero();
+    let sgn = if st.dot(w.n0) >= 0.0 { 1.0 } else { -1.0 };
+    PI - (PI - st.dot(t0).clamp(-1.0, 1.0).acos()) * sgn
+}
+
+/// The diffracted field at `rx` of a wave leaving `tx` with field `e_tx` (at unit distance),
+/// over wedge `w` at `q`, as a field vector (spreading included, propagation phase not), or
+/// `None` when either end is inside the wedge.
+pub fn diffracted_field(
+    scene: &RfScene,
+    w: &Wedge,
+    q: DVec3,
+    tx: DVec3,
+    rx: DVec3,
+    e_tx: &CVec,
+) -> Option<CVec> {
+    let (si, so) = ((q - tx).length(), (rx - q).length());
+    let ki = (q - tx) / si; // incident direction
+    let ko = (rx - q) / so; // diffracted direction
+    let phi_i = face_angle(w, -ki);
+    let phi = face_angle(w, ko);
+    let limit = w.n * PI;
+    if !(phi_i > 0.0 && phi_i < limit && phi > 0.0 && phi < limit) {
+        return None;
+    }
+    let sin_b = ki.cross(w.e).length();
+    if sin_b < 1e-6 {
+        return None;
+    }
+    let beta0 = sin_b.asin();
+    let k = 2.0 * PI / scene.wavelength;
+    let l = si * so * sin_b * sin_b / (si + so);
+    let d = wedge_coefficients(w.n, phi, phi_i, beta0, k, l);
+    // Edge-fixed bases.
+    let phi_hat_i = ki.cross(w.e).normalize();
+    let beta_hat_i = phi_hat_i.cross(ki);
+    let phi_hat_o = -(ko.cross(w.e)).normalize();
+    let beta_hat_o = phi_hat_o.cross(ko);
+    // Face reflection factors (Luebbers): the β component (along the edge) is TE to the faces,
+    // the φ component TM; incidence cosines |sin φ'| on the 0-face, |sin(nπ − φ)| on the n-face.
+    // Rotated into the edge-fixed bases (the W matrices of rf.md §3.1, at β0 = 90°) each picks
+    // up a sign: β̂ turns from +e to −e, and e_∥ = −φ̂' on the way in. So R = −diag(r_TM, r_TE),
+    // which for a perfect conductor gives the classic soft (β) and hard (φ) coefficients.
+    let (r0, _) = scene.slab(w.tri0, phi_i.sin().abs());
+    let (rn, _) = scene.slab(w.trin, (limit - phi).sin().abs());
+    let (r0, rn) = ((-r0.0, -r0.1), (-rn.0, -rn.1));
+    let (e_phi, e_beta) = (field::dot(e_tx, phi_hat_i), field::dot(e_tx, beta_hat_i));
+    let spread = (1.0 / (si * so * (si + so))).sqrt();
+    let comp = |r0c: C64, rnc: C64, ei: C64| -> C64 {
+        -((d[0] + d[1]) - d[2] * rnc - d[3] * r0c) * ei * spread
+    };
+    let out_phi = comp(r0.1, rn.1, e_phi);
+    let out_beta = comp(r0.0, rn.0, e_beta);
+    Some([0, 1, 2].map(|c| out_phi * phi_hat_o[c] + out_beta * beta_hat_o[c]))
+}
