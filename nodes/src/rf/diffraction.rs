@@ -38,7 +38,9 @@ pub struct Wedge {
 /// position, to the micrometre) whose normals differ, with the solid on the inner side.
 pub fn wedges(scene: &RfScene) -> Vec<Wedge> {
     let key = |p: DVec3| [p.x, p.y, p.z].map(|c| (c * 1e6).round() as i64);
-    let mut edges: HashMap<([i64; 3], [i64; 3]), Vec<(u32, DVec3, DVec3)>> = HashMap::new();
+    // Edge (by its ends' quantised positions) -> the triangles on it, with the edge's ends.
+    type EdgeKey = ([i64; 3], [i64; 3]);
+    let mut edges: HashMap<EdgeKey, Vec<(u32, DVec3, DVec3)>> = HashMap::new();
     for (t, tri) in scene.tris.iter().enumerate() {
         if scene.normals[t] == DVec3::ZERO || scene.is_foliage(t as u32) {
             continue;
