@@ -45,9 +45,15 @@ pub struct Interactions {
     /// No diffraction (the default; accepted for Sionna-style command lines).
     #[arg(long)]
     no_diffraction: bool,
-    /// No diffuse reflection (not modelled yet: accepted for Sionna-style command lines).
+    /// Diffuse reflection (effective roughness, Lambertian; last bounce only for links).
+    #[arg(long)]
+    diffuse: bool,
+    /// No diffuse reflection (the default; accepted for Sionna-style command lines).
     #[arg(long)]
     no_diffuse: bool,
+    /// Scattering coefficient S of every surface, in [0, 1] (specular keeps √(1 − S²)).
+    #[arg(long, default_value_t = 0.0)]
+    scattering_coefficient: f64,
     /// Use P.2040 material laws outside their frequency ranges.
     #[arg(long)]
     extrapolate: bool,
@@ -61,8 +67,11 @@ impl Interactions {
             reflection: !self.no_reflection,
             transmission: !self.no_transmission,
             diffraction: self.diffraction && !self.no_diffraction,
+            diffuse: self.diffuse && !self.no_diffuse,
+            scattering_coefficient: self.scattering_coefficient,
             rays: self.rays,
             foliage_db_per_m: None,
+            ..Default::default()
         }
     }
 }
@@ -124,6 +133,15 @@ fn stage_fail(e: StageError) -> Fail {
 }
 
 fn load(scene: &Path, i: &Interactions) -> Result<RfScene, Fail> {
+    if !(0.0..=1.0).contains(&i.scattering_coefficient) {
+        return Err((
+            2,
+            format!(
+                "error: --scattering-coefficient {} is not in [0, 1]",
+                i.scattering_coefficient
+            ),
+        ));
+    }
     if !(i.freq_hz > 0.0 && i.freq_hz.is_finite()) {
         return Err((
             2,
@@ -157,8 +175,8 @@ fn write_file(dest: &Path, bytes: &[u8]) -> Result<(), Fail> {
 }
 
 fn note_unmodelled(i: &Interactions, radio_map: bool) {
-    if !i.no_diffuse {
-        eprintln!("note: diffuse reflection is not modelled yet");
+    if i.diffuse && i.scattering_coefficient <= 0.0 {
+        eprintln!("note: --diffuse with a scattering coefficient of 0 scatters nothing");
     }
     if radio_map && i.diffraction {
         eprintln!("note: radio maps do not model diffraction yet");

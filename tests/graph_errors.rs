@@ -193,6 +193,6 @@ fn an_output_format_the_type_cannot_take() {
     assert_eq!(r.code, 2);
     has(
         &r.stderr,
-        "g.ron:4:16: output \"t.las\": Raster outputs are written as tif, not .las",
+        "g.ron:4:16: output \"t.las\": Raster outputs are written as tif, exr or png, not .las",
     );
 }

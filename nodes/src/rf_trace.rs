@@ -31,6 +31,12 @@ pub struct TraceParams {
 }
 
 fn check_options(o: &TraceOptions) -> Result<(), ParamError> {
+    if !(0.0..=1.0).contains(&o.scattering_coefficient) {
+        return Err(ParamError::new(
+            "options",
+            "expected a scattering_coefficient in [0, 1]",
+        ));
+    }
     if o.rays == 0 {
         return Err(ParamError::new("options", "expected at least one ray"));
     }

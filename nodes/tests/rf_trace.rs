@@ -189,22 +189,108 @@ fn diffraction_round_a_blade_matches_the_knife_edge() {
         diffraction: true,
         rays: 1000,
         foliage_db_per_m: None,
+        ..Default::default()
     };
     let lambda = wavelength(F);
     for h in [1.0, 2.0, 5.0] {
         // The ends sit h metres behind the tip's line, 60 m and 40 m from it.
         let (tx, rx) = ([-h, -60.0, 0.0], [-h, 40.0, 0.0]);
-        let r = &trace_links(&rf, &[(tx, rx)], &Antenna::default(), &Antenna::default(), &opt, F)[0];
+        let r = &trace_links(
+            &rf,
+            &[(tx, rx)],
+            &Antenna::default(),
+            &Antenna::default(),
+            &opt,
+            F,
+        )[0];
         assert_eq!(r.paths.len(), 1, "h {h}: {:?}", r.paths);
-        assert_eq!(r.paths[0].interactions[0].kind, InteractionKind::Diffraction);
+        assert_eq!(
+            r.paths[0].interactions[0].kind,
+            InteractionKind::Diffraction
+        );
         let (d1, d2) = ((h * h + 3600.0f64).sqrt(), (h * h + 1600.0f64).sqrt());
         let v = knife_edge_v(h, 60.0, 40.0, lambda);
         let expected = -fspl_db(d1 + d2, F) - fresnel_kirchhoff_db(v);
-        println!("blade, h {h} m (v {v:.2}): UTD {:.2} dB, knife edge {expected:.2} dB", r.gain_db);
+        println!(
+            "blade, h {h} m (v {v:.2}): UTD {:.2} dB, knife edge {expected:.2} dB",
+            r.gain_db
+        );
         assert!(
             (r.gain_db - expected).abs() < 1.0,
             "h {h} (v {v:.2}): UTD {:.2} dB, knife edge {expected:.2} dB",
             r.gain_db
         );
     }
+}
+
+/// Diffuse scattering off a ground plane (S = 1, Lambertian) against the surface integral it
+/// estimates, done here by quadrature: P = (λ/4π)² ∫ |R_TM|² (cos θ_s / π) cos θ_i / (r_i² r_s²) dA
+/// (a vertically polarised wave meets horizontal ground as TM).
+#[test]
+fn diffuse_ground_scattering_matches_its_surface_integral() {
+    use kodama_nodes::rf::scattering::ScatteringPattern;
+    let g = 2000.0;
+    let ground = quad(
+        "ground",
+        [[-g, -g, 0.0], [g, -g, 0.0], [g, g, 0.0], [-g, g, 0.0]],
+        Material::MediumDryGround,
+    );
+    let scene = RfScene::new(
+        &Scene {
+            objects: vec![ground],
+        },
+        F,
+        false,
+    )
+    .unwrap();
+    let (tx, rx) = ([0.0, 0.0, 20.0], [60.0, 0.0, 5.0]);
+    let opt = TraceOptions {
+        max_depth: 1,
+        los: false,
+        reflection: true,
+        transmission: false,
+        diffuse: true,
+        scattering_coefficient: 1.0,
+        scattering_pattern: ScatteringPattern::Lambertian,
+        rays: 1_000_000,
+        ..Default::default()
+    };
+    let r = &trace_links(
+        &scene,
+        &[(tx, rx)],
+        &Antenna::default(),
+        &Antenna::default(),
+        &opt,
+        F,
+    )[0];
+    assert!(r.paths.is_empty(), "S = 1 leaves no specular path");
+    let eta = permittivity(Material::MediumDryGround, F, false).unwrap();
+    let lam = wavelength(F);
+    let step = 0.5;
+    let mut sum = 0.0;
+    let (mut x, x1): (f64, f64) = (-400.0 + step / 2.0, 460.0);
+    while x < x1 {
+        let mut y: f64 = -400.0 + step / 2.0;
+        while y < 400.0 {
+            let ri2 = x * x + y * y + 400.0;
+            let rs2 = (x - 60.0) * (x - 60.0) + y * y + 25.0;
+            let (cos_i, cos_s) = (20.0 / ri2.sqrt(), 5.0 / rs2.sqrt());
+            let ((_, r_tm), _) = slab(cos_i, eta, 0.1, lam);
+            sum +=
+                r_tm.norm_sqr() * cos_s / std::f64::consts::PI * cos_i / (ri2 * rs2) * step * step;
+            y += step;
+        }
+        x += step;
+    }
+    let expected = 10.0 * ((lam / (4.0 * std::f64::consts::PI)).powi(2) * sum).log10();
+    println!(
+        "diffuse ground: traced {:.3} dB, quadrature {expected:.3} dB",
+        r.diffuse_gain_db
+    );
+    assert!(
+        (r.diffuse_gain_db - expected).abs() < 0.2,
+        "{} vs {expected}",
+        r.diffuse_gain_db
+    );
+    assert!((r.gain_db - r.diffuse_gain_db).abs() < 1e-9);
 }

@@ -64,6 +64,7 @@ fn path_gains_match_sionna_rt() {
             diffraction: false,
             rays: 1_000_000,
             foliage_db_per_m: None,
+            ..Default::default()
         };
         let links: Vec<_> = rows.iter().map(|r| (r.tx, r.rx)).collect();
         let ours = trace_links(

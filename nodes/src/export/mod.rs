@@ -43,10 +43,15 @@ pub fn output_file(name: &str, ty: ArtifactType) -> Result<(String, &'static str
     match name.rsplit_once('.') {
         Some((_, ext)) => match fmts.iter().find(|f| **f == ext) {
             Some(f) => Ok((name.to_owned(), f)),
-            None => Err(format!(
-                "{ty} outputs are written as {}, not .{ext}",
-                fmts.join(" or ")
-            )),
+            None => {
+                let list = match fmts.split_last() {
+                    Some((last, rest)) if !rest.is_empty() => {
+                        format!("{} or {last}", rest.join(", "))
+                    }
+                    _ => fmts.join(""),
+                };
+                Err(format!("{ty} outputs are written as {list}, not .{ext}"))
+            }
         },
         None => Ok((format!("{name}.{}", fmts[0]), fmts[0])),
     }

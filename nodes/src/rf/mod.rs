@@ -9,6 +9,7 @@ pub mod field;
 pub mod links_csv;
 pub mod paths;
 pub mod radiomap;
+pub mod scattering;
 pub mod scene;
 pub mod utd;
 

@@ -14,6 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use super::antenna::Antenna;
 use super::field::{self, CVec};
+use super::scattering::{ScatteringPattern, pattern};
 use super::scene::RfScene;
 
 /// A transmitter and a receiver position, site frame.
@@ -34,6 +35,15 @@ pub struct TraceOptions {
     /// First-order UTD diffraction at convex edges, for links (radio maps do not model it yet).
     /// Default false, as in Sionna RT.
     pub diffraction: bool,
+    /// Diffuse reflection (effective roughness): a fraction `scattering_coefficient`² of the
+    /// reflected power scattered by `scattering_pattern`, last bounce only for links. Default
+    /// false, as in Sionna RT.
+    pub diffuse: bool,
+    /// S in [0, 1] for every surface; specular reflection keeps √(1 − S²) of the field whether
+    /// or not diffuse paths are traced. Default 0 (Sionna's default).
+    pub scattering_coefficient: f64,
+    /// The diffuse pattern. Default Lambertian.
+    pub scattering_pattern: ScatteringPattern,
     /// Rays shot from each transmitter to find reflection sequences. Default 10^6 (Sionna's).
     pub rays: u32,
     /// Loss inside foliage volumes, dB per metre; default 0.2 dB/m x f in GHz (rf.md §5.1,
@@ -49,6 +59,9 @@ impl Default for TraceOptions {
             reflection: true,
             transmission: true,
             diffraction: false,
+            diffuse: false,
+            scattering_coefficient: 0.0,
+            scattering_pattern: ScatteringPattern::Lambertian,
             rays: 1_000_000,
             foliage_db_per_m: None,
         }
@@ -99,8 +112,11 @@ pub struct LinkPaths {
     pub paths: Vec<Path>,
     /// Σ |a|², dB (-inf without paths).
     pub gain_db: f64,
-    /// |Σ a e^{-j2πfτ}|², dB.
+    /// |Σ a e^{-j2πfτ}|², dB (diffuse power added incoherently).
     pub coherent_gain_db: f64,
+    /// The diffusely scattered power alone, dB (-inf without it); included in both gains, not
+    /// listed as paths.
+    pub diffuse_gain_db: f64,
 }
 
 const EPS: f64 = 1e-3;
@@ -135,6 +151,10 @@ pub fn trace_links(
     let mut txs: Vec<[u64; 3]> = links.iter().map(|l| l.0.map(f64::to_bits)).collect();
     txs.sort_unstable();
     txs.dedup();
+    let tx_of = |l: &LinkEnds| {
+        txs.binary_search(&l.0.map(f64::to_bits))
+            .expect("every tx was listed")
+    };
     let wedges = if opt.diffraction && opt.max_depth > 0 {
         super::diffraction::wedges(scene)
     } else {
@@ -144,14 +164,28 @@ pub fn trace_links(
         .iter()
         .map(|t| reflection_sequences(scene, DVec3::from(t.map(f64::from_bits)), opt))
         .collect();
+    // Diffuse power per link, computed per transmitter for all its receivers.
+    let mut diffuse = vec![0.0; links.len()];
+    if opt.diffuse && opt.scattering_coefficient > 0.0 && opt.max_depth > 0 {
+        for (k, t) in txs.iter().enumerate() {
+            let idx: Vec<usize> = (0..links.len())
+                .filter(|&i| tx_of(&links[i]) == k)
+                .collect();
+            let rxs: Vec<DVec3> = idx.iter().map(|&i| DVec3::from(links[i].1)).collect();
+            let tx = DVec3::from(t.map(f64::from_bits));
+            let p = diffuse_power(scene, tx, &rxs, tx_antenna, rx_antenna, opt, freq_hz);
+            for (&i, v) in idx.iter().zip(p) {
+                diffuse[i] = v;
+            }
+        }
+    }
     links
         .par_iter()
-        .map(|(tx, rx)| {
-            let k = txs
-                .binary_search(&tx.map(f64::to_bits))
-                .expect("every tx was listed");
-            let (tx, rx) = (DVec3::from(*tx), DVec3::from(*rx));
-            let found = link_paths(
+        .zip(diffuse.par_iter())
+        .map(|(link, &diffuse_power)| {
+            let k = tx_of(link);
+            let (tx, rx) = (DVec3::from(link.0), DVec3::from(link.1));
+            let mut paths = link_paths(
                 scene,
                 tx,
                 rx,
@@ -161,14 +195,98 @@ pub fn trace_links(
                 opt,
                 freq_hz,
             );
-            if wedges.is_empty() {
-                return found;
+            if !wedges.is_empty() {
+                paths.extend(diffracted_paths(
+                    scene, &wedges, tx, rx, tx_antenna, rx_antenna, opt, freq_hz,
+                ));
             }
-            let extra =
-                diffracted_paths(scene, &wedges, tx, rx, tx_antenna, rx_antenna, opt, freq_hz);
-            summarize(found.paths.into_iter().chain(extra).collect(), freq_hz)
+            summarize(paths, freq_hz, diffuse_power)
         })
         .collect()
+}
+
+/// Diffusely scattered power at each receiver (linear), last bounce only: rays from `tx` follow
+/// specular reflections and transmissions (every branch) to depth − 1; at each surface they hit,
+/// the ray tube of solid angle Ω scatters towards every receiver it sees a field of amplitude
+/// S Γ √(f_s Ω) |E| / r (the tube's footprint cos θ_i dA = Ω L² cancels its 1/L spreading),
+/// summed incoherently (rf.md §1.3).
+fn diffuse_power(
+    scene: &RfScene,
+    tx: DVec3,
+    rxs: &[DVec3],
+    tx_antenna: &Antenna,
+    rx_antenna: &Antenna,
+    opt: &TraceOptions,
+    freq_hz: f64,
+) -> Vec<f64> {
+    let omega = 4.0 * std::f64::consts::PI / opt.rays.max(1) as f64;
+    let s = opt.scattering_coefficient;
+    let specular_factor = (1.0 - s * s).max(0.0).sqrt();
+    let amp = scene.wavelength / (4.0 * std::f64::consts::PI);
+    let _ = freq_hz;
+    let chunks: Vec<Vec<f64>> = fibonacci_sphere(opt.rays)
+        .chunks(4096)
+        .map(|dirs| {
+            let mut acc = vec![0.0; rxs.len()];
+            for d0 in dirs {
+                let e0 = field::real(DVec3::from(tx_antenna.field(d0.to_array())));
+                let mut stack = vec![(tx, d0, e0, 0u32)];
+                while let Some((o, d, e, depth)) = stack.pop() {
+                    let Some(h) = scene.cast(o, d, EPS, f64::INFINITY) else {
+                        continue;
+                    };
+                    let q = o + d * h.t;
+                    if scene.is_foliage(h.triangle) {
+                        stack.push((q, d, e, depth));
+                        continue;
+                    }
+                    if depth + 1 > opt.max_depth {
+                        continue;
+                    }
+                    let n_raw = scene.normals[h.triangle as usize];
+                    let n = if d.dot(n_raw) < 0.0 { n_raw } else { -n_raw };
+                    let (r, t) = scene.slab(h.triangle, d.dot(n));
+                    let (e_spec, k_spec) = field::reflect(&e, d, n, r);
+                    let gamma = (field::norm_sqr(&e_spec) / field::norm_sqr(&e).max(1e-300)).sqrt();
+                    let (th_i, ph_i) = super::antenna::spherical_basis(d.to_array());
+                    let (e_th, e_ph) = (
+                        field::dot(&e, DVec3::from(th_i)),
+                        field::dot(&e, DVec3::from(ph_i)),
+                    );
+                    for (k, rx) in rxs.iter().enumerate() {
+                        let to = *rx - q;
+                        let r_s = to.length();
+                        let ks = to / r_s;
+                        let f = pattern(opt.scattering_pattern, d, ks, n);
+                        if f <= 0.0 || !scene.hits_between(q, *rx, EPS).is_empty() {
+                            continue;
+                        }
+                        let (th_o, ph_o) = super::antenna::spherical_basis(ks.to_array());
+                        let scale = s * gamma * (f * omega).sqrt() / r_s * amp;
+                        let rx_pattern = DVec3::from(rx_antenna.field((-ks).to_array()));
+                        let a = (e_th * DVec3::from(th_o).dot(rx_pattern)
+                            + e_ph * DVec3::from(ph_o).dot(rx_pattern))
+                            * scale;
+                        acc[k] += a.norm_sqr();
+                    }
+                    if opt.reflection {
+                        stack.push((q, k_spec, e_spec.map(|c| c * specular_factor), depth + 1));
+                    }
+                    if opt.transmission {
+                        stack.push((q, d, field::transmit(&e, d, n, t), depth + 1));
+                    }
+                }
+            }
+            acc
+        })
+        .collect();
+    let mut total = vec![0.0; rxs.len()];
+    for c in chunks {
+        for (t, v) in total.iter_mut().zip(c) {
+            *t += v;
+        }
+    }
+    total
 }
 
 /// The distinct sequences of triangles that rays from `tx` reflect off, up to the depth, sorted.
@@ -218,7 +336,7 @@ fn reflection_sequences(scene: &RfScene, tx: DVec3, opt: &TraceOptions) -> Vec<V
     all
 }
 
-/// Solves every sequence for one receiver, plus the direct path.
+/// Every path of one receiver: the direct one and each sequence solved.
 #[allow(clippy::too_many_arguments)]
 fn link_paths(
     scene: &RfScene,
@@ -229,7 +347,7 @@ fn link_paths(
     rx_antenna: &Antenna,
     opt: &TraceOptions,
     freq_hz: f64,
-) -> LinkPaths {
+) -> Vec<Path> {
     let mut paths = Vec::new();
     if opt.los
         && let Some(p) = evaluate(scene, &[tx, rx], &[], tx_antenna, rx_antenna, opt, freq_hz)
@@ -243,11 +361,11 @@ fn link_paths(
             paths.push(p);
         }
     }
-    summarize(paths, freq_hz)
+    paths
 }
 
 /// Paths by delay, with the gains they add up to.
-fn summarize(mut paths: Vec<Path>, freq_hz: f64) -> LinkPaths {
+fn summarize(mut paths: Vec<Path>, freq_hz: f64, diffuse_power: f64) -> LinkPaths {
     paths.sort_by(|a, b| {
         a.delay_s
             .total_cmp(&b.delay_s)
@@ -264,8 +382,9 @@ fn summarize(mut paths: Vec<Path>, freq_hz: f64) -> LinkPaths {
         .sum();
     LinkPaths {
         paths,
-        gain_db: 10.0 * incoherent.log10(),
-        coherent_gain_db: 10.0 * coherent.norm_sqr().log10(),
+        gain_db: 10.0 * (incoherent + diffuse_power).log10(),
+        coherent_gain_db: 10.0 * (coherent.norm_sqr() + diffuse_power).log10(),
+        diffuse_gain_db: 10.0 * diffuse_power.log10(),
     }
 }
 
@@ -338,6 +457,7 @@ fn evaluate(
     freq_hz: f64,
 ) -> Option<Path> {
     let foliage_db_per_m = opt.foliage_db_per_m.unwrap_or(0.2 * freq_hz / 1e9);
+    let specular_factor = (1.0 - opt.scattering_coefficient.powi(2)).max(0.0).sqrt();
     let k0 = (points[1] - points[0]).normalize();
     let mut e: CVec = field::real(DVec3::from(tx_antenna.field(k0.to_array())));
     let mut interactions = Vec::new();
@@ -384,7 +504,7 @@ fn evaluate(
             let n = scene.normals[tri as usize];
             let (r, _) = scene.slab(tri, d.dot(n));
             let (e2, _) = field::reflect(&e, d, n, r);
-            e = e2;
+            e = e2.map(|c| c * specular_factor);
             interactions.push(Interaction {
                 kind: InteractionKind::Reflection,
                 point: b.to_array(),
@@ -397,6 +517,9 @@ fn evaluate(
     let amplitude = scene.wavelength / (4.0 * std::f64::consts::PI * length)
         * 10f64.powf(-foliage_db_per_m * foliage_m / 20.0);
     let a = field::dot(&e, rx_pattern) * amplitude;
+    if a.norm_sqr() == 0.0 {
+        return None; // e.g. specular reflection with S = 1: nothing travels this way
+    }
     Some(Path {
         interactions,
         length_m: length,

@@ -13,8 +13,10 @@ use crate::artifact::{Grid, PodVec, Raster};
 use crate::rng::{mix, unit};
 
 use super::antenna::Antenna;
+use super::antenna::spherical_basis;
 use super::field::{self, CVec};
 use super::paths::{TraceOptions, fibonacci_sphere};
+use super::scattering::pattern;
 use super::scene::RfScene;
 
 const EPS: f64 = 1e-3;
@@ -184,6 +186,7 @@ fn shoot(
     foliage_db_per_m: f64,
     out: &mut Vec<(u32, f64)>,
 ) {
+    let mut omega = omega;
     let mut e: CVec = field::real(DVec3::from(antenna.field(d0.to_array())));
     let (mut o, mut d) = (tx, d0);
     let (mut depth, mut in_foliage) = (0u32, 0i32);
@@ -222,35 +225,58 @@ fn shoot(
             return;
         }
         let (r, t) = scene.slab(h.triangle, d.dot(n));
-        let reflect = match (opt.reflection, opt.transmission) {
-            (false, false) => return,
-            (true, false) => Some(1.0),
-            (false, true) => None,
-            (true, true) => {
-                let pr = r.0.norm_sqr() + r.1.norm_sqr();
-                let pt = t.0.norm_sqr() + t.1.norm_sqr();
-                let p_reflect = if pr + pt > 0.0 { pr / (pr + pt) } else { 0.5 };
-                let u = unit(mix(ray.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ depth as u64));
-                if u < p_reflect {
-                    Some(p_reflect)
-                } else {
-                    Some(-(1.0 - p_reflect))
-                }
-            }
-        };
-        match reflect {
-            Some(p) if p > 0.0 => {
-                let (e2, k) = field::reflect(&e, d, n, r);
-                e = e2.map(|c| c / p.sqrt());
-                d = k;
-            }
-            Some(p) => {
-                e = field::transmit(&e, d, n, t).map(|c| c / (-p).sqrt());
-            }
-            None => e = field::transmit(&e, d, n, t),
+        // Sionna's event probabilities: specular r (1 - S²), diffuse r S², transmission t.
+        let (pr, pt) = (
+            r.0.norm_sqr() + r.1.norm_sqr(),
+            t.0.norm_sqr() + t.1.norm_sqr(),
+        );
+        let s2 = opt.scattering_coefficient.powi(2);
+        let p_spec = if opt.reflection { pr * (1.0 - s2) } else { 0.0 };
+        let p_diff = if opt.diffuse { pr * s2 } else { 0.0 };
+        let p_tran = if opt.transmission { pt } else { 0.0 };
+        let total = p_spec + p_diff + p_tran;
+        if total <= 0.0 {
+            return;
+        }
+        let seed = mix(ray.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ depth as u64);
+        let u = unit(seed) * total;
+        if u < p_spec {
+            let (e2, k) = field::reflect(&e, d, n, r);
+            let w = ((1.0 - s2) * total / p_spec).sqrt();
+            e = e2.map(|c| c * w);
+            d = k;
+        } else if u < p_spec + p_diff {
+            // Uniform on the hemisphere the wave came from; the new tube spans 2π.
+            let side = if d.dot(n) < 0.0 { n } else { -n };
+            let (u1, u2) = (unit(mix(seed ^ 1)), unit(mix(seed ^ 2)));
+            let ko = hemisphere(side, u1, u2);
+            let (e_spec, _) = field::reflect(&e, d, n, r);
+            let gamma = (field::norm_sqr(&e_spec) / field::norm_sqr(&e).max(1e-300)).sqrt();
+            let f = pattern(opt.scattering_pattern, d, ko, side);
+            let (th_i, ph_i) = spherical_basis(d.to_array());
+            let (th_o, ph_o) = spherical_basis(ko.to_array());
+            let (e_th, e_ph) = (
+                field::dot(&e, DVec3::from(th_i)),
+                field::dot(&e, DVec3::from(ph_i)),
+            );
+            let w = opt.scattering_coefficient * gamma * (f * omega * total / p_diff).sqrt();
+            e = [0, 1, 2].map(|c| (e_th * th_o[c] + e_ph * ph_o[c]) * w);
+            d = ko;
+            omega = 2.0 * std::f64::consts::PI;
+        } else {
+            e = field::transmit(&e, d, n, t).map(|c| c * (total / p_tran).sqrt());
         }
         o = p;
     }
+}
+
+/// A direction on the hemisphere round `n`, uniform in solid angle, from two uniforms.
+fn hemisphere(n: DVec3, u1: f64, u2: f64) -> DVec3 {
+    let z = u1;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * std::f64::consts::PI * u2;
+    let (a, b) = n.any_orthonormal_pair();
+    (a * (r * phi.cos()) + b * (r * phi.sin()) + n * z).normalize()
 }
 
 #[cfg(test)]
