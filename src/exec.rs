@@ -60,6 +60,17 @@ pub fn graph_key(graph: &Graph) -> String {
     format!("{}-{}", graph.name, &h[..16])
 }
 
+/// The output digests of every node of `graph`'s last run in `cache` (what `gc --keep` pins).
+pub fn last_run_digests(graph: &Graph, cache: &Cache) -> Vec<[u8; 32]> {
+    LastRun::load(&cache.runs_dir(&graph_key(graph)))
+        .nodes
+        .values()
+        .filter_map(|s| s.digest.as_deref())
+        .filter_map(|d| crate::cache::Digest::from_hex(d).ok())
+        .map(|d| *d.as_bytes())
+        .collect()
+}
+
 /// Resolves `--target` ids to node indices.
 pub fn target_indices(graph: &Graph, targets: &[String]) -> Result<Vec<usize>, RunError> {
     targets

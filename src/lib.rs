@@ -15,4 +15,6 @@ pub mod key;
 pub mod progress;
 pub mod record;
 pub mod registry;
+pub mod sweep;
 pub mod syntax;
+pub mod watch;

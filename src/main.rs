@@ -58,6 +58,55 @@ enum Command {
         #[arg(long, short)]
         quiet: bool,
     },
+    /// Rerun a graph whenever the graph file or an input it reads changes.
+    Watch {
+        #[command(flatten)]
+        graph: GraphArgs,
+        /// Cache directory (default: $KODAMA_DAG_CACHE, else ./cache).
+        #[arg(long)]
+        cache: Option<PathBuf>,
+        /// Where the declared outputs go (default: out/<graph name>/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long, short)]
+        jobs: Option<usize>,
+        /// Print each run record as one JSON line on stdout.
+        #[arg(long)]
+        json: bool,
+        /// Print only warnings and errors.
+        #[arg(long, short)]
+        quiet: bool,
+        /// Quiet time after a change before rerunning, milliseconds.
+        #[arg(long, default_value_t = 300)]
+        debounce_ms: u64,
+    },
+    /// Run a sweep file: a base graph over grids of parameters and ablation switches.
+    Sweep {
+        /// The sweep file (RON).
+        sweep: PathBuf,
+        /// Resolve the base graph's data paths against this folder.
+        #[arg(long)]
+        data: Option<PathBuf>,
+        /// Override applied to every variant: NODE.PARAM=VALUE (repeatable).
+        #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+        sets: Vec<String>,
+        /// Cache directory (default: $KODAMA_DAG_CACHE, else ./cache).
+        #[arg(long)]
+        cache: Option<PathBuf>,
+        /// Where the table and each variant's outputs go (default: out/<sweep name>/).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Worker threads per variant (default: all cores).
+        #[arg(long, short)]
+        jobs: Option<usize>,
+        /// Print only warnings, errors and the table.
+        #[arg(long, short)]
+        quiet: bool,
+        /// Check every variant's graph and list the variants, without running anything.
+        #[arg(long)]
+        dry_run: bool,
+    },
     /// Say what `run` would do and why, without running anything.
     Explain {
         #[command(flatten)]
@@ -80,6 +129,12 @@ enum Command {
         /// Size bound, in bytes or with a unit: 500M, 2G, 1GiB.
         #[arg(long, value_parser = parse_bytes)]
         max_bytes: u64,
+        /// Never evict what this graph's last run produced (repeatable).
+        #[arg(long, value_name = "GRAPH")]
+        keep: Vec<PathBuf>,
+        /// Resolve the kept graphs' data paths against this folder.
+        #[arg(long)]
+        data: Option<PathBuf>,
     },
     /// Print the graph as Graphviz dot or Mermaid.
     Graph {
@@ -179,6 +234,112 @@ fn open_cache(dir: Option<PathBuf>) -> Result<Cache, Fail> {
     })
 }
 
+/// Runs `g` once and reports it as `run` does; the exit code.
+fn run_once(
+    g: &Graph,
+    cache: &Cache,
+    out_dir: PathBuf,
+    targets: Vec<String>,
+    jobs: Option<usize>,
+    json: bool,
+    quiet: bool,
+) -> Result<u8, Fail> {
+    let total = g
+        .needed(&kodama_dag::exec::target_indices(g, &targets)?)
+        .iter()
+        .filter(|x| **x)
+        .count();
+    let reporter = Reporter::new(Mode::detect(quiet), total);
+    let record = run(
+        g,
+        cache,
+        &RunOptions {
+            jobs,
+            targets,
+            out_dir,
+        },
+        &reporter,
+    )?;
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string(&record).expect("records serialize")
+        );
+    }
+    let failed: Vec<_> = record
+        .nodes
+        .iter()
+        .filter(|n| n.status == Status::Failed)
+        .collect();
+    for n in &failed {
+        eprintln!(
+            "error: node \"{}\" ({}) failed: {}",
+            n.id,
+            n.kind,
+            n.error.as_deref().unwrap_or("?")
+        );
+    }
+    Ok(match () {
+        _ if failed.iter().any(|n| n.user_error) => 2,
+        _ if !failed.is_empty() => 1,
+        _ => 0,
+    })
+}
+
+/// `watch`: run, then rerun on every relevant change until interrupted. A graph that does not
+/// load (or a run that fails) is reported and the watch goes on. Interrupting is safe at any
+/// moment: every cache and output write is atomic.
+fn watch_loop(
+    args: GraphArgs,
+    cache: Option<PathBuf>,
+    out: Option<PathBuf>,
+    jobs: Option<usize>,
+    json: bool,
+    quiet: bool,
+    debounce_ms: u64,
+) -> Result<u8, Fail> {
+    let cache = open_cache(cache)?;
+    let mut ignore =
+        vec![std::fs::canonicalize(cache.root()).unwrap_or_else(|_| cache.root().to_path_buf())];
+    loop {
+        let loaded = load_graph(&args);
+        let out_dir = match (&out, &loaded) {
+            (Some(o), _) => o.clone(),
+            (None, Ok(g)) => Path::new("out").join(&g.name),
+            (None, Err(_)) => Path::new("out").join(args.graph.file_stem().unwrap_or_default()),
+        };
+        std::fs::create_dir_all(&out_dir).ok();
+        if let Ok(o) = std::fs::canonicalize(&out_dir) {
+            ignore.push(o);
+        }
+        // Watch before running, so an edit made during the run is not missed.
+        let paths = kodama_dag::watch::watched_paths(&args.graph, loaded.as_ref().ok());
+        let (_watcher, rx) = kodama_dag::watch::watcher(&paths).map_err(|e| {
+            Fail(
+                1,
+                format!("error: cannot watch {}: {e}", args.graph.display()),
+            )
+        })?;
+        match &loaded {
+            Ok(g) => match run_once(g, &cache, out_dir, vec![], jobs, json, quiet) {
+                Ok(_) => {}
+                Err(Fail(_, msg)) => eprintln!("{msg}"),
+            },
+            Err(Fail(_, msg)) => eprintln!("{msg}"),
+        }
+        eprintln!("watching {} paths (Ctrl-C to stop)", paths.len());
+        if !kodama_dag::watch::wait_for_change(
+            &rx,
+            &paths,
+            &ignore,
+            std::time::Duration::from_millis(debounce_ms),
+        ) {
+            return Ok(0);
+        }
+        eprintln!("change detected: rerunning");
+    }
+}
+
 fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_env("KODAMA_DAG_LOG"))
@@ -210,46 +371,81 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             let g = load_graph(&graph)?;
             let cache = open_cache(cache)?;
             let out_dir = out.unwrap_or_else(|| Path::new("out").join(&g.name));
-            let total = g
-                .needed(&kodama_dag::exec::target_indices(&g, &targets)?)
-                .iter()
-                .filter(|x| **x)
-                .count();
-            let reporter = Reporter::new(Mode::detect(quiet), total);
-            let record = run(
-                &g,
-                &cache,
-                &RunOptions {
-                    jobs,
-                    targets,
-                    out_dir,
-                },
-                &reporter,
-            )?;
-            if json {
-                println!(
-                    "{}",
-                    serde_json::to_string(&record).expect("records serialize")
-                );
+            run_once(&g, &cache, out_dir, targets, jobs, json, quiet)
+        }
+        Command::Watch {
+            graph,
+            cache,
+            out,
+            jobs,
+            json,
+            quiet,
+            debounce_ms,
+        } => watch_loop(graph, cache, out, jobs, json, quiet, debounce_ms),
+        Command::Sweep {
+            sweep,
+            data,
+            sets,
+            cache,
+            out,
+            jobs,
+            quiet,
+            dry_run,
+        } => {
+            let sw = kodama_dag::sweep::load_sweep(&sweep)
+                .map_err(|e| Fail(2, format!("error: {e}")))?;
+            if dry_run {
+                let opts = kodama_dag::sweep::SweepOptions {
+                    data_dir: data,
+                    sets,
+                    ..Default::default()
+                };
+                let variants = kodama_dag::sweep::check_variants(&sw, &opts)
+                    .map_err(|e| Fail(2, format!("error: {e}")))?;
+                for v in variants {
+                    println!("{}", v.name());
+                }
+                return Ok(0);
             }
-            let failed: Vec<_> = record
-                .nodes
-                .iter()
-                .filter(|n| n.status == Status::Failed)
-                .collect();
-            for n in &failed {
-                eprintln!(
-                    "error: node \"{}\" ({}) failed: {}",
-                    n.id,
-                    n.kind,
-                    n.error.as_deref().unwrap_or("?")
-                );
-            }
-            Ok(match () {
-                _ if failed.iter().any(|n| n.user_error) => 2,
-                _ if !failed.is_empty() => 1,
-                _ => 0,
+            let cache = open_cache(cache)?;
+            let out_dir = out.unwrap_or_else(|| Path::new("out").join(&sw.name));
+            let opts = kodama_dag::sweep::SweepOptions {
+                data_dir: data,
+                sets,
+                out_dir: out_dir.clone(),
+                jobs,
+            };
+            let reporter = Reporter::new(Mode::detect(quiet), 0);
+            let results = kodama_dag::sweep::run_sweep(&sw, &cache, &opts, &reporter, |i, n, v| {
+                if !quiet {
+                    eprintln!("variant {}/{n}: {}", i + 1, v.name());
+                }
             })
+            .map_err(|e| match e {
+                kodama_dag::sweep::SweepError::Graph(m) => Fail(2, format!("error: {m}")),
+                kodama_dag::sweep::SweepError::Failed(m) => Fail(1, format!("error: {m}")),
+                kodama_dag::sweep::SweepError::Run(e) => Fail::from(e),
+            })?;
+            let ran: usize = results
+                .iter()
+                .map(|r| {
+                    r.record
+                        .nodes
+                        .iter()
+                        .filter(|n| n.status == Status::Ran)
+                        .count()
+                })
+                .sum();
+            eprintln!(
+                "{} variants, {ran} node runs in all; table in {}",
+                results.len(),
+                out_dir.join("table.md").display()
+            );
+            print!(
+                "{}",
+                std::fs::read_to_string(out_dir.join("table.md")).unwrap_or_default()
+            );
+            Ok(0)
         }
         Command::Explain {
             graph,
@@ -277,9 +473,23 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             }
             Ok(0)
         }
-        Command::Gc { cache, max_bytes } => {
+        Command::Gc {
+            cache,
+            max_bytes,
+            keep,
+            data,
+        } => {
             let cache = open_cache(cache)?;
-            let report = gc(&cache, max_bytes, &BTreeSet::new(), || {
+            let mut pinned = BTreeSet::new();
+            for g in keep {
+                let graph = load_graph(&GraphArgs {
+                    graph: g,
+                    data: data.clone(),
+                    sets: Vec::new(),
+                })?;
+                pinned.extend(kodama_dag::exec::last_run_digests(&graph, &cache));
+            }
+            let report = gc(&cache, max_bytes, &pinned, || {
                 eprintln!("waiting for running jobs to release the cache...")
             })
             .map_err(|e| {
@@ -289,11 +499,12 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
                 )
             })?;
             println!(
-                "{} -> {} bytes; removed {} artifacts and {} stale action entries",
+                "{} -> {} bytes; removed {} artifacts and {} stale action entries; kept {} pinned",
                 report.bytes_before,
                 report.bytes_after,
                 report.blobs_removed,
-                report.actions_removed
+                report.actions_removed,
+                report.blobs_pinned
             );
             Ok(0)
         }

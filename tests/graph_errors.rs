@@ -168,8 +168,27 @@ fn bad_set_arguments() {
     );
     has(
         &fails(nodes, &["--set", "b=2"]),
-        "expected NODE.PARAM=VALUE",
+        "node \"b\": expected a node definition `Kind(field: value, ...)`, found integer",
     );
+    has(
+        &fails(nodes, &["--set", "b=Blur(raster: \"t\")"]),
+        "unknown node kind `Blur`",
+    );
+}
+
+#[test]
+fn set_can_replace_a_whole_node() {
+    let env = Env::new();
+    let g = env.write(
+        "g.ron",
+        &format!("Graph(\n    {SITE},\n    nodes: {{ \"t\": SynthTerrain(), \"b\": GaussianBlur(raster: \"t\", sigma_m: 1.0), \"s\": RasterStats(raster: \"b\") }},\n)\n"),
+    );
+    let r = env
+        .run(&g, &["--set", "b=Clamp(raster: \"t\", max: 0.0)"])
+        .ok();
+    assert_eq!(r.status("b"), "ran");
+    let node = r.node("b");
+    assert_eq!(node["kind"], "Clamp");
 }
 
 #[test]

@@ -10,13 +10,14 @@ use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
 #[serde(deny_unknown_fields)]
 pub struct NoParams {}
 
-/// Cell count, valid count, min, max, mean and standard deviation of the valid cells.
+/// Cell count, valid count, min, max, mean, standard deviation and root mean square of the valid
+/// cells.
 pub struct RasterStats;
 
 impl Stage for RasterStats {
     const KIND: &'static str = "RasterStats";
-    const VERSION: u32 = 1;
-    const DOC: &'static str = "raster summary: cells, valid cells, min, max, mean, std";
+    const VERSION: u32 = 2;
+    const DOC: &'static str = "raster summary: cells, valid cells, min, max, mean, std, rms";
     const INPUTS: &'static [InputSpec] =
         &[InputSpec::one("raster", ArtifactType::Raster, "the raster")];
     type Params = NoParams;
@@ -53,6 +54,8 @@ pub fn raster_stats(r: &Raster) -> Metrics {
         m.set("max", hi);
         m.set("mean", mean);
         m.set("std", (sum2 / n as f64 - mean * mean).max(0.0).sqrt());
+        // Of a difference raster, the RMSE.
+        m.set("rms", (sum2 / n as f64).sqrt());
     }
     m
 }

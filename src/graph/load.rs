@@ -326,11 +326,8 @@ fn apply_sets(raw: &mut [RawNode], opts: &LoadOptions, diags: &mut Vec<Diagnosti
             continue;
         };
         let Some((node, param)) = lhs.split_once('.') else {
-            diags.push(Diagnostic::at(
-                at(1),
-                None,
-                "expected NODE.PARAM=VALUE (no `.` between node and param)",
-            ));
+            // NODE=Kind(...): the node replaced by another definition (an ablation swaps a stage).
+            replace_node(raw, lhs, value, src, diags);
             continue;
         };
         let Some(r) = raw.iter_mut().find(|r| r.id == node) else {
@@ -356,6 +353,63 @@ fn apply_sets(raw: &mut [RawNode], opts: &LoadOptions, diags: &mut Vec<Diagnosti
             Some(f) => *f = (name, v),
             None => r.fields.push((name, v)),
         }
+    }
+}
+
+/// `--set NODE=Kind(field: value, ...)`: the node's kind and fields replaced.
+fn replace_node(
+    raw: &mut [RawNode],
+    node: &str,
+    value: &str,
+    src: u16,
+    diags: &mut Vec<Diagnostic>,
+) {
+    let at = |col: usize| Span {
+        src,
+        line: 1,
+        col: col as u32,
+    };
+    let Some(r) = raw.iter_mut().find(|r| r.id == node) else {
+        let ids: Vec<String> = raw.iter().map(|r| r.id.clone()).collect();
+        diags.push(Diagnostic::at(
+            at(1),
+            None,
+            format!(
+                "{} (NODE=Kind(...) replaces a node; NODE.PARAM=VALUE sets a param)",
+                unknown("node", node, ids.iter().map(String::as_str))
+            ),
+        ));
+        return;
+    };
+    let value_col = node.chars().count() + 2;
+    match syntax::parse(value, src, 1, value_col as u32) {
+        Ok(Ast {
+            v:
+                Value::Struct {
+                    name: Some(kind),
+                    fields,
+                },
+            ..
+        }) => {
+            r.kind = kind;
+            r.fields = fields;
+        }
+        Ok(Ast {
+            v: Value::Ident(kind),
+            span,
+        }) => {
+            r.kind = Name { name: kind, span };
+            r.fields = Vec::new();
+        }
+        Ok(other) => diags.push(Diagnostic::at(
+            other.span,
+            Some(node),
+            format!(
+                "expected a node definition `Kind(field: value, ...)`, found {}",
+                other.v.describe()
+            ),
+        )),
+        Err(e) => diags.push(Diagnostic::at(e.span, Some(node), e.message)),
     }
 }
 

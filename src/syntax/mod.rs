@@ -80,6 +80,54 @@ pub enum Value {
     },
 }
 
+impl Ast {
+    /// The value as RON text (what a `--set` takes).
+    pub fn to_ron(&self) -> String {
+        let list = |items: &[Ast]| items.iter().map(Ast::to_ron).collect::<Vec<_>>().join(", ");
+        let fields = |f: &[(Name, Ast)]| {
+            f.iter()
+                .map(|(n, v)| format!("{}: {}", n.name, v.to_ron()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        match &self.v {
+            Value::Bool(b) => b.to_string(),
+            Value::Int(i) => i.to_string(),
+            Value::Float(f) if f.is_finite() && f.fract() == 0.0 && f.abs() < 1e15 => {
+                format!("{f:.1}")
+            }
+            Value::Float(f) if f.is_nan() => "NaN".into(),
+            Value::Float(f) if f.is_infinite() => {
+                if *f > 0.0 {
+                    "inf".into()
+                } else {
+                    "-inf".into()
+                }
+            }
+            Value::Float(f) => format!("{f}"),
+            Value::Str(s) => format!("{s:?}"),
+            Value::Char(c) => format!("{c:?}"),
+            Value::Unit => "()".into(),
+            Value::Ident(i) => i.clone(),
+            Value::List(v) => format!("[{}]", list(v)),
+            Value::Tuple(v) => format!("({})", list(v)),
+            Value::Map(m) => format!(
+                "{{{}}}",
+                m.iter()
+                    .map(|(k, v)| format!("{}: {}", k.to_ron(), v.to_ron()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            Value::Struct { name, fields: f } => format!(
+                "{}({})",
+                name.as_ref().map_or("", |n| n.name.as_str()),
+                fields(f)
+            ),
+            Value::Call { name, args } => format!("{}({})", name.name, list(args)),
+        }
+    }
+}
+
 impl Value {
     /// A short description for "expected X, found Y" messages.
     pub fn describe(&self) -> String {

@@ -1,0 +1,542 @@
+//! Sweeps: one base graph run over the product of parameter grids and ablation switches, every
+//! variant through the same cache, and one table of chosen metrics per variant.
+//!
+//! ```ron
+//! Sweep(
+//!     graph: "../demo.ron",
+//!     axes: {
+//!         "roof_tolerance": Grid(set: "solids.tolerance_m", values: [0.1, 0.3]),
+//!         "terrain": Switch({ "eq1": [], "coarse": ["terrain2=Coarsen(raster: \"terrain1\", cell_m: 8.0)"] }),
+//!     },
+//!     metrics: ["footprint_score.iou", "terrain_error_stats.rmse"],
+//! )
+//! ```
+//!
+//! A `Grid` sets one parameter to each value; a `Switch` names variants by the `--set` overrides
+//! they apply (`NODE.PARAM=VALUE`, or `NODE=Kind(...)` to swap a stage). Variants run one after
+//! another so a node they share is computed once, by the first, and every later variant finds it in
+//! the cache; within a variant nodes run in parallel. An interrupted sweep resumes where it
+//! stopped: finished variants are all cache hits.
+
+use std::path::{Path, PathBuf};
+
+use kodama_nodes::Artifact;
+use kodama_nodes::artifact::Metrics;
+
+use crate::cache::{Cache, Digest, write_atomic};
+use crate::exec::{RunError, RunOptions, run};
+use crate::graph::{Graph, LoadOptions, load};
+use crate::progress::Reporter;
+use crate::record::RunRecord;
+use crate::syntax::{self, Ast, Value};
+
+/// A loaded sweep file.
+#[derive(Clone, Debug)]
+pub struct Sweep {
+    /// The sweep file.
+    pub path: PathBuf,
+    /// Its stem (the default output folder).
+    pub name: String,
+    /// The base graph, resolved against the sweep file's folder.
+    pub graph: PathBuf,
+    /// Axes in file order: name, then its choices.
+    pub axes: Vec<(String, Vec<Choice>)>,
+    /// `NODE.KEY` of each metric reported.
+    pub metrics: Vec<String>,
+}
+
+/// One choice on an axis: its label and the overrides it applies.
+pub type Choice = (String, Vec<String>);
+
+/// One point of the sweep.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Variant {
+    /// (axis, label) per axis.
+    pub labels: Vec<(String, String)>,
+    /// The overrides, in axis order.
+    pub sets: Vec<String>,
+}
+
+impl Variant {
+    /// `axis=label,axis=label`: the variant's name and (sanitised) output folder.
+    pub fn name(&self) -> String {
+        self.labels
+            .iter()
+            .map(|(a, l)| format!("{a}={l}"))
+            .collect::<Vec<_>>()
+            .join(",")
+    }
+}
+
+fn err(path: &Path, at: &Ast, msg: impl std::fmt::Display) -> String {
+    format!("{}:{}:{}: {msg}", path.display(), at.span.line, at.span.col)
+}
+
+fn string(path: &Path, a: &Ast, what: &str) -> Result<String, String> {
+    match &a.v {
+        Value::Str(s) => Ok(s.clone()),
+        v => Err(err(
+            path,
+            a,
+            format!("expected {what} as a string, found {}", v.describe()),
+        )),
+    }
+}
+
+/// Reads and checks a sweep file.
+pub fn load_sweep(path: &Path) -> Result<Sweep, String> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: cannot read the sweep file: {e}", path.display()))?;
+    let ast = syntax::parse(&text, 0, 1, 1).map_err(|e| {
+        format!(
+            "{}:{}:{}: {}",
+            path.display(),
+            e.span.line,
+            e.span.col,
+            e.message
+        )
+    })?;
+    let Value::Struct { name, fields } = &ast.v else {
+        return Err(err(
+            path,
+            &ast,
+            "expected `Sweep(graph: ..., axes: {...}, metrics: [...])`",
+        ));
+    };
+    if name.as_ref().is_some_and(|n| n.name != "Sweep") {
+        return Err(err(path, &ast, "expected `Sweep(...)`"));
+    }
+    let (mut graph, mut axes, mut metrics) = (None, Vec::new(), Vec::new());
+    for (n, v) in fields {
+        match n.name.as_str() {
+            "graph" => graph = Some(string(path, v, "the base graph's path")?),
+            "metrics" => {
+                let Value::List(items) = &v.v else {
+                    return Err(err(path, v, "expected a list of \"NODE.KEY\" metric names"));
+                };
+                for m in items {
+                    let m_s = string(path, m, "a metric")?;
+                    if !m_s.contains('.') {
+                        return Err(err(path, m, format!("expected NODE.KEY, found {m_s:?}")));
+                    }
+                    metrics.push(m_s);
+                }
+            }
+            "axes" => {
+                let Value::Map(entries) = &v.v else {
+                    return Err(err(
+                        path,
+                        v,
+                        "expected a map of axis name -> Grid(...) or Switch({...})",
+                    ));
+                };
+                for (k, a) in entries {
+                    let axis = string(path, k, "an axis name")?;
+                    axes.push((axis, axis_variants(path, a)?));
+                }
+            }
+            other => {
+                return Err(format!(
+                    "{}:{}:{}: unknown field `{other}`; expected graph, axes or metrics",
+                    path.display(),
+                    n.span.line,
+                    n.span.col
+                ));
+            }
+        }
+    }
+    let graph = graph.ok_or_else(|| err(path, &ast, "missing field `graph`"))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    Ok(Sweep {
+        path: path.to_path_buf(),
+        name: path
+            .file_stem()
+            .map_or("sweep".into(), |s| s.to_string_lossy().into_owned()),
+        graph: base.join(graph),
+        axes,
+        metrics,
+    })
+}
+
+fn axis_variants(path: &Path, a: &Ast) -> Result<Vec<Choice>, String> {
+    match &a.v {
+        Value::Struct {
+            name: Some(n),
+            fields,
+        } if n.name == "Grid" => {
+            let (mut set, mut values) = (None, None);
+            for (f, v) in fields {
+                match f.name.as_str() {
+                    "set" => set = Some(string(path, v, "NODE.PARAM")?),
+                    "values" => match &v.v {
+                        Value::List(items) if !items.is_empty() => values = Some(items.clone()),
+                        _ => return Err(err(path, v, "expected a non-empty list of values")),
+                    },
+                    other => {
+                        return Err(err(
+                            path,
+                            v,
+                            format!("unknown Grid field `{other}`; expected set or values"),
+                        ));
+                    }
+                }
+            }
+            let set = set.ok_or_else(|| err(path, a, "Grid needs `set: \"NODE.PARAM\"`"))?;
+            if !set.contains('.') {
+                return Err(err(
+                    path,
+                    a,
+                    format!("expected set: \"NODE.PARAM\", found {set:?}"),
+                ));
+            }
+            Ok(values
+                .ok_or_else(|| err(path, a, "Grid needs `values: [...]`"))?
+                .iter()
+                .map(|v| {
+                    let text = v.to_ron();
+                    (
+                        text.trim_matches('"').to_string(),
+                        vec![format!("{set}={text}")],
+                    )
+                })
+                .collect())
+        }
+        Value::Call { name, args } if name.name == "Switch" && args.len() == 1 => {
+            let Value::Map(entries) = &args[0].v else {
+                return Err(err(
+                    path,
+                    &args[0],
+                    "expected Switch({ \"label\": [\"NODE.PARAM=VALUE\", ...], ... })",
+                ));
+            };
+            let mut out = Vec::new();
+            for (k, v) in entries {
+                let label = string(path, k, "a variant label")?;
+                let Value::List(items) = &v.v else {
+                    return Err(err(path, v, "expected a list of overrides"));
+                };
+                let sets = items
+                    .iter()
+                    .map(|i| string(path, i, "an override NODE.PARAM=VALUE or NODE=Kind(...)"))
+                    .collect::<Result<Vec<_>, _>>()?;
+                out.push((label, sets));
+            }
+            if out.is_empty() {
+                return Err(err(path, a, "a Switch needs at least one variant"));
+            }
+            Ok(out)
+        }
+        v => Err(err(
+            path,
+            a,
+            format!(
+                "expected Grid(set: ..., values: [...]) or Switch({{...}}), found {}",
+                v.describe()
+            ),
+        )),
+    }
+}
+
+impl Sweep {
+    /// Every variant: the product of the axes, first axis slowest.
+    pub fn variants(&self) -> Vec<Variant> {
+        let mut out = vec![Variant {
+            labels: vec![],
+            sets: vec![],
+        }];
+        for (axis, choices) in &self.axes {
+            out = out
+                .into_iter()
+                .flat_map(|v| {
+                    choices.iter().map(move |(label, sets)| {
+                        let mut n = v.clone();
+                        n.labels.push((axis.clone(), label.clone()));
+                        n.sets.extend(sets.iter().cloned());
+                        n
+                    })
+                })
+                .collect();
+        }
+        out
+    }
+}
+
+/// Options of a sweep run.
+#[derive(Clone, Debug, Default)]
+pub struct SweepOptions {
+    /// Data folder for the base graph.
+    pub data_dir: Option<PathBuf>,
+    /// Overrides applied to every variant, before the variant's own.
+    pub sets: Vec<String>,
+    /// Where the table and each variant's outputs go.
+    pub out_dir: PathBuf,
+    /// Worker threads per variant.
+    pub jobs: Option<usize>,
+}
+
+/// One variant's result.
+#[derive(Clone, Debug)]
+pub struct VariantResult {
+    /// The variant.
+    pub variant: Variant,
+    /// Its run record.
+    pub record: RunRecord,
+    /// The metrics asked for, NaN where missing.
+    pub metrics: Vec<f64>,
+}
+
+/// Why a sweep stopped.
+#[derive(Debug)]
+pub enum SweepError {
+    /// A variant's graph is invalid (exit 2).
+    Graph(String),
+    /// A run could not start or finish.
+    Run(RunError),
+    /// A variant had failed nodes (exit 1); the sweep stops there.
+    Failed(String),
+}
+
+/// Runs every variant in order through `cache`, then writes `table.md` and `table.csv` to the
+/// output folder. `on_variant` hears of each variant as it starts.
+pub fn run_sweep(
+    sweep: &Sweep,
+    cache: &Cache,
+    opts: &SweepOptions,
+    reporter: &Reporter,
+    mut on_variant: impl FnMut(usize, usize, &Variant),
+) -> Result<Vec<VariantResult>, SweepError> {
+    let variants = sweep.variants();
+    let graphs = checked_graphs(sweep, opts, &variants)?;
+    let stop_after: Option<usize> = std::env::var("KODAMA_DAG_FAULT_SWEEP_STOP_AFTER")
+        .ok()
+        .and_then(|v| v.parse().ok());
+    let mut results = Vec::new();
+    for (i, (v, g)) in variants.iter().zip(&graphs).enumerate() {
+        if stop_after == Some(i) {
+            // Fault injection for the resume test: as if the sweep were killed here.
+            std::process::exit(1);
+        }
+        on_variant(i, variants.len(), v);
+        let run_opts = RunOptions {
+            jobs: opts.jobs,
+            targets: vec![],
+            out_dir: opts.out_dir.join("variants").join(folder_name(&v.name())),
+        };
+        let record = run(g, cache, &run_opts, reporter).map_err(SweepError::Run)?;
+        if let Some(f) = record
+            .nodes
+            .iter()
+            .find(|n| n.status == crate::record::Status::Failed)
+        {
+            return Err(SweepError::Failed(format!(
+                "variant {}: node {:?} failed: {}",
+                v.name(),
+                f.id,
+                f.error.as_deref().unwrap_or(&f.reason)
+            )));
+        }
+        let metrics = sweep
+            .metrics
+            .iter()
+            .map(|m| metric(cache, &record, m))
+            .collect();
+        results.push(VariantResult {
+            variant: v.clone(),
+            record,
+            metrics,
+        });
+    }
+    write_tables(sweep, &opts.out_dir, cache, &results)
+        .map_err(|e| SweepError::Run(RunError::Io(e)))?;
+    Ok(results)
+}
+
+/// Every variant's graph, loaded and checked, with the metric names checked against it.
+fn checked_graphs(
+    sweep: &Sweep,
+    opts: &SweepOptions,
+    variants: &[Variant],
+) -> Result<Vec<Graph>, SweepError> {
+    let mut graphs = Vec::with_capacity(variants.len());
+    for v in variants {
+        let g = load_variant(sweep, opts, v)?;
+        for m in &sweep.metrics {
+            let (node, _) = m.split_once('.').expect("checked on load");
+            let Some(n) = g.nodes.iter().find(|n| n.id == node) else {
+                return Err(SweepError::Graph(format!(
+                    "{}: metric {m:?}: the graph has no node {node:?}",
+                    sweep.path.display()
+                )));
+            };
+            if n.kind.output != kodama_nodes::ArtifactType::Metrics {
+                return Err(SweepError::Graph(format!(
+                    "{}: metric {m:?}: node {node:?} makes {}, not Metrics",
+                    sweep.path.display(),
+                    n.kind.output
+                )));
+            }
+        }
+        graphs.push(g);
+    }
+    Ok(graphs)
+}
+
+/// Loads every variant's graph and checks the metric names, running nothing: the variants.
+pub fn check_variants(sweep: &Sweep, opts: &SweepOptions) -> Result<Vec<Variant>, String> {
+    let variants = sweep.variants();
+    checked_graphs(sweep, opts, &variants).map_err(|e| match e {
+        SweepError::Graph(m) | SweepError::Failed(m) => m,
+        SweepError::Run(e) => e.to_string(),
+    })?;
+    Ok(variants)
+}
+
+fn load_variant(sweep: &Sweep, opts: &SweepOptions, v: &Variant) -> Result<Graph, SweepError> {
+    let lo = LoadOptions {
+        data_dir: opts.data_dir.clone(),
+        sets: opts.sets.iter().chain(&v.sets).cloned().collect(),
+    };
+    load(&sweep.graph, &lo).map_err(|e| SweepError::Graph(format!("variant {}:\n{e}", v.name())))
+}
+
+/// The value of `NODE.KEY` in the Metrics artifact the run produced for NODE.
+fn metric(cache: &Cache, record: &RunRecord, m: &str) -> f64 {
+    let (node, key) = m.split_once('.').expect("checked on load");
+    record
+        .nodes
+        .iter()
+        .find(|n| n.id == node)
+        .and_then(|n| n.digest.as_deref())
+        .and_then(|d| Digest::from_hex(d).ok())
+        .and_then(|d| cache.get_blob(&d).ok())
+        .and_then(|b| rmp_serde::from_slice::<Artifact>(&b).ok())
+        .and_then(|a| match a {
+            Artifact::Metrics(Metrics { values }) => values.get(key).copied(),
+            _ => None,
+        })
+        .unwrap_or(f64::NAN)
+}
+
+/// A variant name as a folder name.
+fn folder_name(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "=,.-_".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+fn write_tables(
+    sweep: &Sweep,
+    out: &Path,
+    cache: &Cache,
+    results: &[VariantResult],
+) -> Result<(), String> {
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let axes: Vec<&str> = sweep.axes.iter().map(|(a, _)| a.as_str()).collect();
+    let header: Vec<String> = axes
+        .iter()
+        .map(|a| a.to_string())
+        .chain(sweep.metrics.iter().cloned())
+        .collect();
+    let fmt = |v: f64| {
+        if v.is_finite() {
+            format!("{v:.6}")
+        } else {
+            "NaN".into()
+        }
+    };
+    let mut md = format!(
+        "# Sweep {}\n\nBase graph: `{}`\n\n| {} |\n|{}\n",
+        sweep.name,
+        sweep.graph.display(),
+        header.join(" | "),
+        "---|".repeat(header.len())
+    );
+    let mut csv = header
+        .iter()
+        .map(|h| csv_field(h))
+        .collect::<Vec<_>>()
+        .join(",")
+        + "\n";
+    for r in results {
+        let row: Vec<String> = r
+            .variant
+            .labels
+            .iter()
+            .map(|(_, l)| l.clone())
+            .chain(r.metrics.iter().map(|&v| fmt(v)))
+            .collect();
+        md.push_str(&format!("| {} |\n", row.join(" | ")));
+        csv.push_str(
+            &(row
+                .iter()
+                .map(|c| csv_field(c))
+                .collect::<Vec<_>>()
+                .join(",")
+                + "\n"),
+        );
+    }
+    let tmp = cache.root().join("tmp");
+    for (name, text) in [("table.md", md), ("table.csv", csv)] {
+        write_atomic(&tmp, &out.join(name), text.as_bytes())
+            .map_err(|e| format!("{}: {e}", out.join(name).display()))?;
+    }
+    Ok(())
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn axes_multiply_in_file_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.ron");
+        std::fs::write(
+            &p,
+            r#"Sweep(
+    graph: "g.ron",
+    axes: {
+        "a": Grid(set: "n.x", values: [1.0, 2.5, "three"]),
+        "b": Switch({ "on": [], "off": ["n=Other(y: 2)", "m.z=true"] }),
+    },
+    metrics: ["stats.mean"],
+)"#,
+        )
+        .unwrap();
+        let s = load_sweep(&p).unwrap();
+        let v = s.variants();
+        assert_eq!(v.len(), 6);
+        assert_eq!(v[0].name(), "a=1.0,b=on");
+        assert_eq!(
+            v[1].sets,
+            vec![
+                "n.x=1.0".to_string(),
+                "n=Other(y: 2)".into(),
+                "m.z=true".into()
+            ]
+        );
+        assert_eq!(v[5].name(), "a=three,b=off");
+        assert_eq!(v[4].sets, vec!["n.x=\"three\"".to_string()]);
+        std::fs::write(
+            &p,
+            "Sweep(graph: \"g.ron\", axes: { \"a\": Grid(set: \"nx\", values: [1]) })",
+        )
+        .unwrap();
+        let e = load_sweep(&p).unwrap_err();
+        assert!(e.contains("s.ron:1:") && e.contains("NODE.PARAM"), "{e}");
+    }
+}
