@@ -41,6 +41,7 @@ pub mod building_solids;
 pub mod city_footprints;
 pub mod coarsen;
 pub mod composite_height;
+pub mod evaluate;
 pub mod footprint_score;
 pub mod gaussian_blur;
 pub mod osm_baseline;
@@ -63,11 +64,13 @@ pub mod roof_clean;
 pub mod split_buildings;
 pub mod stats;
 pub mod synth_city;
+pub mod synth_drive_test;
 pub mod synth_lidar;
 pub mod synth_scan;
 pub mod synth_terrain;
 pub mod synth_views;
 pub mod terrain_pass;
+pub mod tr38901;
 pub mod trace_footprints;
 pub mod truth_scene;
 pub mod unassigned;
@@ -92,6 +95,7 @@ macro_rules! for_each_stage {
             $crate::rasterize_scene::RenderOrtho,
             $crate::city_footprints::CityFootprints,
             $crate::synth_views::SynthViews,
+            $crate::synth_drive_test::SynthDriveTest,
             $crate::read_las::ReadLas,
             $crate::read_raster::ReadRaster,
             $crate::read_measurements::ReadMeasurements,
@@ -120,6 +124,8 @@ macro_rules! for_each_stage {
             $crate::raster_ops::Difference,
             $crate::rf_trace::Trace,
             $crate::rf_trace::RadioMap,
+            $crate::tr38901::Tr38901,
+            $crate::evaluate::Evaluate,
             $crate::footprint_score::FootprintScore,
             $crate::stats::RasterStats,
             $crate::stats::PointStats,

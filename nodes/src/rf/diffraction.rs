@@ -110,20 +110,18 @@ pub fn wedges(scene: &RfScene) -> Vec<Wedge> {
     out
 }
 
-/// The point of the edge where the path `s1 -> Q -> s2` is shortest, as a distance along it, if
-/// strictly inside the edge.
+/// The point of the edge where the path `s1 -> Q -> s2` is shortest (Keller's cone: equal angles
+/// with the edge), as a distance along it, if strictly inside the edge. Unfolding the two ends
+/// about the edge line makes the path straight, so Q divides the ends' projections on the edge in
+/// the ratio of their distances from it.
 pub fn diffraction_point(w: &Wedge, s1: DVec3, s2: DVec3) -> Option<f64> {
-    let f = |u: f64| (s1 - (w.a + w.e * u)).length() + (s2 - (w.a + w.e * u)).length();
-    let (mut lo, mut hi) = (-w.length, 2.0 * w.length);
-    for _ in 0..100 {
-        let (m1, m2) = (lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0);
-        if f(m1) < f(m2) {
-            hi = m2;
-        } else {
-            lo = m1;
-        }
+    let (u1, u2) = ((s1 - w.a).dot(w.e), (s2 - w.a).dot(w.e));
+    let r1 = (s1 - w.a - w.e * u1).length();
+    let r2 = (s2 - w.a - w.e * u2).length();
+    if r1 + r2 < 1e-12 {
+        return None;
     }
-    let u = (lo + hi) / 2.0;
+    let u = u1 + (u2 - u1) * r1 / (r1 + r2);
     (u > 1e-6 && u < w.length - 1e-6).then_some(u)
 }
 

@@ -155,14 +155,47 @@ pub fn trace_links(
         txs.binary_search(&l.0.map(f64::to_bits))
             .expect("every tx was listed")
     };
-    let wedges = if opt.diffraction && opt.max_depth > 0 {
+    let all_wedges = if opt.diffraction && opt.max_depth > 0 {
         super::diffraction::wedges(scene)
     } else {
         Vec::new()
     };
-    let sequences: Vec<Vec<Vec<u32>>> = txs
+    let sequences: Vec<Vec<(Vec<u32>, Vec<DVec3>)>> = txs
         .iter()
-        .map(|t| reflection_sequences(scene, DVec3::from(t.map(f64::from_bits)), opt))
+        .map(|t| {
+            let tx = DVec3::from(t.map(f64::from_bits));
+            reflection_sequences(scene, tx, opt)
+                .into_iter()
+                .map(|seq| {
+                    let images = images_of(scene, tx, &seq);
+                    (seq, images)
+                })
+                .collect()
+        })
+        .collect();
+    // A wedge can diffract a transmitter's wave only if the transmitter sees one of its faces:
+    // the first surfaces of the ray-found sequences are exactly the ones it sees (as in Sionna,
+    // which samples wedges from the first hits).
+    let wedges: Vec<Vec<super::diffraction::Wedge>> = sequences
+        .iter()
+        .zip(&txs)
+        .map(|(seqs, t)| {
+            if all_wedges.is_empty() {
+                return Vec::new();
+            }
+            let seen: HashSet<u32> = if opt.reflection {
+                seqs.iter()
+                    .filter_map(|(s, _)| s.first().copied())
+                    .collect()
+            } else {
+                first_hits(scene, DVec3::from(t.map(f64::from_bits)), opt.rays)
+            };
+            all_wedges
+                .iter()
+                .filter(|w| seen.contains(&w.tri0) || seen.contains(&w.trin))
+                .copied()
+                .collect()
+        })
         .collect();
     // Diffuse power per link, computed per transmitter for all its receivers.
     let mut diffuse = vec![0.0; links.len()];
@@ -195,9 +228,9 @@ pub fn trace_links(
                 opt,
                 freq_hz,
             );
-            if !wedges.is_empty() {
+            if !wedges[k].is_empty() {
                 paths.extend(diffracted_paths(
-                    scene, &wedges, tx, rx, tx_antenna, rx_antenna, opt, freq_hz,
+                    scene, &wedges[k], tx, rx, tx_antenna, rx_antenna, opt, freq_hz,
                 ));
             }
             summarize(paths, freq_hz, diffuse_power)
@@ -289,6 +322,24 @@ fn diffuse_power(
     total
 }
 
+/// The surfaces a transmitter sees: where its rays first land (through foliage).
+fn first_hits(scene: &RfScene, tx: DVec3, rays: u32) -> HashSet<u32> {
+    fibonacci_sphere(rays)
+        .filter_map(|d| {
+            let mut o = tx;
+            loop {
+                let h = scene.cast(o, d, EPS, f64::INFINITY)?;
+                if !scene.is_foliage(h.triangle) {
+                    return Some(h.triangle);
+                }
+                o += d * h.t;
+            }
+        })
+        .collect::<Vec<u32>>()
+        .into_iter()
+        .collect()
+}
+
 /// The distinct sequences of triangles that rays from `tx` reflect off, up to the depth, sorted.
 fn reflection_sequences(scene: &RfScene, tx: DVec3, opt: &TraceOptions) -> Vec<Vec<u32>> {
     if !opt.reflection || opt.max_depth == 0 {
@@ -342,7 +393,7 @@ fn link_paths(
     scene: &RfScene,
     tx: DVec3,
     rx: DVec3,
-    sequences: &[Vec<u32>],
+    sequences: &[(Vec<u32>, Vec<DVec3>)],
     tx_antenna: &Antenna,
     rx_antenna: &Antenna,
     opt: &TraceOptions,
@@ -354,8 +405,8 @@ fn link_paths(
     {
         paths.push(p);
     }
-    for seq in sequences {
-        if let Some(points) = image_points(scene, tx, rx, seq)
+    for (seq, images) in sequences {
+        if let Some(points) = image_points(scene, tx, rx, seq, images)
             && let Some(p) = evaluate(scene, &points, seq, tx_antenna, rx_antenna, opt, freq_hz)
         {
             paths.push(p);
@@ -388,10 +439,8 @@ fn summarize(mut paths: Vec<Path>, freq_hz: f64, diffuse_power: f64) -> LinkPath
     }
 }
 
-/// The image method: mirror the transmitter in each surface of `seq`, then walk back from the
-/// receiver, intersecting each surface's plane. `None` when a point misses its triangle or falls
-/// outside its segment.
-fn image_points(scene: &RfScene, tx: DVec3, rx: DVec3, seq: &[u32]) -> Option<Vec<DVec3>> {
+/// The transmitter mirrored in each surface of `seq` in turn: the images of the image method.
+fn images_of(scene: &RfScene, tx: DVec3, seq: &[u32]) -> Vec<DVec3> {
     let mut images = Vec::with_capacity(seq.len());
     let mut img = tx;
     for &t in seq {
@@ -400,6 +449,19 @@ fn image_points(scene: &RfScene, tx: DVec3, rx: DVec3, seq: &[u32]) -> Option<Ve
         img -= 2.0 * (img - q).dot(n) * n;
         images.push(img);
     }
+    images
+}
+
+/// The image method: with the transmitter's `images` in the surfaces of `seq`, walk back from
+/// the receiver, intersecting each surface's plane. `None` when a point misses its triangle or falls
+/// outside its segment.
+fn image_points(
+    scene: &RfScene,
+    tx: DVec3,
+    rx: DVec3,
+    seq: &[u32],
+    images: &[DVec3],
+) -> Option<Vec<DVec3>> {
     let mut points = vec![DVec3::ZERO; seq.len() + 2];
     points[0] = tx;
     points[seq.len() + 1] = rx;

@@ -1,0 +1,255 @@
+//! Scoring predicted path loss against measurements (rf.md §6): point-to-point error (mean, RMSE,
+//! standard deviation), and the power-distance (floating intercept) and close-in trend lines fitted
+//! to a model's predictions, with the RMSE of the measurements about each line. When the
+//! transmitters' EIRP is unknown one offset per transmitter is fitted first. LOS and NLOS links
+//! are also scored apart when the predictions say which is which.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{ArtifactType, Height, Link, Measurements, Metrics, Raster};
+use crate::rf::em::fspl_db;
+use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
+
+/// Params of [`Evaluate`].
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EvaluateParams {
+    /// Fit one offset per transmitter (EIRP unknown). Default: when the measurements are received
+    /// powers without EIRP.
+    pub fit_offsets: Option<bool>,
+    /// The model's predictions are its own trend line (3GPP), rather than a line fitted to them.
+    /// Default false.
+    pub model_is_trend: bool,
+}
+
+/// Point-to-point statistics of errors e_i = predicted − measured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct P2p {
+    /// Mean error, dB.
+    pub me: f64,
+    /// Root mean square error, dB.
+    pub rmse: f64,
+    /// Standard deviation, sqrt(RMSE² − ME²), dB.
+    pub std: f64,
+}
+
+/// ME, RMSE and σ of `errors`.
+pub fn p2p(errors: &[f64]) -> P2p {
+    let n = errors.len() as f64;
+    let me = errors.iter().sum::<f64>() / n;
+    let rmse = (errors.iter().map(|e| e * e).sum::<f64>() / n).sqrt();
+    P2p {
+        me,
+        rmse,
+        std: (rmse * rmse - me * me).max(0.0).sqrt(),
+    }
+}
+
+/// Floating-intercept fit PL = α + 10 β log10 d by least squares: (α, β).
+pub fn fit_power_distance(d: &[f64], pl: &[f64]) -> (f64, f64) {
+    let x: Vec<f64> = d.iter().map(|d| 10.0 * d.log10()).collect();
+    let n = x.len() as f64;
+    let (mx, my) = (x.iter().sum::<f64>() / n, pl.iter().sum::<f64>() / n);
+    let sxy: f64 = x.iter().zip(pl).map(|(x, y)| (x - mx) * (y - my)).sum();
+    let sxx: f64 = x.iter().map(|x| (x - mx) * (x - mx)).sum();
+    let beta = if sxx > 0.0 { sxy / sxx } else { 0.0 };
+    (my - beta * mx, beta)
+}
+
+/// Close-in fit PL = FSPL(f, 1 m) + 10 n log10 d by least squares: n.
+pub fn fit_close_in(d: &[f64], pl: &[f64], freq_hz: &[f64]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for i in 0..d.len() {
+        let a = pl[i] - fspl_db(1.0, freq_hz[i]);
+        let dd = 10.0 * d[i].log10();
+        num += a * dd;
+        den += dd * dd;
+    }
+    if den > 0.0 { num / den } else { 0.0 }
+}
+
+/// Scores one model's predictions against the measurements of the same links.
+pub struct Evaluate;
+
+impl Stage for Evaluate {
+    const KIND: &'static str = "Evaluate";
+    const VERSION: u32 = 1;
+    const DOC: &'static str = "P2P error, power-distance and close-in trend RMSE of predictions against measurements (per-tx offsets when EIRP is unknown; LOS/NLOS)";
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::one(
+            "predictions",
+            ArtifactType::Measurements,
+            "predicted path loss per link (Trace, Tr38901)",
+        ),
+        InputSpec::one(
+            "measurements",
+            ArtifactType::Measurements,
+            "the measured links, in the same order",
+        ),
+        InputSpec::optional(
+            "terrain",
+            ArtifactType::Raster,
+            "the terrain, for heights above ground in distances",
+        ),
+    ];
+    type Params = EvaluateParams;
+    type Output = Metrics;
+
+    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Metrics, StageError> {
+        let pred: &Measurements = inputs.one("predictions")?;
+        let meas: &Measurements = inputs.one("measurements")?;
+        let terrain: Option<&Raster> = inputs.optional("terrain")?;
+        if pred.links.len() != meas.links.len() {
+            return Err(StageError::Failed(format!(
+                "{} predictions for {} measured links: predict the measurements' own links",
+                pred.links.len(),
+                meas.links.len()
+            )));
+        }
+        let fit_offsets = p.fit_offsets.unwrap_or_else(|| {
+            meas.links
+                .iter()
+                .any(|l| l.path_loss_db.is_none() && l.tx_eirp_dbm.is_none())
+        });
+        let z = |x: f64, y: f64, h: Height| match h {
+            Height::Absolute(z) => z,
+            Height::AboveGround(h) => terrain.and_then(|t| t.bilinear(x, y)).unwrap_or(0.0) + h,
+        };
+        // (tx id, distance, frequency, predicted, measured loss (up to an offset if unknown), los)
+        let mut rows = Vec::new();
+        for (pl, ml) in pred.links.iter().zip(&meas.links) {
+            let Some(predicted) = pl.path_loss_db.filter(|v| v.is_finite()) else {
+                continue;
+            };
+            let Some(measured) = measured_loss(ml) else {
+                continue;
+            };
+            let d = ((ml.tx.x - ml.rx.x).powi(2)
+                + (ml.tx.y - ml.rx.y).powi(2)
+                + (z(ml.tx.x, ml.tx.y, ml.tx.z) - z(ml.rx.x, ml.rx.y, ml.rx.z)).powi(2))
+            .sqrt()
+            .max(1.0);
+            rows.push((
+                ml.tx.id.clone(),
+                d,
+                ml.freq_hz,
+                predicted,
+                measured,
+                pl.los.or(ml.los),
+            ));
+        }
+        let mut m = Metrics::default();
+        m.set("links", meas.links.len() as f64);
+        m.set("links_scored", rows.len() as f64);
+        if rows.is_empty() {
+            return Ok(m);
+        }
+        // Per-transmitter offsets: the mean of measured − predicted, taken out of the measurements.
+        if fit_offsets {
+            let mut by_tx: BTreeMap<String, (f64, usize)> = BTreeMap::new();
+            for r in &rows {
+                let e = by_tx.entry(r.0.clone()).or_default();
+                e.0 += r.4 - r.3;
+                e.1 += 1;
+            }
+            for (tx, (sum, n)) in &by_tx {
+                let off = sum / *n as f64;
+                m.set(format!("offset_db/{tx}"), off);
+                for r in rows.iter_mut().filter(|r| &r.0 == tx) {
+                    r.4 -= off;
+                }
+            }
+        }
+        let groups: [(&str, Box<dyn Fn(&Option<bool>) -> bool>); 3] = [
+            ("", Box::new(|_| true)),
+            ("los/", Box::new(|l| *l == Some(true))),
+            ("nlos/", Box::new(|l| *l == Some(false))),
+        ];
+        for (prefix, keep) in groups {
+            let g: Vec<_> = rows.iter().filter(|r| keep(&r.5)).collect();
+            if g.is_empty() {
+                continue;
+            }
+            let d: Vec<f64> = g.iter().map(|r| r.1).collect();
+            let f: Vec<f64> = g.iter().map(|r| r.2).collect();
+            let pr: Vec<f64> = g.iter().map(|r| r.3).collect();
+            let ms: Vec<f64> = g.iter().map(|r| r.4).collect();
+            let errors: Vec<f64> = pr.iter().zip(&ms).map(|(p, m)| p - m).collect();
+            let s = p2p(&errors);
+            m.set(format!("{prefix}n"), g.len() as f64);
+            m.set(format!("{prefix}p2p_me_db"), s.me);
+            m.set(format!("{prefix}p2p_rmse_db"), s.rmse);
+            m.set(format!("{prefix}p2p_std_db"), s.std);
+            let rms_about = |line: &dyn Fn(usize) -> f64| {
+                (ms.iter()
+                    .enumerate()
+                    .map(|(i, v)| (v - line(i)).powi(2))
+                    .sum::<f64>()
+                    / ms.len() as f64)
+                    .sqrt()
+            };
+            if p.model_is_trend {
+                m.set(format!("{prefix}pd_rmse_db"), s.rmse);
+                m.set(format!("{prefix}ci_rmse_db"), s.rmse);
+            } else {
+                let (alpha, beta) = fit_power_distance(&d, &pr);
+                m.set(format!("{prefix}pd_alpha_db"), alpha);
+                m.set(format!("{prefix}pd_beta"), beta);
+                m.set(
+                    format!("{prefix}pd_rmse_db"),
+                    rms_about(&|i| alpha + 10.0 * beta * d[i].log10()),
+                );
+                let n = fit_close_in(&d, &pr, &f);
+                m.set(format!("{prefix}ci_n"), n);
+                m.set(
+                    format!("{prefix}ci_rmse_db"),
+                    rms_about(&|i| fspl_db(1.0, f[i]) + 10.0 * n * d[i].log10()),
+                );
+            }
+        }
+        Ok(m)
+    }
+}
+
+/// The measured path loss of a link: given, or EIRP − received power, or −received power (an
+/// offset per transmitter is then fitted).
+pub fn measured_loss(l: &Link) -> Option<f64> {
+    l.path_loss_db
+        .or_else(|| Some(l.tx_eirp_dbm.unwrap_or(0.0) - l.rx_power_dbm?))
+        .filter(|v| v.is_finite())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Hand-computed: errors 1, -1, 3 -> ME 1, RMSE sqrt(11/3), std sqrt(11/3 - 1).
+    #[test]
+    fn p2p_by_hand() {
+        let s = p2p(&[1.0, -1.0, 3.0]);
+        assert!((s.me - 1.0).abs() < 1e-12);
+        assert!((s.rmse - (11.0f64 / 3.0).sqrt()).abs() < 1e-12);
+        assert!((s.std - (8.0f64 / 3.0).sqrt()).abs() < 1e-12);
+    }
+
+    /// Points exactly on PL = 40 + 10 * 3 log10 d are fitted back; the close-in exponent of
+    /// exact free-space points is 2.
+    #[test]
+    fn trend_fits_recover_their_lines() {
+        let d = [10.0, 30.0, 100.0, 400.0];
+        let pl: Vec<f64> = d.iter().map(|d: &f64| 40.0 + 30.0 * d.log10()).collect();
+        let (a, b) = fit_power_distance(&d, &pl);
+        assert!(
+            (a - 40.0).abs() < 1e-9 && (b - 3.0).abs() < 1e-12,
+            "{a} {b}"
+        );
+        let f = [3.5e9; 4];
+        let fs: Vec<f64> = d.iter().map(|d| fspl_db(*d, 3.5e9)).collect();
+        assert!((fit_close_in(&d, &fs, &f) - 2.0).abs() < 1e-9);
+        // By hand: A = (1, 3), D = (10, 20) -> n = (10 + 60) / (100 + 400) = 0.14.
+        let pl2 = [fspl_db(1.0, 3.5e9) + 1.0, fspl_db(1.0, 3.5e9) + 3.0];
+        assert!((fit_close_in(&[10.0, 100.0], &pl2, &[3.5e9; 2]) - 0.14).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,248 @@
+//! The 3GPP TR 38.901 §7.4 path-loss baseline (rf.md §4): UMa, UMi street canyon and RMa, LOS and
+//! NLOS, with the LOS state from a trace of the scene or from the LOS probability of Table 7.4.2-1.
+
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{ArtifactType, Height, Measurements, Raster};
+use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
+
+/// A TR 38.901 scenario.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Scenario {
+    /// Urban macro.
+    UMa,
+    /// Urban micro, street canyon.
+    UMi,
+    /// Rural macro.
+    RMa,
+}
+
+const C: f64 = 3.0e8;
+
+/// Path loss, dB (Table 7.4.1-1; f in GHz, distances and heights in metres). RMa uses the default
+/// street width 20 m and building height 5 m; UMa the effective environment height 1 m.
+pub fn path_loss(s: Scenario, los: bool, d2d: f64, h_bs: f64, h_ut: f64, fc_ghz: f64) -> f64 {
+    let d3d = (d2d * d2d + (h_bs - h_ut).powi(2)).sqrt();
+    let lg = f64::log10;
+    match s {
+        Scenario::UMa => {
+            let dbp = 4.0 * (h_bs - 1.0) * (h_ut - 1.0) * fc_ghz * 1e9 / C;
+            let pl_los = if d2d <= dbp {
+                28.0 + 22.0 * lg(d3d) + 20.0 * lg(fc_ghz)
+            } else {
+                28.0 + 40.0 * lg(d3d) + 20.0 * lg(fc_ghz)
+                    - 9.0 * lg(dbp * dbp + (h_bs - h_ut).powi(2))
+            };
+            if los {
+                pl_los
+            } else {
+                let nlos = 13.54 + 39.08 * lg(d3d) + 20.0 * lg(fc_ghz) - 0.6 * (h_ut - 1.5);
+                pl_los.max(nlos)
+            }
+        }
+        Scenario::UMi => {
+            let dbp = 4.0 * (h_bs - 1.0) * (h_ut - 1.0) * fc_ghz * 1e9 / C;
+            let pl_los = if d2d <= dbp {
+                32.4 + 21.0 * lg(d3d) + 20.0 * lg(fc_ghz)
+            } else {
+                32.4 + 40.0 * lg(d3d) + 20.0 * lg(fc_ghz)
+                    - 9.5 * lg(dbp * dbp + (h_bs - h_ut).powi(2))
+            };
+            if los {
+                pl_los
+            } else {
+                let nlos = 35.3 * lg(d3d) + 22.4 + 21.3 * lg(fc_ghz) - 0.3 * (h_ut - 1.5);
+                pl_los.max(nlos)
+            }
+        }
+        Scenario::RMa => {
+            let (w, h): (f64, f64) = (20.0, 5.0);
+            let dbp = 2.0 * std::f64::consts::PI * h_bs * h_ut * fc_ghz * 1e9 / C;
+            let pl1 = |d: f64| {
+                20.0 * lg(40.0 * std::f64::consts::PI * d * fc_ghz / 3.0)
+                    + (0.03 * h.powf(1.72)).min(10.0) * lg(d)
+                    - (0.044 * h.powf(1.72)).min(14.77)
+                    + 0.002 * lg(h) * d
+            };
+            let pl_los = if d2d <= dbp {
+                pl1(d3d)
+            } else {
+                pl1(dbp) + 40.0 * lg(d3d / dbp)
+            };
+            if los {
+                pl_los
+            } else {
+                let nlos = 161.04 - 7.1 * lg(w) + 7.5 * lg(h)
+                    - (24.37 - 3.7 * (h / h_bs).powi(2)) * lg(h_bs)
+                    + (43.42 - 3.1 * lg(h_bs)) * (lg(d3d) - 3.0)
+                    + 20.0 * lg(fc_ghz)
+                    - (3.2 * lg(11.75 * h_ut).powi(2) - 4.97);
+                pl_los.max(nlos)
+            }
+        }
+    }
+}
+
+/// LOS probability (Table 7.4.2-1).
+pub fn los_probability(s: Scenario, d2d: f64, h_ut: f64) -> f64 {
+    match s {
+        Scenario::RMa => {
+            if d2d <= 10.0 {
+                1.0
+            } else {
+                (-(d2d - 10.0) / 1000.0).exp()
+            }
+        }
+        Scenario::UMi => {
+            if d2d <= 18.0 {
+                1.0
+            } else {
+                18.0 / d2d + (-d2d / 36.0).exp() * (1.0 - 18.0 / d2d)
+            }
+        }
+        Scenario::UMa => {
+            if d2d <= 18.0 {
+                return 1.0;
+            }
+            let c = if h_ut <= 13.0 {
+                0.0
+            } else {
+                ((h_ut - 13.0) / 10.0).powf(1.5)
+            };
+            (18.0 / d2d + (-d2d / 63.0).exp() * (1.0 - 18.0 / d2d))
+                * (1.0 + c * 1.25 * (d2d / 100.0).powi(3) * (-d2d / 150.0).exp())
+        }
+    }
+}
+
+/// Params of [`Tr38901`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tr38901Params {
+    /// The scenario.
+    pub scenario: Scenario,
+}
+
+/// Predicted path loss per link by TR 38.901. With a `los` input (a `Trace` of the scene), each
+/// link takes the LOS or NLOS formula by whether the trace found a line-of-sight path; without,
+/// the LOS and NLOS losses are mixed by the LOS probability (power-weighted).
+pub struct Tr38901;
+
+impl Stage for Tr38901 {
+    const KIND: &'static str = "Tr38901";
+    const VERSION: u32 = 1;
+    const DOC: &'static str =
+        "3GPP TR 38.901 UMa/UMi/RMa path loss per link, LOS from a trace or the LOS probability";
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::one("links", ArtifactType::Measurements, "the links"),
+        InputSpec::optional(
+            "los",
+            ArtifactType::Measurements,
+            "a trace of the same links: its `los` flags",
+        ),
+        InputSpec::optional(
+            "terrain",
+            ArtifactType::Raster,
+            "the terrain, for heights above ground",
+        ),
+    ];
+    type Params = Tr38901Params;
+    type Output = Measurements;
+
+    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Measurements, StageError> {
+        let links: &Measurements = inputs.one("links")?;
+        let los: Option<&Measurements> = inputs.optional("los")?;
+        let terrain: Option<&Raster> = inputs.optional("terrain")?;
+        if let Some(l) = los
+            && l.links.len() != links.links.len()
+        {
+            return Err(StageError::Failed(
+                "the los input must trace the same links".into(),
+            ));
+        }
+        let ground = |x: f64, y: f64| terrain.and_then(|t| t.bilinear(x, y)).unwrap_or(0.0);
+        let height = |x: f64, y: f64, h: Height| match h {
+            Height::AboveGround(h) => h,
+            Height::Absolute(z) => z - ground(x, y),
+        };
+        let mut out = links.clone();
+        for (i, l) in out.links.iter_mut().enumerate() {
+            let d2d = (l.tx.x - l.rx.x).hypot(l.tx.y - l.rx.y).max(1.0);
+            let (h_bs, h_ut) = (
+                height(l.tx.x, l.tx.y, l.tx.z).max(1.5),
+                height(l.rx.x, l.rx.y, l.rx.z).clamp(1.0, 22.5),
+            );
+            let fc = l.freq_hz / 1e9;
+            let pl = match los.and_then(|m| m.links[i].los) {
+                Some(flag) => path_loss(p.scenario, flag, d2d, h_bs, h_ut, fc),
+                None => {
+                    let pr = los_probability(p.scenario, d2d, h_ut);
+                    let lin = |db: f64| 10f64.powf(-db / 10.0);
+                    -10.0
+                        * (pr * lin(path_loss(p.scenario, true, d2d, h_bs, h_ut, fc))
+                            + (1.0 - pr) * lin(path_loss(p.scenario, false, d2d, h_bs, h_ut, fc)))
+                        .log10()
+                }
+            };
+            l.path_loss_db = Some(pl);
+            l.rx_power_dbm = None;
+            l.los = los.and_then(|m| m.links[i].los);
+        }
+        Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// rf.md §8 (hBS 25/10/35 m, hUT 1.5 m), every cell of the table.
+    #[test]
+    fn table_test_vectors() {
+        let rows = [
+            (3.5, 50.0, [77.21, 92.51, 79.09, 94.18, 79.15, 83.26]),
+            (3.5, 200.0, [89.57, 114.46, 91.61, 115.23, 90.15, 103.64]),
+            (
+                3.5,
+                1000.0,
+                [109.41, 141.67, 119.15, 139.89, 105.46, 130.42],
+            ),
+            (28.0, 50.0, [95.27, 110.57, 97.15, 113.42, 97.21, 101.32]),
+            (
+                28.0,
+                200.0,
+                [107.63, 132.52, 109.67, 134.46, 108.21, 121.71],
+            ),
+            (
+                28.0,
+                1000.0,
+                [122.95, 159.73, 124.34, 159.13, 123.52, 148.49],
+            ),
+        ];
+        for (fc, d, want) in rows {
+            let got = [
+                path_loss(Scenario::UMa, true, d, 25.0, 1.5, fc),
+                path_loss(Scenario::UMa, false, d, 25.0, 1.5, fc),
+                path_loss(Scenario::UMi, true, d, 10.0, 1.5, fc),
+                path_loss(Scenario::UMi, false, d, 10.0, 1.5, fc),
+                path_loss(Scenario::RMa, true, d, 35.0, 1.5, fc),
+                path_loss(Scenario::RMa, false, d, 35.0, 1.5, fc),
+            ];
+            for (g, w) in got.iter().zip(want) {
+                assert!((g - w).abs() < 0.011, "fc {fc} d {d}: {got:?} vs {want:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn los_probability_test_vectors() {
+        let close = |a: f64, b: f64| assert!((a - b).abs() < 6e-5, "{a} vs {b}");
+        close(los_probability(Scenario::UMi, 50.0, 1.5), 0.5196);
+        close(los_probability(Scenario::UMa, 50.0, 1.5), 0.6494);
+        close(los_probability(Scenario::RMa, 50.0, 1.5), 0.9608);
+        close(los_probability(Scenario::UMi, 200.0, 1.5), 0.0935);
+        close(los_probability(Scenario::UMa, 200.0, 1.5), 0.1280);
+        close(los_probability(Scenario::RMa, 1000.0, 1.5), 0.3716);
+        close(los_probability(Scenario::UMa, 200.0, 20.0), 0.3257);
+    }
+}
