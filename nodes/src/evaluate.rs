@@ -162,13 +162,12 @@ impl Stage for Evaluate {
                 }
             }
         }
-        let groups: [(&str, Box<dyn Fn(&Option<bool>) -> bool>); 3] = [
-            ("", Box::new(|_| true)),
-            ("los/", Box::new(|l| *l == Some(true))),
-            ("nlos/", Box::new(|l| *l == Some(false))),
-        ];
-        for (prefix, keep) in groups {
-            let g: Vec<_> = rows.iter().filter(|r| keep(&r.5)).collect();
+        // All links, then those the predictions call LOS, then NLOS.
+        for (prefix, want) in [("", None), ("los/", Some(true)), ("nlos/", Some(false))] {
+            let g: Vec<_> = rows
+                .iter()
+                .filter(|r| want.is_none() || r.5 == want)
+                .collect();
             if g.is_empty() {
                 continue;
             }
