@@ -58,7 +58,38 @@ fn demo_scenes_hold_only_valid_building_solids() {
         "demo: {kodama} KODAMA building solids, {baseline} OSM-baseline prisms, all pass the checker"
     );
     assert!(kodama >= 65, "{kodama}");
-    assert_eq!(baseline, 72, "one prism per true footprint");
+    // The OSM-like map misses some buildings (OsmLike drops 10 %).
+    assert!((55..72).contains(&baseline), "{baseline}");
+    check_report(&env.out().join("report"));
+}
+
+/// The demo's report (paper Table 1 on the synthetic site): the twin ahead of the OSM baseline
+/// and of 3GPP in P2P RMSE, every model scored on every link, and plots that decode.
+fn check_report(dir: &Path) {
+    let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+    println!("{md}");
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("metrics.json")).unwrap()).unwrap();
+    let rmse = |m: &str| metrics[m]["p2p_rmse_db"].as_f64().unwrap();
+    let (twin, osm, gpp) = (rmse("KODAMA twin"), rmse("OSM baseline"), rmse("3GPP UMi"));
+    assert!(
+        twin < osm && twin < gpp,
+        "twin {twin}, OSM {osm}, 3GPP {gpp}"
+    );
+    let links = metrics["KODAMA twin"]["links"].as_f64().unwrap();
+    for m in ["KODAMA twin", "OSM baseline", "3GPP UMi"] {
+        assert_eq!(metrics[m]["links_scored"].as_f64().unwrap(), links, "{m}");
+    }
+    assert!(links > 100.0, "{links}");
+    for plot in ["scatter", "error_cdf", "path_loss_distance", "radio_map"] {
+        let img = image::open(dir.join(format!("plots/{plot}.png"))).unwrap();
+        assert!(img.width() > 100 && img.height() > 100, "{plot}");
+    }
+    let csv = std::fs::read_to_string(dir.join("table.csv")).unwrap();
+    assert!(
+        csv.starts_with("site,metric,KODAMA twin,OSM baseline,3GPP UMi\nsynthetic,P2P RMSE (dB),"),
+        "{csv}"
+    );
 }
 
 #[test]

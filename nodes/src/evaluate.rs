@@ -22,6 +22,9 @@ pub struct EvaluateParams {
     /// The model's predictions are its own trend line (3GPP), rather than a line fitted to them.
     /// Default false.
     pub model_is_trend: bool,
+    /// A link the model finds no path for is scored as this loss, dB: the receiver's floor, so
+    /// every model is scored on the same links. Default 140.
+    pub no_path_loss_db: Option<f64>,
 }
 
 /// Point-to-point statistics of errors e_i = predicted − measured.
@@ -120,7 +123,12 @@ impl Stage for Evaluate {
         // (tx id, distance, frequency, predicted, measured loss (up to an offset if unknown), los)
         let mut rows = Vec::new();
         for (pl, ml) in pred.links.iter().zip(&meas.links) {
-            let Some(predicted) = pl.path_loss_db.filter(|v| v.is_finite()) else {
+            let floor = p.no_path_loss_db.unwrap_or(140.0);
+            let Some(predicted) = pl
+                .path_loss_db
+                .filter(|v| !v.is_nan())
+                .map(|v| v.min(floor))
+            else {
                 continue;
             };
             let Some(measured) = measured_loss(ml) else {

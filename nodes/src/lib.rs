@@ -45,6 +45,7 @@ pub mod evaluate;
 pub mod footprint_score;
 pub mod gaussian_blur;
 pub mod osm_baseline;
+pub mod osm_like;
 pub mod raster_ops;
 pub mod rasterize_scene;
 pub mod rasterize_surface;
@@ -59,6 +60,7 @@ pub mod read_sionna;
 pub mod read_tiles;
 pub mod read_views;
 pub mod read_xyz;
+pub mod report;
 pub mod rf_trace;
 pub mod roof_clean;
 pub mod split_buildings;
@@ -117,6 +119,7 @@ macro_rules! for_each_stage {
             $crate::split_buildings::SplitBuildings,
             $crate::building_solids::BuildingSolids,
             $crate::osm_baseline::OsmBaseline,
+            $crate::osm_like::OsmLike,
             $crate::assemble_scene::AssembleScene,
             $crate::coarsen::Coarsen,
             $crate::gaussian_blur::GaussianBlur,
@@ -126,6 +129,7 @@ macro_rules! for_each_stage {
             $crate::rf_trace::RadioMap,
             $crate::tr38901::Tr38901,
             $crate::evaluate::Evaluate,
+            $crate::report::ReportStage,
             $crate::footprint_score::FootprintScore,
             $crate::stats::RasterStats,
             $crate::stats::PointStats,

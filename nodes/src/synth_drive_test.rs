@@ -74,7 +74,7 @@ pub struct SynthDriveTest;
 
 impl Stage for SynthDriveTest {
     const KIND: &'static str = "SynthDriveTest";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const DOC: &'static str = "drive-test measurements traced through the ground truth (richer settings) plus log-normal shadowing";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),

@@ -8,6 +8,7 @@ mod metrics;
 mod ortho;
 mod points;
 mod raster;
+mod report;
 mod scene;
 mod views;
 
@@ -24,6 +25,7 @@ pub use metrics::Metrics;
 pub use ortho::Ortho;
 pub use points::PointSet;
 pub use raster::{Grid, Raster};
+pub use report::Report;
 pub use scene::{Mesh, ObjectClass, Scene, SceneObject};
 pub use views::{Instances, Intrinsics, Pose, View, ViewSet};
 
@@ -48,6 +50,8 @@ pub enum ArtifactType {
     City,
     /// A [`ViewSet`]: street-level views with model outputs.
     Views,
+    /// A report folder.
+    Report,
 }
 
 impl std::fmt::Display for ArtifactType {
@@ -77,6 +81,8 @@ pub enum Artifact {
     City(City),
     /// See [`ViewSet`].
     Views(ViewSet),
+    /// A report folder.
+    Report(Report),
 }
 
 impl Artifact {
@@ -92,6 +98,7 @@ impl Artifact {
             Artifact::Scene(_) => ArtifactType::Scene,
             Artifact::City(_) => ArtifactType::City,
             Artifact::Views(_) => ArtifactType::Views,
+            Artifact::Report(_) => ArtifactType::Report,
         }
     }
 }
@@ -119,6 +126,7 @@ macro_rules! typed {
 }
 typed!(
     Raster,
+    Report,
     Metrics,
     Ortho,
     Measurements,

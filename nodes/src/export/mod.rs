@@ -4,6 +4,7 @@
 pub mod colormap;
 mod glb;
 mod las;
+pub mod plot;
 mod tiles;
 
 use crate::artifact::{Artifact, ArtifactType};
@@ -33,6 +34,7 @@ pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
         ArtifactType::Measurements => &["csv"],
         ArtifactType::Points => &["las", "laz", "xyz"],
         ArtifactType::Views => &["views"],
+        ArtifactType::Report => &["report"],
     }
 }
 
@@ -53,6 +55,8 @@ pub fn output_file(name: &str, ty: ArtifactType) -> Result<(String, &'static str
                 Err(format!("{ty} outputs are written as {list}, not .{ext}"))
             }
         },
+        // A report is a folder named as the output.
+        None if ty == ArtifactType::Report => Ok((name.to_owned(), fmts[0])),
         None => Ok((format!("{name}.{}", fmts[0]), fmts[0])),
     }
 }
@@ -96,6 +100,7 @@ pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String
         (Artifact::Points(p), "laz") => file(write_las(p, site, true)?),
         (Artifact::Points(p), "xyz") => file(xyz_text(p, site).into_bytes()),
         (Artifact::Views(v), "views") => Ok(Encoded::Folder(crate::views_io::write_viewset(v)?)),
+        (Artifact::Report(r), "report") => Ok(Encoded::Folder(r.files.clone())),
         (a, f) => Err(format!(
             "{} cannot be written as {f:?}; formats: {}",
             a.ty(),
