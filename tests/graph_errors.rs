@@ -215,3 +215,22 @@ fn an_output_format_the_type_cannot_take() {
         "g.ron:4:16: output \"t.las\": Raster outputs are written as tif, exr or png, not .las",
     );
 }
+
+/// The paper's sites are graphs over data the user downloads: without it, explain names every
+/// missing file and exits 2.
+#[test]
+fn site_graphs_without_their_data_name_each_missing_file() {
+    let env = Env::new();
+    for site in ["brooklyn", "painiitty", "boulder"] {
+        let g = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("graphs/{site}.ron"));
+        let r = env.cli(&["explain", g.to_str().unwrap()]);
+        assert_eq!(r.code, 2, "{site}: {}", r.stderr);
+        for f in ["lidar.laz", "measurements.csv"] {
+            assert!(
+                r.stderr.contains("file not found: ") && r.stderr.contains(&format!("{site}/{f}")),
+                "{site}: {}",
+                r.stderr
+            );
+        }
+    }
+}

@@ -22,9 +22,11 @@ pub struct EvaluateParams {
     /// The model's predictions are its own trend line (3GPP), rather than a line fitted to them.
     /// Default false.
     pub model_is_trend: bool,
-    /// A link the model finds no path for is scored as this loss, dB: the receiver's floor, so
-    /// every model is scored on the same links. Default 140.
-    pub no_path_loss_db: Option<f64>,
+    /// The receiver's floor as a path loss, dB: a prediction beyond it (or no path at all) is
+    /// scored as the floor, the most loss the measurements could have shown, so every model is
+    /// scored on the same links. Default none: predictions are taken as they are and links a
+    /// model finds no path for are left out of its scores (`links_no_path`).
+    pub floor_db: Option<f64>,
 }
 
 /// Point-to-point statistics of errors e_i = predicted − measured.
@@ -78,7 +80,7 @@ pub struct Evaluate;
 
 impl Stage for Evaluate {
     const KIND: &'static str = "Evaluate";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const DOC: &'static str = "P2P error, power-distance and close-in trend RMSE of predictions against measurements (per-tx offsets when EIRP is unknown; LOS/NLOS)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -123,11 +125,13 @@ impl Stage for Evaluate {
         // (tx id, distance, frequency, predicted, measured loss (up to an offset if unknown), los)
         let mut rows = Vec::new();
         for (pl, ml) in pred.links.iter().zip(&meas.links) {
-            let floor = p.no_path_loss_db.unwrap_or(140.0);
-            let Some(predicted) = pl
-                .path_loss_db
-                .filter(|v| !v.is_nan())
-                .map(|v| v.min(floor))
+            let Some(predicted) =
+                pl.path_loss_db
+                    .filter(|v| !v.is_nan())
+                    .and_then(|v| match p.floor_db {
+                        Some(f) => Some(v.min(f)),
+                        None => v.is_finite().then_some(v),
+                    })
             else {
                 continue;
             };
@@ -149,6 +153,16 @@ impl Stage for Evaluate {
             ));
         }
         let mut m = Metrics::default();
+        if let Some(f) = p.floor_db {
+            m.set("floor_db", f);
+        } else {
+            let no_path = pred
+                .links
+                .iter()
+                .filter(|l| l.path_loss_db.is_some_and(f64::is_infinite))
+                .count();
+            m.set("links_no_path", no_path as f64);
+        }
         m.set("links", meas.links.len() as f64);
         m.set("links_scored", rows.len() as f64);
         if rows.is_empty() {
@@ -168,6 +182,19 @@ impl Stage for Evaluate {
                 for r in rows.iter_mut().filter(|r| &r.0 == tx) {
                     r.4 -= off;
                 }
+            }
+        }
+        // Per transmitter (a cell of a drive test): P2P after its offset.
+        let mut per_tx: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
+        for r in &rows {
+            per_tx.entry(r.0.as_str()).or_default().push(r.3 - r.4);
+        }
+        if per_tx.len() > 1 {
+            for (tx, e) in &per_tx {
+                let s = p2p(e);
+                m.set(format!("tx/{tx}/n"), e.len() as f64);
+                m.set(format!("tx/{tx}/p2p_rmse_db"), s.rmse);
+                m.set(format!("tx/{tx}/p2p_std_db"), s.std);
             }
         }
         // All links, then those the predictions call LOS, then NLOS.

@@ -45,7 +45,7 @@ pub struct ReportStage;
 
 impl Stage for ReportStage {
     const KIND: &'static str = "Report";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -220,8 +220,13 @@ fn pairs(meas: &Measurements, pred: &Measurements, ev: &Metrics) -> Vec<(f64, f6
             Some((
                 link_distance(m),
                 measured_loss(m)? - offset,
-                // No path: the receiver's floor, as Evaluate scores it.
-                p.path_loss_db.filter(|v| !v.is_nan())?.min(140.0),
+                // Beyond the floor (or no path): scored as Evaluate scores it.
+                p.path_loss_db
+                    .filter(|v| !v.is_nan())
+                    .and_then(|v| match ev.get("floor_db") {
+                        Some(f) => Some(v.min(f)),
+                        None => v.is_finite().then_some(v),
+                    })?,
             ))
         })
         .collect()
