@@ -8,7 +8,6 @@ use std::time::Instant;
 use clap::Args;
 use glam::DVec3;
 
-use kodama_nodes::artifact::{PodVec, Raster};
 use kodama_nodes::export::{Encoded, encode};
 use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::links_csv::{read_links, write_results};
@@ -244,15 +243,7 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
         a.interactions.freq_hz,
     );
     let secs = t.elapsed().as_secs_f64();
-    let db = Raster {
-        grid: map.grid,
-        data: PodVec(
-            map.data
-                .iter()
-                .map(|&g| if g > 0.0 { 10.0 * g.log10() } else { f32::NAN })
-                .collect(),
-        ),
-    };
+    let db = kodama_nodes::rf::radiomap::to_db(&map);
     let site = Site {
         crs: String::new(),
         origin: (0.0, 0.0),

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Grid, Height, Measurements, PodVec, Raster, Scene};
+use crate::artifact::{ArtifactType, Grid, Height, Measurements, Raster, Scene};
 use crate::rf::antenna::Antenna;
 use crate::rf::paths::{TraceOptions, trace_links};
 use crate::rf::radiomap::{MapPlane, default_plane, radio_map};
@@ -236,22 +236,14 @@ impl Stage for RadioMap {
             ),
         };
         let map = radio_map(&rf, tx, &p.antenna, &plane, &p.options, p.freq_hz);
-        Ok(Raster {
-            grid: map.grid,
-            data: PodVec(
-                map.data
-                    .iter()
-                    .map(|&g| if g > 0.0 { 10.0 * g.log10() } else { f32::NAN })
-                    .collect(),
-            ),
-        })
+        Ok(crate::rf::radiomap::to_db(&map))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::artifact::{Endpoint, Link};
+    use crate::artifact::{Endpoint, Link, PodVec};
     use crate::stage::Slot;
     use crate::{Artifact, Site};
     use std::sync::Arc;

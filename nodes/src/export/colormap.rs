@@ -1,6 +1,6 @@
 //! A raster as a PNG picture: viridis colours between the 2nd and 98th percentile of its values,
-//! no-data transparent, and a colour bar with the range printed beside it (a 3 x 5 pixel digit
-//! font, scaled), so a radio map reads without GIS software.
+//! no-data transparent, and a colour bar with the range printed beside it (the 3 x 5 pixel font
+//! of `plot`, scaled), so a radio map reads without GIS software.
 
 use image::{ImageBuffer, Rgba, RgbaImage};
 
@@ -26,47 +26,8 @@ fn viridis(t: f64) -> [u8; 3] {
     [0, 1, 2].map(|k| (a[k] + (b[k] - a[k]) * f).round() as u8)
 }
 
-/// 3 x 5 glyphs, one row per u8 (three low bits, left to right).
-fn glyph(c: char) -> Option<[u8; 5]> {
-    Some(match c {
-        '0' => [7, 5, 5, 5, 7],
-        '1' => [2, 6, 2, 2, 7],
-        '2' => [7, 1, 7, 4, 7],
-        '3' => [7, 1, 7, 1, 7],
-        '4' => [5, 5, 7, 1, 1],
-        '5' => [7, 4, 7, 1, 7],
-        '6' => [7, 4, 7, 5, 7],
-        '7' => [7, 1, 1, 1, 1],
-        '8' => [7, 5, 7, 5, 7],
-        '9' => [7, 5, 7, 1, 7],
-        '-' => [0, 0, 7, 0, 0],
-        '.' => [0, 0, 0, 0, 2],
-        ' ' => [0, 0, 0, 0, 0],
-        _ => return None,
-    })
-}
-
 fn text(img: &mut RgbaImage, x: u32, y: u32, s: &str, scale: u32) {
-    for (k, c) in s.chars().enumerate() {
-        let Some(g) = glyph(c) else { continue };
-        for (row, bits) in g.iter().enumerate() {
-            for col in 0..3u32 {
-                if bits & (4 >> col) != 0 {
-                    for dy in 0..scale {
-                        for dx in 0..scale {
-                            let (px, py) = (
-                                x + (k as u32 * 4 + col) * scale + dx,
-                                y + row as u32 * scale + dy,
-                            );
-                            if px < img.width() && py < img.height() {
-                                img.put_pixel(px, py, Rgba([0, 0, 0, 255]));
-                            }
-                        }
-                    }
-                }
-            }
-        }
-    }
+    super::plot::text_px(img, x as i64, y as i64, s, scale, Rgba([0, 0, 0, 255]));
 }
 
 /// The PNG bytes of `r` with a colour bar.

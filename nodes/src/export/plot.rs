@@ -60,8 +60,15 @@ pub fn glyph(c: char) -> Option<[u8; 5]> {
     })
 }
 
-/// Draws `s` with its top-left corner at (x, y), `scale` pixels per font pixel.
-pub fn text(img: &mut RgbImage, x: i64, y: i64, s: &str, scale: u32, color: [u8; 3]) {
+/// Draws `s` with its top-left corner at (x, y), `scale` pixels per font pixel, in `color`.
+pub fn text_px<P: image::Pixel>(
+    img: &mut image::ImageBuffer<P, Vec<P::Subpixel>>,
+    x: i64,
+    y: i64,
+    s: &str,
+    scale: u32,
+    color: P,
+) {
     for (k, c) in s.chars().enumerate() {
         let Some(g) = glyph(c) else { continue };
         for (row, bits) in g.iter().enumerate() {
@@ -78,13 +85,18 @@ pub fn text(img: &mut RgbImage, x: i64, y: i64, s: &str, scale: u32, color: [u8;
                             && (px as u32) < img.width()
                             && (py as u32) < img.height()
                         {
-                            img.put_pixel(px as u32, py as u32, Rgb(color));
+                            img.put_pixel(px as u32, py as u32, color);
                         }
                     }
                 }
             }
         }
     }
+}
+
+/// [`text_px`] in an RGB colour.
+pub fn text(img: &mut RgbImage, x: i64, y: i64, s: &str, scale: u32, color: [u8; 3]) {
+    text_px(img, x, y, s, scale, Rgb(color));
 }
 
 /// Width in pixels of `s` at `scale`.

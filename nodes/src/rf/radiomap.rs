@@ -270,6 +270,19 @@ fn shoot(
     }
 }
 
+/// A path-gain map in dB: NaN where no ray arrived.
+pub fn to_db(map: &Raster) -> Raster {
+    Raster {
+        grid: map.grid,
+        data: PodVec(
+            map.data
+                .iter()
+                .map(|&g| if g > 0.0 { 10.0 * g.log10() } else { f32::NAN })
+                .collect(),
+        ),
+    }
+}
+
 /// A direction on the hemisphere round `n`, uniform in solid angle, from two uniforms.
 fn hemisphere(n: DVec3, u1: f64, u2: f64) -> DVec3 {
     let z = u1;
