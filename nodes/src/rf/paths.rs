@@ -206,7 +206,7 @@ pub fn trace_links(
                 .collect();
             let rxs: Vec<DVec3> = idx.iter().map(|&i| DVec3::from(links[i].1)).collect();
             let tx = DVec3::from(t.map(f64::from_bits));
-            let p = diffuse_power(scene, tx, &rxs, tx_antenna, rx_antenna, opt, freq_hz);
+            let p = diffuse_power(scene, tx, &rxs, tx_antenna, rx_antenna, opt);
             for (&i, v) in idx.iter().zip(p) {
                 diffuse[i] = v;
             }
@@ -250,13 +250,11 @@ fn diffuse_power(
     tx_antenna: &Antenna,
     rx_antenna: &Antenna,
     opt: &TraceOptions,
-    freq_hz: f64,
 ) -> Vec<f64> {
     let omega = 4.0 * std::f64::consts::PI / opt.rays.max(1) as f64;
     let s = opt.scattering_coefficient;
     let specular_factor = (1.0 - s * s).max(0.0).sqrt();
     let amp = scene.wavelength / (4.0 * std::f64::consts::PI);
-    let _ = freq_hz;
     let chunks: Vec<Vec<f64>> = fibonacci_sphere(opt.rays)
         .chunks(4096)
         .map(|dirs| {
