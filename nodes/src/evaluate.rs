@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Height, Link, Measurements, Metrics, Raster};
+use crate::artifact::{ArtifactType, Link, Measurements, Metrics, Raster};
 use crate::rf::em::fspl_db;
 use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
 
@@ -118,10 +118,6 @@ impl Stage for Evaluate {
                 .iter()
                 .any(|l| l.path_loss_db.is_none() && l.tx_eirp_dbm.is_none())
         });
-        let z = |x: f64, y: f64, h: Height| match h {
-            Height::Absolute(z) => z,
-            Height::AboveGround(h) => terrain.and_then(|t| t.bilinear(x, y)).unwrap_or(0.0) + h,
-        };
         // (tx id, distance, frequency, predicted, measured loss (up to an offset if unknown), los)
         let mut rows = Vec::new();
         for (pl, ml) in pred.links.iter().zip(&meas.links) {
@@ -138,11 +134,7 @@ impl Stage for Evaluate {
             let Some(measured) = measured_loss(ml) else {
                 continue;
             };
-            let d = ((ml.tx.x - ml.rx.x).powi(2)
-                + (ml.tx.y - ml.rx.y).powi(2)
-                + (z(ml.tx.x, ml.tx.y, ml.tx.z) - z(ml.rx.x, ml.rx.y, ml.rx.z)).powi(2))
-            .sqrt()
-            .max(1.0);
+            let d = link_distance(ml, terrain);
             rows.push((
                 ml.tx.id.clone(),
                 d,
@@ -245,6 +237,19 @@ impl Stage for Evaluate {
         }
         Ok(m)
     }
+}
+
+/// The 3-D distance between a link's ends (at least 1 m); heights above ground stand on
+/// `terrain`, or on z = 0 without one.
+pub fn link_distance(l: &Link, terrain: Option<&Raster>) -> f64 {
+    let z = |e: &crate::artifact::Endpoint| {
+        let ground = terrain.and_then(|t| t.bilinear(e.x, e.y)).unwrap_or(0.0);
+        e.absolute_z(Some(ground))
+            .expect("a ground height is given")
+    };
+    ((l.tx.x - l.rx.x).powi(2) + (l.tx.y - l.rx.y).powi(2) + (z(&l.tx) - z(&l.rx)).powi(2))
+        .sqrt()
+        .max(1.0)
 }
 
 /// The measured path loss of a link: given, or EIRP − received power, or −received power (an

@@ -7,8 +7,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Height, Link, Measurements, Metrics, Ortho, Raster, Report};
-use crate::evaluate::{fit_power_distance, measured_loss};
+use crate::artifact::{ArtifactType, Measurements, Metrics, Ortho, Raster, Report};
+use crate::evaluate::{fit_power_distance, link_distance, measured_loss};
 use crate::export::plot::{Chart, PALETTE, range};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -199,18 +199,6 @@ fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
     (md, csv)
 }
 
-fn z(h: Height) -> f64 {
-    match h {
-        Height::Absolute(z) | Height::AboveGround(z) => z,
-    }
-}
-
-fn link_distance(l: &Link) -> f64 {
-    ((l.tx.x - l.rx.x).powi(2) + (l.tx.y - l.rx.y).powi(2) + (z(l.tx.z) - z(l.rx.z)).powi(2))
-        .sqrt()
-        .max(1.0)
-}
-
 fn pairs(meas: &Measurements, pred: &Measurements, ev: &Metrics) -> Vec<(f64, f64, f64)> {
     meas.links
         .iter()
@@ -218,7 +206,7 @@ fn pairs(meas: &Measurements, pred: &Measurements, ev: &Metrics) -> Vec<(f64, f6
         .filter_map(|(m, p)| {
             let offset = ev.get(&format!("offset_db/{}", m.tx.id)).unwrap_or(0.0);
             Some((
-                link_distance(m),
+                link_distance(m, None),
                 measured_loss(m)? - offset,
                 // Beyond the floor (or no path): scored as Evaluate scores it.
                 p.path_loss_db

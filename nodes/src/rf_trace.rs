@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Grid, Height, Measurements, Raster, Scene};
+use crate::artifact::{ArtifactType, Endpoint, Grid, Measurements, Raster, Scene};
 use crate::rf::antenna::Antenna;
 use crate::rf::paths::{TraceOptions, trace_links};
 use crate::rf::radiomap::{MapPlane, default_plane, radio_map};
@@ -83,25 +83,20 @@ impl Stage for Trace {
         let scene: &Scene = inputs.one("scene")?;
         let links: &Measurements = inputs.one("links")?;
         let terrain: Option<&Raster> = inputs.optional("terrain")?;
-        let z = |x: f64, y: f64, h: Height| -> Result<f64, StageError> {
-            match h {
-                Height::Absolute(z) => Ok(z),
-                Height::AboveGround(h) => terrain
-                    .and_then(|t| t.bilinear(x, y))
-                    .map(|g| g + h)
-                    .ok_or_else(|| StageError::Failed(format!(
-                        "a height above ground at ({x:.1}, {y:.1}) needs a terrain input covering it"
-                    ))),
-            }
+        let z = |e: &Endpoint| -> Result<f64, StageError> {
+            e.absolute_z(terrain.and_then(|t| t.bilinear(e.x, e.y)))
+                .ok_or_else(|| {
+                    StageError::Failed(format!(
+                        "a height above ground at ({:.1}, {:.1}) needs a terrain input covering it",
+                        e.x, e.y
+                    ))
+                })
         };
         // One scene per carrier, one trace per (carrier, transmitter azimuth).
         let mut groups: BTreeMap<(u64, u64), Vec<usize>> = BTreeMap::new();
         let mut ends = Vec::with_capacity(links.links.len());
         for (i, l) in links.links.iter().enumerate() {
-            ends.push((
-                [l.tx.x, l.tx.y, z(l.tx.x, l.tx.y, l.tx.z)?],
-                [l.rx.x, l.rx.y, z(l.rx.x, l.rx.y, l.rx.z)?],
-            ));
+            ends.push(([l.tx.x, l.tx.y, z(&l.tx)?], [l.rx.x, l.rx.y, z(&l.rx)?]));
             let az = l.tx.azimuth_deg.map_or(f64::NAN, |a| 90.0 - a);
             groups
                 .entry((l.freq_hz.to_bits(), az.to_bits()))
@@ -243,7 +238,7 @@ impl Stage for RadioMap {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::artifact::{Endpoint, Link, PodVec};
+    use crate::artifact::{Height, Link, PodVec};
     use crate::stage::Slot;
     use crate::{Artifact, Site};
     use std::sync::Arc;

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Height, Measurements, Raster};
+use crate::artifact::{ArtifactType, Measurements, Raster};
 use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
 
 /// A TR 38.901 scenario.
@@ -26,13 +26,7 @@ pub fn path_loss(s: Scenario, los: bool, d2d: f64, h_bs: f64, h_ut: f64, fc_ghz:
     let lg = f64::log10;
     match s {
         Scenario::UMa => {
-            let dbp = 4.0 * (h_bs - 1.0) * (h_ut - 1.0) * fc_ghz * 1e9 / C;
-            let pl_los = if d2d <= dbp {
-                28.0 + 22.0 * lg(d3d) + 20.0 * lg(fc_ghz)
-            } else {
-                28.0 + 40.0 * lg(d3d) + 20.0 * lg(fc_ghz)
-                    - 9.0 * lg(dbp * dbp + (h_bs - h_ut).powi(2))
-            };
+            let pl_los = two_slope_los((28.0, 22.0, 9.0), d2d, h_bs, h_ut, fc_ghz);
             if los {
                 pl_los
             } else {
@@ -41,13 +35,7 @@ pub fn path_loss(s: Scenario, los: bool, d2d: f64, h_bs: f64, h_ut: f64, fc_ghz:
             }
         }
         Scenario::UMi => {
-            let dbp = 4.0 * (h_bs - 1.0) * (h_ut - 1.0) * fc_ghz * 1e9 / C;
-            let pl_los = if d2d <= dbp {
-                32.4 + 21.0 * lg(d3d) + 20.0 * lg(fc_ghz)
-            } else {
-                32.4 + 40.0 * lg(d3d) + 20.0 * lg(fc_ghz)
-                    - 9.5 * lg(dbp * dbp + (h_bs - h_ut).powi(2))
-            };
+            let pl_los = two_slope_los((32.4, 21.0, 9.5), d2d, h_bs, h_ut, fc_ghz);
             if los {
                 pl_los
             } else {
@@ -80,6 +68,20 @@ pub fn path_loss(s: Scenario, los: bool, d2d: f64, h_bs: f64, h_ut: f64, fc_ghz:
                 pl_los.max(nlos)
             }
         }
+    }
+}
+
+/// The UMa/UMi LOS loss: `a + b log10 d3D + 20 log10 fc` up to the breakpoint d'BP (effective
+/// heights over hE = 1 m), `a + 40 log10 d3D + 20 log10 fc − c log10(d'BP² + (hBS − hUT)²)` beyond,
+/// for `(a, b, c)` = (28, 22, 9) in UMa and (32.4, 21, 9.5) in UMi.
+fn two_slope_los((a, b, c): (f64, f64, f64), d2d: f64, h_bs: f64, h_ut: f64, fc_ghz: f64) -> f64 {
+    let lg = f64::log10;
+    let d3d = (d2d * d2d + (h_bs - h_ut).powi(2)).sqrt();
+    let dbp = 4.0 * (h_bs - 1.0) * (h_ut - 1.0) * fc_ghz * 1e9 / C;
+    if d2d <= dbp {
+        a + b * lg(d3d) + 20.0 * lg(fc_ghz)
+    } else {
+        a + 40.0 * lg(d3d) + 20.0 * lg(fc_ghz) - c * lg(dbp * dbp + (h_bs - h_ut).powi(2))
     }
 }
 
@@ -160,18 +162,16 @@ impl Stage for Tr38901 {
                 "the los input must trace the same links".into(),
             ));
         }
-        let ground = |x: f64, y: f64| terrain.and_then(|t| t.bilinear(x, y)).unwrap_or(0.0);
-        let height = |x: f64, y: f64, h: Height| match h {
-            Height::AboveGround(h) => h,
-            Height::Absolute(z) => z - ground(x, y),
+        // Absolute heights stand on the terrain, or on z = 0 without one.
+        let height = |e: &crate::artifact::Endpoint| {
+            let ground = terrain.and_then(|t| t.bilinear(e.x, e.y)).unwrap_or(0.0);
+            e.above_ground(Some(ground))
+                .expect("a ground height is given")
         };
         let mut out = links.clone();
         for (i, l) in out.links.iter_mut().enumerate() {
             let d2d = (l.tx.x - l.rx.x).hypot(l.tx.y - l.rx.y).max(1.0);
-            let (h_bs, h_ut) = (
-                height(l.tx.x, l.tx.y, l.tx.z).max(1.5),
-                height(l.rx.x, l.rx.y, l.rx.z).clamp(1.0, 22.5),
-            );
+            let (h_bs, h_ut) = (height(&l.tx).max(1.5), height(&l.rx).clamp(1.0, 22.5));
             let fc = l.freq_hz / 1e9;
             let pl = match los.and_then(|m| m.links[i].los) {
                 Some(flag) => path_loss(p.scenario, flag, d2d, h_bs, h_ut, fc),

@@ -27,6 +27,26 @@ pub struct Endpoint {
     pub azimuth_deg: Option<f64>,
 }
 
+impl Endpoint {
+    /// Site-frame z, given the ground height under the endpoint (needed only when its height is
+    /// above ground; `None` then if the ground is unknown).
+    pub fn absolute_z(&self, ground: Option<f64>) -> Option<f64> {
+        match self.z {
+            Height::Absolute(z) => Some(z),
+            Height::AboveGround(h) => ground.map(|g| g + h),
+        }
+    }
+
+    /// Height above the ground, given the ground height under the endpoint (needed only when its
+    /// height is absolute).
+    pub fn above_ground(&self, ground: Option<f64>) -> Option<f64> {
+        match self.z {
+            Height::AboveGround(h) => Some(h),
+            Height::Absolute(z) => ground.map(|g| z - g),
+        }
+    }
+}
+
 /// One measured link.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Link {
