@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
-use kodama_nodes::export::{Encoded, encode, output_file};
+use kodama_nodes::io::export::{Encoded, encode, output_file};
 use kodama_nodes::stage::{Arity, Slot};
 use kodama_nodes::{Artifact, Ctx, Inputs, StageError};
 use rayon::prelude::*;

@@ -8,13 +8,13 @@ use std::time::Instant;
 use clap::Args;
 use glam::DVec3;
 
-use kodama_nodes::export::{Encoded, encode};
+use kodama_nodes::io::export::{Encoded, encode};
 use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::links_csv::{read_links, write_results};
 use kodama_nodes::rf::paths::{TraceOptions, trace_links};
 use kodama_nodes::rf::radiomap::{default_plane, radio_map};
 use kodama_nodes::rf::scene::RfScene;
-use kodama_nodes::sionna_xml::read_scene;
+use kodama_nodes::io::sionna_xml::read_scene;
 use kodama_nodes::{Artifact, Site, StageError};
 
 /// Interaction switches shared by both commands.

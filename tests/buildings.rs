@@ -8,7 +8,7 @@ use common::*;
 use std::path::{Path, PathBuf};
 
 use kodama_nodes::artifact::{Mesh, PodVec};
-use kodama_nodes::mesh_check::check_solid;
+use kodama_nodes::geom::mesh_check::check_solid;
 
 fn repo(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)

@@ -18,65 +18,16 @@ compile_error!(
 );
 
 pub mod artifact;
-pub mod crs;
-pub mod ecef;
-pub mod export;
-pub mod exrio;
-pub mod geojson;
-pub mod geotiff;
-pub mod materials;
-pub mod mesh_build;
-pub mod mesh_check;
+pub mod geom;
+pub mod io;
 pub mod params;
 pub mod rf;
 pub mod rng;
-pub mod sionna_xml;
 pub mod site;
 pub mod stage;
-pub mod warp;
 
-pub mod assemble_scene;
-pub mod building_mask;
-pub mod building_solids;
-pub mod city_footprints;
-pub mod coarsen;
-pub mod composite_height;
-pub mod evaluate;
-pub mod footprint_score;
-pub mod gaussian_blur;
-pub mod osm_baseline;
-pub mod osm_like;
-pub mod raster_ops;
-pub mod rasterize_scene;
-pub mod rasterize_surface;
-pub mod raycast;
-pub mod read_footprints;
-pub mod read_las;
-pub mod read_measurements;
-pub mod read_ortho;
-pub mod read_osm;
-pub mod read_raster;
-pub mod read_sionna;
-pub mod read_tiles;
-pub mod read_views;
-pub mod read_xyz;
-pub mod report;
-pub mod rf_trace;
-pub mod roof_clean;
-pub mod split_buildings;
-pub mod stats;
-pub mod synth_city;
-pub mod synth_drive_test;
-pub mod synth_lidar;
-pub mod synth_scan;
-pub mod synth_terrain;
-pub mod synth_views;
-pub mod terrain_pass;
-pub mod tr38901;
-pub mod trace_footprints;
-pub mod truth_scene;
-pub mod unassigned;
-pub mod views_io;
+pub mod stages;
+pub mod synth;
 
 pub use artifact::{Artifact, ArtifactType};
 pub use site::Site;
@@ -88,51 +39,51 @@ pub use stage::{Arity, Ctx, FileRef, InputSpec, Inputs, ParamError, Progress, St
 macro_rules! for_each_stage {
     ($m:ident) => {
         $m! {
-            $crate::synth_terrain::SynthTerrain,
-            $crate::synth_scan::SynthScan,
-            $crate::synth_city::SynthCity,
-            $crate::truth_scene::TruthScene,
-            $crate::synth_lidar::SynthLidar,
-            $crate::rasterize_scene::RasterizeScene,
-            $crate::rasterize_scene::RenderOrtho,
-            $crate::city_footprints::CityFootprints,
-            $crate::synth_views::SynthViews,
-            $crate::synth_drive_test::SynthDriveTest,
-            $crate::read_las::ReadLas,
-            $crate::read_raster::ReadRaster,
-            $crate::read_measurements::ReadMeasurements,
-            $crate::read_footprints::ReadFootprints,
-            $crate::read_osm::ReadOsmBuildings,
-            $crate::read_tiles::ReadTileset,
-            $crate::read_views::ReadViews,
-            $crate::read_ortho::ReadOrtho,
-            $crate::read_sionna::ReadSionnaScene,
-            $crate::read_xyz::ReadXyz,
-            $crate::rasterize_surface::RasterizeSurface,
-            $crate::composite_height::CompositeHeight,
-            $crate::terrain_pass::TerrainPass,
-            $crate::terrain_pass::AboveGround,
-            $crate::building_mask::BuildingMask,
-            $crate::trace_footprints::TraceFootprints,
-            $crate::unassigned::UnassignedAbove,
-            $crate::roof_clean::RoofClean,
-            $crate::split_buildings::SplitBuildings,
-            $crate::building_solids::BuildingSolids,
-            $crate::osm_baseline::OsmBaseline,
-            $crate::osm_like::OsmLike,
-            $crate::assemble_scene::AssembleScene,
-            $crate::coarsen::Coarsen,
-            $crate::gaussian_blur::GaussianBlur,
-            $crate::raster_ops::Clamp,
-            $crate::raster_ops::Difference,
-            $crate::rf_trace::Trace,
-            $crate::rf_trace::RadioMap,
-            $crate::tr38901::Tr38901,
-            $crate::evaluate::Evaluate,
-            $crate::report::ReportStage,
-            $crate::footprint_score::FootprintScore,
-            $crate::stats::RasterStats,
-            $crate::stats::PointStats,
+            $crate::synth::synth_terrain::SynthTerrain,
+            $crate::synth::synth_scan::SynthScan,
+            $crate::synth::synth_city::SynthCity,
+            $crate::synth::truth_scene::TruthScene,
+            $crate::synth::synth_lidar::SynthLidar,
+            $crate::stages::heights::rasterize_scene::RasterizeScene,
+            $crate::stages::heights::rasterize_scene::RenderOrtho,
+            $crate::synth::city_footprints::CityFootprints,
+            $crate::synth::synth_views::SynthViews,
+            $crate::synth::synth_drive_test::SynthDriveTest,
+            $crate::stages::ingest::read_las::ReadLas,
+            $crate::stages::ingest::read_raster::ReadRaster,
+            $crate::stages::ingest::read_measurements::ReadMeasurements,
+            $crate::stages::ingest::read_footprints::ReadFootprints,
+            $crate::stages::ingest::read_osm::ReadOsmBuildings,
+            $crate::stages::ingest::read_tiles::ReadTileset,
+            $crate::stages::ingest::read_views::ReadViews,
+            $crate::stages::ingest::read_ortho::ReadOrtho,
+            $crate::stages::ingest::read_sionna::ReadSionnaScene,
+            $crate::stages::ingest::read_xyz::ReadXyz,
+            $crate::stages::heights::rasterize_surface::RasterizeSurface,
+            $crate::stages::heights::composite_height::CompositeHeight,
+            $crate::stages::buildings::terrain_pass::TerrainPass,
+            $crate::stages::buildings::terrain_pass::AboveGround,
+            $crate::stages::buildings::building_mask::BuildingMask,
+            $crate::stages::buildings::trace_footprints::TraceFootprints,
+            $crate::stages::buildings::unassigned::UnassignedAbove,
+            $crate::stages::buildings::roof_clean::RoofClean,
+            $crate::stages::buildings::split_buildings::SplitBuildings,
+            $crate::stages::buildings::building_solids::BuildingSolids,
+            $crate::stages::baseline::osm_baseline::OsmBaseline,
+            $crate::synth::osm_like::OsmLike,
+            $crate::stages::buildings::assemble_scene::AssembleScene,
+            $crate::stages::heights::coarsen::Coarsen,
+            $crate::stages::heights::gaussian_blur::GaussianBlur,
+            $crate::stages::heights::raster_ops::Clamp,
+            $crate::stages::heights::raster_ops::Difference,
+            $crate::stages::radio::rf_trace::Trace,
+            $crate::stages::radio::rf_trace::RadioMap,
+            $crate::stages::baseline::tr38901::Tr38901,
+            $crate::stages::eval::evaluate::Evaluate,
+            $crate::stages::eval::report::ReportStage,
+            $crate::stages::eval::footprint_score::FootprintScore,
+            $crate::stages::eval::stats::RasterStats,
+            $crate::stages::eval::stats::PointStats,
         }
     };
 }

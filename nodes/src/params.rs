@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use crate::crs::Crs;
+use crate::io::crs::Crs;
 use crate::stage::ParamError;
 
 /// An optional cell size must be positive (rejects NaN too).

@@ -7,10 +7,10 @@ use common::*;
 use std::sync::Arc;
 
 use kodama_nodes::artifact::Raster;
-use kodama_nodes::building_mask::{BuildingMask, BuildingMaskParams};
-use kodama_nodes::read_osm::point_in_ring;
+use kodama_nodes::stages::buildings::building_mask::{BuildingMask, BuildingMaskParams};
+use kodama_nodes::stages::ingest::read_osm::point_in_ring;
 use kodama_nodes::stage::Slot;
-use kodama_nodes::synth_city::{SynthCityParams, generate};
+use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
 
 #[test]
@@ -33,7 +33,7 @@ fn masks_match_the_true_outlines() {
         })
         .collect();
     {
-        let rough = kodama_nodes::building_mask::roughness(&a);
+        let rough = kodama_nodes::stages::buildings::building_mask::roughness(&a);
         let pct = |mut v: Vec<f32>| {
             v.sort_by(f32::total_cmp);
             [0.5, 0.9, 0.98].map(|q| v[((v.len() - 1) as f64 * q) as usize])
@@ -106,7 +106,7 @@ fn masks_match_the_true_outlines() {
 /// The traced polygons, rasterized back at cell centres, are exactly the mask (outlines and
 /// courtyards), carry heights, and export as GeoJSON.
 fn check_traced_polygons(labels: &Raster, a: &Raster, site: &Site) {
-    use kodama_nodes::trace_footprints::{TraceFootprints, TraceFootprintsParams};
+    use kodama_nodes::stages::buildings::trace_footprints::{TraceFootprints, TraceFootprintsParams};
     let inputs = Inputs::new()
         .with("labels", slot(Artifact::Raster(labels.clone())))
         .with(
@@ -143,8 +143,8 @@ fn check_traced_polygons(labels: &Raster, a: &Raster, site: &Site) {
     assert_eq!(mismatches, 0);
     assert!(holes >= 3, "the courtyards are holes");
     assert!(fp.items.iter().all(|b| b.height_m.is_some_and(|h| h > 3.0)));
-    let kodama_nodes::export::Encoded::File(json) =
-        kodama_nodes::export::encode(&Artifact::Footprints(fp), site, "geojson").unwrap()
+    let kodama_nodes::io::export::Encoded::File(json) =
+        kodama_nodes::io::export::encode(&Artifact::Footprints(fp), site, "geojson").unwrap()
     else {
         panic!()
     };

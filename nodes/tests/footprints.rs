@@ -7,8 +7,8 @@ use common::*;
 use std::path::Path;
 
 use kodama_nodes::artifact::{Footprints, Polygon};
-use kodama_nodes::geojson::{PropertyNames, read_footprints, write_footprints};
-use kodama_nodes::read_osm::{ReadOsmBuildings, ReadOsmBuildingsParams};
+use kodama_nodes::io::geojson::{PropertyNames, read_footprints, write_footprints};
+use kodama_nodes::stages::ingest::read_osm::{ReadOsmBuildings, ReadOsmBuildingsParams};
 use kodama_nodes::{Ctx, Inputs, Site, Stage};
 
 fn total_area(f: &Footprints) -> f64 {

@@ -6,7 +6,7 @@ use common::*;
 use std::path::PathBuf;
 
 use kodama_nodes::artifact::{Height, Measurements};
-use kodama_nodes::read_measurements::{Layout, ReadMeasurements, ReadMeasurementsParams};
+use kodama_nodes::stages::ingest::read_measurements::{Layout, ReadMeasurements, ReadMeasurementsParams};
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
 
 fn read(
@@ -104,11 +104,11 @@ fn links_layout_in_site_and_geographic_coordinates_round_trips_through_export() 
         (10.5, -20.25, 3.5e9, Some(-80.5), Some(46.0), Some(true))
     );
     assert_eq!(
-        kodama_nodes::export::formats(kodama_nodes::ArtifactType::Measurements),
+        kodama_nodes::io::export::formats(kodama_nodes::ArtifactType::Measurements),
         ["csv"]
     );
-    let kodama_nodes::export::Encoded::File(bytes) =
-        kodama_nodes::export::encode(&Artifact::Measurements(m.clone()), &site, "csv").unwrap()
+    let kodama_nodes::io::export::Encoded::File(bytes) =
+        kodama_nodes::io::export::encode(&Artifact::Measurements(m.clone()), &site, "csv").unwrap()
     else {
         panic!("a file")
     };

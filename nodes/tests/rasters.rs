@@ -8,11 +8,11 @@ use common::*;
 use std::path::PathBuf;
 
 use kodama_nodes::artifact::{Grid, Ortho, PodVec, Raster};
-use kodama_nodes::crs::{Crs, ToSite};
-use kodama_nodes::geotiff::{read_geotiff, write_geotiff, write_geotiff_rgb};
-use kodama_nodes::read_ortho::{ReadOrtho, ReadOrthoParams};
-use kodama_nodes::read_raster::{ReadRaster, ReadRasterParams};
-use kodama_nodes::warp::Resample;
+use kodama_nodes::io::crs::{Crs, ToSite};
+use kodama_nodes::io::geotiff::{read_geotiff, write_geotiff, write_geotiff_rgb};
+use kodama_nodes::stages::ingest::read_ortho::{ReadOrtho, ReadOrthoParams};
+use kodama_nodes::stages::ingest::read_raster::{ReadRaster, ReadRasterParams};
+use kodama_nodes::io::warp::Resample;
 use kodama_nodes::{Ctx, Inputs, Site, Stage};
 
 fn raster_params(path: &str) -> ReadRasterParams {
@@ -275,7 +275,7 @@ fn autzen_orthophoto_registers_with_the_lidar_colours() {
     };
     let files = [shared("autzen/autzen.jpg"), shared("autzen/autzen.wld")];
     let o = ReadOrtho::run(&p, &Inputs::new(), &Ctx::new(&site, &files)).unwrap();
-    let pts = kodama_nodes::read_las::read_las(
+    let pts = kodama_nodes::stages::ingest::read_las::read_las(
         &shared("autzen/autzen_trim.las"),
         None,
         &Ctx::new(&site, &[]),

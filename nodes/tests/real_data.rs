@@ -5,8 +5,8 @@
 mod common;
 use common::*;
 
-use kodama_nodes::crs::{Crs, ToSite};
-use kodama_nodes::read_las::{header_crs, read_las};
+use kodama_nodes::io::crs::{Crs, ToSite};
+use kodama_nodes::stages::ingest::read_las::{header_crs, read_las};
 use kodama_nodes::{Ctx, Site};
 
 #[test]

@@ -5,7 +5,7 @@ use glam::DVec3;
 use num_complex::Complex64 as C64;
 
 use kodama_nodes::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
-use kodama_nodes::materials::Material;
+use kodama_nodes::rf::materials::Material;
 use kodama_nodes::rf::antenna::{Antenna, Pattern, Polarization};
 use kodama_nodes::rf::em::{fspl_db, permittivity, slab};
 use kodama_nodes::rf::paths::{InteractionKind, TraceOptions, trace_links};
@@ -169,7 +169,7 @@ fn a_concrete_wall_costs_its_slab_transmission_loss() {
 #[test]
 fn diffraction_round_a_blade_matches_the_knife_edge() {
     use kodama_nodes::artifact::Polygon;
-    use kodama_nodes::mesh_build::prism;
+    use kodama_nodes::geom::mesh_build::prism;
     use kodama_nodes::rf::utd::{fresnel_kirchhoff_db, knife_edge_v};
     let blade = Polygon::normalized(vec![[0.0, 0.0], [-20.0, -0.4], [-20.0, 0.4]], vec![]).unwrap();
     let mesh = prism(&blade, -400.0, 400.0, Material::Metal, Material::Metal).unwrap();

@@ -7,9 +7,9 @@ use common::*;
 use std::path::Path;
 
 use kodama_nodes::artifact::Scene;
-use kodama_nodes::export::{Encoded, encode, write_glb};
-use kodama_nodes::read_tiles::{ReadTileset, ReadTilesetParams};
-use kodama_nodes::synth_city::generate;
+use kodama_nodes::io::export::{Encoded, encode, write_glb};
+use kodama_nodes::stages::ingest::read_tiles::{ReadTileset, ReadTilesetParams};
+use kodama_nodes::synth::synth_city::generate;
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
 
 fn truth() -> Scene {

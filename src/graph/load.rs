@@ -632,7 +632,7 @@ fn check_outputs(
         match index.get(node.as_str()) {
             Some(&i) => {
                 let ty = registry::kind(&raw[i].kind.name).map(|k| k.output);
-                match ty.map(|t| kodama_nodes::export::output_file(name, t)) {
+                match ty.map(|t| kodama_nodes::io::export::output_file(name, t)) {
                     Some(Err(m)) => diags.push(Diagnostic::at(
                         k.span,
                         None,

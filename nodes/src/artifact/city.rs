@@ -3,8 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::Polygon;
-use crate::materials::Material;
-use crate::synth_terrain::SynthTerrainParams;
+use crate::rf::materials::Material;
+use crate::synth::synth_terrain::SynthTerrainParams;
 
 /// An oriented rectangle: south-west corner (before rotation), length along `heading`, width.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -209,7 +209,7 @@ pub struct Street {
 /// The synthetic site.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct City {
-    /// The terrain (evaluated with [`crate::synth_terrain::height_at`]).
+    /// The terrain (evaluated with [`crate::synth::synth_terrain::height_at`]).
     pub terrain: SynthTerrainParams,
     /// Extent (east, north) from the site origin, metres.
     pub size_m: (f64, f64),

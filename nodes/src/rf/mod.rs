@@ -7,6 +7,7 @@ pub mod diffraction;
 pub mod em;
 pub mod field;
 pub mod links_csv;
+pub mod materials;
 pub mod paths;
 pub mod radiomap;
 pub mod scattering;

@@ -29,7 +29,7 @@ pub struct MapPlane {
     /// Height of the plane, metres (site frame); unused with a lifted surface.
     pub z: f64,
     /// The terrain-following measurement surface, if any.
-    pub lifted: Option<crate::raycast::SceneRays>,
+    pub lifted: Option<crate::geom::raycast::SceneRays>,
 }
 
 impl MapPlane {
@@ -45,10 +45,10 @@ impl MapPlane {
     /// The surface `height_m` above `terrain`, over `grid`: the terrain meshed at the grid's
     /// cell size and lifted.
     pub fn above_terrain(grid: Grid, terrain: &Raster, height_m: f64) -> Result<MapPlane, String> {
-        let mut mesh = crate::assemble_scene::terrain_mesh(
+        let mut mesh = crate::stages::buildings::assemble_scene::terrain_mesh(
             terrain,
             grid.cell_m,
-            crate::materials::Material::MediumDryGround,
+            crate::rf::materials::Material::MediumDryGround,
         )?;
         for p in mesh.positions.iter_mut() {
             p[2] += height_m as f32;
@@ -63,7 +63,7 @@ impl MapPlane {
         Ok(MapPlane {
             grid,
             z: f64::NAN,
-            lifted: Some(crate::raycast::SceneRays::new(&scene)),
+            lifted: Some(crate::geom::raycast::SceneRays::new(&scene)),
         })
     }
 

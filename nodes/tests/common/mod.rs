@@ -6,13 +6,13 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use kodama_nodes::artifact::{City, PointSet, Raster, Scene};
-use kodama_nodes::rasterize_surface::{CellMode, RasterizeSurface, RasterizeSurfaceParams};
+use kodama_nodes::stages::heights::rasterize_surface::{CellMode, RasterizeSurface, RasterizeSurfaceParams};
 use kodama_nodes::stage::Slot;
-use kodama_nodes::synth_city::SynthCityParams;
-use kodama_nodes::synth_lidar::{SynthLidar, SynthLidarParams};
-use kodama_nodes::synth_terrain::SynthTerrainParams;
-use kodama_nodes::terrain_pass::{AboveGround, AboveGroundParams, TerrainPass, TerrainPassParams};
-use kodama_nodes::truth_scene::{TruthScene, TruthSceneParams};
+use kodama_nodes::synth::synth_city::SynthCityParams;
+use kodama_nodes::synth::synth_lidar::{SynthLidar, SynthLidarParams};
+use kodama_nodes::synth::synth_terrain::SynthTerrainParams;
+use kodama_nodes::stages::buildings::terrain_pass::{AboveGround, AboveGroundParams, TerrainPass, TerrainPassParams};
+use kodama_nodes::synth::truth_scene::{TruthScene, TruthSceneParams};
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
 
 /// A file of the real test data, which sits in `shared/data` beside the repository.

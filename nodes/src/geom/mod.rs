@@ -1,0 +1,6 @@
+//! Geometry shared by the stages: closed solids and their checks, polygons, the terrain mesh, and
+//! ray casting over a BVH. Never imports a stage.
+
+pub mod mesh_build;
+pub mod mesh_check;
+pub mod raycast;

@@ -1,0 +1,163 @@
+//! Artifacts as ordinary files that other tools open: GeoTIFF, LAS, glTF, 3D Tiles, GeoJSON, CSV,
+//! JSON.
+
+pub mod colormap;
+mod glb;
+mod las;
+pub mod plot;
+mod tiles;
+
+use crate::artifact::{Artifact, ArtifactType};
+use crate::io::geotiff::{write_geotiff, write_geotiff_rgb};
+use crate::site::Site;
+
+pub use glb::{material_color, write_glb, write_glb_objects};
+pub use las::write_las;
+pub use tiles::write_tileset;
+
+/// An encoded output.
+pub enum Encoded {
+    /// One file.
+    File(Vec<u8>),
+    /// A folder of files, by relative path; the first is its entry point (e.g. `tileset.json`).
+    Folder(Vec<(String, Vec<u8>)>),
+}
+
+/// The formats (file extensions) an artifact type can be written in; the first is the default.
+pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
+    match ty {
+        ArtifactType::Raster => &["tif", "exr", "png"],
+        ArtifactType::Ortho => &["tif"],
+        ArtifactType::City | ArtifactType::Metrics => &["json"],
+        ArtifactType::Scene => &["glb", "3dtiles", "sionna"],
+        ArtifactType::Footprints => &["geojson"],
+        ArtifactType::Measurements => &["csv"],
+        ArtifactType::Points => &["las", "laz", "xyz"],
+        ArtifactType::Views => &["views"],
+        ArtifactType::Report => &["report"],
+    }
+}
+
+/// The file name and format of output `name` of type `ty`: a name ending in one of the type's
+/// formats (`truth.3dtiles`) picks it; otherwise the default format's extension is appended.
+pub fn output_file(name: &str, ty: ArtifactType) -> Result<(String, &'static str), String> {
+    let fmts = formats(ty);
+    match name.rsplit_once('.') {
+        Some((_, ext)) => match fmts.iter().find(|f| **f == ext) {
+            Some(f) => Ok((name.to_owned(), f)),
+            None => {
+                let list = match fmts.split_last() {
+                    Some((last, rest)) if !rest.is_empty() => {
+                        format!("{} or {last}", rest.join(", "))
+                    }
+                    _ => fmts.join(""),
+                };
+                Err(format!("{ty} outputs are written as {list}, not .{ext}"))
+            }
+        },
+        // A report is a folder named as the output.
+        None if ty == ArtifactType::Report => Ok((name.to_owned(), fmts[0])),
+        None => Ok((format!("{name}.{}", fmts[0]), fmts[0])),
+    }
+}
+
+/// Encodes `a` in `format`, one of [`formats`] for its type.
+pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String> {
+    let file = |bytes: Vec<u8>| Ok(Encoded::File(bytes));
+    match (a, format) {
+        (Artifact::Raster(r), "tif") => {
+            let mut buf = std::io::Cursor::new(Vec::new());
+            write_geotiff(r, site, &mut buf)?;
+            file(buf.into_inner())
+        }
+        (Artifact::Raster(r), "exr") => file(crate::io::exr_io::write_exr(
+            r.grid.width as usize,
+            r.grid.height as usize,
+            vec![("Y", r.data.to_vec())],
+        )?),
+        (Artifact::Raster(r), "png") => file(colormap::raster_png(r)?),
+        (Artifact::Ortho(o), "tif") => {
+            let mut buf = std::io::Cursor::new(Vec::new());
+            write_geotiff_rgb(&o.rgb, &o.grid, site, &mut buf)?;
+            file(buf.into_inner())
+        }
+        (Artifact::City(c), "json") => {
+            file(serde_json::to_vec_pretty(c).map_err(|e| e.to_string())?)
+        }
+        (Artifact::Scene(s), "glb") => file(write_glb(s)?),
+        (Artifact::Scene(s), "3dtiles") => Ok(Encoded::Folder(write_tileset(s, site, 100.0)?)),
+        (Artifact::Scene(s), "sionna") => Ok(Encoded::Folder(crate::io::sionna_xml::write_scene(s)?)),
+        (Artifact::Footprints(f), "geojson") => {
+            file(crate::io::geojson::write_footprints(f, site)?.into_bytes())
+        }
+        (Artifact::Measurements(m), "csv") => file(measurements_csv(m).into_bytes()),
+        (Artifact::Metrics(m), "json") => {
+            let mut s = serde_json::to_string_pretty(&m.values).map_err(|e| e.to_string())?;
+            s.push('\n');
+            file(s.into_bytes())
+        }
+        (Artifact::Points(p), "las") => file(write_las(p, site, false)?),
+        (Artifact::Points(p), "laz") => file(write_las(p, site, true)?),
+        (Artifact::Points(p), "xyz") => file(xyz_text(p, site).into_bytes()),
+        (Artifact::Views(v), "views") => Ok(Encoded::Folder(crate::io::views_io::write_viewset(v)?)),
+        (Artifact::Report(r), "report") => Ok(Encoded::Folder(r.files.clone())),
+        (a, f) => Err(format!(
+            "{} cannot be written as {f:?}; formats: {}",
+            a.ty(),
+            formats(a.ty()).join(", ")
+        )),
+    }
+}
+
+/// ASCII XYZ in absolute CRS coordinates: what PDAL's text writer and CloudCompare read.
+fn xyz_text(p: &crate::artifact::PointSet, site: &Site) -> String {
+    use std::fmt::Write;
+    let mut s = String::with_capacity(p.len() * 40);
+    s.push_str("x y z class\n");
+    let (ox, oy) = site.origin;
+    for (i, q) in p.xyz.iter().enumerate() {
+        let class = p.class.get(i).copied().unwrap_or(0);
+        let _ = writeln!(
+            s,
+            "{:.3} {:.3} {:.3} {class}",
+            ox + q[0] as f64,
+            oy + q[1] as f64,
+            q[2]
+        );
+    }
+    s
+}
+
+/// Measurements in the project's CSV layout, site-frame coordinates.
+fn measurements_csv(m: &crate::artifact::Measurements) -> String {
+    use crate::artifact::Height;
+    use std::fmt::Write;
+    let opt = |v: Option<f64>| v.map(|v| v.to_string()).unwrap_or_default();
+    let z = |h: Height| match h {
+        Height::Absolute(z) => (z.to_string(), String::new()),
+        Height::AboveGround(h) => (String::new(), h.to_string()),
+    };
+    let mut s = String::from(
+        "tx_id,tx_x,tx_y,tx_z,tx_height_m,tx_azimuth_deg,rx_id,rx_x,rx_y,rx_z,rx_height_m,freq_hz,path_loss_db,rx_power_dbm,tx_eirp_dbm,los\n",
+    );
+    for l in &m.links {
+        let ((tz, th), (rz, rh)) = (z(l.tx.z), z(l.rx.z));
+        let los = l.los.map(|b| if b { "1" } else { "0" }).unwrap_or("");
+        let _ = writeln!(
+            s,
+            "{},{:.3},{:.3},{tz},{th},{},{},{:.3},{:.3},{rz},{rh},{},{},{},{},{los}",
+            l.tx.id,
+            l.tx.x,
+            l.tx.y,
+            opt(l.tx.azimuth_deg),
+            l.rx.id,
+            l.rx.x,
+            l.rx.y,
+            l.freq_hz,
+            opt(l.path_loss_db),
+            opt(l.rx_power_dbm),
+            opt(l.tx_eirp_dbm)
+        );
+    }
+    s
+}

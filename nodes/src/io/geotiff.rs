@@ -1,0 +1,297 @@
+//! GeoTIFF: reading rasters with their georeferencing (as GDAL writes them), and writing float32
+//! and RGB rasters that GDAL, QGIS and rasterio read.
+
+use std::io::{Seek, Write};
+use std::path::Path;
+
+use tiff::ColorType;
+use tiff::decoder::{Decoder, DecodingResult, Limits};
+use tiff::encoder::{TiffEncoder, colortype};
+use tiff::tags::{PlanarConfiguration, Tag};
+
+use crate::artifact::{Grid, Raster};
+use crate::io::crs::{Crs, parse_geokeys};
+use crate::site::Site;
+use crate::stage::StageError;
+
+const MODEL_PIXEL_SCALE: u16 = 33550;
+const MODEL_TIEPOINT: u16 = 33922;
+const GEO_KEY_DIRECTORY: u16 = 34735;
+const GDAL_NODATA: u16 = 42113;
+const MODEL_TRANSFORMATION: u16 = 34264;
+const GEO_DOUBLE_PARAMS: u16 = 34736;
+const GEO_ASCII_PARAMS: u16 = 34737;
+
+/// Where the pixels of an image are: the CRS coordinates of its north-west corner and the pixel
+/// size, north-up, without rotation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelGrid {
+    /// CRS x of the western edge.
+    pub west: f64,
+    /// CRS y of the northern edge.
+    pub north: f64,
+    /// Pixel width in CRS units.
+    pub dx: f64,
+    /// Pixel height in CRS units (positive: rows go south).
+    pub dy: f64,
+    /// Columns.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+}
+
+impl PixelGrid {
+    /// The same grid in the site frame, if the pixels are square and the CRS is the site's.
+    pub fn as_site_grid(&self, origin: (f64, f64)) -> Option<Grid> {
+        ((self.dx - self.dy).abs() <= 1e-9 * self.dx.abs()).then_some(Grid {
+            x0: self.west - origin.0,
+            y0: self.north - origin.1,
+            cell_m: self.dx,
+            width: self.width,
+            height: self.height,
+        })
+    }
+}
+
+/// A decoded GeoTIFF: samples, georeferencing, CRS (when recorded) and no-data value.
+pub struct GeoTiff {
+    /// Where the pixels are.
+    pub pixels: PixelGrid,
+    /// Samples per pixel.
+    pub bands: u16,
+    /// Interleaved samples, row-major from the north-west corner.
+    pub samples: DecodingResult,
+    /// The CRS from the GeoKeys, if any.
+    pub crs: Option<Crs>,
+    /// The GDAL no-data value, if any.
+    pub nodata: Option<f64>,
+}
+
+impl GeoTiff {
+    /// Sample `band` (0-based) of pixel `i` as f64.
+    pub fn sample(&self, i: usize, band: usize) -> f64 {
+        let k = i * self.bands as usize + band;
+        match &self.samples {
+            DecodingResult::U8(v) => v[k] as f64,
+            DecodingResult::U16(v) => v[k] as f64,
+            DecodingResult::U32(v) => v[k] as f64,
+            DecodingResult::U64(v) => v[k] as f64,
+            DecodingResult::F16(v) => f64::from(v[k]),
+            DecodingResult::F32(v) => v[k] as f64,
+            DecodingResult::F64(v) => v[k],
+            DecodingResult::I8(v) => v[k] as f64,
+            DecodingResult::I16(v) => v[k] as f64,
+            DecodingResult::I32(v) => v[k] as f64,
+            DecodingResult::I64(v) => v[k] as f64,
+        }
+    }
+}
+
+fn tiff_error(path: &Path, place: &str, e: tiff::TiffError) -> StageError {
+    StageError::bad_input(path, place, format!("expected a readable TIFF: {e}"))
+}
+
+/// Reads a GeoTIFF's first image with its georeferencing. A TIFF without tiepoint and pixel scale
+/// (or a model transformation) is an error: we would not know where it is.
+pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
+    let file = std::fs::File::open(path)
+        .map_err(|e| StageError::bad_input(path, "open", e.to_string()))?;
+    let mut d = Decoder::new(std::io::BufReader::new(file))
+        .map_err(|e| tiff_error(path, "header", e))?
+        .with_limits(Limits::unlimited());
+    let (width, height) = d
+        .dimensions()
+        .map_err(|e| tiff_error(path, "dimensions", e))?;
+    let bands = match d
+        .colortype()
+        .map_err(|e| tiff_error(path, "colour type", e))?
+    {
+        ColorType::Gray(_) => 1,
+        ColorType::GrayA(_) => 2,
+        ColorType::RGB(_) | ColorType::YCbCr(_) => 3,
+        ColorType::RGBA(_) | ColorType::CMYK(_) => 4,
+        ColorType::Multiband { num_samples, .. } => num_samples,
+        other => {
+            return Err(StageError::bad_input(
+                path,
+                "colour type",
+                format!("unsupported colour type {other:?}"),
+            ));
+        }
+    };
+    let planar = d
+        .find_tag_unsigned::<u16>(Tag::PlanarConfiguration)
+        .ok()
+        .flatten();
+    if bands > 1 && planar == Some(PlanarConfiguration::Planar.to_u16()) {
+        return Err(StageError::bad_input(
+            path,
+            "PlanarConfiguration",
+            "band-sequential (planar) multi-band TIFFs are not supported; write it pixel-interleaved (gdal_translate -co INTERLEAVE=PIXEL)",
+        ));
+    }
+    let f64s = |d: &mut Decoder<_>, tag: u16| {
+        d.find_tag(Tag::Unknown(tag))
+            .ok()
+            .flatten()
+            .and_then(|v| v.into_f64_vec().ok())
+    };
+    let scale = f64s(&mut d, MODEL_PIXEL_SCALE);
+    let tie = f64s(&mut d, MODEL_TIEPOINT);
+    let matrix = f64s(&mut d, MODEL_TRANSFORMATION);
+    let no_georef = || {
+        StageError::bad_input(
+            path,
+            "georeferencing",
+            "no ModelTiepoint + ModelPixelScale or ModelTransformation tags: the raster's position is unknown (add a world file or georeference it)",
+        )
+    };
+    let pixels = match (scale, tie, matrix) {
+        (Some(s), Some(t), _) if s.len() >= 2 && t.len() >= 6 => PixelGrid {
+            west: t[3] - t[0] * s[0],
+            north: t[4] + t[1] * s[1],
+            dx: s[0],
+            dy: s[1],
+            width,
+            height,
+        },
+        (_, _, Some(m)) if m.len() >= 16 => {
+            if m[1] != 0.0 || m[4] != 0.0 {
+                return Err(StageError::bad_input(
+                    path,
+                    "ModelTransformation",
+                    "rotated rasters are not supported; warp it north-up first (gdalwarp)",
+                ));
+            }
+            PixelGrid {
+                west: m[3],
+                north: m[7],
+                dx: m[0],
+                dy: -m[5],
+                width,
+                height,
+            }
+        }
+        _ => return Err(no_georef()),
+    };
+    if !(pixels.dx > 0.0 && pixels.dy > 0.0) {
+        return Err(StageError::bad_input(
+            path,
+            "georeferencing",
+            "expected positive pixel sizes and a north-up raster",
+        ));
+    }
+    let crs = match d
+        .find_tag_unsigned_vec::<u16>(Tag::Unknown(GEO_KEY_DIRECTORY))
+        .ok()
+        .flatten()
+    {
+        Some(dir) => {
+            let doubles = f64s(&mut d, GEO_DOUBLE_PARAMS).unwrap_or_default();
+            let ascii = d
+                .find_tag(Tag::Unknown(GEO_ASCII_PARAMS))
+                .ok()
+                .flatten()
+                .and_then(|v| v.into_string().ok())
+                .unwrap_or_default();
+            let keys = parse_geokeys(&dir, &doubles, &ascii)
+                .map_err(|m| StageError::bad_input(path, "GeoKeyDirectory", m))?;
+            Some(
+                Crs::from_geokeys(&keys)
+                    .map_err(|m| StageError::bad_input(path, "GeoKeyDirectory", m))?,
+            )
+        }
+        None => None,
+    };
+    let nodata = d
+        .find_tag(Tag::Unknown(GDAL_NODATA))
+        .ok()
+        .flatten()
+        .and_then(|v| v.into_string().ok())
+        .and_then(|s| s.trim_matches(['\0', ' ']).parse::<f64>().ok());
+    let samples = d
+        .read_image()
+        .map_err(|e| tiff_error(path, "pixel data", e))?;
+    Ok(GeoTiff {
+        pixels,
+        bands,
+        samples,
+        crs,
+        nodata,
+    })
+}
+
+/// Writes `r` as a single-band float32 GeoTIFF in the site CRS (absolute coordinates), NaN as
+/// no-data. GeoKeys: projected model, pixel-is-area, `ProjectedCSTypeGeoKey` = the site's EPSG code.
+pub fn write_geotiff<W: Write + Seek>(r: &Raster, site: &Site, w: &mut W) -> Result<(), String> {
+    let g = r.grid;
+    let err = |e: tiff::TiffError| format!("GeoTIFF encoding failed: {e}");
+    let mut enc = TiffEncoder::new(w).map_err(err)?;
+    let mut img = enc
+        .new_image::<colortype::Gray32Float>(g.width, g.height)
+        .map_err(err)?;
+    let epsg = if site.crs.is_empty() {
+        None
+    } else {
+        Some(site.epsg()?)
+    };
+    write_georef(img.encoder(), &g, site, epsg).map_err(err)?;
+    img.encoder()
+        .write_tag(Tag::Unknown(GDAL_NODATA), "nan")
+        .map_err(err)?;
+    img.write_data(&r.data).map_err(err)?;
+    Ok(())
+}
+
+/// Writes the GeoTIFF georeferencing tags of `g` (site frame) in the site CRS.
+fn write_georef<W: Write + Seek, K: tiff::encoder::TiffKind>(
+    e: &mut tiff::encoder::DirectoryEncoder<'_, W, K>,
+    g: &Grid,
+    site: &Site,
+    epsg: Option<u16>,
+) -> Result<(), tiff::TiffError> {
+    e.write_tag(
+        Tag::Unknown(MODEL_PIXEL_SCALE),
+        &[g.cell_m, g.cell_m, 0.0][..],
+    )?;
+    e.write_tag(
+        Tag::Unknown(MODEL_TIEPOINT),
+        &[
+            0.0,
+            0.0,
+            0.0,
+            site.origin.0 + g.x0,
+            site.origin.1 + g.y0,
+            0.0,
+        ][..],
+    )?;
+    // GeoKeyDirectory: header (version 1.1.0, key count), then (key, location, count, value).
+    // Without an EPSG code (a local frame, e.g. a Sionna scene) the CRS is left unknown.
+    let mut keys: Vec<u16> = vec![
+        1, 1, 0, 2, //
+        1024, 0, 1, 1, // GTModelTypeGeoKey = ModelTypeProjected
+        1025, 0, 1, 1, // GTRasterTypeGeoKey = RasterPixelIsArea
+    ];
+    if let Some(code) = epsg {
+        keys[3] = 3;
+        keys.extend([3072, 0, 1, code]); // ProjectedCSTypeGeoKey
+    }
+    e.write_tag(Tag::Unknown(GEO_KEY_DIRECTORY), &keys[..])
+}
+
+/// Writes an RGB u8 image on `g` as a GeoTIFF in the site CRS.
+pub fn write_geotiff_rgb<W: Write + Seek>(
+    rgb: &[[u8; 3]],
+    g: &Grid,
+    site: &Site,
+    w: &mut W,
+) -> Result<(), String> {
+    let err = |e: tiff::TiffError| format!("GeoTIFF encoding failed: {e}");
+    let mut enc = TiffEncoder::new(w).map_err(err)?;
+    let mut img = enc
+        .new_image::<colortype::RGB8>(g.width, g.height)
+        .map_err(err)?;
+    write_georef(img.encoder(), g, site, Some(site.epsg()?)).map_err(err)?;
+    img.write_data(bytemuck::cast_slice(rgb)).map_err(err)?;
+    Ok(())
+}

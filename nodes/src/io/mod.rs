@@ -1,0 +1,13 @@
+//! Files and frames: the formats artifacts are read from and written to (GeoTIFF, GeoJSON, EXR,
+//! the street-view folder layout, Sionna's Mitsuba XML + PLY, and every `export` format), coordinate
+//! reference systems, ECEF/ENU, and resampling into the site frame. Never imports a stage.
+
+pub mod crs;
+pub mod ecef;
+pub mod exr_io;
+pub mod export;
+pub mod geojson;
+pub mod geotiff;
+pub mod sionna_xml;
+pub mod views_io;
+pub mod warp;

@@ -1,0 +1,375 @@
+//! Sionna RT scenes: Mitsuba 3 XML naming one binary PLY mesh per shape, each with an
+//! ITU-R P.2040 radio material (rf.md §7.3). Read, so our tracer runs on Sionna's scenes; written,
+//! so `sionna.rt.load_scene` loads ours.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use crate::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
+use crate::rf::materials::Material;
+use crate::stage::StageError;
+
+/// Sionna's default slab thickness, metres; the only one our scenes carry.
+pub const THICKNESS_M: f64 = 0.1;
+
+/// Reads a Sionna/Mitsuba scene XML and the PLY files it names (relative to the XML's folder).
+/// Each shape becomes one object (id without the `mesh-` prefix, class `Unsegmented`) whose
+/// triangles carry the shape's material.
+pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
+    let bad = |place: String, expected: &str| StageError::bad_input(path, place, expected);
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| bad("file".into(), &format!("a readable XML file ({e})")))?;
+    let doc = roxmltree::Document::parse(&text).map_err(|e| {
+        let pos = e.pos();
+        bad(
+            format!("line {}, column {}", pos.row, pos.col),
+            &format!("well-formed XML ({e})"),
+        )
+    })?;
+    let line = |n: roxmltree::Node| doc.text_pos_at(n.range().start).row;
+    let mut materials: BTreeMap<String, Material> = BTreeMap::new();
+    for b in doc
+        .descendants()
+        .filter(|n| n.has_tag_name("bsdf") && n.parent().is_some_and(|p| p.has_tag_name("scene")))
+    {
+        let id = b.attribute("id").unwrap_or_default().to_string();
+        let kind = b.attribute("type").unwrap_or_default();
+        let prop = |tag: &str, name: &str| {
+            b.children()
+                .find(|c| c.has_tag_name(tag) && c.attribute("name") == Some(name))
+                .and_then(|c| c.attribute("value"))
+        };
+        let material = match kind {
+            "itu-radio-material" => prop("string", "type").and_then(Material::from_name),
+            // Blender/Sionna 0.x exports: the id names the ITU class (`mat-itu_concrete`).
+            _ => Material::from_name(&id),
+        }
+        .filter(|m| m.itu_type().is_some())
+        .ok_or_else(|| {
+            bad(
+                format!("line {}: bsdf \"{id}\"", line(b)),
+                "an itu-radio-material, or an id naming an ITU class (custom radio-material \
+                 permittivities are not supported)",
+            )
+        })?;
+        if let Some(t) = prop("float", "thickness") {
+            let t: f64 = t.parse().map_err(|_| {
+                bad(
+                    format!("line {}: bsdf \"{id}\" thickness", line(b)),
+                    "a number",
+                )
+            })?;
+            if (t - THICKNESS_M).abs() > 1e-9 {
+                return Err(bad(
+                    format!("line {}: bsdf \"{id}\" thickness {t}", line(b)),
+                    "the default 0.1 m (other slab thicknesses are not supported yet)",
+                ));
+            }
+        }
+        materials.insert(id, material);
+    }
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let mut objects = Vec::new();
+    for s in doc.descendants().filter(|n| n.has_tag_name("shape")) {
+        let id = s.attribute("id").unwrap_or_default();
+        let place = || format!("line {}: shape \"{id}\"", line(s));
+        if s.attribute("type") != Some("ply") {
+            return Err(bad(place(), "a shape of type \"ply\""));
+        }
+        let file = s
+            .children()
+            .find(|c| c.has_tag_name("string") && c.attribute("name") == Some("filename"))
+            .and_then(|c| c.attribute("value"))
+            .ok_or_else(|| bad(place(), "a <string name=\"filename\"> child"))?;
+        let bsdf = s
+            .children()
+            .find(|c| c.has_tag_name("ref"))
+            .and_then(|c| c.attribute("id"))
+            .ok_or_else(|| bad(place(), "a <ref id=...> to a material"))?;
+        let material = *materials.get(bsdf).ok_or_else(|| {
+            bad(
+                place(),
+                &format!("a material defined in the file (no bsdf \"{bsdf}\")"),
+            )
+        })?;
+        let mut mesh = read_ply(&dir.join(file))?;
+        mesh.materials = PodVec(vec![material as u8; mesh.triangles.len()]);
+        objects.push(SceneObject {
+            id: id.strip_prefix("mesh-").unwrap_or(id).to_string(),
+            class: ObjectClass::Unsegmented,
+            mesh,
+        });
+    }
+    Ok(Scene { objects })
+}
+
+/// Reads a binary little-endian PLY: vertex x, y, z (any other vertex properties skipped) and
+/// polygon faces (fanned into triangles).
+pub fn read_ply(path: &Path) -> Result<Mesh, StageError> {
+    let bad = |place: &str, expected: &str| StageError::bad_input(path, place, expected);
+    let bytes =
+        std::fs::read(path).map_err(|e| bad("file", &format!("a readable PLY file ({e})")))?;
+    let end = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .ok_or_else(|| bad("header", "a PLY header ending in end_header"))?;
+    let header = std::str::from_utf8(&bytes[..end]).map_err(|_| bad("header", "ASCII text"))?;
+    let mut body = &bytes[end + 11..];
+    if !header.starts_with("ply") {
+        return Err(bad("header", "the magic word ply"));
+    }
+    if !header.contains("format binary_little_endian 1.0") {
+        return Err(bad("header", "format binary_little_endian 1.0"));
+    }
+    let size = |t: &str| match t {
+        "char" | "uchar" | "int8" | "uint8" => Some(1),
+        "short" | "ushort" | "int16" | "uint16" => Some(2),
+        "int" | "uint" | "float" | "int32" | "uint32" | "float32" => Some(4),
+        "double" | "float64" => Some(8),
+        _ => None,
+    };
+    let (mut n_vertex, mut n_face) = (0usize, 0usize);
+    let mut element = "";
+    let mut vertex_props: Vec<(String, String)> = Vec::new();
+    let mut face_types: Option<(String, String)> = None;
+    for l in header.lines() {
+        let w: Vec<&str> = l.split_whitespace().collect();
+        match w.as_slice() {
+            ["element", name, n] => {
+                element = if *name == "vertex" {
+                    "vertex"
+                } else if *name == "face" {
+                    "face"
+                } else {
+                    "other"
+                };
+                let n: usize = n.parse().map_err(|_| bad(l, "an element count"))?;
+                match element {
+                    "vertex" => n_vertex = n,
+                    "face" => n_face = n,
+                    _ if n > 0 => return Err(bad(l, "only vertex and face elements")),
+                    _ => {}
+                }
+            }
+            ["property", "list", count, index, _] if element == "face" => {
+                face_types = Some((count.to_string(), index.to_string()));
+            }
+            ["property", t, name] if element == "vertex" => {
+                vertex_props.push((t.to_string(), name.to_string()));
+            }
+            _ => {}
+        }
+    }
+    let stride: usize = vertex_props
+        .iter()
+        .map(|(t, _)| size(t).ok_or_else(|| bad("vertex properties", "known property types")))
+        .sum::<Result<usize, _>>()?;
+    let offset = |want: &str| -> Result<(usize, &str), StageError> {
+        let mut off = 0;
+        for (t, n) in &vertex_props {
+            if n == want {
+                return Ok((off, t.as_str()));
+            }
+            off += size(t).unwrap_or(0);
+        }
+        Err(bad(
+            "vertex properties",
+            &format!("a vertex property {want}"),
+        ))
+    };
+    let xyz = [offset("x")?, offset("y")?, offset("z")?];
+    if body.len() < n_vertex * stride {
+        return Err(bad(
+            "vertex data",
+            &format!("{n_vertex} vertices of {stride} bytes"),
+        ));
+    }
+    let read_f = |b: &[u8], t: &str| -> f32 {
+        match t {
+            "double" | "float64" => f64::from_le_bytes(b[..8].try_into().expect("8 bytes")) as f32,
+            _ => f32::from_le_bytes(b[..4].try_into().expect("4 bytes")),
+        }
+    };
+    let positions: Vec<[f32; 3]> = (0..n_vertex)
+        .map(|i| xyz.map(|(off, t)| read_f(&body[i * stride + off..], t)))
+        .collect();
+    body = &body[n_vertex * stride..];
+    let (count_t, index_t) =
+        face_types.ok_or_else(|| bad("header", "a face vertex_indices list"))?;
+    let (cs, is) = (
+        size(&count_t).ok_or_else(|| bad("face list", "a known count type"))?,
+        size(&index_t).ok_or_else(|| bad("face list", "a known index type"))?,
+    );
+    let read_u = |b: &[u8], n: usize| -> u32 {
+        match n {
+            1 => b[0] as u32,
+            2 => u16::from_le_bytes([b[0], b[1]]) as u32,
+            _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+        }
+    };
+    let mut triangles = Vec::with_capacity(n_face);
+    let mut at = 0usize;
+    for f in 0..n_face {
+        let truncated = || bad(&format!("face {f}"), "the face data the header announces");
+        let k = read_u(body.get(at..at + cs).ok_or_else(truncated)?, cs) as usize;
+        at += cs;
+        let idx: Vec<u32> = (0..k)
+            .map(|j| {
+                body.get(at + j * is..at + (j + 1) * is)
+                    .map(|b| read_u(b, is))
+                    .ok_or_else(truncated)
+            })
+            .collect::<Result<_, _>>()?;
+        at += k * is;
+        if let Some(&bad_index) = idx.iter().find(|&&v| v as usize >= n_vertex) {
+            return Err(bad(
+                &format!("face {f}"),
+                &format!("vertex indices below {n_vertex}, not {bad_index}"),
+            ));
+        }
+        for j in 1..k.saturating_sub(1) {
+            triangles.push([idx[0], idx[j], idx[j + 1]]);
+        }
+    }
+    Ok(Mesh {
+        positions: PodVec(positions),
+        triangles: PodVec(triangles),
+        materials: PodVec(vec![]),
+    })
+}
+
+/// Writes a binary little-endian PLY with float x, y, z and int triangle lists.
+pub fn write_ply(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<u8> {
+    let mut out = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        positions.len(),
+        triangles.len()
+    )
+    .into_bytes();
+    for p in positions {
+        for v in p {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    for t in triangles {
+        out.push(3);
+        for v in t {
+            out.extend_from_slice(&(*v as i32).to_le_bytes());
+        }
+    }
+    out
+}
+
+/// The files of a Sionna scene folder: `scene.xml` and `meshes/<object>-<material>.ply`, one
+/// shape per object and material. Foliage has no P.2040 class and is left out (our tracer applies
+/// it as a volume loss; Sionna has no such material).
+pub fn write_scene(scene: &Scene) -> Result<Vec<(String, Vec<u8>)>, String> {
+    let mut files = Vec::new();
+    let mut used: std::collections::BTreeSet<Material> = Default::default();
+    let mut shapes = String::new();
+    for obj in &scene.objects {
+        let by_material: BTreeMap<u8, Vec<usize>> =
+            obj.mesh
+                .materials
+                .iter()
+                .enumerate()
+                .fold(BTreeMap::new(), |mut m, (k, &mat)| {
+                    m.entry(mat).or_insert_with(Vec::new).push(k);
+                    m
+                });
+        for (mat, tris) in by_material {
+            let material = Material::from_u8(mat)
+                .ok_or_else(|| format!("{}: unknown material id {mat}", obj.id))?;
+            let Some(itu) = material.itu_type() else {
+                continue;
+            };
+            used.insert(material);
+            // Only the vertices these triangles use, renumbered.
+            let mut remap: BTreeMap<u32, u32> = BTreeMap::new();
+            let mut positions = Vec::new();
+            let triangles: Vec<[u32; 3]> = tris
+                .iter()
+                .map(|&k| {
+                    obj.mesh.triangles[k].map(|v| {
+                        *remap.entry(v).or_insert_with(|| {
+                            positions.push(obj.mesh.positions[v as usize]);
+                            positions.len() as u32 - 1
+                        })
+                    })
+                })
+                .collect();
+            let name = format!("{}-itu_{itu}", safe_name(&obj.id));
+            files.push((
+                format!("meshes/{name}.ply"),
+                write_ply(&positions, &triangles),
+            ));
+            shapes.push_str(&format!(
+                "\t<shape type=\"ply\" id=\"mesh-{name}\">\n\t\t<string name=\"filename\" value=\"meshes/{name}.ply\"/>\n\t\t<boolean name=\"face_normals\" value=\"true\"/>\n\t\t<ref id=\"itu_{itu}\" name=\"bsdf\"/>\n\t</shape>\n"
+            ));
+        }
+    }
+    let mut xml = String::from("<scene version=\"2.1.0\">\n\n<!-- Materials -->\n\n");
+    for m in &used {
+        let itu = m.itu_type().expect("only ITU classes are used");
+        xml.push_str(&format!(
+            "\t<bsdf type=\"itu-radio-material\" id=\"itu_{itu}\">\n\t\t<string name=\"type\" value=\"{itu}\"/>\n\t\t<float name=\"thickness\" value=\"{THICKNESS_M}\"/>\n\t</bsdf>\n"
+        ));
+    }
+    xml.push_str("\n<!-- Shapes -->\n\n");
+    xml.push_str(&shapes);
+    xml.push_str("</scene>\n");
+    files.insert(0, ("scene.xml".to_string(), xml.into_bytes()));
+    Ok(files)
+}
+
+/// Object ids as file names: letters, digits, `-` and `_` kept, anything else `_`.
+fn safe_name(id: &str) -> String {
+    id.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geom::mesh_build::cuboid;
+
+    #[test]
+    fn a_written_scene_reads_back_the_same() {
+        let mut mesh = cuboid([10.0, 5.0], [4.0, 3.0, 6.0], 0.3, 1.0, Material::Brick);
+        mesh.materials[0] = Material::Glass as u8;
+        let scene = Scene {
+            objects: vec![SceneObject {
+                id: "building-1".into(),
+                class: ObjectClass::Building,
+                mesh: mesh.clone(),
+            }],
+        };
+        let dir = tempfile::tempdir().unwrap();
+        for (name, bytes) in write_scene(&scene).unwrap() {
+            let p = dir.path().join(name);
+            std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+            std::fs::write(p, bytes).unwrap();
+        }
+        let back = read_scene(&dir.path().join("scene.xml")).unwrap();
+        assert_eq!(back.objects.len(), 2, "one shape per material");
+        let tris: usize = back.objects.iter().map(|o| o.mesh.len()).sum();
+        assert_eq!(tris, mesh.len());
+        let volume: f64 = back.objects.iter().map(|o| o.mesh.volume()).sum();
+        assert!((volume - mesh.volume()).abs() < 1e-3);
+        assert_eq!(back.objects[0].id, "building-1-itu_brick");
+        assert!(
+            back.objects[1]
+                .mesh
+                .materials
+                .iter()
+                .all(|&m| m == Material::Glass as u8)
+        );
+    }
+}

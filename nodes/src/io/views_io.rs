@@ -1,0 +1,472 @@
+//! View sets on disk, in the layout of DESIGN.md (Street views and model outputs):
+//!
+//! ```text
+//! views.json        {"material_classes": [...], "views": [{ "id", "image", "width", "height",
+//!                    "intrinsics": {"fx","fy","cx","cy"} | {"hfov_deg"},
+//!                    "pose": {"x","y","z"} | {"lat","lon","alt_m"},
+//!                    "orientation": {"heading_deg","pitch_deg","roll_deg"} | {"quat_wxyz"},
+//!                    "captured_at" }]}   (a bare array of views is accepted too)
+//! arch/<id>.png     architectural instance ids (16-bit), arch/<id>.json: {"<id>": "<class>"}
+//! clutter/<id>.png  clutter instance ids (16-bit), clutter/<id>.json likewise
+//! material/<id>.png material class per pixel (8-bit index into material_classes; 255 = none)
+//! depth/<id>.exr    depth along the optical axis, channel Z (or Y, R, the first)
+//! normal/<id>.exr   camera-frame normals, channels R, G, B (or X, Y, Z)
+//! ```
+//! Model outputs are optional per view; a file that is referenced or present must be valid.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde_json::{Value, json};
+
+use crate::artifact::{Instances, Intrinsics, PodVec, Pose, View, ViewSet};
+use crate::io::crs::{Crs, ToSite};
+use crate::io::exr_io::{Channels, read_exr, write_exr};
+use crate::site::Site;
+use crate::stage::StageError;
+
+fn num(v: &Value, key: &str) -> Option<f64> {
+    v.get(key).and_then(Value::as_f64)
+}
+
+/// Reads the view set described by `views_json`.
+pub fn read_viewset(views_json: &Path, site: &Site) -> Result<ViewSet, StageError> {
+    let dir = views_json.parent().unwrap_or(Path::new("."));
+    let text = std::fs::read_to_string(views_json)
+        .map_err(|e| StageError::bad_input(views_json, "open", e.to_string()))?;
+    let doc: Value = serde_json::from_str(&text).map_err(|e| {
+        StageError::bad_input(
+            views_json,
+            format!("line {}, column {}", e.line(), e.column()),
+            format!("expected JSON: {e}"),
+        )
+    })?;
+    let (list, classes) = match &doc {
+        Value::Array(a) => (a.clone(), Vec::new()),
+        Value::Object(o) => (
+            o.get("views")
+                .and_then(Value::as_array)
+                .cloned()
+                .ok_or_else(|| {
+                    StageError::bad_input(views_json, "top level", "expected a `views` array")
+                })?,
+            o.get("material_classes")
+                .and_then(Value::as_array)
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|c| c.as_str().map(str::to_owned))
+                        .collect()
+                })
+                .unwrap_or_default(),
+        ),
+        _ => {
+            return Err(StageError::bad_input(
+                views_json,
+                "top level",
+                "expected an array of views or {\"views\": [...]}",
+            ));
+        }
+    };
+    let wgs84 = ToSite::new(&Crs::from_epsg(4326).map_err(StageError::Failed)?, site)
+        .map_err(StageError::Failed)?;
+    let mut set = ViewSet {
+        views: Vec::new(),
+        material_classes: classes,
+    };
+    for (i, v) in list.iter().enumerate() {
+        let id = v.get("id").and_then(|x| {
+            x.as_str()
+                .map(str::to_owned)
+                .or_else(|| x.as_u64().map(|n| n.to_string()))
+        });
+        let id = id.ok_or_else(|| {
+            StageError::bad_input(views_json, format!("view {i}"), "expected an `id`")
+        })?;
+        let place = |what: &str| format!("view {id:?}, {what}");
+        let bad = |what: &str, expected: &str| {
+            StageError::bad_input(views_json, place(what), expected.to_owned())
+        };
+        let (width, height) = (
+            num(v, "width").ok_or_else(|| bad("width", "expected a pixel count"))? as u32,
+            num(v, "height").ok_or_else(|| bad("height", "expected a pixel count"))? as u32,
+        );
+        let k = v
+            .get("intrinsics")
+            .ok_or_else(|| bad("intrinsics", "expected {fx, fy, cx, cy} or {hfov_deg}"))?;
+        let intrinsics = match (
+            num(k, "fx"),
+            num(k, "fy"),
+            num(k, "cx"),
+            num(k, "cy"),
+            num(k, "hfov_deg"),
+        ) {
+            (Some(fx), Some(fy), Some(cx), Some(cy), _) => Intrinsics { fx, fy, cx, cy },
+            (_, _, _, _, Some(h)) if h > 0.0 && h < 180.0 => {
+                let f = width as f64 / 2.0 / (h.to_radians() / 2.0).tan();
+                Intrinsics {
+                    fx: f,
+                    fy: f,
+                    cx: width as f64 / 2.0,
+                    cy: height as f64 / 2.0,
+                }
+            }
+            _ => {
+                return Err(bad(
+                    "intrinsics",
+                    "expected {fx, fy, cx, cy} or {hfov_deg} in (0, 180)",
+                ));
+            }
+        };
+        let p = v
+            .get("pose")
+            .ok_or_else(|| bad("pose", "expected {x, y, z} or {lat, lon, alt_m}"))?;
+        let position = match (
+            num(p, "x"),
+            num(p, "y"),
+            num(p, "z"),
+            num(p, "lat"),
+            num(p, "lon"),
+            num(p, "alt_m"),
+        ) {
+            (Some(x), Some(y), Some(z), ..) => [x, y, z],
+            (_, _, _, Some(lat), Some(lon), Some(alt)) => {
+                let (x, y, _) = wgs84.apply(lon, lat, 0.0).map_err(|m| bad("pose", &m))?;
+                [x, y, alt]
+            }
+            _ => {
+                return Err(bad(
+                    "pose",
+                    "expected {x, y, z} (site frame) or {lat, lon, alt_m}",
+                ));
+            }
+        };
+        let o = v.get("orientation").ok_or_else(|| {
+            bad(
+                "orientation",
+                "expected {heading_deg, pitch_deg, roll_deg} or {quat_wxyz}",
+            )
+        })?;
+        let pose = match (
+            num(o, "heading_deg"),
+            o.get("quat_wxyz").and_then(Value::as_array),
+        ) {
+            (Some(h), _) => Pose::from_angles(
+                position,
+                h,
+                num(o, "pitch_deg").unwrap_or(0.0),
+                num(o, "roll_deg").unwrap_or(0.0),
+            ),
+            (None, Some(q)) if q.len() == 4 && q.iter().all(|x| x.is_number()) => {
+                Pose::from_quaternion(
+                    position,
+                    [0, 1, 2, 3].map(|j| q[j].as_f64().expect("checked")),
+                )
+            }
+            _ => {
+                return Err(bad(
+                    "orientation",
+                    "expected {heading_deg, pitch_deg, roll_deg} or {quat_wxyz: [w, x, y, z]}",
+                ));
+            }
+        };
+        let image_rel = v
+            .get("image")
+            .and_then(Value::as_str)
+            .ok_or_else(|| bad("image", "expected the image's path"))?;
+        let image_path = dir.join(image_rel);
+        if !image_path.is_file() {
+            return Err(StageError::bad_input(
+                views_json,
+                place("image"),
+                format!("the image {} does not exist", image_path.display()),
+            ));
+        }
+        let img = image::open(&image_path)
+            .map_err(|e| {
+                StageError::bad_input(
+                    &image_path,
+                    "image",
+                    format!("expected a readable JPEG/PNG: {e}"),
+                )
+            })?
+            .into_rgb8();
+        let size_check = |p: &Path, w: u32, h: u32| {
+            if (w, h) == (width, height) {
+                Ok(())
+            } else {
+                Err(StageError::bad_input(
+                    p,
+                    "size",
+                    format!("{w} x {h} pixels, but views.json says {width} x {height}"),
+                ))
+            }
+        };
+        size_check(&image_path, img.width(), img.height())?;
+        let n = (width * height) as usize;
+        let read_instances = |kind: &str| -> Result<Option<Instances>, StageError> {
+            let png = dir.join(kind).join(format!("{id}.png"));
+            if !png.exists() {
+                return Ok(None);
+            }
+            let img = image::open(&png)
+                .map_err(|e| {
+                    StageError::bad_input(
+                        &png,
+                        "image",
+                        format!("expected a 16-bit PNG of instance ids: {e}"),
+                    )
+                })?
+                .into_luma16();
+            size_check(&png, img.width(), img.height())?;
+            let json = png.with_extension("json");
+            let classes: BTreeMap<u16, String> = match std::fs::read_to_string(&json) {
+                Ok(t) => {
+                    let m: BTreeMap<String, String> = serde_json::from_str(&t).map_err(|e| {
+                        StageError::bad_input(
+                            &json,
+                            "contents",
+                            format!("expected {{\"<instance id>\": \"<class>\"}}: {e}"),
+                        )
+                    })?;
+                    m.into_iter()
+                        .map(|(k, c)| {
+                            k.parse::<u16>().map(|k| (k, c)).map_err(|_| {
+                                StageError::bad_input(
+                                    &json,
+                                    format!("key {k:?}"),
+                                    "expected an instance id 1-65535",
+                                )
+                            })
+                        })
+                        .collect::<Result<_, _>>()?
+                }
+                Err(_) => {
+                    return Err(StageError::bad_input(
+                        &png,
+                        "classes",
+                        format!("expected the class table {} beside it", json.display()),
+                    ));
+                }
+            };
+            Ok(Some(Instances {
+                ids: PodVec(img.into_raw()),
+                classes,
+            }))
+        };
+        let material_png = dir.join("material").join(format!("{id}.png"));
+        let material = if material_png.exists() {
+            if set.material_classes.is_empty() {
+                return Err(StageError::bad_input(
+                    views_json,
+                    "material_classes",
+                    format!(
+                        "{} exists but views.json has no material_classes table",
+                        material_png.display()
+                    ),
+                ));
+            }
+            let m = image::open(&material_png)
+                .map_err(|e| {
+                    StageError::bad_input(
+                        &material_png,
+                        "image",
+                        format!("expected an 8-bit PNG of class indices: {e}"),
+                    )
+                })?
+                .into_luma8();
+            size_check(&material_png, m.width(), m.height())?;
+            Some(PodVec(m.into_raw()))
+        } else {
+            None
+        };
+        let exr_channels = |kind: &str| -> Result<Option<Channels>, StageError> {
+            let p = dir.join(kind).join(format!("{id}.exr"));
+            if !p.exists() {
+                return Ok(None);
+            }
+            let (w, h, ch) = read_exr(&p)?;
+            size_check(&p, w as u32, h as u32)?;
+            Ok(Some(ch))
+        };
+        let pick = |ch: &[(String, Vec<f32>)], names: &[&str]| {
+            names
+                .iter()
+                .find_map(|n| ch.iter().find(|c| c.0 == *n).map(|c| c.1.clone()))
+        };
+        let depth = exr_channels("depth")?
+            .map(|ch| {
+                pick(&ch, &["Z", "Y", "R"])
+                    .or_else(|| ch.first().map(|c| c.1.clone()))
+                    .unwrap_or_default()
+            })
+            .map(PodVec);
+        let normal = match exr_channels("normal")? {
+            Some(ch) => {
+                let (x, y, z) = match (
+                    pick(&ch, &["R", "X"]),
+                    pick(&ch, &["G", "Y"]),
+                    pick(&ch, &["B", "Z"]),
+                ) {
+                    (Some(x), Some(y), Some(z)) => (x, y, z),
+                    _ => {
+                        return Err(StageError::bad_input(
+                            &dir.join("normal").join(format!("{id}.exr")),
+                            "channels",
+                            "expected R, G, B (or X, Y, Z)",
+                        ));
+                    }
+                };
+                Some(PodVec((0..n).map(|i| [x[i], y[i], z[i]]).collect()))
+            }
+            None => None,
+        };
+        set.views.push(View {
+            id: id.clone(),
+            width,
+            height,
+            intrinsics,
+            pose,
+            captured_at: v
+                .get("captured_at")
+                .and_then(Value::as_str)
+                .map(str::to_owned),
+            image: PodVec(img.pixels().map(|p| p.0).collect()),
+            arch: read_instances("arch")?,
+            clutter: read_instances("clutter")?,
+            material,
+            depth,
+            normal,
+        });
+    }
+    Ok(set)
+}
+
+fn png(w: u32, h: u32, color: image::ExtendedColorType, bytes: &[u8]) -> Result<Vec<u8>, String> {
+    use image::ImageEncoder;
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(bytes, w, h, color)
+        .map_err(|e| format!("PNG encoding failed: {e}"))?;
+    Ok(out)
+}
+
+/// The files of a view set in the DESIGN layout, `views.json` first. Images are written as PNG so
+/// the model outputs stay pixel-exact.
+pub fn write_viewset(set: &ViewSet) -> Result<Vec<(String, Vec<u8>)>, String> {
+    let mut files = Vec::new();
+    let mut entries = Vec::new();
+    for v in &set.views {
+        let (w, h) = (v.width, v.height);
+        entries.push(json!({
+            "id": v.id,
+            "image": format!("img/{}.png", v.id),
+            "width": w,
+            "height": h,
+            "intrinsics": {"fx": v.intrinsics.fx, "fy": v.intrinsics.fy, "cx": v.intrinsics.cx, "cy": v.intrinsics.cy},
+            "pose": {"x": v.pose.position[0], "y": v.pose.position[1], "z": v.pose.position[2]},
+            "orientation": {"quat_wxyz": quaternion(&v.pose)},
+            "captured_at": v.captured_at,
+        }));
+        files.push((
+            format!("img/{}.png", v.id),
+            png(
+                w,
+                h,
+                image::ExtendedColorType::Rgb8,
+                bytemuck::cast_slice(&v.image),
+            )?,
+        ));
+        for (kind, inst) in [("arch", &v.arch), ("clutter", &v.clutter)] {
+            if let Some(inst) = inst {
+                // The encoder takes native-endian samples and writes PNG's big-endian itself.
+                files.push((
+                    format!("{kind}/{}.png", v.id),
+                    png(
+                        w,
+                        h,
+                        image::ExtendedColorType::L16,
+                        bytemuck::cast_slice(&inst.ids),
+                    )?,
+                ));
+                let classes: BTreeMap<String, &String> = inst
+                    .classes
+                    .iter()
+                    .map(|(k, c)| (k.to_string(), c))
+                    .collect();
+                files.push((
+                    format!("{kind}/{}.json", v.id),
+                    serde_json::to_vec_pretty(&classes).map_err(|e| e.to_string())?,
+                ));
+            }
+        }
+        if let Some(m) = &v.material {
+            files.push((
+                format!("material/{}.png", v.id),
+                png(w, h, image::ExtendedColorType::L8, m)?,
+            ));
+        }
+        if let Some(d) = &v.depth {
+            files.push((
+                format!("depth/{}.exr", v.id),
+                write_exr(w as usize, h as usize, vec![("Z", d.0.clone())])?,
+            ));
+        }
+        if let Some(nrm) = &v.normal {
+            let ch = |k: usize| nrm.iter().map(|n| n[k]).collect::<Vec<f32>>();
+            files.push((
+                format!("normal/{}.exr", v.id),
+                write_exr(
+                    w as usize,
+                    h as usize,
+                    vec![("R", ch(0)), ("G", ch(1)), ("B", ch(2))],
+                )?,
+            ));
+        }
+    }
+    let doc = json!({"material_classes": set.material_classes, "views": entries});
+    let mut out = vec![(
+        "views.json".to_owned(),
+        serde_json::to_vec_pretty(&doc).map_err(|e| e.to_string())?,
+    )];
+    out.extend(files);
+    Ok(out)
+}
+
+/// The unit quaternion (w, x, y, z) of a pose's rotation (Shepperd's method).
+fn quaternion(p: &Pose) -> [f64; 4] {
+    let m = &p.rotation;
+    let t = m[0][0] + m[1][1] + m[2][2];
+    if t > 0.0 {
+        let s = (t + 1.0).sqrt() * 2.0;
+        [
+            0.25 * s,
+            (m[2][1] - m[1][2]) / s,
+            (m[0][2] - m[2][0]) / s,
+            (m[1][0] - m[0][1]) / s,
+        ]
+    } else if m[0][0] > m[1][1] && m[0][0] > m[2][2] {
+        let s = (1.0 + m[0][0] - m[1][1] - m[2][2]).sqrt() * 2.0;
+        [
+            (m[2][1] - m[1][2]) / s,
+            0.25 * s,
+            (m[0][1] + m[1][0]) / s,
+            (m[0][2] + m[2][0]) / s,
+        ]
+    } else if m[1][1] > m[2][2] {
+        let s = (1.0 + m[1][1] - m[0][0] - m[2][2]).sqrt() * 2.0;
+        [
+            (m[0][2] - m[2][0]) / s,
+            (m[0][1] + m[1][0]) / s,
+            0.25 * s,
+            (m[1][2] + m[2][1]) / s,
+        ]
+    } else {
+        let s = (1.0 + m[2][2] - m[0][0] - m[1][1]).sqrt() * 2.0;
+        [
+            (m[1][0] - m[0][1]) / s,
+            (m[0][2] + m[2][0]) / s,
+            (m[1][2] + m[2][1]) / s,
+            0.25 * s,
+        ]
+    }
+}

@@ -1,0 +1,170 @@
+//! Scene assembly: the terrain as a mesh plus the objects of the other stages (building solids,
+//! later vegetation and clutter), each with a stable id, a semantic class and per-triangle ITU
+//! materials, ready for tracing and export.
+
+use std::collections::BTreeSet;
+
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{ArtifactType, Mesh, ObjectClass, Raster, Scene, SceneObject};
+use crate::rf::materials::{Material, default_material};
+use crate::geom::mesh_build::height_surface;
+use crate::geom::mesh_check::check_solid;
+use crate::stages::heights::rasterize_surface::fill_gaps;
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+
+/// Params of [`AssembleScene`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AssembleSceneParams {
+    /// Spacing of the terrain mesh's vertices, metres; `None` uses the terrain raster's cell.
+    /// Default 2 (0.5 m terrain rasters would give millions of triangles for little RF effect).
+    pub terrain_step_m: Option<f64>,
+    /// Material of the terrain. Default the terrain class's: medium dry ground.
+    pub terrain_material: Material,
+}
+
+impl Default for AssembleSceneParams {
+    fn default() -> Self {
+        AssembleSceneParams {
+            terrain_step_m: Some(2.0),
+            terrain_material: default_material(ObjectClass::Terrain),
+        }
+    }
+}
+
+/// `terrain` first, then every object of every input scene in order; building solids are checked
+/// again, ids must be unique.
+pub struct AssembleScene;
+
+impl Stage for AssembleScene {
+    const KIND: &'static str = "AssembleScene";
+    const VERSION: u32 = 1;
+    const DOC: &'static str = "the RF scene: terrain mesh + objects (buildings, vegetation, clutter) with ids, classes and ITU materials";
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::one("terrain", ArtifactType::Raster, "the terrain T"),
+        InputSpec::many(
+            "objects",
+            ArtifactType::Scene,
+            "scenes whose objects join the terrain (building solids, ...)",
+        ),
+    ];
+    type Params = AssembleSceneParams;
+    type Output = Scene;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        match p.terrain_step_m {
+            Some(s) if !(s > 0.0 && s.is_finite()) => Err(ParamError::new(
+                "terrain_step_m",
+                "expected a positive spacing in metres",
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Scene, StageError> {
+        let terrain: &Raster = inputs.one("terrain")?;
+        let scenes: Vec<&Scene> = inputs.many("objects")?;
+        let mesh = terrain_mesh(
+            terrain,
+            p.terrain_step_m.unwrap_or(terrain.grid.cell_m),
+            p.terrain_material,
+        )
+        .map_err(StageError::Failed)?;
+        let mut objects = vec![SceneObject {
+            id: "terrain".into(),
+            class: ObjectClass::Terrain,
+            mesh,
+        }];
+        let mut ids: BTreeSet<String> = BTreeSet::from(["terrain".to_string()]);
+        let total: usize = scenes.iter().map(|s| s.objects.len()).sum();
+        ctx.progress.set_total(total as u64);
+        for o in scenes.iter().flat_map(|s| &s.objects) {
+            if !ids.insert(o.id.clone()) {
+                return Err(StageError::Failed(format!(
+                    "two objects are called {:?}: give each input scene distinct ids",
+                    o.id
+                )));
+            }
+            if o.class == ObjectClass::Building {
+                check_solid(&o.mesh).map_err(|e| StageError::Failed(format!("{}: {e}", o.id)))?;
+            }
+            objects.push(o.clone());
+            ctx.progress.advance(1);
+        }
+        Ok(Scene { objects })
+    }
+}
+
+/// The terrain raster as a regular triangulated surface over its whole extent, vertices every
+/// `step` metres (bilinear between cell centres, clamped at the rim); no-data cells are filled
+/// from their neighbours first.
+pub fn terrain_mesh(terrain: &Raster, step: f64, material: Material) -> Result<Mesh, String> {
+    let g = terrain.grid;
+    if !terrain.data.iter().any(|v| v.is_finite()) {
+        return Err("the terrain raster has no data".into());
+    }
+    let mut t = terrain.clone();
+    fill_gaps(&mut t, g.width.max(g.height));
+    let (w, h) = (g.width as f64 * g.cell_m, g.height as f64 * g.cell_m);
+    let nx = (w / step).ceil() as u32 + 1;
+    let ny = (h / step).ceil() as u32 + 1;
+    let south = g.y0 - h;
+    // The last row and column may overshoot the extent by less than a step: pull them back.
+    let clamp = |x: f64, lo: f64, hi: f64| x.min(hi).max(lo);
+    let mut mesh = height_surface(
+        [g.x0, south],
+        nx,
+        ny,
+        step,
+        |x, y| {
+            t.bilinear(clamp(x, g.x0, g.x0 + w), clamp(y, south, g.y0))
+                .unwrap_or(f64::NAN)
+        },
+        material,
+    );
+    for p in mesh.positions.iter_mut() {
+        p[0] = p[0].min((g.x0 + w) as f32);
+        p[1] = p[1].min(g.y0 as f32);
+    }
+    if mesh.positions.iter().any(|p| !p[2].is_finite()) {
+        return Err("the terrain raster could not be filled".into());
+    }
+    Ok(mesh)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::artifact::{Grid, PodVec};
+
+    #[test]
+    fn the_terrain_mesh_covers_the_raster_and_follows_it() {
+        let g = Grid {
+            x0: 10.0,
+            y0: 50.0,
+            cell_m: 1.0,
+            width: 7,
+            height: 5,
+        };
+        let mut data: Vec<f32> = (0..35).map(|i| (i % 7) as f32 * 0.5).collect();
+        data[12] = f32::NAN;
+        let r = Raster {
+            grid: g,
+            data: PodVec(data),
+        };
+        let m = terrain_mesh(&r, 2.0, Material::WetGround).unwrap();
+        let (lo, hi) = m
+            .positions
+            .iter()
+            .fold(([f32::MAX; 3], [f32::MIN; 3]), |(lo, hi), p| {
+                (
+                    [lo[0].min(p[0]), lo[1].min(p[1]), lo[2].min(p[2])],
+                    [hi[0].max(p[0]), hi[1].max(p[1]), hi[2].max(p[2])],
+                )
+            });
+        assert_eq!((lo[0], lo[1], hi[0], hi[1]), (10.0, 45.0, 17.0, 50.0));
+        assert!(lo[2] >= 0.0 && hi[2] <= 3.0, "{lo:?} {hi:?}");
+        assert!(m.materials.iter().all(|&k| k == Material::WetGround as u8));
+    }
+}

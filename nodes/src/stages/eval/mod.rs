@@ -1,0 +1,7 @@
+//! Evaluation (Sec. 5, Table 1): predictions scored against measurements, reconstruction scored
+//! against references, and the report.
+
+pub mod evaluate;
+pub mod footprint_score;
+pub mod report;
+pub mod stats;

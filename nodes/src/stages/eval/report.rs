@@ -1,0 +1,334 @@
+//! The report (paper Table 1 and its figures): every model's scores against the measurements in
+//! one table (rows: site x metric; columns: models), as Markdown, CSV and JSON, with plots: predicted
+//! vs measured, the CDF of the error, path loss against distance with each model's trend line, and
+//! the radio map over the orthophoto.
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{ArtifactType, Measurements, Metrics, Ortho, Raster, Report};
+use crate::stages::eval::evaluate::{fit_power_distance, link_distance, measured_loss};
+use crate::io::export::plot::{Chart, PALETTE, range};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+
+/// Params of [`ReportStage`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReportParams {
+    /// The models' names, in the order of `predictions` and `evaluations` (the table's columns).
+    pub models: Vec<String>,
+    /// The site's name (the table's row group). Default "site".
+    #[serde(default = "site")]
+    pub site: String,
+}
+
+fn site() -> String {
+    "site".into()
+}
+
+/// The table's rows: (metric key in the evaluations, label).
+const ROWS: [(&str, &str); 9] = [
+    ("p2p_rmse_db", "P2P RMSE (dB)"),
+    ("p2p_me_db", "P2P mean error (dB)"),
+    ("p2p_std_db", "P2P std (dB)"),
+    ("pd_rmse_db", "PD RMSE (dB)"),
+    ("ci_rmse_db", "CI RMSE (dB)"),
+    ("ci_n", "CI exponent n"),
+    ("los/p2p_rmse_db", "LOS P2P RMSE (dB)"),
+    ("nlos/p2p_rmse_db", "NLOS P2P RMSE (dB)"),
+    ("links_scored", "links scored"),
+];
+
+/// Table 1 and its plots as a folder: `report.md`, `table.csv`, `metrics.json`, `plots/*.png`.
+pub struct ReportStage;
+
+impl Stage for ReportStage {
+    const KIND: &'static str = "Report";
+    const VERSION: u32 = 2;
+    const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::one(
+            "measurements",
+            ArtifactType::Measurements,
+            "the measured links",
+        ),
+        InputSpec::many(
+            "predictions",
+            ArtifactType::Measurements,
+            "each model's predictions, in `models` order",
+        ),
+        InputSpec::many(
+            "evaluations",
+            ArtifactType::Metrics,
+            "each model's Evaluate metrics, in `models` order",
+        ),
+        InputSpec::optional(
+            "radio_map",
+            ArtifactType::Raster,
+            "a radio map (dB) to show",
+        ),
+        InputSpec::optional(
+            "ortho",
+            ArtifactType::Ortho,
+            "an orthophoto under the radio map",
+        ),
+    ];
+    type Params = ReportParams;
+    type Output = Report;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        if p.models.is_empty() {
+            return Err(ParamError::new("models", "expected the models' names"));
+        }
+        Ok(())
+    }
+
+    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Report, StageError> {
+        let meas: &Measurements = inputs.one("measurements")?;
+        let preds: Vec<&Measurements> = inputs.many("predictions")?;
+        let evals: Vec<&Metrics> = inputs.many("evaluations")?;
+        if preds.len() != p.models.len() || evals.len() != p.models.len() {
+            return Err(StageError::Failed(format!(
+                "{} models named, {} predictions, {} evaluations: give one of each per model",
+                p.models.len(),
+                preds.len(),
+                evals.len()
+            )));
+        }
+        let radio_map: Option<&Raster> = inputs.optional("radio_map")?;
+        let ortho: Option<&Ortho> = inputs.optional("ortho")?;
+        let fail = StageError::Failed;
+        let mut files = Vec::new();
+        let (md_table, csv) = tables(p, &evals);
+        let mut json: BTreeMap<&str, &BTreeMap<String, f64>> = BTreeMap::new();
+        for (name, e) in p.models.iter().zip(&evals) {
+            json.insert(name, &e.values);
+        }
+        // Per model: (distance, measured with its offset taken out, predicted).
+        let series: Vec<Vec<(f64, f64, f64)>> = preds
+            .iter()
+            .zip(&evals)
+            .map(|(pr, ev)| pairs(meas, pr, ev))
+            .collect();
+        let mut plots = vec![
+            ("plots/scatter.png", scatter(p, &series).map_err(fail)?),
+            ("plots/error_cdf.png", cdf(p, &series).map_err(fail)?),
+            (
+                "plots/path_loss_distance.png",
+                distance(p, &series).map_err(fail)?,
+            ),
+        ];
+        if let Some(map) = radio_map {
+            plots.push(("plots/radio_map.png", map_png(map, ortho).map_err(fail)?));
+        }
+        let mut md = format!(
+            "# KODAMA report: {}\n\n{} measured links; every model is scored at the same links \
+             (rf.md §6: P2P = predicted − measured; PD and CI = RMSE of the measurements about the \
+             trend line fitted to the model's predictions; 3GPP's trend is its own formula).\n\n{md_table}\n",
+            p.site,
+            meas.links.len()
+        );
+        for (name, _) in &plots {
+            md.push_str(&format!("![{name}]({name})\n\n"));
+        }
+        files.push(("report.md".to_string(), md.into_bytes()));
+        files.push(("table.csv".to_string(), csv.into_bytes()));
+        files.push((
+            "metrics.json".to_string(),
+            (serde_json::to_string_pretty(&json).map_err(|e| fail(e.to_string()))? + "\n")
+                .into_bytes(),
+        ));
+        for (name, bytes) in plots {
+            files.push((name.to_string(), bytes));
+        }
+        Ok(Report { files })
+    }
+}
+
+fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
+    let mut md = format!(
+        "| site | metric | {} |\n|---|---|{}\n",
+        p.models.join(" | "),
+        "---|".repeat(p.models.len())
+    );
+    let mut csv = format!("site,metric,{}\n", p.models.join(","));
+    for (key, label) in ROWS {
+        let vals: Vec<String> = evals
+            .iter()
+            .map(|e| {
+                e.get(key).map_or("–".into(), |v| {
+                    if key == "links_scored" {
+                        format!("{v:.0}")
+                    } else {
+                        format!("{v:.2}")
+                    }
+                })
+            })
+            .collect();
+        if vals.iter().all(|v| v == "–") {
+            continue;
+        }
+        // Bold the best P2P/trend RMSE of the row.
+        let best = key.ends_with("rmse_db").then(|| {
+            evals
+                .iter()
+                .enumerate()
+                .filter_map(|(i, e)| e.get(key).map(|v| (i, v)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|x| x.0)
+        });
+        let shown: Vec<String> = vals
+            .iter()
+            .enumerate()
+            .map(|(i, v)| {
+                if best.flatten() == Some(i) {
+                    format!("**{v}**")
+                } else {
+                    v.clone()
+                }
+            })
+            .collect();
+        md.push_str(&format!(
+            "| {} | {label} | {} |\n",
+            p.site,
+            shown.join(" | ")
+        ));
+        csv.push_str(&format!("{},{label},{}\n", p.site, vals.join(",")));
+    }
+    (md, csv)
+}
+
+fn pairs(meas: &Measurements, pred: &Measurements, ev: &Metrics) -> Vec<(f64, f64, f64)> {
+    meas.links
+        .iter()
+        .zip(&pred.links)
+        .filter_map(|(m, p)| {
+            let offset = ev.get(&format!("offset_db/{}", m.tx.id)).unwrap_or(0.0);
+            Some((
+                link_distance(m, None),
+                measured_loss(m)? - offset,
+                // Beyond the floor (or no path): scored as Evaluate scores it.
+                p.path_loss_db
+                    .filter(|v| !v.is_nan())
+                    .and_then(|v| match ev.get("floor_db") {
+                        Some(f) => Some(v.min(f)),
+                        None => v.is_finite().then_some(v),
+                    })?,
+            ))
+        })
+        .collect()
+}
+
+fn scatter(p: &ReportParams, series: &[Vec<(f64, f64, f64)>]) -> Result<Vec<u8>, String> {
+    let r = range(series.iter().flatten().flat_map(|s| [s.1, s.2]));
+    let mut c = Chart::new(
+        640,
+        560,
+        r,
+        r,
+        "PREDICTED VS MEASURED PATH LOSS",
+        "MEASURED (DB)",
+        "PREDICTED (DB)",
+    );
+    c.line(&[(r.0, r.0), (r.1, r.1)], [120, 120, 120], "");
+    for (k, s) in series.iter().enumerate() {
+        let pts: Vec<(f64, f64)> = s.iter().map(|x| (x.1, x.2)).collect();
+        c.points(&pts, PALETTE[k % PALETTE.len()], &p.models[k]);
+    }
+    c.png()
+}
+
+fn cdf(p: &ReportParams, series: &[Vec<(f64, f64, f64)>]) -> Result<Vec<u8>, String> {
+    let errs: Vec<Vec<f64>> = series
+        .iter()
+        .map(|s| {
+            let mut e: Vec<f64> = s.iter().map(|x| (x.2 - x.1).abs()).collect();
+            e.sort_by(f64::total_cmp);
+            e
+        })
+        .collect();
+    let xmax = errs.iter().flatten().fold(1.0f64, |m, &v| m.max(v));
+    let mut c = Chart::new(
+        640,
+        420,
+        (0.0, xmax),
+        (0.0, 1.0),
+        "CDF OF ABS PREDICTION ERROR",
+        "ABS ERROR (DB)",
+        "CDF",
+    );
+    for (k, e) in errs.iter().enumerate() {
+        let n = e.len().max(1) as f64;
+        let pts: Vec<(f64, f64)> = e
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| (v, (i + 1) as f64 / n))
+            .collect();
+        c.line(&pts, PALETTE[k % PALETTE.len()], &p.models[k]);
+    }
+    c.png()
+}
+
+fn distance(p: &ReportParams, series: &[Vec<(f64, f64, f64)>]) -> Result<Vec<u8>, String> {
+    let xr = range(series.iter().flatten().map(|s| s.0.log10()));
+    let yr = range(series.iter().flatten().flat_map(|s| [s.1, s.2]));
+    let mut c = Chart::new(
+        640,
+        420,
+        xr,
+        yr,
+        "PATH LOSS VS DISTANCE, PD TREND LINES",
+        "LOG10 DISTANCE (M)",
+        "PATH LOSS (DB)",
+    );
+    if let Some(first) = series.first() {
+        let pts: Vec<(f64, f64)> = first.iter().map(|s| (s.0.log10(), s.1)).collect();
+        c.points(&pts, [90, 90, 90], "MEASURED");
+    }
+    for (k, s) in series.iter().enumerate() {
+        if s.len() < 2 {
+            continue;
+        }
+        let d: Vec<f64> = s.iter().map(|x| x.0).collect();
+        let pl: Vec<f64> = s.iter().map(|x| x.2).collect();
+        let (a, b) = fit_power_distance(&d, &pl);
+        let line: Vec<(f64, f64)> = (0..=20)
+            .map(|i| {
+                let x = xr.0 + (xr.1 - xr.0) * i as f64 / 20.0;
+                (x, a + 10.0 * b * x)
+            })
+            .collect();
+        c.line(&line, PALETTE[k % PALETTE.len()], &p.models[k]);
+    }
+    c.png()
+}
+
+/// The radio map colour-mapped over the orthophoto (60 % map where a ray arrived).
+fn map_png(map: &Raster, ortho: Option<&Ortho>) -> Result<Vec<u8>, String> {
+    let colored = crate::io::export::colormap::raster_png(map)?;
+    let Some(o) = ortho else { return Ok(colored) };
+    let mut img = image::load_from_memory(&colored)
+        .map_err(|e| e.to_string())?
+        .to_rgba8();
+    let g = map.grid;
+    for row in 0..g.height {
+        for col in 0..g.width {
+            let (x, y) = g.center(col, row);
+            let Some((oc, or)) = o.grid.cell_of(x, y) else {
+                continue;
+            };
+            let under = o.rgb[(or * o.grid.width + oc) as usize];
+            let px = img.get_pixel_mut(col, row);
+            let a = if px[3] > 0 { 0.6 } else { 0.0 };
+            for k in 0..3 {
+                px[k] = (px[k] as f64 * a + under[k] as f64 * (1.0 - a)).round() as u8;
+            }
+            px[3] = 255;
+        }
+    }
+    let mut out = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut out, image::ImageFormat::Png)
+        .map_err(|e| e.to_string())?;
+    Ok(out.into_inner())
+}

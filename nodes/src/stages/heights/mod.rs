@@ -1,0 +1,9 @@
+//! Height fields (Sec. 4): each source rasterized onto the site grid, composited, filtered and
+//! compared.
+
+pub mod coarsen;
+pub mod composite_height;
+pub mod gaussian_blur;
+pub mod raster_ops;
+pub mod rasterize_scene;
+pub mod rasterize_surface;

@@ -1,0 +1,291 @@
+//! Ingest of OpenStreetMap buildings from `.osm.pbf`: the footprints and height tags the peers'
+//! OSM-extruded scenes are built from (paper Sec. 5 baseline).
+
+use std::collections::{HashMap, HashSet};
+use std::path::Path;
+
+use osmpbf::{Element, ElementReader, RelMemberType};
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{Footprint, Footprints, Polygon};
+use crate::io::crs::{Crs, ToSite};
+use crate::stage::{Ctx, FileRef, InputSpec, Inputs, Stage, StageError};
+
+/// Params of [`ReadOsmBuildings`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReadOsmBuildingsParams {
+    /// The `.osm.pbf` file.
+    pub path: String,
+}
+
+/// Reads every closed way and multipolygon relation tagged `building=*` (or `building:part`), with
+/// `height`, `min_height`, `building:levels` and `building:min_level`.
+pub struct ReadOsmBuildings;
+
+impl Stage for ReadOsmBuildings {
+    const KIND: &'static str = "ReadOsmBuildings";
+    const VERSION: u32 = 1;
+    const DOC: &'static str = "OSM PBF buildings (ways and multipolygons, height/levels tags) into the site frame, Sec. 5";
+    const INPUTS: &'static [InputSpec] = &[];
+    type Params = ReadOsmBuildingsParams;
+    type Output = Footprints;
+
+    fn files(p: &Self::Params) -> Vec<FileRef> {
+        vec![FileRef {
+            field: "path",
+            path: p.path.clone(),
+        }]
+    }
+
+    fn run(_: &Self::Params, _: &Inputs, ctx: &Ctx) -> Result<Footprints, StageError> {
+        let path = ctx.file(0)?;
+        let wgs84 = ToSite::new(&Crs::from_epsg(4326).expect("EPSG:4326 is known"), ctx.site)
+            .map_err(StageError::Failed)?;
+        read_osm_buildings(path, &wgs84)
+    }
+}
+
+fn is_building<'a>(mut tags: impl Iterator<Item = (&'a str, &'a str)>) -> bool {
+    tags.any(|(k, v)| k == "building" && v != "no")
+}
+
+/// A length tag in metres: `12`, `12 m`, `12.5m`, `40'`, `40 ft`.
+pub fn parse_length(v: &str) -> Option<f64> {
+    let v = v.trim();
+    let (num, scale) = if let Some(n) = v.strip_suffix("ft").or_else(|| v.strip_suffix('\'')) {
+        (n, 0.3048)
+    } else {
+        (v.strip_suffix('m').unwrap_or(v), 1.0)
+    };
+    num.trim()
+        .replace(',', ".")
+        .parse::<f64>()
+        .ok()
+        .filter(|x| x.is_finite() && *x >= 0.0)
+        .map(|x| x * scale)
+}
+
+struct Tags {
+    height_m: Option<f64>,
+    min_height_m: Option<f64>,
+    levels: Option<f64>,
+    min_level: Option<f64>,
+}
+
+fn tags<'a>(it: impl Iterator<Item = (&'a str, &'a str)>) -> Tags {
+    let mut t = Tags {
+        height_m: None,
+        min_height_m: None,
+        levels: None,
+        min_level: None,
+    };
+    for (k, v) in it {
+        match k {
+            "height" | "building:height" => t.height_m = t.height_m.or(parse_length(v)),
+            "min_height" => t.min_height_m = parse_length(v),
+            "building:levels" => t.levels = v.trim().parse().ok(),
+            "building:min_level" => t.min_level = v.trim().parse().ok(),
+            _ => {}
+        }
+    }
+    t
+}
+
+fn osm_error(path: &Path, e: osmpbf::Error) -> StageError {
+    StageError::bad_input(path, "PBF data", format!("expected an OSM PBF file: {e}"))
+}
+
+/// Joins way node lists into closed rings by matching end points; open leftovers are dropped.
+fn assemble_rings(mut parts: Vec<Vec<i64>>) -> Vec<Vec<i64>> {
+    let mut rings = Vec::new();
+    while let Some(mut ring) = parts.pop() {
+        while ring.len() > 1 && ring.first() != ring.last() {
+            let end = *ring.last().expect("non-empty");
+            let Some(k) = parts
+                .iter()
+                .position(|p| p.first() == Some(&end) || p.last() == Some(&end))
+            else {
+                break;
+            };
+            let mut next = parts.swap_remove(k);
+            if next.first() != Some(&end) {
+                next.reverse();
+            }
+            ring.extend_from_slice(&next[1..]);
+        }
+        if ring.len() >= 4 && ring.first() == ring.last() {
+            rings.push(ring);
+        }
+    }
+    rings
+}
+
+/// Three passes: building relations and their member ways; building ways and members' node ids;
+/// the coordinates of just those nodes.
+pub fn read_osm_buildings(path: &Path, wgs84: &ToSite) -> Result<Footprints, StageError> {
+    struct Rel {
+        id: i64,
+        outer: Vec<i64>,
+        inner: Vec<i64>,
+        tags: Tags,
+    }
+    let mut rels = Vec::new();
+    ElementReader::from_path(path)
+        .map_err(|e| osm_error(path, e))?
+        .for_each(|el| {
+            if let Element::Relation(r) = el {
+                let mp = r
+                    .tags()
+                    .any(|(k, v)| k == "type" && (v == "multipolygon" || v == "building"));
+                if mp && is_building(r.tags()) {
+                    let (mut outer, mut inner) = (Vec::new(), Vec::new());
+                    for m in r.members().filter(|m| m.member_type == RelMemberType::Way) {
+                        match m.role() {
+                            Ok("inner") => inner.push(m.member_id),
+                            _ => outer.push(m.member_id),
+                        }
+                    }
+                    rels.push(Rel {
+                        id: r.id(),
+                        outer,
+                        inner,
+                        tags: tags(r.tags()),
+                    });
+                }
+            }
+        })
+        .map_err(|e| osm_error(path, e))?;
+    let members: HashSet<i64> = rels
+        .iter()
+        .flat_map(|r| r.outer.iter().chain(&r.inner))
+        .copied()
+        .collect();
+
+    let mut ways: HashMap<i64, Vec<i64>> = HashMap::new();
+    let mut building_ways = Vec::new();
+    ElementReader::from_path(path)
+        .map_err(|e| osm_error(path, e))?
+        .for_each(|el| {
+            if let Element::Way(w) = el {
+                let building = is_building(w.tags());
+                if building || members.contains(&w.id()) {
+                    ways.insert(w.id(), w.refs().collect());
+                }
+                if building {
+                    building_ways.push((w.id(), tags(w.tags())));
+                }
+            }
+        })
+        .map_err(|e| osm_error(path, e))?;
+    let needed: HashSet<i64> = ways.values().flatten().copied().collect();
+
+    let mut nodes: HashMap<i64, [f64; 2]> = HashMap::with_capacity(needed.len());
+    let mut failure = None;
+    ElementReader::from_path(path)
+        .map_err(|e| osm_error(path, e))?
+        .for_each(|el| {
+            let (id, lat, lon) = match el {
+                Element::Node(n) => (n.id(), n.lat(), n.lon()),
+                Element::DenseNode(n) => (n.id(), n.lat(), n.lon()),
+                _ => return,
+            };
+            if needed.contains(&id) {
+                match wgs84.apply(lon, lat, 0.0) {
+                    Ok((x, y, _)) => {
+                        nodes.insert(id, [x, y]);
+                    }
+                    Err(m) => failure = Some(StageError::bad_input(path, format!("node {id}"), m)),
+                }
+            }
+        })
+        .map_err(|e| osm_error(path, e))?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    // Ways whose nodes are missing (clipped at the extract's edge) are skipped, as osmium does.
+    let coords = |refs: &[i64]| {
+        refs.iter()
+            .map(|r| nodes.get(r).copied())
+            .collect::<Option<Vec<[f64; 2]>>>()
+    };
+
+    let mut out = Footprints::default();
+    for (id, t) in building_ways {
+        let refs = &ways[&id];
+        if refs.len() < 4 || refs.first() != refs.last() {
+            continue;
+        }
+        let Some(ring) = coords(refs) else { continue };
+        if let Some(p) = Polygon::normalized(ring, Vec::new()) {
+            out.items.push(Footprint {
+                id: format!("w{id}"),
+                polygons: vec![p],
+                height_m: t.height_m,
+                min_height_m: t.min_height_m,
+                levels: t.levels,
+                min_level: t.min_level,
+            });
+        }
+    }
+    for r in rels {
+        let rings =
+            |ids: &[i64]| assemble_rings(ids.iter().filter_map(|w| ways.get(w).cloned()).collect());
+        let inner: Vec<Vec<[f64; 2]>> = rings(&r.inner)
+            .iter()
+            .filter_map(|ring| coords(ring))
+            .collect();
+        let mut polygons = Vec::new();
+        for outer in rings(&r.outer) {
+            let Some(outer) = coords(&outer) else {
+                continue;
+            };
+            // Each inner ring goes to the outer ring that contains its first vertex.
+            let holes = inner
+                .iter()
+                .filter(|h| point_in_ring(h[0], &outer))
+                .cloned()
+                .collect();
+            polygons.extend(Polygon::normalized(outer, holes));
+        }
+        if !polygons.is_empty() {
+            let t = r.tags;
+            out.items.push(Footprint {
+                id: format!("r{}", r.id),
+                polygons,
+                height_m: t.height_m,
+                min_height_m: t.min_height_m,
+                levels: t.levels,
+                min_level: t.min_level,
+            });
+        }
+    }
+    Ok(out)
+}
+
+pub use crate::artifact::point_in_ring;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lengths() {
+        assert_eq!(parse_length("12"), Some(12.0));
+        assert_eq!(parse_length("12.5 m"), Some(12.5));
+        assert_eq!(parse_length("40'"), Some(40.0 * 0.3048));
+        assert_eq!(parse_length("3,5"), Some(3.5));
+        assert_eq!(parse_length("tall"), None);
+    }
+
+    #[test]
+    fn rings_join_open_ways_in_either_direction() {
+        let rings = assemble_rings(vec![
+            vec![1, 2, 3],
+            vec![5, 4, 3],
+            vec![5, 6, 1],
+            vec![7, 8],
+        ]);
+        assert_eq!(rings, vec![vec![5, 6, 1, 2, 3, 4, 5]]);
+    }
+}

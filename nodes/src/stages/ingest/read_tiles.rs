@@ -1,0 +1,372 @@
+//! Ingest of OGC 3D Tiles (photogrammetry meshes, paper Sec. 4): `tileset.json` with glTF (`.glb`)
+//! or batched-3D-model (`.b3dm`) content, every transform applied, into one scene in the site frame.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use crate::artifact::{Mesh, ObjectClass, Scene, SceneObject};
+use crate::io::crs::{Crs, ToSite};
+use crate::io::ecef::from_ecef;
+use crate::rf::materials::Material;
+use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
+
+/// Params of [`ReadTileset`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReadTilesetParams {
+    /// The `tileset.json`. Its whole folder is the node's input (content files live beside it).
+    pub path: String,
+    /// The CRS of tile coordinates; default ECEF (EPSG:4978), as 3D Tiles specify.
+    #[serde(default)]
+    pub crs: Option<String>,
+}
+
+/// Reads a 3D Tiles tileset into a scene: one object per glTF node with a mesh, surfaces marked
+/// [`ObjectClass::Unsegmented`]; materials from their names when they are ITU classes, else
+/// concrete (photogrammetry carries no radio materials; a later stage assigns them).
+pub struct ReadTileset;
+
+impl Stage for ReadTileset {
+    const KIND: &'static str = "ReadTileset";
+    const VERSION: u32 = 1;
+    const DOC: &'static str =
+        "OGC 3D Tiles (glb/b3dm content) into a scene in the site frame, Sec. 4";
+    const INPUTS: &'static [InputSpec] = &[];
+    type Params = ReadTilesetParams;
+    type Output = Scene;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        crate::params::check_crs(&p.crs)?;
+        if !p.path.ends_with(".json") {
+            return Err(ParamError::new("path", "expected the tileset's .json file"));
+        }
+        Ok(())
+    }
+
+    fn files(p: &Self::Params) -> Vec<FileRef> {
+        let folder = crate::params::folder_of(&p.path);
+        vec![FileRef {
+            field: "path",
+            path: folder,
+        }]
+    }
+
+    fn run(p: &Self::Params, _: &Inputs, ctx: &Ctx) -> Result<Scene, StageError> {
+        let folder = ctx.file(0)?;
+        let json = folder.join(Path::new(&p.path).file_name().unwrap_or_default());
+        let place: Box<Placer> = match &p.crs {
+            None => {
+                let wgs84 =
+                    ToSite::new(&Crs::from_epsg(4326).expect("EPSG:4326 is known"), ctx.site)
+                        .map_err(StageError::Failed)?;
+                Box::new(move |e: [f64; 3]| {
+                    let (lon, lat, h) = from_ecef(e);
+                    let (x, y, _) = wgs84.apply(lon, lat, 0.0)?;
+                    Ok([x, y, h])
+                })
+            }
+            Some(c) => {
+                let crs =
+                    Crs::from_user(c).map_err(|m| StageError::Param(ParamError::new("crs", m)))?;
+                let t = ToSite::new(&crs, ctx.site).map_err(StageError::Failed)?;
+                Box::new(move |e: [f64; 3]| t.apply(e[0], e[1], e[2]).map(|(x, y, z)| [x, y, z]))
+            }
+        };
+        let mut scene = Scene::default();
+        read_tileset_file(&json, IDENTITY, None, &place, &mut scene, 0)?;
+        if scene.objects.is_empty() {
+            return Err(StageError::bad_input(
+                &json,
+                "content",
+                "the tileset has no glb or b3dm content",
+            ));
+        }
+        Ok(scene)
+    }
+}
+
+type Mat4 = [f64; 16];
+const IDENTITY: Mat4 = [
+    1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.,
+];
+
+/// Column-major product a * b.
+fn mul(a: &Mat4, b: &Mat4) -> Mat4 {
+    let mut out = [0.0; 16];
+    for c in 0..4 {
+        for r in 0..4 {
+            out[c * 4 + r] = (0..4).map(|k| a[k * 4 + r] * b[c * 4 + k]).sum();
+        }
+    }
+    out
+}
+
+fn apply(m: &Mat4, p: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|r| m[r] * p[0] + m[4 + r] * p[1] + m[8 + r] * p[2] + m[12 + r])
+}
+
+/// glTF content is y-up; 3D Tiles rotate it to z-up before the tile transform.
+const Y_UP_TO_Z_UP: Mat4 = [
+    1., 0., 0., 0., 0., 0., 1., 0., 0., -1., 0., 0., 0., 0., 0., 1.,
+];
+
+type Placer = dyn Fn([f64; 3]) -> Result<[f64; 3], String> + Sync;
+
+fn read_tileset_file(
+    json: &Path,
+    parent: Mat4,
+    refine: Option<&str>,
+    place: &Placer,
+    scene: &mut Scene,
+    depth: u32,
+) -> Result<(), StageError> {
+    if depth > 16 {
+        return Err(StageError::bad_input(
+            json,
+            "external tilesets",
+            "nested more than 16 deep (a cycle?)",
+        ));
+    }
+    let text = std::fs::read_to_string(json)
+        .map_err(|e| StageError::bad_input(json, "open", e.to_string()))?;
+    let doc: Value = serde_json::from_str(&text).map_err(|e| {
+        StageError::bad_input(
+            json,
+            format!("line {}, column {}", e.line(), e.column()),
+            format!("expected JSON: {e}"),
+        )
+    })?;
+    let root = doc
+        .get("root")
+        .ok_or_else(|| StageError::bad_input(json, "top level", "expected a `root` tile"))?;
+    let base = json.parent().unwrap_or(Path::new("."));
+    visit_tile(
+        root,
+        base,
+        json,
+        parent,
+        refine.unwrap_or("REPLACE"),
+        place,
+        scene,
+        depth,
+        "root".into(),
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn visit_tile(
+    tile: &Value,
+    base: &Path,
+    json: &Path,
+    parent: Mat4,
+    refine: &str,
+    place: &Placer,
+    scene: &mut Scene,
+    depth: u32,
+    path: String,
+) -> Result<(), StageError> {
+    let transform = match tile.get("transform").and_then(Value::as_array) {
+        Some(t) if t.len() == 16 => {
+            let mut m = [0.0; 16];
+            for (i, v) in t.iter().enumerate() {
+                m[i] = v.as_f64().ok_or_else(|| {
+                    StageError::bad_input(json, format!("{path}.transform"), "expected 16 numbers")
+                })?;
+            }
+            mul(&parent, &m)
+        }
+        Some(_) => {
+            return Err(StageError::bad_input(
+                json,
+                format!("{path}.transform"),
+                "expected 16 numbers",
+            ));
+        }
+        None => parent,
+    };
+    let refine = tile.get("refine").and_then(Value::as_str).unwrap_or(refine);
+    let children = tile
+        .get("children")
+        .and_then(Value::as_array)
+        .map(Vec::as_slice)
+        .unwrap_or(&[]);
+    // With REPLACE refinement a parent's content is a coarser copy of its children's: read leaves.
+    let read_content = refine.eq_ignore_ascii_case("ADD") || children.is_empty();
+    if read_content {
+        let contents: Vec<&Value> = match (
+            tile.get("content"),
+            tile.get("contents").and_then(Value::as_array),
+        ) {
+            (Some(c), _) => vec![c],
+            (None, Some(cs)) => cs.iter().collect(),
+            _ => vec![],
+        };
+        for c in contents {
+            let Some(uri) = c
+                .get("uri")
+                .or_else(|| c.get("url"))
+                .and_then(Value::as_str)
+            else {
+                continue;
+            };
+            let file: PathBuf = base.join(uri);
+            if uri.ends_with(".json") {
+                read_tileset_file(&file, transform, Some(refine), place, scene, depth + 1)?;
+            } else {
+                read_content_file(&file, uri, &transform, place, scene)?;
+            }
+        }
+    }
+    for (i, child) in children.iter().enumerate() {
+        visit_tile(
+            child,
+            base,
+            json,
+            transform,
+            refine,
+            place,
+            scene,
+            depth,
+            format!("{path}.children[{i}]"),
+        )?;
+    }
+    Ok(())
+}
+
+fn read_content_file(
+    file: &Path,
+    uri: &str,
+    tile: &Mat4,
+    place: &Placer,
+    scene: &mut Scene,
+) -> Result<(), StageError> {
+    let bytes =
+        std::fs::read(file).map_err(|e| StageError::bad_input(file, "open", e.to_string()))?;
+    let (glb, rtc) = if bytes.starts_with(b"b3dm") {
+        split_b3dm(file, &bytes)?
+    } else {
+        (bytes.as_slice(), [0.0; 3])
+    };
+    let gltf = gltf::Gltf::from_slice(glb)
+        .map_err(|e| StageError::bad_input(file, "glTF", format!("expected a glTF binary: {e}")))?;
+    let buffers: Vec<Vec<u8>> = gltf
+        .buffers()
+        .map(|b| match b.source() {
+            gltf::buffer::Source::Bin => gltf
+                .blob
+                .clone()
+                .ok_or_else(|| StageError::bad_input(file, "glTF", "the BIN chunk is missing")),
+            gltf::buffer::Source::Uri(u) => {
+                std::fs::read(file.parent().unwrap_or(Path::new(".")).join(u))
+                    .map_err(|e| StageError::bad_input(file, format!("buffer {u}"), e.to_string()))
+            }
+        })
+        .collect::<Result<_, _>>()?;
+    let rtc_m: Mat4 = [
+        1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., rtc[0], rtc[1], rtc[2], 1.,
+    ];
+    let to_tile = mul(tile, &mul(&rtc_m, &Y_UP_TO_Z_UP));
+    let Some(s) = gltf.default_scene().or_else(|| gltf.scenes().next()) else {
+        return Ok(());
+    };
+    let mut stack: Vec<(gltf::Node, Mat4)> = s.nodes().map(|n| (n, to_tile)).collect();
+    while let Some((node, parent)) = stack.pop() {
+        let local = node.transform().matrix();
+        let m: Mat4 = std::array::from_fn(|i| local[i / 4][i % 4] as f64);
+        let world = mul(&parent, &m);
+        if let Some(mesh) = node.mesh() {
+            let mut out = Mesh::default();
+            // Primitives often share one POSITION accessor (one per material): read each once.
+            let mut bases: std::collections::HashMap<usize, (u32, u32)> = Default::default();
+            for prim in mesh.primitives() {
+                if prim.mode() != gltf::mesh::Mode::Triangles {
+                    continue;
+                }
+                let material = prim
+                    .material()
+                    .name()
+                    .and_then(Material::from_name)
+                    .unwrap_or(Material::Concrete);
+                let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+                let Some(accessor) = prim.get(&gltf::Semantic::Positions) else {
+                    continue;
+                };
+                let (base, n) = match bases.get(&accessor.index()) {
+                    Some(&b) => b,
+                    None => {
+                        let Some(positions) = reader.read_positions() else {
+                            continue;
+                        };
+                        let base = out.positions.len() as u32;
+                        for p in positions {
+                            let e = apply(&world, [p[0] as f64, p[1] as f64, p[2] as f64]);
+                            let q =
+                                place(e).map_err(|m| StageError::bad_input(file, "vertex", m))?;
+                            out.positions.push([q[0] as f32, q[1] as f32, q[2] as f32]);
+                        }
+                        let b = (base, out.positions.len() as u32 - base);
+                        bases.insert(accessor.index(), b);
+                        b
+                    }
+                };
+                let indices: Vec<u32> = match reader.read_indices() {
+                    Some(ix) => ix.into_u32().collect(),
+                    None => (0..n).collect(),
+                };
+                for t in indices.chunks_exact(3) {
+                    if t.iter().any(|&i| i >= n) {
+                        return Err(StageError::bad_input(
+                            file,
+                            "indices",
+                            "an index points past the vertices",
+                        ));
+                    }
+                    out.triangles.push([base + t[0], base + t[1], base + t[2]]);
+                    out.materials.push(material as u8);
+                }
+            }
+            let name = node
+                .name()
+                .map(str::to_owned)
+                .unwrap_or_else(|| node.index().to_string());
+            scene.objects.push(SceneObject {
+                id: format!("{uri}#{name}"),
+                class: ObjectClass::Unsegmented,
+                mesh: out,
+            });
+        }
+        stack.extend(node.children().map(|c| (c, world)));
+    }
+    Ok(())
+}
+
+/// The glTF inside a b3dm, and its feature table's RTC_CENTER.
+fn split_b3dm<'a>(file: &Path, b: &'a [u8]) -> Result<(&'a [u8], [f64; 3]), StageError> {
+    let u32_at = |o: usize| {
+        b.get(o..o + 4)
+            .map(|s| u32::from_le_bytes(s.try_into().expect("4 bytes")) as usize)
+    };
+    let bad = |m: &str| StageError::bad_input(file, "b3dm header", m.to_owned());
+    let (Some(ft_json), Some(ft_bin), Some(bt_json), Some(bt_bin)) =
+        (u32_at(12), u32_at(16), u32_at(20), u32_at(24))
+    else {
+        return Err(bad("expected a 28-byte header"));
+    };
+    let glb_start = 28 + ft_json + ft_bin + bt_json + bt_bin;
+    let glb = b
+        .get(glb_start..)
+        .ok_or_else(|| bad("the table lengths run past the end of the file"))?;
+    let mut rtc = [0.0; 3];
+    if ft_json > 0 {
+        let ft: Value = serde_json::from_slice(&b[28..28 + ft_json])
+            .map_err(|e| bad(&format!("feature table: {e}")))?;
+        if let Some(c) = ft.get("RTC_CENTER").and_then(Value::as_array) {
+            for (k, v) in c.iter().take(3).enumerate() {
+                rtc[k] = v.as_f64().unwrap_or(0.0);
+            }
+        }
+    }
+    Ok((glb, rtc))
+}

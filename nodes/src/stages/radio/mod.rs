@@ -1,0 +1,3 @@
+//! Radio (Sec. 5): link paths and radio maps traced through a scene.
+
+pub mod rf_trace;

@@ -1,0 +1,657 @@
+//! The seeded synthetic city: a benchmark generator whose ground truth every reconstruction stage
+//! can be scored against (DESIGN: Synthetic site).
+//!
+//! Layout: a grid of blocks separated by streets; each block is cut into lots along its length
+//! (one or two rows); each lot draws a building type (flat, L-shaped, courtyard, gabled, hipped,
+//! stepped, domed) or a small park. Streets get trees, parked cars, poles, signs and shelters. All
+//! draws are hashes of (seed, purpose, index), so the city does not depend on evaluation order.
+
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{
+    BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, Polygon, Rect, Roof, RoofBox,
+    Street, TreeSpec,
+};
+use crate::rf::materials::Material;
+use crate::rng::{mix, unit};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::synth::synth_terrain::{SynthTerrainParams, height_at};
+
+/// Params of [`SynthCity`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SynthCityParams {
+    /// Seed of every draw. Default 7.
+    pub seed: u64,
+    /// Extent (east, north) from the site origin, metres. Default (400, 300).
+    pub size_m: (f64, f64),
+    /// Blocks (east, north). Default (4, 3).
+    pub blocks: (u32, u32),
+    /// Street width between blocks, metres. Default 18.
+    pub street_m: f64,
+    /// Lot frontage range, metres. Default (16, 30).
+    pub lot_m: (f64, f64),
+    /// Eave height range of flat-roofed buildings, metres. Default (8, 32).
+    pub height_m: (f64, f64),
+    /// Street tree spacing, metres (0: none). Default 15.
+    pub tree_spacing_m: f64,
+    /// Parked cars per 100 m of kerb. Default 6.
+    pub cars_per_100m: f64,
+    /// The terrain under the city.
+    pub terrain: SynthTerrainParams,
+}
+
+impl Default for SynthCityParams {
+    fn default() -> Self {
+        SynthCityParams {
+            seed: 7,
+            size_m: (400.0, 300.0),
+            blocks: (4, 3),
+            street_m: 18.0,
+            lot_m: (16.0, 30.0),
+            height_m: (8.0, 32.0),
+            tree_spacing_m: 15.0,
+            cars_per_100m: 6.0,
+            terrain: SynthTerrainParams {
+                seed: 7,
+                size_m: (400.0, 300.0),
+                ..Default::default()
+            },
+        }
+    }
+}
+
+/// Generates the ground truth of a synthetic city.
+pub struct SynthCity;
+
+impl Stage for SynthCity {
+    const KIND: &'static str = "SynthCity";
+    const VERSION: u32 = 1;
+    const DOC: &'static str =
+        "seeded synthetic city ground truth: terrain, buildings with roof shapes, trees, clutter";
+    const INPUTS: &'static [InputSpec] = &[];
+    type Params = SynthCityParams;
+    type Output = City;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        if !(p.size_m.0 >= 50.0 && p.size_m.1 >= 50.0) {
+            return Err(ParamError::new("size_m", "expected at least 50 x 50 m"));
+        }
+        if p.blocks.0 == 0 || p.blocks.1 == 0 {
+            return Err(ParamError::new(
+                "blocks",
+                "expected at least one block each way",
+            ));
+        }
+        let bw = (p.size_m.0 - (p.blocks.0 + 1) as f64 * p.street_m) / p.blocks.0 as f64;
+        let bh = (p.size_m.1 - (p.blocks.1 + 1) as f64 * p.street_m) / p.blocks.1 as f64;
+        if !(bw >= 20.0 && bh >= 20.0) {
+            return Err(ParamError::new(
+                "blocks",
+                format!(
+                    "blocks would be {bw:.1} x {bh:.1} m; expected at least 20 x 20 m (fewer blocks or narrower streets)"
+                ),
+            ));
+        }
+        if !(p.lot_m.0 >= 8.0 && p.lot_m.1 >= p.lot_m.0) {
+            return Err(ParamError::new("lot_m", "expected 8 <= min <= max"));
+        }
+        if !(p.height_m.0 >= 3.0 && p.height_m.1 >= p.height_m.0) {
+            return Err(ParamError::new("height_m", "expected 3 <= min <= max"));
+        }
+        Ok(())
+    }
+
+    fn run(p: &Self::Params, _: &Inputs, _: &Ctx) -> Result<City, StageError> {
+        Ok(generate(p))
+    }
+}
+
+/// Seeded draws: `r.u(purpose, index)` in [0, 1).
+struct Draw(u64);
+
+impl Draw {
+    fn u(&self, purpose: u64, i: u64) -> f64 {
+        unit(mix(
+            self.0 ^ mix(purpose.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ mix(i))
+        ))
+    }
+    fn range(&self, purpose: u64, i: u64, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.u(purpose, i)
+    }
+    fn pick<T: Copy>(&self, purpose: u64, i: u64, weighted: &[(T, f64)]) -> T {
+        let total: f64 = weighted.iter().map(|w| w.1).sum();
+        let mut x = self.u(purpose, i) * total;
+        for &(v, w) in weighted {
+            if x < w {
+                return v;
+            }
+            x -= w;
+        }
+        weighted.last().expect("non-empty choice").0
+    }
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Kind {
+    Flat,
+    LShape,
+    Courtyard,
+    Gabled,
+    Hipped,
+    Stepped,
+    Domed,
+    Park,
+}
+
+fn rect_poly(x0: f64, y0: f64, x1: f64, y1: f64) -> Vec<[f64; 2]> {
+    vec![[x0, y0], [x1, y0], [x1, y1], [x0, y1]]
+}
+
+/// The city for `p`.
+pub fn generate(p: &SynthCityParams) -> City {
+    let d = Draw(p.seed);
+    let t = &p.terrain;
+    let (nbx, nby) = p.blocks;
+    let bw = (p.size_m.0 - (nbx + 1) as f64 * p.street_m) / nbx as f64;
+    let bh = (p.size_m.1 - (nby + 1) as f64 * p.street_m) / nby as f64;
+    let mut city = City {
+        terrain: t.clone(),
+        size_m: p.size_m,
+        buildings: vec![],
+        trees: vec![],
+        clutter: vec![],
+        streets: vec![],
+    };
+    for k in 0..=nby {
+        let y = k as f64 * (bh + p.street_m) + p.street_m / 2.0;
+        city.streets.push(Street {
+            a: [0.0, y],
+            b: [p.size_m.0, y],
+            width_m: p.street_m,
+        });
+    }
+    for k in 0..=nbx {
+        let x = k as f64 * (bw + p.street_m) + p.street_m / 2.0;
+        city.streets.push(Street {
+            a: [x, 0.0],
+            b: [x, p.size_m.1],
+            width_m: p.street_m,
+        });
+    }
+    let mut lot_id = 0u64;
+    for by in 0..nby {
+        for bx in 0..nbx {
+            let x0 = p.street_m + bx as f64 * (bw + p.street_m);
+            let y0 = p.street_m + by as f64 * (bh + p.street_m);
+            // Lots run along the block's length; deep blocks get two rows back to back.
+            let rows = if bh >= 50.0 { 2 } else { 1 };
+            let depth = bh / rows as f64;
+            for row in 0..rows {
+                let ly0 = y0 + row as f64 * depth;
+                let mut lx = x0;
+                while x0 + bw - lx >= p.lot_m.0 {
+                    let mut w = d.range(1, lot_id, p.lot_m.0, p.lot_m.1);
+                    if x0 + bw - (lx + w) < p.lot_m.0 {
+                        w = x0 + bw - lx;
+                    }
+                    add_lot(&mut city, &d, p, lot_id, [lx, ly0, lx + w, ly0 + depth]);
+                    lot_id += 1;
+                    lx += w;
+                }
+            }
+        }
+    }
+    add_street_furniture(&mut city, &d, p, bw, bh);
+    city
+}
+
+fn ground(t: &SynthTerrainParams, pts: &[[f64; 2]]) -> (f64, f64) {
+    pts.iter()
+        .map(|q| height_at(t, q[0], q[1]))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), z| {
+            (lo.min(z), hi.max(z))
+        })
+}
+
+fn add_lot(city: &mut City, d: &Draw, p: &SynthCityParams, lot: u64, b: [f64; 4]) {
+    let (w, h) = (b[2] - b[0], b[3] - b[1]);
+    let big = w >= 24.0 && h >= 24.0;
+    let kind = d.pick(
+        2,
+        lot,
+        &[
+            (Kind::Flat, 0.26),
+            (Kind::LShape, 0.12),
+            (Kind::Courtyard, if big { 0.10 } else { 0.0 }),
+            (Kind::Gabled, 0.17),
+            (Kind::Hipped, 0.13),
+            (Kind::Stepped, 0.12),
+            (Kind::Domed, 0.04),
+            (Kind::Park, 0.06),
+        ],
+    );
+    if kind == Kind::Park {
+        for k in 0..3 {
+            let pos = [
+                d.range(30, lot * 8 + k, b[0] + 3.0, b[2] - 3.0),
+                d.range(31, lot * 8 + k, b[1] + 3.0, b[3] - 3.0),
+            ];
+            add_tree(city, d, p, pos);
+        }
+        return;
+    }
+    // Setbacks from the lot edges.
+    let s = |k: u64| d.range(3, lot * 4 + k, 1.0, 3.0);
+    let (x0, y0, x1, y1) = (b[0] + s(0), b[1] + s(1), b[2] - s(2), b[3] - s(3));
+    let (fw, fh) = (x1 - x0, y1 - y0);
+    let id = format!("building-{}", city.buildings.len());
+    let facade = d.pick(
+        4,
+        lot,
+        &[
+            (Material::Concrete, 0.35),
+            (Material::Brick, 0.3),
+            (Material::Glass, 0.2),
+            (Material::Marble, 0.1),
+            (Material::Wood, 0.05),
+        ],
+    );
+    let flat_eave = d.range(5, lot, p.height_m.0, p.height_m.1);
+    let low_eave = d.range(5, lot, 6.0, 12.0f64.max(p.height_m.0));
+    let (outline, holes, roof, eave_m, roof_material) = match kind {
+        Kind::Flat | Kind::Domed => {
+            let roof = if kind == Kind::Domed {
+                let r = 0.35 * fw.min(fh);
+                Roof::Domed {
+                    center: [(x0 + x1) / 2.0, (y0 + y1) / 2.0],
+                    radius_m: r,
+                    height_m: d.range(6, lot, 0.6, 1.0) * r,
+                }
+            } else {
+                Roof::Flat
+            };
+            (
+                rect_poly(x0, y0, x1, y1),
+                vec![],
+                roof,
+                flat_eave,
+                if kind == Kind::Domed {
+                    Material::Metal
+                } else {
+                    Material::Concrete
+                },
+            )
+        }
+        Kind::LShape => {
+            let (cx, cy) = (
+                x0 + fw * d.range(7, lot, 0.4, 0.6),
+                y0 + fh * d.range(8, lot, 0.4, 0.6),
+            );
+            let l = vec![[x0, y0], [x1, y0], [x1, cy], [cx, cy], [cx, y1], [x0, y1]];
+            (l, vec![], Roof::Flat, flat_eave, Material::Concrete)
+        }
+        Kind::Courtyard => {
+            let (mx, my) = (
+                fw * d.range(9, lot, 0.25, 0.32),
+                fh * d.range(10, lot, 0.25, 0.32),
+            );
+            (
+                rect_poly(x0, y0, x1, y1),
+                vec![rect_poly(x0 + mx, y0 + my, x1 - mx, y1 - my)],
+                Roof::Flat,
+                flat_eave.min(20.0),
+                Material::Concrete,
+            )
+        }
+        Kind::Gabled | Kind::Hipped => {
+            // The ridge runs along the longer side.
+            let rect = if fw >= fh {
+                Rect {
+                    corner: [x0, y0],
+                    length: fw,
+                    width: fh,
+                    heading: 0.0,
+                }
+            } else {
+                Rect {
+                    corner: [x1, y0],
+                    length: fh,
+                    width: fw,
+                    heading: std::f64::consts::FRAC_PI_2,
+                }
+            };
+            let ridge_m = d.range(11, lot, 0.25, 0.45) * rect.width.min(14.0);
+            let roof = if kind == Kind::Gabled {
+                Roof::Gabled { rect, ridge_m }
+            } else {
+                Roof::Hipped { rect, ridge_m }
+            };
+            let mat = d.pick(
+                12,
+                lot,
+                &[(Material::Metal, 0.4), (Material::Concrete, 0.6)],
+            );
+            (rect.corners(), vec![], roof, low_eave, mat)
+        }
+        Kind::Stepped => {
+            let (ix, iy) = (
+                fw * d.range(13, lot, 0.15, 0.3),
+                fh * d.range(14, lot, 0.15, 0.3),
+            );
+            let upper = Polygon::normalized(rect_poly(x0 + ix, y0 + iy, x1 - ix, y1 - iy), vec![])
+                .expect("inner rectangle is valid");
+            (
+                rect_poly(x0, y0, x1, y1),
+                vec![],
+                Roof::Stepped {
+                    upper,
+                    upper_m: d.range(15, lot, 3.5, 9.0),
+                },
+                flat_eave,
+                Material::Concrete,
+            )
+        }
+        Kind::Park => unreachable!("parks return early"),
+    };
+    let footprint = Polygon::normalized(outline, holes).expect("generated outlines are valid");
+    let (lo, hi) = ground(&p.terrain, &footprint.exterior);
+    let mut furniture = Vec::new();
+    if matches!(roof, Roof::Flat | Roof::Stepped { .. }) {
+        // HVAC units and chimneys kept clear of the outline and any courtyard.
+        for k in 0..d.pick(16, lot, &[(0u64, 0.3), (1, 0.35), (2, 0.25), (3, 0.1)]) {
+            let hvac = d.u(17, lot * 4 + k) < 0.7;
+            let size = if hvac {
+                [
+                    d.range(18, lot * 4 + k, 2.0, 4.0),
+                    d.range(19, lot * 4 + k, 1.5, 3.0),
+                    1.6,
+                ]
+            } else {
+                [0.7, 0.7, 1.8]
+            };
+            let c = [
+                x0 + 2.5 + (fw - 5.0) * d.u(20, lot * 4 + k),
+                y0 + 2.5 + (fh - 5.0) * d.u(21, lot * 4 + k),
+            ];
+            let corners = Rect {
+                corner: [c[0] - size[0] / 2.0, c[1] - size[1] / 2.0],
+                length: size[0],
+                width: size[1],
+                heading: 0.0,
+            }
+            .corners();
+            let inside = corners.iter().all(|q| {
+                crate::stages::ingest::read_osm::point_in_ring(*q, &footprint.exterior)
+                    && !footprint
+                        .holes
+                        .iter()
+                        .any(|h| crate::stages::ingest::read_osm::point_in_ring(*q, h))
+            });
+            let clear_of_tier = match &roof {
+                Roof::Stepped { upper, .. } => !corners
+                    .iter()
+                    .any(|q| crate::stages::ingest::read_osm::point_in_ring(*q, &upper.exterior)),
+                _ => true,
+            };
+            if inside && clear_of_tier {
+                furniture.push(RoofBox {
+                    kind: if hvac {
+                        "hvac".into()
+                    } else {
+                        "chimney".into()
+                    },
+                    center: c,
+                    size,
+                });
+            }
+        }
+    }
+    let features = facade_features(
+        d,
+        lot,
+        &p.terrain,
+        &footprint,
+        hi,
+        lo - 1.0,
+        hi + eave_m,
+        facade,
+    );
+    city.buildings.push(BuildingSpec {
+        id,
+        footprint,
+        ground_z: hi,
+        base_z: lo - 1.0,
+        eave_m,
+        roof,
+        furniture,
+        facade,
+        roof_material,
+        features,
+    });
+}
+
+/// Depth of window and door recesses: the thickness of the outer wall layer, metres.
+pub const RECESS_M: f64 = 0.25;
+/// Storey height, metres.
+pub const FLOOR_M: f64 = 3.2;
+
+/// Windows on every storey of every wall long enough (every 3 m, 1.4 x 1.6 m, sill at 0.9 m), a
+/// door in the middle of the first wall, balconies on some taller masonry buildings, and
+/// drainpipes at two corners.
+#[allow(clippy::too_many_arguments)]
+fn facade_features(
+    d: &Draw,
+    lot: u64,
+    t: &SynthTerrainParams,
+    fp: &Polygon,
+    ground_z: f64,
+    base_z: f64,
+    eave_z: f64,
+    facade: Material,
+) -> Vec<FacadeFeature> {
+    let floors = ((eave_z - ground_z) / FLOOR_M).floor().max(1.0) as usize;
+    let balconies = floors >= 3 && facade != Material::Glass && d.u(60, lot) < 0.4;
+    let mut out = Vec::new();
+    let rings: Vec<&Vec<[f64; 2]>> = std::iter::once(&fp.exterior).chain(&fp.holes).collect();
+    for (ri, ring) in rings.iter().enumerate() {
+        for e in 0..ring.len() {
+            let (a, b) = (ring[e], ring[(e + 1) % ring.len()]);
+            let len = (b[0] - a[0]).hypot(b[1] - a[1]);
+            let n_win = ((len - 2.0) / 3.0).floor() as i64;
+            if n_win < 1 {
+                continue;
+            }
+            let first = (len - (n_win - 1) as f64 * 3.0) / 2.0;
+            let door = (ri == 0 && e == 0).then_some(n_win / 2);
+            for f in 0..floors {
+                let z0 = ground_z + f as f64 * FLOOR_M;
+                for k in 0..n_win {
+                    let c = first + k as f64 * 3.0;
+                    let feature = |kind, along, z, depth_m| FacadeFeature {
+                        kind,
+                        ring: ri,
+                        edge: e,
+                        along,
+                        z,
+                        depth_m,
+                    };
+                    if f == 0 && door == Some(k) {
+                        let s = c / len;
+                        let g = height_at(t, a[0] + (b[0] - a[0]) * s, a[1] + (b[1] - a[1]) * s);
+                        out.push(feature(
+                            FeatureKind::Door,
+                            (c - 0.6, c + 0.6),
+                            (g, g + 2.2),
+                            -RECESS_M,
+                        ));
+                        continue;
+                    }
+                    out.push(feature(
+                        FeatureKind::Window,
+                        (c - 0.7, c + 0.7),
+                        (z0 + 0.9, z0 + 2.5),
+                        -RECESS_M,
+                    ));
+                    if balconies && ri == 0 && e == 0 && f >= 1 && k % 2 == 0 {
+                        out.push(feature(
+                            FeatureKind::Balcony,
+                            (c - 1.1, c + 1.1),
+                            (z0, z0 + 1.1),
+                            1.2,
+                        ));
+                    }
+                }
+            }
+        }
+    }
+    for e in 0..2.min(fp.exterior.len()) {
+        out.push(FacadeFeature {
+            kind: FeatureKind::Drainpipe,
+            ring: 0,
+            edge: e,
+            along: (0.1, 0.22),
+            z: (base_z, eave_z),
+            depth_m: 0.15,
+        });
+    }
+    out
+}
+
+fn add_tree(city: &mut City, d: &Draw, p: &SynthCityParams, pos: [f64; 2]) {
+    let i = city.trees.len() as u64;
+    city.trees.push(TreeSpec {
+        id: format!("tree-{i}"),
+        pos,
+        ground_z: height_at(&p.terrain, pos[0], pos[1]),
+        trunk_m: d.range(40, i, 2.2, 3.5),
+        crown_radius_m: d.range(41, i, 2.0, 3.8),
+        crown_m: d.range(42, i, 4.0, 7.5),
+    });
+}
+
+/// Adds `c`, giving it the next id of its kind and the terrain height at its centre.
+fn add_clutter(city: &mut City, p: &SynthCityParams, mut c: ClutterSpec) {
+    let n = city.clutter.iter().filter(|k| k.kind == c.kind).count();
+    c.id = format!("{}-{n}", c.kind);
+    c.ground_z = height_at(&p.terrain, c.center[0], c.center[1]);
+    city.clutter.push(c);
+}
+
+/// A clutter item before [`add_clutter`] names and grounds it.
+fn item(
+    kind: &str,
+    center: [f64; 2],
+    heading: f64,
+    size: [f64; 3],
+    lift_m: f64,
+    material: Material,
+) -> ClutterSpec {
+    ClutterSpec {
+        id: String::new(),
+        kind: kind.into(),
+        center,
+        heading,
+        ground_z: 0.0,
+        size,
+        lift_m,
+        material,
+    }
+}
+
+/// Trees on the pavements, cars at the kerbs, poles with some signs, and a few shelters, along
+/// the east-west streets (kerbs 2.5 m inside each street edge).
+fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, _bw: f64, bh: f64) {
+    let (sx, sy) = p.size_m;
+    for street in 0..=p.blocks.1 {
+        let yc = street as f64 * (bh + p.street_m) + p.street_m / 2.0;
+        for side in [-1.0, 1.0] {
+            let pavement = yc + side * (p.street_m / 2.0 - 1.5);
+            let kerb = yc + side * (p.street_m / 2.0 - 4.0);
+            let k = (street * 2 + (side > 0.0) as u32) as u64;
+            if p.tree_spacing_m > 0.0 {
+                let mut x = 6.0 + d.range(50, k, 0.0, p.tree_spacing_m);
+                while x < sx - 6.0 {
+                    if pavement > 2.0 && pavement < sy - 2.0 {
+                        add_tree(
+                            city,
+                            d,
+                            p,
+                            [x + d.range(51, (k << 20) + x as u64, -1.0, 1.0), pavement],
+                        );
+                    }
+                    x += p.tree_spacing_m;
+                }
+            }
+            let gap = 100.0 / p.cars_per_100m.max(0.01);
+            let mut x = 5.0 + d.range(52, k, 0.0, gap);
+            let mut i = 0u64;
+            while p.cars_per_100m > 0.0 && x < sx - 5.0 {
+                if kerb > 2.0 && kerb < sy - 2.0 {
+                    let heading = if d.u(53, (k << 20) + i) < 0.5 {
+                        0.0
+                    } else {
+                        std::f64::consts::PI
+                    };
+                    let mat = Material::Metal;
+                    add_clutter(
+                        city,
+                        p,
+                        item("car", [x, kerb], heading, [4.5, 1.8, 1.5], 0.0, mat),
+                    );
+                }
+                x += gap * d.range(54, (k << 20) + i, 0.6, 1.4);
+                i += 1;
+            }
+            let mut x = 10.0 + d.range(55, k, 0.0, 20.0);
+            let mut j = 0u64;
+            while x < sx - 10.0 {
+                let py = yc + side * (p.street_m / 2.0 - 0.5);
+                if py > 1.0 && py < sy - 1.0 {
+                    add_clutter(
+                        city,
+                        p,
+                        item(
+                            "pole",
+                            [x, py],
+                            0.0,
+                            [0.25, 0.25, 8.0],
+                            0.0,
+                            Material::Metal,
+                        ),
+                    );
+                    if d.u(56, (k << 20) + j) < 0.3 {
+                        add_clutter(
+                            city,
+                            p,
+                            item(
+                                "sign",
+                                [x, py + side * 0.2],
+                                0.0,
+                                [0.9, 0.08, 0.6],
+                                2.2,
+                                Material::Metal,
+                            ),
+                        );
+                    }
+                    if d.u(57, (k << 20) + j) < 0.12 {
+                        add_clutter(
+                            city,
+                            p,
+                            item(
+                                "shelter",
+                                [x + 4.0, py - side * 0.6],
+                                0.0,
+                                [3.5, 1.6, 2.6],
+                                0.0,
+                                Material::Glass,
+                            ),
+                        );
+                    }
+                }
+                x += 30.0;
+                j += 1;
+            }
+        }
+    }
+}

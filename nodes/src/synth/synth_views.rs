@@ -1,0 +1,278 @@
+//! Synthetic street-level views of a scene with the model outputs a real pipeline would run on
+//! them (architectural and clutter instances, material classes, depth, normals), rendered from
+//! the ground truth and then degraded by error knobs, so the relief, material and clutter stages
+//! can be scored against what they should have found.
+
+use std::collections::HashMap;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{
+    ArtifactType, City, Instances, Intrinsics, ObjectClass, PodVec, Pose, Scene, View, ViewSet,
+};
+use crate::io::export::material_color;
+use crate::rf::materials::Material;
+use crate::geom::raycast::SceneRays;
+use crate::rng::{gaussian, mix, unit};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::synth::synth_terrain::height_at;
+
+/// Params of [`SynthViews`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SynthViewsParams {
+    /// Distance between camera stations along each street, metres. Default 40.
+    pub spacing_m: f64,
+    /// At most this many views (stations are taken in street order). Default 24.
+    pub max_views: u32,
+    /// Image size, pixels. Default (640, 480).
+    pub size: (u32, u32),
+    /// Horizontal field of view, degrees. Default 90.
+    pub hfov_deg: f64,
+    /// Camera height above the road, metres. Default 2.5.
+    pub camera_height_m: f64,
+    /// Upward tilt, degrees. Default 8.
+    pub pitch_deg: f64,
+    /// Relative standard deviation of depth noise. Default 0.02.
+    pub depth_noise: f64,
+    /// Depth is reported times this factor (1 = metric; otherwise "relative" depth). Default 1.
+    pub depth_scale: f64,
+    /// Probability that an object's material is reported as another class. Default 0.05.
+    pub material_error: f64,
+    /// Probability that an instance is missed (its pixels get id 0). Default 0.1.
+    pub instance_miss: f64,
+    /// Seed. Default 7.
+    pub seed: u64,
+}
+
+impl Default for SynthViewsParams {
+    fn default() -> Self {
+        SynthViewsParams {
+            spacing_m: 40.0,
+            max_views: 24,
+            size: (640, 480),
+            hfov_deg: 90.0,
+            camera_height_m: 2.5,
+            pitch_deg: 8.0,
+            depth_noise: 0.02,
+            depth_scale: 1.0,
+            material_error: 0.05,
+            instance_miss: 0.1,
+            seed: 7,
+        }
+    }
+}
+
+/// Renders street views of a city's truth scene.
+pub struct SynthViews;
+
+impl Stage for SynthViews {
+    const KIND: &'static str = "SynthViews";
+    const VERSION: u32 = 1;
+    const DOC: &'static str = "synthetic street views with instance, material, depth and normal maps (with error knobs), Sec. 4.2";
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),
+        InputSpec::one(
+            "city",
+            ArtifactType::City,
+            "the city (for its streets and terrain)",
+        ),
+    ];
+    type Params = SynthViewsParams;
+    type Output = ViewSet;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        let prob = |v: f64| (0.0..=1.0).contains(&v);
+        if !(p.spacing_m >= 1.0) {
+            return Err(ParamError::new("spacing_m", "expected at least 1 m"));
+        }
+        if !(p.size.0 >= 16 && p.size.1 >= 16 && p.size.0 <= 8192 && p.size.1 <= 8192) {
+            return Err(ParamError::new("size", "expected 16..8192 pixels each way"));
+        }
+        if !(p.hfov_deg > 1.0 && p.hfov_deg < 170.0) {
+            return Err(ParamError::new(
+                "hfov_deg",
+                "expected a field of view in (1, 170) degrees",
+            ));
+        }
+        if !(p.depth_scale > 0.0) {
+            return Err(ParamError::new("depth_scale", "expected a positive factor"));
+        }
+        for (name, v) in [
+            ("depth_noise", p.depth_noise),
+            ("material_error", p.material_error),
+            ("instance_miss", p.instance_miss),
+        ] {
+            if !prob(v) {
+                return Err(ParamError::new(name, "expected a value in [0, 1]"));
+            }
+        }
+        Ok(())
+    }
+
+    fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<ViewSet, StageError> {
+        let scene: &Scene = inputs.one("scene")?;
+        let city: &City = inputs.one("city")?;
+        let rays = SceneRays::new(scene);
+        let poses = stations(city, p);
+        ctx.progress.set_total(poses.len() as u64);
+        let material_classes: Vec<String> = Material::ALL
+            .iter()
+            .map(|m| {
+                m.itu_type()
+                    .map(|t| format!("itu_{t}"))
+                    .unwrap_or_else(|| "foliage".into())
+            })
+            .collect();
+        let views = poses
+            .par_iter()
+            .enumerate()
+            .map(|(k, pose)| {
+                let v = render(scene, &rays, p, k, *pose);
+                ctx.progress.advance(1);
+                v
+            })
+            .collect();
+        Ok(ViewSet {
+            views,
+            material_classes,
+        })
+    }
+}
+
+/// Camera poses: stations every `spacing_m` along each street, one camera looking to each side
+/// (30 degrees forward of perpendicular).
+fn stations(city: &City, p: &SynthViewsParams) -> Vec<Pose> {
+    let mut out = Vec::new();
+    for s in &city.streets {
+        let (dx, dy) = (s.b[0] - s.a[0], s.b[1] - s.a[1]);
+        let len = dx.hypot(dy);
+        let along = dx.atan2(dy).to_degrees(); // heading of the street direction
+        let mut d = p.spacing_m / 2.0;
+        while d < len - 1.0 && out.len() < p.max_views as usize {
+            let (x, y) = (s.a[0] + dx * d / len, s.a[1] + dy * d / len);
+            let z = height_at(&city.terrain, x, y) + p.camera_height_m;
+            for side in [-60.0, 60.0] {
+                if out.len() < p.max_views as usize {
+                    out.push(Pose::from_angles([x, y, z], along + side, p.pitch_deg, 0.0));
+                }
+            }
+            d += p.spacing_m;
+        }
+    }
+    out
+}
+
+fn render(scene: &Scene, rays: &SceneRays, p: &SynthViewsParams, k: usize, pose: Pose) -> View {
+    let (w, h) = p.size;
+    let f = w as f64 / 2.0 / (p.hfov_deg.to_radians() / 2.0).tan();
+    let intrinsics = Intrinsics {
+        fx: f,
+        fy: f,
+        cx: w as f64 / 2.0,
+        cy: h as f64 / 2.0,
+    };
+    let n = (w * h) as usize;
+    let (mut image, mut depth, mut normal) = (
+        vec![[0u8; 3]; n],
+        vec![f32::INFINITY; n],
+        vec![[0f32; 3]; n],
+    );
+    let mut material = vec![255u8; n];
+    let (mut arch_ids, mut clutter_ids) = (vec![0u16; n], vec![0u16; n]);
+    let mut arch = Instances::default();
+    let mut clutter = Instances::default();
+    let mut arch_of: HashMap<(usize, bool), u16> = HashMap::new();
+    let mut clutter_of: HashMap<usize, u16> = HashMap::new();
+    let seed = mix(p.seed ^ mix(k as u64));
+    let sun = [0.35f64, -0.45, 0.82];
+    let origin = pose.position.map(|v| v as f32);
+    for v in 0..h {
+        for u in 0..w {
+            let i = (v * w + u) as usize;
+            let cam = [
+                (u as f64 + 0.5 - intrinsics.cx) / f,
+                (v as f64 + 0.5 - intrinsics.cy) / f,
+                1.0,
+            ];
+            let norm = (cam[0] * cam[0] + cam[1] * cam[1] + 1.0).sqrt();
+            let dir = pose.to_site(cam.map(|c| c / norm));
+            let Some(hit) = rays.cast(origin, dir.map(|d| d as f32), 1e-3, 2000.0) else {
+                image[i] = [150, 185, 225];
+                continue;
+            };
+            let obj = &scene.objects[hit.object];
+            let mut nrm = hit.normal.map(|c| c as f64);
+            if nrm[0] * dir[0] + nrm[1] * dir[1] + nrm[2] * dir[2] > 0.0 {
+                nrm = nrm.map(|c| -c);
+            }
+            let z_depth = hit.t as f64 / norm;
+            let noise = 1.0 + p.depth_noise * gaussian(mix(seed ^ (i as u64).wrapping_mul(0x9E37)));
+            depth[i] = (z_depth * noise * p.depth_scale) as f32;
+            normal[i] = pose.to_camera(nrm).map(|c| c as f32);
+            let m = obj
+                .mesh
+                .materials
+                .get(hit.triangle)
+                .copied()
+                .and_then(Material::from_u8)
+                .unwrap_or(Material::Concrete);
+            // Per-object material confusion: the same wrong class for all of the object's pixels.
+            let h_obj = mix(seed ^ mix(hit.object as u64 ^ 0xA5A5));
+            let reported = if unit(h_obj) < p.material_error {
+                Material::ALL[(h_obj % 14) as usize]
+            } else {
+                m
+            };
+            material[i] = reported as u8;
+            let lambert = (nrm[0] * sun[0] + nrm[1] * sun[1] + nrm[2] * sun[2]).max(0.0);
+            let c = material_color(m);
+            image[i] = c.map(|x| {
+                (255.0
+                    * (x as f64 * (0.45 + 0.55 * lambert))
+                        .clamp(0.0, 1.0)
+                        .powf(1.0 / 2.2)) as u8
+            });
+            let missed = |key: u64| unit(mix(seed ^ mix(key ^ 0x5EED))) < p.instance_miss;
+            match obj.class {
+                ObjectClass::Building => {
+                    let roof = nrm[2] > 0.7;
+                    let next = arch_of.len() as u16 + 1;
+                    let id = *arch_of.entry((hit.object, roof)).or_insert(next);
+                    if !missed(hit.object as u64 * 2 + roof as u64) {
+                        arch_ids[i] = id;
+                        arch.classes
+                            .insert(id, if roof { "roof".into() } else { "wall".into() });
+                    }
+                }
+                ObjectClass::Clutter | ObjectClass::Vegetation => {
+                    let next = clutter_of.len() as u16 + 1;
+                    let id = *clutter_of.entry(hit.object).or_insert(next);
+                    if !missed(hit.object as u64 + (1 << 40)) {
+                        clutter_ids[i] = id;
+                        let kind = obj.id.split('-').next().unwrap_or("object").to_owned();
+                        clutter.classes.insert(id, kind);
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    arch.ids = PodVec(arch_ids);
+    clutter.ids = PodVec(clutter_ids);
+    View {
+        id: format!("v{k:04}"),
+        width: w,
+        height: h,
+        intrinsics,
+        pose,
+        captured_at: None,
+        image: PodVec(image),
+        arch: Some(arch),
+        clutter: Some(clutter),
+        material: Some(PodVec(material)),
+        depth: Some(PodVec(depth)),
+        normal: Some(PodVec(normal)),
+    }
+}
