@@ -21,6 +21,7 @@ pub mod artifact;
 pub mod geom;
 pub mod io;
 pub mod params;
+pub mod raster;
 pub mod rf;
 pub mod rng;
 pub mod site;
@@ -45,7 +46,7 @@ macro_rules! for_each_stage {
             $crate::synth::truth_scene::TruthScene,
             $crate::synth::synth_lidar::SynthLidar,
             $crate::stages::heights::rasterize_scene::RasterizeScene,
-            $crate::stages::heights::rasterize_scene::RenderOrtho,
+            $crate::synth::render_ortho::RenderOrtho,
             $crate::synth::city_footprints::CityFootprints,
             $crate::synth::synth_views::SynthViews,
             $crate::synth::synth_drive_test::SynthDriveTest,
@@ -62,7 +63,7 @@ macro_rules! for_each_stage {
             $crate::stages::heights::rasterize_surface::RasterizeSurface,
             $crate::stages::heights::composite_height::CompositeHeight,
             $crate::stages::buildings::terrain_pass::TerrainPass,
-            $crate::stages::buildings::terrain_pass::AboveGround,
+            $crate::stages::buildings::above_ground::AboveGround,
             $crate::stages::buildings::building_mask::BuildingMask,
             $crate::stages::buildings::trace_footprints::TraceFootprints,
             $crate::stages::buildings::unassigned::UnassignedAbove,
@@ -74,16 +75,16 @@ macro_rules! for_each_stage {
             $crate::stages::buildings::assemble_scene::AssembleScene,
             $crate::stages::heights::coarsen::Coarsen,
             $crate::stages::heights::gaussian_blur::GaussianBlur,
-            $crate::stages::heights::raster_ops::Clamp,
-            $crate::stages::heights::raster_ops::Difference,
-            $crate::stages::radio::rf_trace::Trace,
-            $crate::stages::radio::rf_trace::RadioMap,
+            $crate::stages::heights::clamp::Clamp,
+            $crate::stages::heights::difference::Difference,
+            $crate::stages::radio::trace::Trace,
+            $crate::stages::radio::radio_map::RadioMap,
             $crate::stages::baseline::tr38901::Tr38901,
             $crate::stages::eval::evaluate::Evaluate,
-            $crate::stages::eval::report::ReportStage,
+            $crate::stages::eval::report::Report,
             $crate::stages::eval::footprint_score::FootprintScore,
-            $crate::stages::eval::stats::RasterStats,
-            $crate::stages::eval::stats::PointStats,
+            $crate::stages::eval::raster_stats::RasterStats,
+            $crate::stages::eval::point_stats::PointStats,
         }
     };
 }

@@ -2,6 +2,8 @@
 
 use std::path::Path;
 
+use serde::{Deserialize, Serialize};
+
 use crate::io::crs::Crs;
 use crate::stage::ParamError;
 
@@ -33,3 +35,8 @@ pub fn folder_of(path: &str) -> String {
         .filter(|f| !f.is_empty())
         .unwrap_or_else(|| ".".into())
 }
+
+/// The params of a stage that takes none.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoParams {}

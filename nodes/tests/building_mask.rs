@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use kodama_nodes::artifact::Raster;
 use kodama_nodes::stages::buildings::building_mask::{BuildingMask, BuildingMaskParams};
-use kodama_nodes::stages::ingest::read_osm::point_in_ring;
+use kodama_nodes::geom::polygon::point_in_ring;
 use kodama_nodes::stage::Slot;
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};

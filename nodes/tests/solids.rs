@@ -14,7 +14,7 @@ use kodama_nodes::synth::city_footprints::CityFootprints;
 use kodama_nodes::stages::eval::footprint_score::FootprintScore;
 use kodama_nodes::geom::mesh_check::check_solid;
 use kodama_nodes::geom::raycast::SceneRays;
-use kodama_nodes::stages::ingest::read_osm::point_in_ring;
+use kodama_nodes::geom::polygon::point_in_ring;
 use kodama_nodes::stages::buildings::roof_clean::{RoofClean, RoofCleanParams};
 use kodama_nodes::stages::buildings::split_buildings::{SplitBuildings, SplitBuildingsParams};
 use kodama_nodes::stage::Slot;

@@ -11,11 +11,11 @@ use kodama_nodes::synth::city_footprints::{CityFootprints, CityFootprintsParams}
 use kodama_nodes::io::export::{write_glb, write_las};
 use kodama_nodes::geom::mesh_check::check_closed_solid;
 use kodama_nodes::stages::heights::rasterize_scene::{RasterizeScene, RasterizeSceneParams};
-use kodama_nodes::stages::ingest::read_osm::point_in_ring;
+use kodama_nodes::geom::polygon::point_in_ring;
 use kodama_nodes::stage::Slot;
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::synth::synth_lidar::{SynthLidar, SynthLidarParams};
-use kodama_nodes::synth::synth_terrain::height_at;
+use kodama_nodes::artifact::height_at;
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
 
 fn scan(scene: &Scene, p: &SynthLidarParams) -> PointSet {

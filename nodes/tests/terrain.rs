@@ -6,12 +6,12 @@ use common::*;
 
 use kodama_nodes::artifact::{ObjectClass, Roof};
 use kodama_nodes::stages::heights::rasterize_scene::{RasterizeScene, RasterizeSceneParams};
-use kodama_nodes::stages::ingest::read_osm::point_in_ring;
+use kodama_nodes::geom::polygon::point_in_ring;
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
-use kodama_nodes::synth::synth_terrain::SynthTerrainParams;
+use kodama_nodes::artifact::TerrainModel;
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
 
-fn run_case(terrain: SynthTerrainParams) -> (f64, f64, usize) {
+fn run_case(terrain: TerrainModel) -> (f64, f64, usize) {
     let s = site();
     let ctx = Ctx::new(&s, &[]);
     let city = generate(&SynthCityParams {

@@ -10,7 +10,7 @@ use kodama_nodes::artifact::{City, Scene, ViewSet};
 use kodama_nodes::rf::materials::Material;
 use kodama_nodes::stage::Slot;
 use kodama_nodes::synth::synth_city::generate;
-use kodama_nodes::synth::synth_terrain::height_at;
+use kodama_nodes::artifact::height_at;
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
 use kodama_nodes::io::views_io::{read_viewset, write_viewset};
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};

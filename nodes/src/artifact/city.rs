@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use super::Polygon;
 use crate::rf::materials::Material;
-use crate::synth::synth_terrain::SynthTerrainParams;
+use crate::artifact::TerrainModel;
 
 /// An oriented rectangle: south-west corner (before rotation), length along `heading`, width.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -209,8 +209,8 @@ pub struct Street {
 /// The synthetic site.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct City {
-    /// The terrain (evaluated with [`crate::synth::synth_terrain::height_at`]).
-    pub terrain: SynthTerrainParams,
+    /// The terrain (evaluated with [`crate::artifact::height_at`]).
+    pub terrain: TerrainModel,
     /// Extent (east, north) from the site origin, metres.
     pub size_m: (f64, f64),
     /// Buildings.

@@ -2,6 +2,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::Raster;
+
 /// The height of an endpoint: absolute in the site frame, or above the local ground (resolved
 /// against the terrain by the stage that needs it).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -71,4 +73,25 @@ pub struct Link {
 pub struct Measurements {
     /// The links, in file order.
     pub links: Vec<Link>,
+}
+
+/// The 3-D distance between a link's ends (at least 1 m); heights above ground stand on
+/// `terrain`, or on z = 0 without one.
+pub fn link_distance(l: &Link, terrain: Option<&Raster>) -> f64 {
+    let z = |e: &crate::artifact::Endpoint| {
+        let ground = terrain.and_then(|t| t.bilinear(e.x, e.y)).unwrap_or(0.0);
+        e.absolute_z(Some(ground))
+            .expect("a ground height is given")
+    };
+    ((l.tx.x - l.rx.x).powi(2) + (l.tx.y - l.rx.y).powi(2) + (z(&l.tx) - z(&l.rx)).powi(2))
+        .sqrt()
+        .max(1.0)
+}
+
+/// The measured path loss of a link: given, or EIRP − received power, or −received power (an
+/// offset per transmitter is then fitted).
+pub fn measured_loss(l: &Link) -> Option<f64> {
+    l.path_loss_db
+        .or_else(|| Some(l.tx_eirp_dbm.unwrap_or(0.0) - l.rx_power_dbm?))
+        .filter(|v| v.is_finite())
 }

@@ -10,6 +10,7 @@ mod points;
 mod raster;
 mod report;
 mod scene;
+mod terrain_model;
 mod views;
 
 use serde::{Deserialize, Serialize};
@@ -19,14 +20,15 @@ pub use city::{
     BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, Rect, Roof, RoofBox, Street,
     TreeSpec,
 };
-pub use footprints::{Footprint, Footprints, Polygon, point_in_ring, ring_area};
-pub use measurements::{Endpoint, Height, Link, Measurements};
+pub use footprints::{Footprint, Footprints, Polygon};
+pub use measurements::{Endpoint, Height, Link, Measurements, link_distance, measured_loss};
 pub use metrics::Metrics;
 pub use ortho::Ortho;
 pub use points::PointSet;
 pub use raster::{Grid, Raster};
-pub use report::Report;
+pub use report::ReportFiles;
 pub use scene::{Mesh, ObjectClass, Scene, SceneObject};
+pub use terrain_model::{TerrainModel, height_at};
 pub use views::{Instances, Intrinsics, Pose, View, ViewSet};
 
 /// The type of an artifact, as the loader checks it on every edge.
@@ -82,7 +84,7 @@ pub enum Artifact {
     /// See [`ViewSet`].
     Views(ViewSet),
     /// A report folder.
-    Report(Report),
+    Report(ReportFiles),
 }
 
 impl Artifact {
@@ -114,49 +116,25 @@ pub trait Typed: Sized + Send + Sync + 'static {
 }
 
 macro_rules! typed {
-    ($($t:ident),*) => {$(
+    ($($variant:ident => $t:ty),* $(,)?) => {$(
         impl Typed for $t {
-            const TYPE: ArtifactType = ArtifactType::$t;
-            fn into_artifact(self) -> Artifact { Artifact::$t(self) }
+            const TYPE: ArtifactType = ArtifactType::$variant;
+            fn into_artifact(self) -> Artifact { Artifact::$variant(self) }
             fn from_artifact(a: &Artifact) -> Option<&Self> {
-                match a { Artifact::$t(x) => Some(x), _ => None }
+                match a { Artifact::$variant(x) => Some(x), _ => None }
             }
         }
     )*};
 }
 typed!(
-    Raster,
-    Report,
-    Metrics,
-    Ortho,
-    Measurements,
-    Footprints,
-    Scene,
-    City
+    Raster => Raster,
+    Points => PointSet,
+    Views => ViewSet,
+    Report => ReportFiles,
+    Metrics => Metrics,
+    Ortho => Ortho,
+    Measurements => Measurements,
+    Footprints => Footprints,
+    Scene => Scene,
+    City => City,
 );
-
-impl Typed for PointSet {
-    const TYPE: ArtifactType = ArtifactType::Points;
-    fn into_artifact(self) -> Artifact {
-        Artifact::Points(self)
-    }
-    fn from_artifact(a: &Artifact) -> Option<&Self> {
-        match a {
-            Artifact::Points(x) => Some(x),
-            _ => None,
-        }
-    }
-}
-
-impl Typed for ViewSet {
-    const TYPE: ArtifactType = ArtifactType::Views;
-    fn into_artifact(self) -> Artifact {
-        Artifact::Views(self)
-    }
-    fn from_artifact(a: &Artifact) -> Option<&Self> {
-        match a {
-            Artifact::Views(x) => Some(x),
-            _ => None,
-        }
-    }
-}

@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 /// Files by relative path; the first is the entry point (`report.md`).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Report {
+pub struct ReportFiles {
     /// (relative path, bytes).
     pub files: Vec<(String, Vec<u8>)>,
 }

@@ -8,7 +8,7 @@ use spade::{ConstrainedDelaunayTriangulation, HasPosition, Point2, Triangulation
 
 use crate::artifact::{Mesh, PodVec, Polygon, Rect};
 use crate::rf::materials::Material;
-use crate::stages::ingest::read_osm::point_in_ring;
+use crate::geom::polygon::point_in_ring;
 
 /// A mesh under construction.
 #[derive(Default)]

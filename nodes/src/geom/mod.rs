@@ -1,6 +1,9 @@
 //! Geometry shared by the stages: closed solids and their checks, polygons, the terrain mesh, and
 //! ray casting over a BVH. Never imports a stage.
 
+pub mod from_above;
 pub mod mesh_build;
 pub mod mesh_check;
+pub mod polygon;
 pub mod raycast;
+pub mod terrain_mesh;

@@ -13,6 +13,7 @@ use proj4rs::Proj;
 use proj4rs::transform::transform;
 
 use crate::site::Site;
+use crate::stage::{ParamError, StageError};
 
 /// A CRS, as the PROJ.4 definition proj4rs runs and a label for messages.
 #[derive(Clone, Debug, PartialEq)]
@@ -410,6 +411,23 @@ pub fn check_site_crs(crs: &str) -> Result<(), String> {
         ));
     }
     Ok(())
+}
+
+/// The CRS to use: the graph's if given, else the file's, else an error naming the file.
+pub fn source_crs(
+    param: Option<&str>,
+    recorded: Option<Crs>,
+    path: &std::path::Path,
+) -> Result<Crs, StageError> {
+    match (param, recorded) {
+        (Some(c), _) => Crs::from_user(c).map_err(|m| StageError::Param(ParamError::new("crs", m))),
+        (None, Some(c)) => Ok(c),
+        (None, None) => Err(StageError::bad_input(
+            path,
+            "georeferencing",
+            "no CRS recorded; give it in the graph, e.g. crs: \"EPSG:32618\"",
+        )),
+    }
 }
 
 #[cfg(test)]

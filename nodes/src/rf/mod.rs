@@ -9,6 +9,7 @@ pub mod field;
 pub mod links_csv;
 pub mod materials;
 pub mod paths;
+pub mod pathloss_fit;
 pub mod radiomap;
 pub mod scattering;
 pub mod scene;

@@ -16,6 +16,7 @@ use super::antenna::Antenna;
 use super::field::{self, CVec};
 use super::scattering::{ScatteringPattern, pattern};
 use super::scene::RfScene;
+use crate::stage::ParamError;
 
 /// A transmitter and a receiver position, site frame.
 pub type LinkEnds = ([f64; 3], [f64; 3]);
@@ -660,4 +661,26 @@ fn diffracted_paths(
         });
     }
     out
+}
+
+/// Checks the options a user can set: what Trace and RadioMap validate.
+pub fn check_options(o: &TraceOptions) -> Result<(), ParamError> {
+    if !(0.0..=1.0).contains(&o.scattering_coefficient) {
+        return Err(ParamError::new(
+            "options",
+            "expected a scattering_coefficient in [0, 1]",
+        ));
+    }
+    if o.rays == 0 {
+        return Err(ParamError::new("options", "expected at least one ray"));
+    }
+    if o.foliage_db_per_m
+        .is_some_and(|v| !(v >= 0.0 && v.is_finite()))
+    {
+        return Err(ParamError::new(
+            "options",
+            "expected a non-negative foliage loss in dB/m",
+        ));
+    }
+    Ok(())
 }

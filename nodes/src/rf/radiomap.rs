@@ -45,7 +45,7 @@ impl MapPlane {
     /// The surface `height_m` above `terrain`, over `grid`: the terrain meshed at the grid's
     /// cell size and lifted.
     pub fn above_terrain(grid: Grid, terrain: &Raster, height_m: f64) -> Result<MapPlane, String> {
-        let mut mesh = crate::stages::buildings::assemble_scene::terrain_mesh(
+        let mut mesh = crate::geom::terrain_mesh::terrain_mesh(
             terrain,
             grid.cell_m,
             crate::rf::materials::Material::MediumDryGround,

@@ -4,6 +4,7 @@
 
 pub mod city_footprints;
 pub mod osm_like;
+pub mod render_ortho;
 pub mod synth_city;
 pub mod synth_drive_test;
 pub mod synth_lidar;

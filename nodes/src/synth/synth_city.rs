@@ -15,7 +15,7 @@ use crate::artifact::{
 use crate::rf::materials::Material;
 use crate::rng::{mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
-use crate::synth::synth_terrain::{SynthTerrainParams, height_at};
+use crate::artifact::{TerrainModel, height_at};
 
 /// Params of [`SynthCity`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -38,7 +38,7 @@ pub struct SynthCityParams {
     /// Parked cars per 100 m of kerb. Default 6.
     pub cars_per_100m: f64,
     /// The terrain under the city.
-    pub terrain: SynthTerrainParams,
+    pub terrain: TerrainModel,
 }
 
 impl Default for SynthCityParams {
@@ -52,7 +52,7 @@ impl Default for SynthCityParams {
             height_m: (8.0, 32.0),
             tree_spacing_m: 15.0,
             cars_per_100m: 6.0,
-            terrain: SynthTerrainParams {
+            terrain: TerrainModel {
                 seed: 7,
                 size_m: (400.0, 300.0),
                 ..Default::default()
@@ -206,7 +206,7 @@ pub fn generate(p: &SynthCityParams) -> City {
     city
 }
 
-fn ground(t: &SynthTerrainParams, pts: &[[f64; 2]]) -> (f64, f64) {
+fn ground(t: &TerrainModel, pts: &[[f64; 2]]) -> (f64, f64) {
     pts.iter()
         .map(|q| height_at(t, q[0], q[1]))
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), z| {
@@ -382,16 +382,16 @@ fn add_lot(city: &mut City, d: &Draw, p: &SynthCityParams, lot: u64, b: [f64; 4]
             }
             .corners();
             let inside = corners.iter().all(|q| {
-                crate::stages::ingest::read_osm::point_in_ring(*q, &footprint.exterior)
+                crate::geom::polygon::point_in_ring(*q, &footprint.exterior)
                     && !footprint
                         .holes
                         .iter()
-                        .any(|h| crate::stages::ingest::read_osm::point_in_ring(*q, h))
+                        .any(|h| crate::geom::polygon::point_in_ring(*q, h))
             });
             let clear_of_tier = match &roof {
                 Roof::Stepped { upper, .. } => !corners
                     .iter()
-                    .any(|q| crate::stages::ingest::read_osm::point_in_ring(*q, &upper.exterior)),
+                    .any(|q| crate::geom::polygon::point_in_ring(*q, &upper.exterior)),
                 _ => true,
             };
             if inside && clear_of_tier {
@@ -443,7 +443,7 @@ pub const FLOOR_M: f64 = 3.2;
 fn facade_features(
     d: &Draw,
     lot: u64,
-    t: &SynthTerrainParams,
+    t: &TerrainModel,
     fp: &Polygon,
     ground_z: f64,
     base_z: f64,

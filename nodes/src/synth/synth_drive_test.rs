@@ -11,7 +11,7 @@ use crate::rf::scattering::ScatteringPattern;
 use crate::rf::scene::RfScene;
 use crate::rng::{gaussian, mix};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
-use crate::synth::synth_terrain::height_at;
+use crate::artifact::height_at;
 
 /// Params of [`SynthDriveTest`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -16,7 +16,7 @@ use crate::rf::materials::Material;
 use crate::geom::raycast::SceneRays;
 use crate::rng::{gaussian, mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
-use crate::synth::synth_terrain::height_at;
+use crate::artifact::height_at;
 
 /// Params of [`SynthViews`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

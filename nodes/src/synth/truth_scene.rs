@@ -11,7 +11,7 @@ use crate::rf::materials::Material;
 use crate::geom::mesh_build::{cuboid, dome, ellipsoid, gabled, height_surface, hipped, prism};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 use crate::synth::synth_city::RECESS_M;
-use crate::synth::synth_terrain::height_at;
+use crate::artifact::height_at;
 
 /// Params of [`TruthScene`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

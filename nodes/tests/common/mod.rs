@@ -10,8 +10,9 @@ use kodama_nodes::stages::heights::rasterize_surface::{CellMode, RasterizeSurfac
 use kodama_nodes::stage::Slot;
 use kodama_nodes::synth::synth_city::SynthCityParams;
 use kodama_nodes::synth::synth_lidar::{SynthLidar, SynthLidarParams};
-use kodama_nodes::synth::synth_terrain::SynthTerrainParams;
-use kodama_nodes::stages::buildings::terrain_pass::{AboveGround, AboveGroundParams, TerrainPass, TerrainPassParams};
+use kodama_nodes::artifact::TerrainModel;
+use kodama_nodes::stages::buildings::above_ground::{AboveGround, AboveGroundParams};
+use kodama_nodes::stages::buildings::terrain_pass::{TerrainPass, TerrainPassParams};
 use kodama_nodes::synth::truth_scene::{TruthScene, TruthSceneParams};
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
 
@@ -54,7 +55,7 @@ pub fn small_city() -> SynthCityParams {
     SynthCityParams {
         size_m: (200.0, 150.0),
         blocks: (2, 2),
-        terrain: SynthTerrainParams {
+        terrain: TerrainModel {
             seed: 3,
             size_m: (200.0, 150.0),
             relief_m: 2.0,
@@ -66,8 +67,8 @@ pub fn small_city() -> SynthCityParams {
 
 /// A steeper variant of the demo's terrain (6 % and 4 % slopes, 4 m relief): where a terrain
 /// filter is most tempted to swallow buildings.
-pub fn steep_terrain() -> SynthTerrainParams {
-    SynthTerrainParams {
+pub fn steep_terrain() -> TerrainModel {
+    TerrainModel {
         seed: 11,
         size_m: (400.0, 300.0),
         slope: (0.06, -0.04),

@@ -8,6 +8,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Footprints, PodVec, PointSet, Raster};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::raster::label::{label_components, label_regions};
+use crate::raster::morph::{dilate, erode};
 
 /// Params of [`BuildingMask`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -231,109 +233,6 @@ pub fn roughness(a: &Raster) -> Vec<f32> {
             s / n as f32
         })
         .collect()
-}
-
-fn morph(mask: &[bool], w: u32, h: u32, radius: i64, dilate: bool) -> Vec<bool> {
-    if radius <= 0 {
-        return mask.to_vec();
-    }
-    let (w, h) = (w as i64, h as i64);
-    // A disk, separably would be a square; the disk keeps corners from growing diagonally.
-    let offsets: Vec<(i64, i64)> = (-radius..=radius)
-        .flat_map(|dr| (-radius..=radius).map(move |dc| (dc, dr)))
-        .filter(|(dc, dr)| dc * dc + dr * dr <= radius * radius)
-        .collect();
-    (0..w * h)
-        .into_par_iter()
-        .map(|i| {
-            let (c, r) = (i % w, i / w);
-            let hit = |(dc, dr): &(i64, i64)| {
-                let (cc, rr) = (c + dc, r + dr);
-                // Outside the grid counts as empty for dilation and as full for erosion, so
-                // buildings cut by the survey's edge are not eaten away.
-                if cc < 0 || rr < 0 || cc >= w || rr >= h {
-                    !dilate
-                } else {
-                    mask[(rr * w + cc) as usize]
-                }
-            };
-            if dilate {
-                offsets.iter().any(hit)
-            } else {
-                offsets.iter().all(hit)
-            }
-        })
-        .collect()
-}
-
-/// Morphological dilation with a disk of `radius` cells.
-pub fn dilate(mask: &[bool], w: u32, h: u32, radius: i64) -> Vec<bool> {
-    morph(mask, w, h, radius, true)
-}
-
-/// Morphological erosion with a disk of `radius` cells.
-pub fn erode(mask: &[bool], w: u32, h: u32, radius: i64) -> Vec<bool> {
-    morph(mask, w, h, radius, false)
-}
-
-/// 4-connected components of at least `min_cells`, labelled 1, 2, ... in raster order of their
-/// first cell; 0 elsewhere.
-pub fn label_components(mask: &[bool], w: u32, h: u32, min_cells: usize) -> Vec<u32> {
-    let key: Vec<u32> = mask.iter().map(|&m| m as u32).collect();
-    label_regions(&key, w, h, min_cells)
-}
-
-/// 4-connected regions of equal non-zero `key` of at least `min_cells`, labelled 1, 2, ... in
-/// raster order of their first cell; 0 elsewhere.
-pub fn label_regions(key: &[u32], w: u32, h: u32, min_cells: usize) -> Vec<u32> {
-    flood_regions(w, h, min_cells, |i| key[i] != 0, |i, j| key[i] == key[j])
-}
-
-/// 4-connected regions of `active` cells, neighbours joined where `connect(cell, neighbour)`,
-/// of at least `min_cells`, labelled 1, 2, ... in raster order of their first cell; 0 elsewhere.
-pub fn flood_regions(
-    w: u32,
-    h: u32,
-    min_cells: usize,
-    active: impl Fn(usize) -> bool,
-    connect: impl Fn(usize, usize) -> bool,
-) -> Vec<u32> {
-    let (w, h) = (w as usize, h as usize);
-    let mut labels = vec![0u32; w * h];
-    let mut seen = vec![false; w * h];
-    let mut next = 1u32;
-    let (mut stack, mut members) = (Vec::new(), Vec::new());
-    for start in 0..w * h {
-        if !active(start) || seen[start] {
-            continue;
-        }
-        members.clear();
-        stack.push(start);
-        seen[start] = true;
-        while let Some(i) = stack.pop() {
-            members.push(i);
-            let (c, r) = (i % w, i / w);
-            let neighbours = [
-                (c > 0).then(|| i - 1),
-                (c + 1 < w).then(|| i + 1),
-                (r > 0).then(|| i - w),
-                (r + 1 < h).then(|| i + w),
-            ];
-            for j in neighbours.into_iter().flatten() {
-                if !seen[j] && active(j) && connect(i, j) {
-                    seen[j] = true;
-                    stack.push(j);
-                }
-            }
-        }
-        if members.len() >= min_cells {
-            for &i in &members {
-                labels[i] = next;
-            }
-            next += 1;
-        }
-    }
-    labels
 }
 
 #[cfg(test)]

@@ -23,10 +23,10 @@ use crate::artifact::{
 use crate::rf::materials::{Material, default_material};
 use crate::geom::mesh_build::{Builder, insert_rings, triangulate};
 use crate::geom::mesh_check::check_solid;
-use crate::stages::ingest::read_osm::point_in_ring;
-use crate::stages::buildings::roof_clean::label_ids;
+use crate::geom::polygon::point_in_ring;
+use crate::raster::label::label_ids;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
-use crate::stages::buildings::trace_footprints::{simplify_polygon, trace};
+use crate::geom::polygon::{simplify_polygon, trace};
 
 /// Params of [`BuildingSolids`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -1,6 +1,7 @@
 //! Buildings (Sec. 4.1): terrain passes (eq. (1)), the above-ground field, building masks, cleaned
 //! roofs, footprints and watertight solids, assembled into a scene.
 
+pub mod above_ground;
 pub mod assemble_scene;
 pub mod building_mask;
 pub mod building_solids;

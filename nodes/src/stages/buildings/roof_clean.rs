@@ -11,8 +11,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, PodVec, PointSet, Raster};
-use crate::stages::buildings::building_mask::label_regions;
+use crate::raster::label::label_regions;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::raster::label::label_ids;
 
 /// ASPRS class of building returns.
 const BUILDING_CLASS: u8 = 6;
@@ -151,21 +152,6 @@ impl Stage for RoofClean {
             data: PodVec(roof),
         })
     }
-}
-
-/// The label of every cell, 0 for none (or no data).
-pub fn label_ids(labels: &Raster) -> Vec<u32> {
-    labels
-        .data
-        .iter()
-        .map(|&v| {
-            if v.is_finite() && v > 0.0 {
-                v as u32
-            } else {
-                0
-            }
-        })
-        .collect()
 }
 
 /// The roof height each building cell's returns support, or NaN where they show no roof: with

@@ -10,8 +10,8 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, PodVec, Raster};
-use crate::stages::buildings::building_mask::flood_regions;
-use crate::stages::buildings::roof_clean::label_ids;
+use crate::raster::label::flood_regions;
+use crate::raster::label::label_ids;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`SplitBuildings`].

@@ -5,9 +5,10 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Grid, PodVec, Raster};
-use crate::stages::heights::gaussian_blur::gaussian_blur;
-use crate::stages::heights::rasterize_surface::fill_gaps;
+use crate::raster::blur::gaussian_blur;
+use crate::raster::gap_fill::fill_gaps;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::raster::normal::normal_z;
 
 /// Params of [`TerrainPass`] (the symbols of eq. (1)).
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -98,29 +99,6 @@ impl Stage for TerrainPass {
         ctx.progress.advance(1);
         Ok(t)
     }
-}
-
-/// Vertical component of the surface normal at each cell, from central differences; NaN where a
-/// neighbour is missing.
-pub fn normal_z(h: &Raster) -> Vec<f32> {
-    let g = h.grid;
-    let (w, ht) = (g.width as i64, g.height as i64);
-    let at = |c: i64, r: i64| {
-        if c < 0 || r < 0 || c >= w || r >= ht {
-            f32::NAN
-        } else {
-            h.at(c as u32, r as u32)
-        }
-    };
-    (0..g.len())
-        .into_par_iter()
-        .map(|i| {
-            let (c, r) = ((i as i64) % w, (i as i64) / w);
-            let dx = (at(c + 1, r) - at(c - 1, r)) as f64 / (2.0 * g.cell_m);
-            let dy = (at(c, r - 1) - at(c, r + 1)) as f64 / (2.0 * g.cell_m);
-            (1.0 / (1.0 + dx * dx + dy * dy).sqrt()) as f32
-        })
-        .collect()
 }
 
 /// T̄_k on the coarse grid: the q_k-th percentile of each coarse cell's level samples (those with
@@ -249,49 +227,5 @@ fn combine(h: &Raster, coarse: &Raster, tau_m: f64) -> Raster {
     Raster {
         grid: g,
         data: PodVec(data),
-    }
-}
-
-/// [`AboveGround`] has no parameters.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct AboveGroundParams {}
-
-/// The above-ground field A = max(H - T, 0) on H's grid (paper Sec. 4.1); no-data where H is.
-pub struct AboveGround;
-
-impl Stage for AboveGround {
-    const KIND: &'static str = "AboveGround";
-    const VERSION: u32 = 1;
-    const DOC: &'static str = "above-ground field A = max(H - T, 0), Sec. 4.1";
-    const INPUTS: &'static [InputSpec] = &[
-        InputSpec::one("surface", ArtifactType::Raster, "the height field H"),
-        InputSpec::one("terrain", ArtifactType::Raster, "the terrain T"),
-    ];
-    type Params = AboveGroundParams;
-    type Output = Raster;
-
-    fn run(_: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Raster, StageError> {
-        let h: &Raster = inputs.one("surface")?;
-        let t: &Raster = inputs.one("terrain")?;
-        let g = h.grid;
-        let data = (0..g.len())
-            .into_par_iter()
-            .map(|i| {
-                let (x, y) = g.center(i as u32 % g.width, i as u32 / g.width);
-                let tz = t.bilinear(x, y).unwrap_or(f64::NAN);
-                let a = h.data[i] as f64 - tz;
-                // f64::max would turn a missing H or T into 0 ("on the ground"); keep it missing.
-                if a.is_nan() {
-                    f32::NAN
-                } else {
-                    a.max(0.0) as f32
-                }
-            })
-            .collect();
-        Ok(Raster {
-            grid: g,
-            data: PodVec(data),
-        })
     }
 }

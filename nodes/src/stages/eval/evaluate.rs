@@ -8,9 +8,11 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Link, Measurements, Metrics, Raster};
+use crate::artifact::{ArtifactType, Measurements, Metrics, Raster};
 use crate::rf::em::fspl_db;
 use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
+use crate::artifact::{link_distance, measured_loss};
+use crate::rf::pathloss_fit::{fit_close_in, fit_power_distance};
 
 /// Params of [`Evaluate`].
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -50,29 +52,6 @@ pub fn p2p(errors: &[f64]) -> P2p {
         rmse,
         std: (rmse * rmse - me * me).max(0.0).sqrt(),
     }
-}
-
-/// Floating-intercept fit PL = α + 10 β log10 d by least squares: (α, β).
-pub fn fit_power_distance(d: &[f64], pl: &[f64]) -> (f64, f64) {
-    let x: Vec<f64> = d.iter().map(|d| 10.0 * d.log10()).collect();
-    let n = x.len() as f64;
-    let (mx, my) = (x.iter().sum::<f64>() / n, pl.iter().sum::<f64>() / n);
-    let sxy: f64 = x.iter().zip(pl).map(|(x, y)| (x - mx) * (y - my)).sum();
-    let sxx: f64 = x.iter().map(|x| (x - mx) * (x - mx)).sum();
-    let beta = if sxx > 0.0 { sxy / sxx } else { 0.0 };
-    (my - beta * mx, beta)
-}
-
-/// Close-in fit PL = FSPL(f, 1 m) + 10 n log10 d by least squares: n.
-pub fn fit_close_in(d: &[f64], pl: &[f64], freq_hz: &[f64]) -> f64 {
-    let (mut num, mut den) = (0.0, 0.0);
-    for i in 0..d.len() {
-        let a = pl[i] - fspl_db(1.0, freq_hz[i]);
-        let dd = 10.0 * d[i].log10();
-        num += a * dd;
-        den += dd * dd;
-    }
-    if den > 0.0 { num / den } else { 0.0 }
 }
 
 /// Scores one model's predictions against the measurements of the same links.
@@ -237,27 +216,6 @@ impl Stage for Evaluate {
         }
         Ok(m)
     }
-}
-
-/// The 3-D distance between a link's ends (at least 1 m); heights above ground stand on
-/// `terrain`, or on z = 0 without one.
-pub fn link_distance(l: &Link, terrain: Option<&Raster>) -> f64 {
-    let z = |e: &crate::artifact::Endpoint| {
-        let ground = terrain.and_then(|t| t.bilinear(e.x, e.y)).unwrap_or(0.0);
-        e.absolute_z(Some(ground))
-            .expect("a ground height is given")
-    };
-    ((l.tx.x - l.rx.x).powi(2) + (l.tx.y - l.rx.y).powi(2) + (z(&l.tx) - z(&l.rx)).powi(2))
-        .sqrt()
-        .max(1.0)
-}
-
-/// The measured path loss of a link: given, or EIRP − received power, or −received power (an
-/// offset per transmitter is then fitted).
-pub fn measured_loss(l: &Link) -> Option<f64> {
-    l.path_loss_db
-        .or_else(|| Some(l.tx_eirp_dbm.unwrap_or(0.0) - l.rx_power_dbm?))
-        .filter(|v| v.is_finite())
 }
 
 #[cfg(test)]

@@ -4,4 +4,5 @@
 pub mod evaluate;
 pub mod footprint_score;
 pub mod report;
-pub mod stats;
+pub mod point_stats;
+pub mod raster_stats;

@@ -7,12 +7,13 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Measurements, Metrics, Ortho, Raster, Report};
-use crate::stages::eval::evaluate::{fit_power_distance, link_distance, measured_loss};
+use crate::artifact::{ArtifactType, Measurements, Metrics, Ortho, Raster, ReportFiles};
+use crate::artifact::{link_distance, measured_loss};
+use crate::rf::pathloss_fit::fit_power_distance;
 use crate::io::export::plot::{Chart, PALETTE, range};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
-/// Params of [`ReportStage`].
+/// Params of [`Report`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ReportParams {
@@ -41,9 +42,9 @@ const ROWS: [(&str, &str); 9] = [
 ];
 
 /// Table 1 and its plots as a folder: `report.md`, `table.csv`, `metrics.json`, `plots/*.png`.
-pub struct ReportStage;
+pub struct Report;
 
-impl Stage for ReportStage {
+impl Stage for Report {
     const KIND: &'static str = "Report";
     const VERSION: u32 = 2;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
@@ -75,7 +76,7 @@ impl Stage for ReportStage {
         ),
     ];
     type Params = ReportParams;
-    type Output = Report;
+    type Output = ReportFiles;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         if p.models.is_empty() {
@@ -84,7 +85,7 @@ impl Stage for ReportStage {
         Ok(())
     }
 
-    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Report, StageError> {
+    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<ReportFiles, StageError> {
         let meas: &Measurements = inputs.one("measurements")?;
         let preds: Vec<&Measurements> = inputs.many("predictions")?;
         let evals: Vec<&Metrics> = inputs.many("evaluations")?;
@@ -142,7 +143,7 @@ impl Stage for ReportStage {
         for (name, bytes) in plots {
             files.push((name.to_string(), bytes));
         }
-        Ok(Report { files })
+        Ok(ReportFiles { files })
     }
 }
 

@@ -2,8 +2,9 @@
 //! compared.
 
 pub mod coarsen;
+pub mod clamp;
 pub mod composite_height;
+pub mod difference;
 pub mod gaussian_blur;
-pub mod raster_ops;
 pub mod rasterize_scene;
 pub mod rasterize_surface;

@@ -6,6 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Grid, PodVec, PointSet, Raster};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::raster::gap_fill::fill_gaps;
 
 /// How the points falling into one cell become its value.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -138,52 +139,6 @@ pub fn select(p: &PointSet, keep: impl Fn(usize) -> bool) -> PointSet {
         return_number: pick(&p.return_number, &idx),
         number_of_returns: pick(&p.number_of_returns, &idx),
         rgb: pick(&p.rgb, &idx),
-    }
-}
-
-/// Bounded gap filling: `steps` times, every no-data cell with valid 8-neighbours takes their mean,
-/// so holes shrink by one cell per step from their rim and nothing is invented further than
-/// `steps` cells from an observation. Double-buffered, so the result does not depend on order.
-pub fn fill_gaps(r: &mut Raster, steps: u32) {
-    let (w, h) = (r.grid.width as i64, r.grid.height as i64);
-    for _ in 0..steps {
-        let src = r.data.clone();
-        let mut changed = false;
-        for row in 0..h {
-            for col in 0..w {
-                let i = (row * w + col) as usize;
-                if src[i].is_finite() {
-                    continue;
-                }
-                let (mut sum, mut n) = (0.0f64, 0u32);
-                for (dr, dc) in [
-                    (-1, -1),
-                    (-1, 0),
-                    (-1, 1),
-                    (0, -1),
-                    (0, 1),
-                    (1, -1),
-                    (1, 0),
-                    (1, 1),
-                ] {
-                    let (rr, cc) = (row + dr, col + dc);
-                    if rr >= 0 && rr < h && cc >= 0 && cc < w {
-                        let v = src[(rr * w + cc) as usize];
-                        if v.is_finite() {
-                            sum += v as f64;
-                            n += 1;
-                        }
-                    }
-                }
-                if n > 0 {
-                    r.data[i] = (sum / n as f64) as f32;
-                    changed = true;
-                }
-            }
-        }
-        if !changed {
-            break;
-        }
     }
 }
 

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{Ortho, PodVec};
 use crate::io::crs::{Crs, ToSite};
 use crate::io::geotiff::{PixelGrid, read_geotiff};
-use crate::stages::ingest::read_raster::source_crs;
+use crate::io::crs::source_crs;
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 use crate::io::warp::{Resample, SourceMap, covering_grid, sample};
 

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{Footprint, Footprints, Polygon};
 use crate::io::crs::{Crs, ToSite};
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, Stage, StageError};
+use crate::geom::polygon::point_in_ring;
 
 /// Params of [`ReadOsmBuildings`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -263,7 +264,6 @@ pub fn read_osm_buildings(path: &Path, wgs84: &ToSite) -> Result<Footprints, Sta
     Ok(out)
 }
 
-pub use crate::artifact::point_in_ring;
 
 #[cfg(test)]
 mod tests {

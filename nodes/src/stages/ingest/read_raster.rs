@@ -5,10 +5,11 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{PodVec, Raster};
-use crate::io::crs::{Crs, ToSite};
+use crate::io::crs::ToSite;
 use crate::io::geotiff::{GeoTiff, read_geotiff};
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 use crate::io::warp::{Resample, SourceMap, covering_grid, sample};
+use crate::io::crs::source_crs;
 
 /// Params of [`ReadRaster`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -116,23 +117,6 @@ impl Stage for ReadRaster {
             ctx,
         )
         .map_err(|m| StageError::bad_input(path, "reprojection", m))
-    }
-}
-
-/// The CRS to use: the graph's if given, else the file's, else an error naming the file.
-pub fn source_crs(
-    param: Option<&str>,
-    recorded: Option<Crs>,
-    path: &std::path::Path,
-) -> Result<Crs, StageError> {
-    match (param, recorded) {
-        (Some(c), _) => Crs::from_user(c).map_err(|m| StageError::Param(ParamError::new("crs", m))),
-        (None, Some(c)) => Ok(c),
-        (None, None) => Err(StageError::bad_input(
-            path,
-            "georeferencing",
-            "no CRS recorded; give it in the graph, e.g. crs: \"EPSG:32618\"",
-        )),
     }
 }
 

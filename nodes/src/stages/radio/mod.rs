@@ -1,3 +1,4 @@
 //! Radio (Sec. 5): link paths and radio maps traced through a scene.
 
-pub mod rf_trace;
+pub mod radio_map;
+pub mod trace;

@@ -1,14 +1,10 @@
-//! Summary statistics of rasters and point sets: quick checks, and the numbers tests assert on.
+//! Summary statistics of a raster: a quick check, and the numbers tests assert on (the RMSE of a
+//! difference raster).
 
-use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Metrics, PointSet, Raster};
+use crate::artifact::{ArtifactType, Metrics, Raster};
+use crate::params::NoParams;
 use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
-
-/// [`RasterStats`] and [`PointStats`] have no parameters.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct NoParams {}
 
 /// Cell count, valid count, min, max, mean, standard deviation and root mean square of the valid
 /// cells.
@@ -58,40 +54,4 @@ pub fn raster_stats(r: &Raster) -> Metrics {
         m.set("rms", (sum2 / n as f64).sqrt());
     }
     m
-}
-
-/// Point count, extent and the ASPRS class histogram (`class_<n>`).
-pub struct PointStats;
-
-impl Stage for PointStats {
-    const KIND: &'static str = "PointStats";
-    const VERSION: u32 = 1;
-    const DOC: &'static str = "point set summary: count, extent, class histogram";
-    const INPUTS: &'static [InputSpec] = &[InputSpec::one(
-        "points",
-        ArtifactType::Points,
-        "the point set",
-    )];
-    type Params = NoParams;
-    type Output = Metrics;
-
-    fn run(_: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Metrics, StageError> {
-        let p: &PointSet = inputs.one("points")?;
-        let mut m = Metrics::default();
-        m.set("count", p.len() as f64);
-        if let Some((lo, hi)) = p.bounds() {
-            for (k, axis) in ["x", "y", "z"].iter().enumerate() {
-                m.set(format!("{axis}_min"), lo[k] as f64);
-                m.set(format!("{axis}_max"), hi[k] as f64);
-            }
-        }
-        let mut hist = [0u64; 256];
-        for &c in p.class.iter() {
-            hist[c as usize] += 1;
-        }
-        for (c, &k) in hist.iter().enumerate().filter(|(_, k)| **k > 0) {
-            m.set(format!("class_{c}"), k as f64);
-        }
-        Ok(m)
-    }
 }

@@ -1,15 +1,13 @@
-//! The `Trace` and `RadioMap` stages (paper Sec. 5): the native ray tracer of `rf` on a scene,
-//! for the links of a drive test, or over a grid.
+//! Trace: the links of a drive test traced through a scene by the native ray tracer of `rf`
+//! (paper Sec. 5).
 
 use std::collections::BTreeMap;
 
-use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Endpoint, Grid, Measurements, Raster, Scene};
+use crate::artifact::{ArtifactType, Endpoint, Measurements, Raster, Scene};
 use crate::rf::antenna::Antenna;
-use crate::rf::paths::{TraceOptions, trace_links};
-use crate::rf::radiomap::{MapPlane, default_plane, radio_map};
+use crate::rf::paths::{TraceOptions, check_options, trace_links};
 use crate::rf::scene::RfScene;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -28,27 +26,6 @@ pub struct TraceParams {
     pub coherent: bool,
     /// Use P.2040 laws outside their frequency ranges. Default false.
     pub extrapolate: bool,
-}
-
-fn check_options(o: &TraceOptions) -> Result<(), ParamError> {
-    if !(0.0..=1.0).contains(&o.scattering_coefficient) {
-        return Err(ParamError::new(
-            "options",
-            "expected a scattering_coefficient in [0, 1]",
-        ));
-    }
-    if o.rays == 0 {
-        return Err(ParamError::new("options", "expected at least one ray"));
-    }
-    if o.foliage_db_per_m
-        .is_some_and(|v| !(v >= 0.0 && v.is_finite()))
-    {
-        return Err(ParamError::new(
-            "options",
-            "expected a non-negative foliage loss in dB/m",
-        ));
-    }
-    Ok(())
 }
 
 /// The links of the measurements with their predicted path loss (`path_loss_db` = −10 log10 of
@@ -132,113 +109,11 @@ impl Stage for Trace {
     }
 }
 
-/// Params of [`RadioMap`].
-#[derive(Clone, Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RadioMapParams {
-    /// Transmitter position (x, y) in the site frame and its height: above the terrain when a
-    /// terrain is given, else site-frame z.
-    pub tx: (f64, f64, f64),
-    /// Carrier frequency, Hz.
-    pub freq_hz: f64,
-    /// Cell size, metres. Default 5.
-    #[serde(default = "five")]
-    pub cell_m: f64,
-    /// Height of the map: above the terrain when a terrain is given, else site-frame z. Default 1.5.
-    #[serde(default = "one_and_a_half")]
-    pub height_m: f64,
-    /// Interactions and the number of rays.
-    #[serde(default)]
-    pub options: TraceOptions,
-    /// The transmit antenna. Default isotropic, vertical.
-    #[serde(default)]
-    pub antenna: Antenna,
-    /// Use P.2040 laws outside their frequency ranges. Default false.
-    #[serde(default)]
-    pub extrapolate: bool,
-}
-
-fn five() -> f64 {
-    5.0
-}
-fn one_and_a_half() -> f64 {
-    1.5
-}
-
-/// Path gain (dB, NaN where no ray arrived) over the terrain's extent, on a surface following the
-/// terrain at `height_m`; without a terrain, over the scene on the plane z = `height_m`.
-pub struct RadioMap;
-
-impl Stage for RadioMap {
-    const KIND: &'static str = "RadioMap";
-    const VERSION: u32 = 1;
-    const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
-    const INPUTS: &'static [InputSpec] = &[
-        InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
-        InputSpec::optional(
-            "terrain",
-            ArtifactType::Raster,
-            "the terrain: map extent and heights above ground",
-        ),
-    ];
-    type Params = RadioMapParams;
-    type Output = Raster;
-
-    fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        check_options(&p.options)?;
-        if p.options.diffraction {
-            return Err(ParamError::new(
-                "options",
-                "radio maps do not model diffraction yet (set diffraction: false)",
-            ));
-        }
-        if !(p.freq_hz > 0.0 && p.freq_hz.is_finite()) {
-            return Err(ParamError::new(
-                "freq_hz",
-                "expected a positive frequency in Hz",
-            ));
-        }
-        crate::params::check_cell(Some(p.cell_m))
-    }
-
-    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Raster, StageError> {
-        let scene: &Scene = inputs.one("scene")?;
-        let terrain: Option<&Raster> = inputs.optional("terrain")?;
-        let rf = RfScene::new(scene, p.freq_hz, p.extrapolate).map_err(StageError::Failed)?;
-        let (plane, tx) = match terrain {
-            Some(t) => {
-                let tg = t.grid;
-                let grid = Grid {
-                    cell_m: p.cell_m,
-                    width: (tg.width as f64 * tg.cell_m / p.cell_m).ceil() as u32,
-                    height: (tg.height as f64 * tg.cell_m / p.cell_m).ceil() as u32,
-                    ..tg
-                };
-                let ground = t.bilinear(p.tx.0, p.tx.1).ok_or_else(|| {
-                    StageError::Failed(format!(
-                        "the transmitter at ({}, {}) is off the terrain",
-                        p.tx.0, p.tx.1
-                    ))
-                })?;
-                (
-                    MapPlane::above_terrain(grid, t, p.height_m).map_err(StageError::Failed)?,
-                    DVec3::new(p.tx.0, p.tx.1, ground + p.tx.2),
-                )
-            }
-            None => (
-                default_plane(&rf, p.cell_m, p.height_m),
-                DVec3::new(p.tx.0, p.tx.1, p.tx.2),
-            ),
-        };
-        let map = radio_map(&rf, tx, &p.antenna, &plane, &p.options, p.freq_hz);
-        Ok(crate::rf::radiomap::to_db(&map))
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::artifact::{Height, Link, PodVec};
+    use crate::artifact::Grid;
     use crate::stage::Slot;
     use crate::{Artifact, Site};
     use std::sync::Arc;
@@ -308,42 +183,5 @@ mod tests {
             )
             .with("links", Slot::One(Arc::new(Artifact::Measurements(out))));
         assert!(Trace::run(&TraceParams::default(), &inputs, &Ctx::new(&s, &[])).is_err());
-    }
-
-    #[test]
-    fn radio_map_follows_the_terrain_surface() {
-        // Free space over "terrain" at 12 m: the map at 1.5 m above it is Friis from a transmitter
-        // 30 m above it, averaged over each 5 m cell.
-        let inputs = Inputs::new()
-            .with(
-                "scene",
-                Slot::One(Arc::new(Artifact::Scene(Scene::default()))),
-            )
-            .with(
-                "terrain",
-                Slot::Optional(Some(Arc::new(Artifact::Raster(flat(12.0))))),
-            );
-        let p = RadioMapParams {
-            tx: (100.0, 100.0, 30.0),
-            freq_hz: 3.5e9,
-            cell_m: 5.0,
-            height_m: 1.5,
-            options: TraceOptions {
-                rays: 1_000_000,
-                ..Default::default()
-            },
-            antenna: Antenna::default(),
-            extrapolate: false,
-        };
-        let s = site();
-        let map = RadioMap::run(&p, &inputs, &Ctx::new(&s, &[])).unwrap();
-        let (x, y) = map.grid.center(35, 20);
-        let d2 = (x - 100.0).powi(2) + (y - 100.0).powi(2) + 28.5f64.powi(2);
-        let friis = -crate::rf::em::fspl_db(d2.sqrt(), 3.5e9);
-        assert!(
-            (map.at(35, 20) as f64 - friis).abs() < 0.3,
-            "{} vs {friis}",
-            map.at(35, 20)
-        );
     }
 }
