@@ -6,6 +6,10 @@ use super::Polygon;
 use crate::rf::materials::Material;
 use crate::artifact::TerrainModel;
 
+/// Depth of the synthetic city's window and door recesses: the thickness of the outer wall
+/// layer, metres.
+pub const RECESS_M: f64 = 0.25;
+
 /// An oriented rectangle: south-west corner (before rotation), length along `heading`, width.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Rect {

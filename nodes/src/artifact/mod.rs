@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 
 pub use array::PodVec;
 pub use city::{
-    BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, Rect, Roof, RoofBox, Street,
+    BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, RECESS_M, Rect, Roof, RoofBox, Street,
     TreeSpec,
 };
 pub use footprints::{Footprint, Footprints, Polygon};

@@ -8,6 +8,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::RECESS_M;
 use crate::artifact::{
     BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, Polygon, Rect, Roof, RoofBox,
     Street, TreeSpec,
@@ -431,8 +432,6 @@ fn add_lot(city: &mut City, d: &Draw, p: &SynthCityParams, lot: u64, b: [f64; 4]
     });
 }
 
-/// Depth of window and door recesses: the thickness of the outer wall layer, metres.
-pub const RECESS_M: f64 = 0.25;
 /// Storey height, metres.
 pub const FLOOR_M: f64 = 3.2;
 

@@ -10,7 +10,7 @@ use crate::artifact::{
 use crate::rf::materials::Material;
 use crate::geom::mesh_build::{cuboid, dome, ellipsoid, gabled, height_surface, hipped, prism};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
-use crate::synth::synth_city::RECESS_M;
+use crate::artifact::RECESS_M;
 use crate::artifact::height_at;
 
 /// Params of [`TruthScene`].
