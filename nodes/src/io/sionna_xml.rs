@@ -106,32 +106,58 @@ pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
 /// Reads a binary little-endian PLY: vertex x, y, z (any other vertex properties skipped) and
 /// polygon faces (fanned into triangles).
 pub fn read_ply(path: &Path) -> Result<Mesh, StageError> {
-    let bad = |place: &str, expected: &str| StageError::bad_input(path, place, expected);
-    let bytes =
-        std::fs::read(path).map_err(|e| bad("file", &format!("a readable PLY file ({e})")))?;
+    let bytes = std::fs::read(path)
+        .map_err(|e| ply_error(path, "file", &format!("a readable PLY file ({e})")))?;
+    let (header, body) = split_header(path, &bytes)?;
+    let header = parse_header(path, header)?;
+    let (positions, faces) = read_positions(path, &header, body)?;
+    let triangles = read_triangles(path, &header, faces)?;
+    Ok(Mesh {
+        positions: PodVec(positions),
+        triangles: PodVec(triangles),
+        materials: PodVec(vec![]),
+    })
+}
+
+fn ply_error(path: &Path, place: &str, expected: &str) -> StageError {
+    StageError::bad_input(path, place, expected)
+}
+
+/// The header text and the data after it, once the header says binary little-endian PLY.
+fn split_header<'a>(path: &Path, bytes: &'a [u8]) -> Result<(&'a str, &'a [u8]), StageError> {
+    let bad = |place: &str, expected: &str| ply_error(path, place, expected);
     let end = bytes
         .windows(11)
         .position(|w| w == b"end_header\n")
         .ok_or_else(|| bad("header", "a PLY header ending in end_header"))?;
     let header = std::str::from_utf8(&bytes[..end]).map_err(|_| bad("header", "ASCII text"))?;
-    let mut body = &bytes[end + 11..];
     if !header.starts_with("ply") {
         return Err(bad("header", "the magic word ply"));
     }
     if !header.contains("format binary_little_endian 1.0") {
         return Err(bad("header", "format binary_little_endian 1.0"));
     }
-    let size = |t: &str| match t {
-        "char" | "uchar" | "int8" | "uint8" => Some(1),
-        "short" | "ushort" | "int16" | "uint16" => Some(2),
-        "int" | "uint" | "float" | "int32" | "uint32" | "float32" => Some(4),
-        "double" | "float64" => Some(8),
-        _ => None,
+    Ok((header, &bytes[end + 11..]))
+}
+
+/// What a PLY header declares.
+struct PlyHeader {
+    n_vertex: usize,
+    n_face: usize,
+    /// (type, name) of each vertex property, in data order.
+    vertex_props: Vec<(String, String)>,
+    /// (count type, index type) of the face list.
+    face_types: Option<(String, String)>,
+}
+
+fn parse_header(path: &Path, header: &str) -> Result<PlyHeader, StageError> {
+    let mut h = PlyHeader {
+        n_vertex: 0,
+        n_face: 0,
+        vertex_props: Vec::new(),
+        face_types: None,
     };
-    let (mut n_vertex, mut n_face) = (0usize, 0usize);
     let mut element = "";
-    let mut vertex_props: Vec<(String, String)> = Vec::new();
-    let mut face_types: Option<(String, String)> = None;
     for l in header.lines() {
         let w: Vec<&str> = l.split_whitespace().collect();
         match w.as_slice() {
@@ -143,80 +169,129 @@ pub fn read_ply(path: &Path) -> Result<Mesh, StageError> {
                 } else {
                     "other"
                 };
-                let n: usize = n.parse().map_err(|_| bad(l, "an element count"))?;
+                let n: usize = n
+                    .parse()
+                    .map_err(|_| ply_error(path, l, "an element count"))?;
                 match element {
-                    "vertex" => n_vertex = n,
-                    "face" => n_face = n,
-                    _ if n > 0 => return Err(bad(l, "only vertex and face elements")),
+                    "vertex" => h.n_vertex = n,
+                    "face" => h.n_face = n,
+                    _ if n > 0 => return Err(ply_error(path, l, "only vertex and face elements")),
                     _ => {}
                 }
             }
             ["property", "list", count, index, _] if element == "face" => {
-                face_types = Some((count.to_string(), index.to_string()));
+                h.face_types = Some((count.to_string(), index.to_string()));
             }
             ["property", t, name] if element == "vertex" => {
-                vertex_props.push((t.to_string(), name.to_string()));
+                h.vertex_props.push((t.to_string(), name.to_string()));
             }
             _ => {}
         }
     }
-    let stride: usize = vertex_props
+    Ok(h)
+}
+
+/// Bytes of a PLY scalar type.
+fn type_size(t: &str) -> Option<usize> {
+    match t {
+        "char" | "uchar" | "int8" | "uint8" => Some(1),
+        "short" | "ushort" | "int16" | "uint16" => Some(2),
+        "int" | "uint" | "float" | "int32" | "uint32" | "float32" => Some(4),
+        "double" | "float64" => Some(8),
+        _ => None,
+    }
+}
+
+/// The vertex positions, and the data after the vertices.
+fn read_positions<'a>(
+    path: &Path,
+    h: &PlyHeader,
+    body: &'a [u8],
+) -> Result<(Vec<[f32; 3]>, &'a [u8]), StageError> {
+    let stride: usize = h
+        .vertex_props
         .iter()
-        .map(|(t, _)| size(t).ok_or_else(|| bad("vertex properties", "known property types")))
+        .map(|(t, _)| {
+            type_size(t).ok_or_else(|| ply_error(path, "vertex properties", "known property types"))
+        })
         .sum::<Result<usize, _>>()?;
-    let offset = |want: &str| -> Result<(usize, &str), StageError> {
-        let mut off = 0;
-        for (t, n) in &vertex_props {
-            if n == want {
-                return Ok((off, t.as_str()));
-            }
-            off += size(t).unwrap_or(0);
-        }
-        Err(bad(
-            "vertex properties",
-            &format!("a vertex property {want}"),
-        ))
-    };
-    let xyz = [offset("x")?, offset("y")?, offset("z")?];
+    let xyz = [
+        vertex_offset(path, h, "x")?,
+        vertex_offset(path, h, "y")?,
+        vertex_offset(path, h, "z")?,
+    ];
+    let n_vertex = h.n_vertex;
     if body.len() < n_vertex * stride {
-        return Err(bad(
+        return Err(ply_error(
+            path,
             "vertex data",
             &format!("{n_vertex} vertices of {stride} bytes"),
         ));
     }
-    let read_f = |b: &[u8], t: &str| -> f32 {
-        match t {
-            "double" | "float64" => f64::from_le_bytes(b[..8].try_into().expect("8 bytes")) as f32,
-            _ => f32::from_le_bytes(b[..4].try_into().expect("4 bytes")),
-        }
-    };
-    let positions: Vec<[f32; 3]> = (0..n_vertex)
-        .map(|i| xyz.map(|(off, t)| read_f(&body[i * stride + off..], t)))
+    let positions = (0..n_vertex)
+        .map(|i| xyz.map(|(off, t)| read_float(&body[i * stride + off..], t)))
         .collect();
-    body = &body[n_vertex * stride..];
-    let (count_t, index_t) =
-        face_types.ok_or_else(|| bad("header", "a face vertex_indices list"))?;
-    let (cs, is) = (
-        size(&count_t).ok_or_else(|| bad("face list", "a known count type"))?,
-        size(&index_t).ok_or_else(|| bad("face list", "a known index type"))?,
-    );
-    let read_u = |b: &[u8], n: usize| -> u32 {
-        match n {
-            1 => b[0] as u32,
-            2 => u16::from_le_bytes([b[0], b[1]]) as u32,
-            _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+    Ok((positions, &body[n_vertex * stride..]))
+}
+
+/// The byte offset within a vertex, and the type, of property `want`.
+fn vertex_offset<'a>(
+    path: &Path,
+    h: &'a PlyHeader,
+    want: &str,
+) -> Result<(usize, &'a str), StageError> {
+    let mut off = 0;
+    for (t, n) in &h.vertex_props {
+        if n == want {
+            return Ok((off, t.as_str()));
         }
-    };
-    let mut triangles = Vec::with_capacity(n_face);
+        off += type_size(t).unwrap_or(0);
+    }
+    Err(ply_error(
+        path,
+        "vertex properties",
+        &format!("a vertex property {want}"),
+    ))
+}
+
+fn read_float(b: &[u8], t: &str) -> f32 {
+    match t {
+        "double" | "float64" => f64::from_le_bytes(b[..8].try_into().expect("8 bytes")) as f32,
+        _ => f32::from_le_bytes(b[..4].try_into().expect("4 bytes")),
+    }
+}
+
+/// An unsigned integer of `n` bytes.
+fn read_uint(b: &[u8], n: usize) -> u32 {
+    match n {
+        1 => b[0] as u32,
+        2 => u16::from_le_bytes([b[0], b[1]]) as u32,
+        _ => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+    }
+}
+
+/// The faces in `body`, each fanned into triangles about its first vertex.
+fn read_triangles(path: &Path, h: &PlyHeader, body: &[u8]) -> Result<Vec<[u32; 3]>, StageError> {
+    let bad = |place: &str, expected: &str| ply_error(path, place, expected);
+    let (count_t, index_t) = h
+        .face_types
+        .as_ref()
+        .ok_or_else(|| bad("header", "a face vertex_indices list"))?;
+    let (cs, is) = (
+        type_size(count_t).ok_or_else(|| bad("face list", "a known count type"))?,
+        type_size(index_t).ok_or_else(|| bad("face list", "a known index type"))?,
+    );
+    let n_vertex = h.n_vertex;
+    let mut triangles = Vec::with_capacity(h.n_face);
     let mut at = 0usize;
-    for f in 0..n_face {
+    for f in 0..h.n_face {
         let truncated = || bad(&format!("face {f}"), "the face data the header announces");
-        let k = read_u(body.get(at..at + cs).ok_or_else(truncated)?, cs) as usize;
+        let k = read_uint(body.get(at..at + cs).ok_or_else(truncated)?, cs) as usize;
         at += cs;
         let idx: Vec<u32> = (0..k)
             .map(|j| {
                 body.get(at + j * is..at + (j + 1) * is)
-                    .map(|b| read_u(b, is))
+                    .map(|b| read_uint(b, is))
                     .ok_or_else(truncated)
             })
             .collect::<Result<_, _>>()?;
@@ -231,11 +306,7 @@ pub fn read_ply(path: &Path) -> Result<Mesh, StageError> {
             triangles.push([idx[0], idx[j], idx[j + 1]]);
         }
     }
-    Ok(Mesh {
-        positions: PodVec(positions),
-        triangles: PodVec(triangles),
-        materials: PodVec(vec![]),
-    })
+    Ok(triangles)
 }
 
 /// Writes a binary little-endian PLY with float x, y, z and int triangle lists.

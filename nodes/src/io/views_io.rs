@@ -15,7 +15,7 @@
 //! Model outputs are optional per view; a file that is referenced or present must be valid.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 
@@ -32,24 +32,44 @@ fn num(v: &Value, key: &str) -> Option<f64> {
 /// Reads the view set described by `views_json`.
 pub fn read_viewset(views_json: &Path, site: &Site) -> Result<ViewSet, StageError> {
     let dir = views_json.parent().unwrap_or(Path::new("."));
+    let doc = read_views_json(views_json)?;
+    let (list, material_classes) = view_list(views_json, &doc)?;
+    let wgs84 = ToSite::new(&Crs::from_epsg(4326).map_err(StageError::Failed)?, site)
+        .map_err(StageError::Failed)?;
+    let mut set = ViewSet {
+        views: Vec::new(),
+        material_classes,
+    };
+    for (i, v) in list.iter().enumerate() {
+        let view = read_view(views_json, dir, &wgs84, &set.material_classes, i, v)?;
+        set.views.push(view);
+    }
+    Ok(set)
+}
+
+fn read_views_json(views_json: &Path) -> Result<Value, StageError> {
     let text = std::fs::read_to_string(views_json)
         .map_err(|e| StageError::bad_input(views_json, "open", e.to_string()))?;
-    let doc: Value = serde_json::from_str(&text).map_err(|e| {
+    serde_json::from_str(&text).map_err(|e| {
         StageError::bad_input(
             views_json,
             format!("line {}, column {}", e.line(), e.column()),
             format!("expected JSON: {e}"),
         )
-    })?;
-    let (list, classes) = match &doc {
-        Value::Array(a) => (a.clone(), Vec::new()),
-        Value::Object(o) => (
-            o.get("views")
-                .and_then(Value::as_array)
-                .cloned()
-                .ok_or_else(|| {
-                    StageError::bad_input(views_json, "top level", "expected a `views` array")
-                })?,
+    })
+}
+
+/// The view entries and the material class table, from either accepted top level.
+fn view_list<'a>(
+    views_json: &Path,
+    doc: &'a Value,
+) -> Result<(&'a [Value], Vec<String>), StageError> {
+    match doc {
+        Value::Array(a) => Ok((a, Vec::new())),
+        Value::Object(o) => Ok((
+            o.get("views").and_then(Value::as_array).ok_or_else(|| {
+                StageError::bad_input(views_json, "top level", "expected a `views` array")
+            })?,
             o.get("material_classes")
                 .and_then(Value::as_array)
                 .map(|a| {
@@ -58,126 +78,214 @@ pub fn read_viewset(views_json: &Path, site: &Site) -> Result<ViewSet, StageErro
                         .collect()
                 })
                 .unwrap_or_default(),
-        ),
-        _ => {
-            return Err(StageError::bad_input(
-                views_json,
-                "top level",
-                "expected an array of views or {\"views\": [...]}",
-            ));
+        )),
+        _ => Err(StageError::bad_input(
+            views_json,
+            "top level",
+            "expected an array of views or {\"views\": [...]}",
+        )),
+    }
+}
+
+/// View `i` of views.json, `v`, with its image and whichever model outputs are present.
+fn read_view(
+    views_json: &Path,
+    dir: &Path,
+    wgs84: &ToSite,
+    material_classes: &[String],
+    i: usize,
+    v: &Value,
+) -> Result<View, StageError> {
+    let id = view_id(views_json, i, v)?;
+    let entry = Entry {
+        views_json,
+        id: &id,
+    };
+    let (width, height) = (
+        num(v, "width").ok_or_else(|| entry.bad("width", "expected a pixel count"))? as u32,
+        num(v, "height").ok_or_else(|| entry.bad("height", "expected a pixel count"))? as u32,
+    );
+    let intrinsics = intrinsics(&entry, v, width, height)?;
+    let position = position(&entry, v, wgs84)?;
+    let pose = orientation(&entry, v, position)?;
+    let files = ViewFiles {
+        dir,
+        id: &id,
+        width,
+        height,
+    };
+    let img = files.image(&entry, v)?;
+    let material = files.material(views_json, material_classes)?;
+    let depth = files.depth()?;
+    let normal = files.normal()?;
+    Ok(View {
+        id: id.clone(),
+        width,
+        height,
+        intrinsics,
+        pose,
+        captured_at: v
+            .get("captured_at")
+            .and_then(Value::as_str)
+            .map(str::to_owned),
+        image: PodVec(img.pixels().map(|p| p.0).collect()),
+        arch: files.instances("arch")?,
+        clutter: files.instances("clutter")?,
+        material,
+        depth,
+        normal,
+    })
+}
+
+/// A string id, or a number as one.
+fn view_id(views_json: &Path, i: usize, v: &Value) -> Result<String, StageError> {
+    let id = v.get("id").and_then(|x| {
+        x.as_str()
+            .map(str::to_owned)
+            .or_else(|| x.as_u64().map(|n| n.to_string()))
+    });
+    id.ok_or_else(|| StageError::bad_input(views_json, format!("view {i}"), "expected an `id`"))
+}
+
+/// One entry of views.json, for errors that name the view.
+struct Entry<'a> {
+    views_json: &'a Path,
+    id: &'a str,
+}
+
+impl Entry<'_> {
+    fn place(&self, what: &str) -> String {
+        format!("view {:?}, {what}", self.id)
+    }
+
+    fn bad(&self, what: &str, expected: &str) -> StageError {
+        StageError::bad_input(self.views_json, self.place(what), expected.to_owned())
+    }
+}
+
+fn intrinsics(entry: &Entry, v: &Value, width: u32, height: u32) -> Result<Intrinsics, StageError> {
+    let k = v
+        .get("intrinsics")
+        .ok_or_else(|| entry.bad("intrinsics", "expected {fx, fy, cx, cy} or {hfov_deg}"))?;
+    match (
+        num(k, "fx"),
+        num(k, "fy"),
+        num(k, "cx"),
+        num(k, "cy"),
+        num(k, "hfov_deg"),
+    ) {
+        (Some(fx), Some(fy), Some(cx), Some(cy), _) => Ok(Intrinsics { fx, fy, cx, cy }),
+        (_, _, _, _, Some(h)) if h > 0.0 && h < 180.0 => {
+            let f = width as f64 / 2.0 / (h.to_radians() / 2.0).tan();
+            Ok(Intrinsics {
+                fx: f,
+                fy: f,
+                cx: width as f64 / 2.0,
+                cy: height as f64 / 2.0,
+            })
         }
-    };
-    let wgs84 = ToSite::new(&Crs::from_epsg(4326).map_err(StageError::Failed)?, site)
-        .map_err(StageError::Failed)?;
-    let mut set = ViewSet {
-        views: Vec::new(),
-        material_classes: classes,
-    };
-    for (i, v) in list.iter().enumerate() {
-        let id = v.get("id").and_then(|x| {
-            x.as_str()
-                .map(str::to_owned)
-                .or_else(|| x.as_u64().map(|n| n.to_string()))
-        });
-        let id = id.ok_or_else(|| {
-            StageError::bad_input(views_json, format!("view {i}"), "expected an `id`")
-        })?;
-        let place = |what: &str| format!("view {id:?}, {what}");
-        let bad = |what: &str, expected: &str| {
-            StageError::bad_input(views_json, place(what), expected.to_owned())
-        };
-        let (width, height) = (
-            num(v, "width").ok_or_else(|| bad("width", "expected a pixel count"))? as u32,
-            num(v, "height").ok_or_else(|| bad("height", "expected a pixel count"))? as u32,
-        );
-        let k = v
-            .get("intrinsics")
-            .ok_or_else(|| bad("intrinsics", "expected {fx, fy, cx, cy} or {hfov_deg}"))?;
-        let intrinsics = match (
-            num(k, "fx"),
-            num(k, "fy"),
-            num(k, "cx"),
-            num(k, "cy"),
-            num(k, "hfov_deg"),
-        ) {
-            (Some(fx), Some(fy), Some(cx), Some(cy), _) => Intrinsics { fx, fy, cx, cy },
-            (_, _, _, _, Some(h)) if h > 0.0 && h < 180.0 => {
-                let f = width as f64 / 2.0 / (h.to_radians() / 2.0).tan();
-                Intrinsics {
-                    fx: f,
-                    fy: f,
-                    cx: width as f64 / 2.0,
-                    cy: height as f64 / 2.0,
-                }
-            }
-            _ => {
-                return Err(bad(
-                    "intrinsics",
-                    "expected {fx, fy, cx, cy} or {hfov_deg} in (0, 180)",
-                ));
-            }
-        };
-        let p = v
-            .get("pose")
-            .ok_or_else(|| bad("pose", "expected {x, y, z} or {lat, lon, alt_m}"))?;
-        let position = match (
-            num(p, "x"),
-            num(p, "y"),
-            num(p, "z"),
-            num(p, "lat"),
-            num(p, "lon"),
-            num(p, "alt_m"),
-        ) {
-            (Some(x), Some(y), Some(z), ..) => [x, y, z],
-            (_, _, _, Some(lat), Some(lon), Some(alt)) => {
-                let (x, y, _) = wgs84.apply(lon, lat, 0.0).map_err(|m| bad("pose", &m))?;
-                [x, y, alt]
-            }
-            _ => {
-                return Err(bad(
-                    "pose",
-                    "expected {x, y, z} (site frame) or {lat, lon, alt_m}",
-                ));
-            }
-        };
-        let o = v.get("orientation").ok_or_else(|| {
-            bad(
-                "orientation",
-                "expected {heading_deg, pitch_deg, roll_deg} or {quat_wxyz}",
-            )
-        })?;
-        let pose = match (
-            num(o, "heading_deg"),
-            o.get("quat_wxyz").and_then(Value::as_array),
-        ) {
-            (Some(h), _) => Pose::from_angles(
+        _ => Err(entry.bad(
+            "intrinsics",
+            "expected {fx, fy, cx, cy} or {hfov_deg} in (0, 180)",
+        )),
+    }
+}
+
+/// The camera position in the site frame; a WGS 84 pose keeps its altitude as z.
+fn position(entry: &Entry, v: &Value, wgs84: &ToSite) -> Result<[f64; 3], StageError> {
+    let p = v
+        .get("pose")
+        .ok_or_else(|| entry.bad("pose", "expected {x, y, z} or {lat, lon, alt_m}"))?;
+    match (
+        num(p, "x"),
+        num(p, "y"),
+        num(p, "z"),
+        num(p, "lat"),
+        num(p, "lon"),
+        num(p, "alt_m"),
+    ) {
+        (Some(x), Some(y), Some(z), ..) => Ok([x, y, z]),
+        (_, _, _, Some(lat), Some(lon), Some(alt)) => {
+            let (x, y, _) = wgs84
+                .apply(lon, lat, 0.0)
+                .map_err(|m| entry.bad("pose", &m))?;
+            Ok([x, y, alt])
+        }
+        _ => Err(entry.bad(
+            "pose",
+            "expected {x, y, z} (site frame) or {lat, lon, alt_m}",
+        )),
+    }
+}
+
+fn orientation(entry: &Entry, v: &Value, position: [f64; 3]) -> Result<Pose, StageError> {
+    let o = v.get("orientation").ok_or_else(|| {
+        entry.bad(
+            "orientation",
+            "expected {heading_deg, pitch_deg, roll_deg} or {quat_wxyz}",
+        )
+    })?;
+    match (
+        num(o, "heading_deg"),
+        o.get("quat_wxyz").and_then(Value::as_array),
+    ) {
+        (Some(h), _) => Ok(Pose::from_angles(
+            position,
+            h,
+            num(o, "pitch_deg").unwrap_or(0.0),
+            num(o, "roll_deg").unwrap_or(0.0),
+        )),
+        (None, Some(q)) if q.len() == 4 && q.iter().all(|x| x.is_number()) => {
+            Ok(Pose::from_quaternion(
                 position,
-                h,
-                num(o, "pitch_deg").unwrap_or(0.0),
-                num(o, "roll_deg").unwrap_or(0.0),
-            ),
-            (None, Some(q)) if q.len() == 4 && q.iter().all(|x| x.is_number()) => {
-                Pose::from_quaternion(
-                    position,
-                    [0, 1, 2, 3].map(|j| q[j].as_f64().expect("checked")),
-                )
-            }
-            _ => {
-                return Err(bad(
-                    "orientation",
-                    "expected {heading_deg, pitch_deg, roll_deg} or {quat_wxyz: [w, x, y, z]}",
-                ));
-            }
-        };
+                [0, 1, 2, 3].map(|j| q[j].as_f64().expect("checked")),
+            ))
+        }
+        _ => Err(entry.bad(
+            "orientation",
+            "expected {heading_deg, pitch_deg, roll_deg} or {quat_wxyz: [w, x, y, z]}",
+        )),
+    }
+}
+
+/// The image files of one view: its photo and the model outputs `<kind>/<id>.<ext>` beside
+/// views.json, each of which must have the size views.json gives.
+struct ViewFiles<'a> {
+    dir: &'a Path,
+    id: &'a str,
+    width: u32,
+    height: u32,
+}
+
+impl ViewFiles<'_> {
+    fn output(&self, kind: &str, ext: &str) -> PathBuf {
+        self.dir.join(kind).join(format!("{}.{ext}", self.id))
+    }
+
+    fn check_size(&self, p: &Path, w: u32, h: u32) -> Result<(), StageError> {
+        let (width, height) = (self.width, self.height);
+        if (w, h) == (width, height) {
+            Ok(())
+        } else {
+            Err(StageError::bad_input(
+                p,
+                "size",
+                format!("{w} x {h} pixels, but views.json says {width} x {height}"),
+            ))
+        }
+    }
+
+    /// The photo that views.json names (required).
+    fn image(&self, entry: &Entry, v: &Value) -> Result<image::RgbImage, StageError> {
         let image_rel = v
             .get("image")
             .and_then(Value::as_str)
-            .ok_or_else(|| bad("image", "expected the image's path"))?;
-        let image_path = dir.join(image_rel);
+            .ok_or_else(|| entry.bad("image", "expected the image's path"))?;
+        let image_path = self.dir.join(image_rel);
         if !image_path.is_file() {
             return Err(StageError::bad_input(
-                views_json,
-                place("image"),
+                entry.views_json,
+                entry.place("image"),
                 format!("the image {} does not exist", image_path.display()),
             ));
         }
@@ -190,155 +298,145 @@ pub fn read_viewset(views_json: &Path, site: &Site) -> Result<ViewSet, StageErro
                 )
             })?
             .into_rgb8();
-        let size_check = |p: &Path, w: u32, h: u32| {
-            if (w, h) == (width, height) {
-                Ok(())
-            } else {
-                Err(StageError::bad_input(
-                    p,
-                    "size",
-                    format!("{w} x {h} pixels, but views.json says {width} x {height}"),
-                ))
-            }
-        };
-        size_check(&image_path, img.width(), img.height())?;
-        let n = (width * height) as usize;
-        let read_instances = |kind: &str| -> Result<Option<Instances>, StageError> {
-            let png = dir.join(kind).join(format!("{id}.png"));
-            if !png.exists() {
-                return Ok(None);
-            }
-            let img = image::open(&png)
-                .map_err(|e| {
-                    StageError::bad_input(
-                        &png,
-                        "image",
-                        format!("expected a 16-bit PNG of instance ids: {e}"),
-                    )
-                })?
-                .into_luma16();
-            size_check(&png, img.width(), img.height())?;
-            let json = png.with_extension("json");
-            let classes: BTreeMap<u16, String> = match std::fs::read_to_string(&json) {
-                Ok(t) => {
-                    let m: BTreeMap<String, String> = serde_json::from_str(&t).map_err(|e| {
-                        StageError::bad_input(
-                            &json,
-                            "contents",
-                            format!("expected {{\"<instance id>\": \"<class>\"}}: {e}"),
-                        )
-                    })?;
-                    m.into_iter()
-                        .map(|(k, c)| {
-                            k.parse::<u16>().map(|k| (k, c)).map_err(|_| {
-                                StageError::bad_input(
-                                    &json,
-                                    format!("key {k:?}"),
-                                    "expected an instance id 1-65535",
-                                )
-                            })
-                        })
-                        .collect::<Result<_, _>>()?
-                }
-                Err(_) => {
-                    return Err(StageError::bad_input(
-                        &png,
-                        "classes",
-                        format!("expected the class table {} beside it", json.display()),
-                    ));
-                }
-            };
-            Ok(Some(Instances {
-                ids: PodVec(img.into_raw()),
-                classes,
-            }))
-        };
-        let material_png = dir.join("material").join(format!("{id}.png"));
-        let material = if material_png.exists() {
-            if set.material_classes.is_empty() {
-                return Err(StageError::bad_input(
-                    views_json,
-                    "material_classes",
-                    format!(
-                        "{} exists but views.json has no material_classes table",
-                        material_png.display()
-                    ),
-                ));
-            }
-            let m = image::open(&material_png)
-                .map_err(|e| {
-                    StageError::bad_input(
-                        &material_png,
-                        "image",
-                        format!("expected an 8-bit PNG of class indices: {e}"),
-                    )
-                })?
-                .into_luma8();
-            size_check(&material_png, m.width(), m.height())?;
-            Some(PodVec(m.into_raw()))
-        } else {
-            None
-        };
-        let exr_channels = |kind: &str| -> Result<Option<Channels>, StageError> {
-            let p = dir.join(kind).join(format!("{id}.exr"));
-            if !p.exists() {
-                return Ok(None);
-            }
-            let (w, h, ch) = read_exr(&p)?;
-            size_check(&p, w as u32, h as u32)?;
-            Ok(Some(ch))
-        };
-        let pick = |ch: &[(String, Vec<f32>)], names: &[&str]| {
-            names
-                .iter()
-                .find_map(|n| ch.iter().find(|c| c.0 == *n).map(|c| c.1.clone()))
-        };
-        let depth = exr_channels("depth")?
+        self.check_size(&image_path, img.width(), img.height())?;
+        Ok(img)
+    }
+
+    /// `arch` or `clutter` instance ids, with the class table beside them.
+    fn instances(&self, kind: &str) -> Result<Option<Instances>, StageError> {
+        let png = self.output(kind, "png");
+        if !png.exists() {
+            return Ok(None);
+        }
+        let img = image::open(&png)
+            .map_err(|e| {
+                StageError::bad_input(
+                    &png,
+                    "image",
+                    format!("expected a 16-bit PNG of instance ids: {e}"),
+                )
+            })?
+            .into_luma16();
+        self.check_size(&png, img.width(), img.height())?;
+        let classes = read_instance_classes(&png)?;
+        Ok(Some(Instances {
+            ids: PodVec(img.into_raw()),
+            classes,
+        }))
+    }
+
+    /// Per-pixel indices into `material_classes`, which must then not be empty.
+    fn material(
+        &self,
+        views_json: &Path,
+        material_classes: &[String],
+    ) -> Result<Option<PodVec<u8>>, StageError> {
+        let material_png = self.output("material", "png");
+        if !material_png.exists() {
+            return Ok(None);
+        }
+        if material_classes.is_empty() {
+            return Err(StageError::bad_input(
+                views_json,
+                "material_classes",
+                format!(
+                    "{} exists but views.json has no material_classes table",
+                    material_png.display()
+                ),
+            ));
+        }
+        let m = image::open(&material_png)
+            .map_err(|e| {
+                StageError::bad_input(
+                    &material_png,
+                    "image",
+                    format!("expected an 8-bit PNG of class indices: {e}"),
+                )
+            })?
+            .into_luma8();
+        self.check_size(&material_png, m.width(), m.height())?;
+        Ok(Some(PodVec(m.into_raw())))
+    }
+
+    fn exr_channels(&self, kind: &str) -> Result<Option<Channels>, StageError> {
+        let p = self.output(kind, "exr");
+        if !p.exists() {
+            return Ok(None);
+        }
+        let (w, h, ch) = read_exr(&p)?;
+        self.check_size(&p, w as u32, h as u32)?;
+        Ok(Some(ch))
+    }
+
+    fn depth(&self) -> Result<Option<PodVec<f32>>, StageError> {
+        Ok(self
+            .exr_channels("depth")?
             .map(|ch| {
-                pick(&ch, &["Z", "Y", "R"])
+                pick_channel(&ch, &["Z", "Y", "R"])
                     .or_else(|| ch.first().map(|c| c.1.clone()))
                     .unwrap_or_default()
             })
-            .map(PodVec);
-        let normal = match exr_channels("normal")? {
-            Some(ch) => {
-                let (x, y, z) = match (
-                    pick(&ch, &["R", "X"]),
-                    pick(&ch, &["G", "Y"]),
-                    pick(&ch, &["B", "Z"]),
-                ) {
-                    (Some(x), Some(y), Some(z)) => (x, y, z),
-                    _ => {
-                        return Err(StageError::bad_input(
-                            &dir.join("normal").join(format!("{id}.exr")),
-                            "channels",
-                            "expected R, G, B (or X, Y, Z)",
-                        ));
-                    }
-                };
-                Some(PodVec((0..n).map(|i| [x[i], y[i], z[i]]).collect()))
-            }
-            None => None,
-        };
-        set.views.push(View {
-            id: id.clone(),
-            width,
-            height,
-            intrinsics,
-            pose,
-            captured_at: v
-                .get("captured_at")
-                .and_then(Value::as_str)
-                .map(str::to_owned),
-            image: PodVec(img.pixels().map(|p| p.0).collect()),
-            arch: read_instances("arch")?,
-            clutter: read_instances("clutter")?,
-            material,
-            depth,
-            normal,
-        });
+            .map(PodVec))
     }
-    Ok(set)
+
+    fn normal(&self) -> Result<Option<PodVec<[f32; 3]>>, StageError> {
+        let Some(ch) = self.exr_channels("normal")? else {
+            return Ok(None);
+        };
+        let (x, y, z) = match (
+            pick_channel(&ch, &["R", "X"]),
+            pick_channel(&ch, &["G", "Y"]),
+            pick_channel(&ch, &["B", "Z"]),
+        ) {
+            (Some(x), Some(y), Some(z)) => (x, y, z),
+            _ => {
+                return Err(StageError::bad_input(
+                    &self.output("normal", "exr"),
+                    "channels",
+                    "expected R, G, B (or X, Y, Z)",
+                ));
+            }
+        };
+        let n = (self.width * self.height) as usize;
+        Ok(Some(PodVec((0..n).map(|i| [x[i], y[i], z[i]]).collect())))
+    }
+}
+
+/// The class table `<png stem>.json` that must sit beside an instance PNG.
+fn read_instance_classes(png: &Path) -> Result<BTreeMap<u16, String>, StageError> {
+    let json = png.with_extension("json");
+    let Ok(t) = std::fs::read_to_string(&json) else {
+        return Err(StageError::bad_input(
+            png,
+            "classes",
+            format!("expected the class table {} beside it", json.display()),
+        ));
+    };
+    let m: BTreeMap<String, String> = serde_json::from_str(&t).map_err(|e| {
+        StageError::bad_input(
+            &json,
+            "contents",
+            format!("expected {{\"<instance id>\": \"<class>\"}}: {e}"),
+        )
+    })?;
+    m.into_iter()
+        .map(|(k, c)| {
+            k.parse::<u16>().map(|k| (k, c)).map_err(|_| {
+                StageError::bad_input(
+                    &json,
+                    format!("key {k:?}"),
+                    "expected an instance id 1-65535",
+                )
+            })
+        })
+        .collect()
+}
+
+/// The first of `names` present among the channels.
+fn pick_channel(ch: &[(String, Vec<f32>)], names: &[&str]) -> Option<Vec<f32>> {
+    names
+        .iter()
+        .find_map(|n| ch.iter().find(|c| c.0 == *n).map(|c| c.1.clone()))
 }
 
 fn png(w: u32, h: u32, color: image::ExtendedColorType, bytes: &[u8]) -> Result<Vec<u8>, String> {

@@ -216,36 +216,12 @@ fn ground(t: &TerrainModel, pts: &[[f64; 2]]) -> (f64, f64) {
 }
 
 fn add_lot(city: &mut City, d: &Draw, p: &SynthCityParams, lot: u64, b: [f64; 4]) {
-    let (w, h) = (b[2] - b[0], b[3] - b[1]);
-    let big = w >= 24.0 && h >= 24.0;
-    let kind = d.pick(
-        2,
-        lot,
-        &[
-            (Kind::Flat, 0.26),
-            (Kind::LShape, 0.12),
-            (Kind::Courtyard, if big { 0.10 } else { 0.0 }),
-            (Kind::Gabled, 0.17),
-            (Kind::Hipped, 0.13),
-            (Kind::Stepped, 0.12),
-            (Kind::Domed, 0.04),
-            (Kind::Park, 0.06),
-        ],
-    );
+    let kind = lot_kind(d, lot, b);
     if kind == Kind::Park {
-        for k in 0..3 {
-            let pos = [
-                d.range(30, lot * 8 + k, b[0] + 3.0, b[2] - 3.0),
-                d.range(31, lot * 8 + k, b[1] + 3.0, b[3] - 3.0),
-            ];
-            add_tree(city, d, p, pos);
-        }
+        add_park(city, d, p, lot, b);
         return;
     }
-    // Setbacks from the lot edges.
-    let s = |k: u64| d.range(3, lot * 4 + k, 1.0, 3.0);
-    let (x0, y0, x1, y1) = (b[0] + s(0), b[1] + s(1), b[2] - s(2), b[3] - s(3));
-    let (fw, fh) = (x1 - x0, y1 - y0);
+    let built = set_back(d, lot, b);
     let id = format!("building-{}", city.buildings.len());
     let facade = d.pick(
         4,
@@ -258,156 +234,11 @@ fn add_lot(city: &mut City, d: &Draw, p: &SynthCityParams, lot: u64, b: [f64; 4]
             (Material::Wood, 0.05),
         ],
     );
-    let flat_eave = d.range(5, lot, p.height_m.0, p.height_m.1);
-    let low_eave = d.range(5, lot, 6.0, 12.0f64.max(p.height_m.0));
-    let (outline, holes, roof, eave_m, roof_material) = match kind {
-        Kind::Flat | Kind::Domed => {
-            let roof = if kind == Kind::Domed {
-                let r = 0.35 * fw.min(fh);
-                Roof::Domed {
-                    center: [(x0 + x1) / 2.0, (y0 + y1) / 2.0],
-                    radius_m: r,
-                    height_m: d.range(6, lot, 0.6, 1.0) * r,
-                }
-            } else {
-                Roof::Flat
-            };
-            (
-                rect_poly(x0, y0, x1, y1),
-                vec![],
-                roof,
-                flat_eave,
-                if kind == Kind::Domed {
-                    Material::Metal
-                } else {
-                    Material::Concrete
-                },
-            )
-        }
-        Kind::LShape => {
-            let (cx, cy) = (
-                x0 + fw * d.range(7, lot, 0.4, 0.6),
-                y0 + fh * d.range(8, lot, 0.4, 0.6),
-            );
-            let l = vec![[x0, y0], [x1, y0], [x1, cy], [cx, cy], [cx, y1], [x0, y1]];
-            (l, vec![], Roof::Flat, flat_eave, Material::Concrete)
-        }
-        Kind::Courtyard => {
-            let (mx, my) = (
-                fw * d.range(9, lot, 0.25, 0.32),
-                fh * d.range(10, lot, 0.25, 0.32),
-            );
-            (
-                rect_poly(x0, y0, x1, y1),
-                vec![rect_poly(x0 + mx, y0 + my, x1 - mx, y1 - my)],
-                Roof::Flat,
-                flat_eave.min(20.0),
-                Material::Concrete,
-            )
-        }
-        Kind::Gabled | Kind::Hipped => {
-            // The ridge runs along the longer side.
-            let rect = if fw >= fh {
-                Rect {
-                    corner: [x0, y0],
-                    length: fw,
-                    width: fh,
-                    heading: 0.0,
-                }
-            } else {
-                Rect {
-                    corner: [x1, y0],
-                    length: fh,
-                    width: fw,
-                    heading: std::f64::consts::FRAC_PI_2,
-                }
-            };
-            let ridge_m = d.range(11, lot, 0.25, 0.45) * rect.width.min(14.0);
-            let roof = if kind == Kind::Gabled {
-                Roof::Gabled { rect, ridge_m }
-            } else {
-                Roof::Hipped { rect, ridge_m }
-            };
-            let mat = d.pick(
-                12,
-                lot,
-                &[(Material::Metal, 0.4), (Material::Concrete, 0.6)],
-            );
-            (rect.corners(), vec![], roof, low_eave, mat)
-        }
-        Kind::Stepped => {
-            let (ix, iy) = (
-                fw * d.range(13, lot, 0.15, 0.3),
-                fh * d.range(14, lot, 0.15, 0.3),
-            );
-            let upper = Polygon::normalized(rect_poly(x0 + ix, y0 + iy, x1 - ix, y1 - iy), vec![])
-                .expect("inner rectangle is valid");
-            (
-                rect_poly(x0, y0, x1, y1),
-                vec![],
-                Roof::Stepped {
-                    upper,
-                    upper_m: d.range(15, lot, 3.5, 9.0),
-                },
-                flat_eave,
-                Material::Concrete,
-            )
-        }
-        Kind::Park => unreachable!("parks return early"),
-    };
-    let footprint = Polygon::normalized(outline, holes).expect("generated outlines are valid");
+    let massing = massing(kind, d, p, lot, built);
+    let footprint =
+        Polygon::normalized(massing.outline, massing.holes).expect("generated outlines are valid");
     let (lo, hi) = ground(&p.terrain, &footprint.exterior);
-    let mut furniture = Vec::new();
-    if matches!(roof, Roof::Flat | Roof::Stepped { .. }) {
-        // HVAC units and chimneys kept clear of the outline and any courtyard.
-        for k in 0..d.pick(16, lot, &[(0u64, 0.3), (1, 0.35), (2, 0.25), (3, 0.1)]) {
-            let hvac = d.u(17, lot * 4 + k) < 0.7;
-            let size = if hvac {
-                [
-                    d.range(18, lot * 4 + k, 2.0, 4.0),
-                    d.range(19, lot * 4 + k, 1.5, 3.0),
-                    1.6,
-                ]
-            } else {
-                [0.7, 0.7, 1.8]
-            };
-            let c = [
-                x0 + 2.5 + (fw - 5.0) * d.u(20, lot * 4 + k),
-                y0 + 2.5 + (fh - 5.0) * d.u(21, lot * 4 + k),
-            ];
-            let corners = Rect {
-                corner: [c[0] - size[0] / 2.0, c[1] - size[1] / 2.0],
-                length: size[0],
-                width: size[1],
-                heading: 0.0,
-            }
-            .corners();
-            let inside = corners.iter().all(|q| {
-                crate::geom::polygon::point_in_ring(*q, &footprint.exterior)
-                    && !footprint
-                        .holes
-                        .iter()
-                        .any(|h| crate::geom::polygon::point_in_ring(*q, h))
-            });
-            let clear_of_tier = match &roof {
-                Roof::Stepped { upper, .. } => !corners
-                    .iter()
-                    .any(|q| crate::geom::polygon::point_in_ring(*q, &upper.exterior)),
-                _ => true,
-            };
-            if inside && clear_of_tier {
-                furniture.push(RoofBox {
-                    kind: if hvac {
-                        "hvac".into()
-                    } else {
-                        "chimney".into()
-                    },
-                    center: c,
-                    size,
-                });
-            }
-        }
-    }
+    let furniture = roof_furniture(d, lot, built, &footprint, &massing.roof);
     let features = facade_features(
         d,
         lot,
@@ -415,7 +246,7 @@ fn add_lot(city: &mut City, d: &Draw, p: &SynthCityParams, lot: u64, b: [f64; 4]
         &footprint,
         hi,
         lo - 1.0,
-        hi + eave_m,
+        hi + massing.eave_m,
         facade,
     );
     city.buildings.push(BuildingSpec {
@@ -423,13 +254,263 @@ fn add_lot(city: &mut City, d: &Draw, p: &SynthCityParams, lot: u64, b: [f64; 4]
         footprint,
         ground_z: hi,
         base_z: lo - 1.0,
-        eave_m,
-        roof,
+        eave_m: massing.eave_m,
+        roof: massing.roof,
         furniture,
         facade,
-        roof_material,
+        roof_material: massing.roof_material,
         features,
     });
+}
+
+/// Courtyards only fit on big lots.
+fn lot_kind(d: &Draw, lot: u64, b: [f64; 4]) -> Kind {
+    let (w, h) = (b[2] - b[0], b[3] - b[1]);
+    let big = w >= 24.0 && h >= 24.0;
+    d.pick(
+        2,
+        lot,
+        &[
+            (Kind::Flat, 0.26),
+            (Kind::LShape, 0.12),
+            (Kind::Courtyard, if big { 0.10 } else { 0.0 }),
+            (Kind::Gabled, 0.17),
+            (Kind::Hipped, 0.13),
+            (Kind::Stepped, 0.12),
+            (Kind::Domed, 0.04),
+            (Kind::Park, 0.06),
+        ],
+    )
+}
+
+fn add_park(city: &mut City, d: &Draw, p: &SynthCityParams, lot: u64, b: [f64; 4]) {
+    for k in 0..3 {
+        let pos = [
+            d.range(30, lot * 8 + k, b[0] + 3.0, b[2] - 3.0),
+            d.range(31, lot * 8 + k, b[1] + 3.0, b[3] - 3.0),
+        ];
+        add_tree(city, d, p, pos);
+    }
+}
+
+/// The part of lot `b` a building may cover: `[x0, y0, x1, y1]` after a setback from each edge.
+fn set_back(d: &Draw, lot: u64, b: [f64; 4]) -> [f64; 4] {
+    let s = |k: u64| d.range(3, lot * 4 + k, 1.0, 3.0);
+    [b[0] + s(0), b[1] + s(1), b[2] - s(2), b[3] - s(3)]
+}
+
+/// A building's shape before its furniture and facade features.
+struct Massing {
+    outline: Vec<[f64; 2]>,
+    holes: Vec<Vec<[f64; 2]>>,
+    roof: Roof,
+    eave_m: f64,
+    roof_material: Material,
+}
+
+/// The massing of a `kind` building on the set-back lot `built`.
+fn massing(kind: Kind, d: &Draw, p: &SynthCityParams, lot: u64, built: [f64; 4]) -> Massing {
+    let flat_eave = d.range(5, lot, p.height_m.0, p.height_m.1);
+    let low_eave = d.range(5, lot, 6.0, 12.0f64.max(p.height_m.0));
+    match kind {
+        Kind::Flat | Kind::Domed => flat_or_domed(kind == Kind::Domed, d, lot, built, flat_eave),
+        Kind::LShape => l_shaped(d, lot, built, flat_eave),
+        Kind::Courtyard => courtyard(d, lot, built, flat_eave),
+        Kind::Gabled | Kind::Hipped => pitched(kind == Kind::Gabled, d, lot, built, low_eave),
+        Kind::Stepped => stepped(d, lot, built, flat_eave),
+        Kind::Park => unreachable!("parks return early"),
+    }
+}
+
+fn flat_or_domed(domed: bool, d: &Draw, lot: u64, built: [f64; 4], eave_m: f64) -> Massing {
+    let [x0, y0, x1, y1] = built;
+    let (fw, fh) = (x1 - x0, y1 - y0);
+    let roof = if domed {
+        let r = 0.35 * fw.min(fh);
+        Roof::Domed {
+            center: [(x0 + x1) / 2.0, (y0 + y1) / 2.0],
+            radius_m: r,
+            height_m: d.range(6, lot, 0.6, 1.0) * r,
+        }
+    } else {
+        Roof::Flat
+    };
+    Massing {
+        outline: rect_poly(x0, y0, x1, y1),
+        holes: vec![],
+        roof,
+        eave_m,
+        roof_material: if domed {
+            Material::Metal
+        } else {
+            Material::Concrete
+        },
+    }
+}
+
+fn l_shaped(d: &Draw, lot: u64, built: [f64; 4], eave_m: f64) -> Massing {
+    let [x0, y0, x1, y1] = built;
+    let (fw, fh) = (x1 - x0, y1 - y0);
+    let (cx, cy) = (
+        x0 + fw * d.range(7, lot, 0.4, 0.6),
+        y0 + fh * d.range(8, lot, 0.4, 0.6),
+    );
+    Massing {
+        outline: vec![[x0, y0], [x1, y0], [x1, cy], [cx, cy], [cx, y1], [x0, y1]],
+        holes: vec![],
+        roof: Roof::Flat,
+        eave_m,
+        roof_material: Material::Concrete,
+    }
+}
+
+fn courtyard(d: &Draw, lot: u64, built: [f64; 4], flat_eave: f64) -> Massing {
+    let [x0, y0, x1, y1] = built;
+    Massing {
+        outline: rect_poly(x0, y0, x1, y1),
+        holes: vec![inset_rect(d, lot, built, [9, 10], (0.25, 0.32))],
+        roof: Roof::Flat,
+        eave_m: flat_eave.min(20.0),
+        roof_material: Material::Concrete,
+    }
+}
+
+/// A gabled or hipped building.
+fn pitched(gabled: bool, d: &Draw, lot: u64, built: [f64; 4], eave_m: f64) -> Massing {
+    let [x0, y0, x1, y1] = built;
+    let (fw, fh) = (x1 - x0, y1 - y0);
+    // The ridge runs along the longer side.
+    let rect = if fw >= fh {
+        Rect {
+            corner: [x0, y0],
+            length: fw,
+            width: fh,
+            heading: 0.0,
+        }
+    } else {
+        Rect {
+            corner: [x1, y0],
+            length: fh,
+            width: fw,
+            heading: std::f64::consts::FRAC_PI_2,
+        }
+    };
+    let ridge_m = d.range(11, lot, 0.25, 0.45) * rect.width.min(14.0);
+    let roof = if gabled {
+        Roof::Gabled { rect, ridge_m }
+    } else {
+        Roof::Hipped { rect, ridge_m }
+    };
+    Massing {
+        outline: rect.corners(),
+        holes: vec![],
+        roof,
+        eave_m,
+        roof_material: d.pick(
+            12,
+            lot,
+            &[(Material::Metal, 0.4), (Material::Concrete, 0.6)],
+        ),
+    }
+}
+
+fn stepped(d: &Draw, lot: u64, built: [f64; 4], eave_m: f64) -> Massing {
+    let [x0, y0, x1, y1] = built;
+    let upper = Polygon::normalized(inset_rect(d, lot, built, [13, 14], (0.15, 0.3)), vec![])
+        .expect("inner rectangle is valid");
+    Massing {
+        outline: rect_poly(x0, y0, x1, y1),
+        holes: vec![],
+        roof: Roof::Stepped {
+            upper,
+            upper_m: d.range(15, lot, 3.5, 9.0),
+        },
+        eave_m,
+        roof_material: Material::Concrete,
+    }
+}
+
+/// `built` shrunk on each side by a drawn fraction (in `frac`) of its width and depth, drawn by
+/// `purposes` (x, y).
+fn inset_rect(
+    d: &Draw,
+    lot: u64,
+    built: [f64; 4],
+    purposes: [u64; 2],
+    frac: (f64, f64),
+) -> Vec<[f64; 2]> {
+    let [x0, y0, x1, y1] = built;
+    let (fw, fh) = (x1 - x0, y1 - y0);
+    let (ix, iy) = (
+        fw * d.range(purposes[0], lot, frac.0, frac.1),
+        fh * d.range(purposes[1], lot, frac.0, frac.1),
+    );
+    rect_poly(x0 + ix, y0 + iy, x1 - ix, y1 - iy)
+}
+
+/// HVAC units and chimneys on flat roofs (and a stepped roof's lower tier), kept clear of the
+/// outline, any courtyard and the upper tier.
+fn roof_furniture(
+    d: &Draw,
+    lot: u64,
+    built: [f64; 4],
+    footprint: &Polygon,
+    roof: &Roof,
+) -> Vec<RoofBox> {
+    let mut furniture = Vec::new();
+    if !matches!(roof, Roof::Flat | Roof::Stepped { .. }) {
+        return furniture;
+    }
+    let [x0, y0, x1, y1] = built;
+    let (fw, fh) = (x1 - x0, y1 - y0);
+    for k in 0..d.pick(16, lot, &[(0u64, 0.3), (1, 0.35), (2, 0.25), (3, 0.1)]) {
+        let hvac = d.u(17, lot * 4 + k) < 0.7;
+        let size = if hvac {
+            [
+                d.range(18, lot * 4 + k, 2.0, 4.0),
+                d.range(19, lot * 4 + k, 1.5, 3.0),
+                1.6,
+            ]
+        } else {
+            [0.7, 0.7, 1.8]
+        };
+        let c = [
+            x0 + 2.5 + (fw - 5.0) * d.u(20, lot * 4 + k),
+            y0 + 2.5 + (fh - 5.0) * d.u(21, lot * 4 + k),
+        ];
+        let corners = Rect {
+            corner: [c[0] - size[0] / 2.0, c[1] - size[1] / 2.0],
+            length: size[0],
+            width: size[1],
+            heading: 0.0,
+        }
+        .corners();
+        if fits_on_roof(&corners, footprint, roof) {
+            furniture.push(RoofBox {
+                kind: if hvac {
+                    "hvac".into()
+                } else {
+                    "chimney".into()
+                },
+                center: c,
+                size,
+            });
+        }
+    }
+    furniture
+}
+
+fn fits_on_roof(corners: &[[f64; 2]], footprint: &Polygon, roof: &Roof) -> bool {
+    use crate::geom::polygon::point_in_ring;
+    let inside = corners.iter().all(|q| {
+        point_in_ring(*q, &footprint.exterior)
+            && !footprint.holes.iter().any(|h| point_in_ring(*q, h))
+    });
+    let clear_of_tier = match roof {
+        Roof::Stepped { upper, .. } => !corners.iter().any(|q| point_in_ring(*q, &upper.exterior)),
+        _ => true,
+    };
+    inside && clear_of_tier
 }
 
 /// Storey height, metres.

@@ -97,125 +97,185 @@ impl Stage for Evaluate {
                 .iter()
                 .any(|l| l.path_loss_db.is_none() && l.tx_eirp_dbm.is_none())
         });
-        // (tx id, distance, frequency, predicted, measured loss (up to an offset if unknown), los)
-        let mut rows = Vec::new();
-        for (pl, ml) in pred.links.iter().zip(&meas.links) {
-            let Some(predicted) =
-                pl.path_loss_db
-                    .filter(|v| !v.is_nan())
-                    .and_then(|v| match p.floor_db {
-                        Some(f) => Some(v.min(f)),
-                        None => v.is_finite().then_some(v),
-                    })
-            else {
-                continue;
-            };
-            let Some(measured) = measured_loss(ml) else {
-                continue;
-            };
-            let d = link_distance(ml, terrain);
-            rows.push((
-                ml.tx.id.clone(),
-                d,
-                ml.freq_hz,
-                predicted,
-                measured,
-                pl.los.or(ml.los),
-            ));
-        }
+        let mut links = scored_links(p, pred, meas, terrain);
         let mut m = Metrics::default();
-        if let Some(f) = p.floor_db {
-            m.set("floor_db", f);
-        } else {
-            let no_path = pred
-                .links
-                .iter()
-                .filter(|l| l.path_loss_db.is_some_and(f64::is_infinite))
-                .count();
-            m.set("links_no_path", no_path as f64);
-        }
-        m.set("links", meas.links.len() as f64);
-        m.set("links_scored", rows.len() as f64);
-        if rows.is_empty() {
+        set_link_counts(&mut m, p, pred, meas, links.len());
+        if links.is_empty() {
             return Ok(m);
         }
-        // Per-transmitter offsets: the mean of measured − predicted, taken out of the measurements.
         if fit_offsets {
-            let mut by_tx: BTreeMap<String, (f64, usize)> = BTreeMap::new();
-            for r in &rows {
-                let e = by_tx.entry(r.0.clone()).or_default();
-                e.0 += r.4 - r.3;
-                e.1 += 1;
-            }
-            for (tx, (sum, n)) in &by_tx {
-                let off = sum / *n as f64;
-                m.set(format!("offset_db/{tx}"), off);
-                for r in rows.iter_mut().filter(|r| &r.0 == tx) {
-                    r.4 -= off;
-                }
-            }
+            take_out_tx_offsets(&mut m, &mut links);
         }
-        // Per transmitter (a cell of a drive test): P2P after its offset.
-        let mut per_tx: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
-        for r in &rows {
-            per_tx.entry(r.0.as_str()).or_default().push(r.3 - r.4);
-        }
-        if per_tx.len() > 1 {
-            for (tx, e) in &per_tx {
-                let s = p2p(e);
-                m.set(format!("tx/{tx}/n"), e.len() as f64);
-                m.set(format!("tx/{tx}/p2p_rmse_db"), s.rmse);
-                m.set(format!("tx/{tx}/p2p_std_db"), s.std);
-            }
-        }
+        set_per_tx_p2p(&mut m, &links);
         // All links, then those the predictions call LOS, then NLOS.
         for (prefix, want) in [("", None), ("los/", Some(true)), ("nlos/", Some(false))] {
-            let g: Vec<_> = rows
+            let group: Vec<&ScoredLink> = links
                 .iter()
-                .filter(|r| want.is_none() || r.5 == want)
+                .filter(|l| want.is_none() || l.los == want)
                 .collect();
-            if g.is_empty() {
-                continue;
-            }
-            let d: Vec<f64> = g.iter().map(|r| r.1).collect();
-            let f: Vec<f64> = g.iter().map(|r| r.2).collect();
-            let pr: Vec<f64> = g.iter().map(|r| r.3).collect();
-            let ms: Vec<f64> = g.iter().map(|r| r.4).collect();
-            let errors: Vec<f64> = pr.iter().zip(&ms).map(|(p, m)| p - m).collect();
-            let s = p2p(&errors);
-            m.set(format!("{prefix}n"), g.len() as f64);
-            m.set(format!("{prefix}p2p_me_db"), s.me);
-            m.set(format!("{prefix}p2p_rmse_db"), s.rmse);
-            m.set(format!("{prefix}p2p_std_db"), s.std);
-            let rms_about = |line: &dyn Fn(usize) -> f64| {
-                (ms.iter()
-                    .enumerate()
-                    .map(|(i, v)| (v - line(i)).powi(2))
-                    .sum::<f64>()
-                    / ms.len() as f64)
-                    .sqrt()
-            };
-            if p.model_is_trend {
-                m.set(format!("{prefix}pd_rmse_db"), s.rmse);
-                m.set(format!("{prefix}ci_rmse_db"), s.rmse);
-            } else {
-                let (alpha, beta) = fit_power_distance(&d, &pr);
-                m.set(format!("{prefix}pd_alpha_db"), alpha);
-                m.set(format!("{prefix}pd_beta"), beta);
-                m.set(
-                    format!("{prefix}pd_rmse_db"),
-                    rms_about(&|i| alpha + 10.0 * beta * d[i].log10()),
-                );
-                let n = fit_close_in(&d, &pr, &f);
-                m.set(format!("{prefix}ci_n"), n);
-                m.set(
-                    format!("{prefix}ci_rmse_db"),
-                    rms_about(&|i| fspl_db(1.0, f[i]) + 10.0 * n * d[i].log10()),
-                );
+            if !group.is_empty() {
+                set_group_metrics(&mut m, p, prefix, &group);
             }
         }
         Ok(m)
     }
+}
+
+/// A link both the model and the measurements give a path loss for.
+struct ScoredLink {
+    /// The transmitter's id.
+    tx: String,
+    /// Link distance, metres.
+    distance_m: f64,
+    /// Carrier frequency, Hz.
+    freq_hz: f64,
+    /// Predicted path loss, dB (no more than the floor, when there is one).
+    predicted_db: f64,
+    /// Measured path loss, dB: up to the transmitter's offset while the EIRP is unknown.
+    measured_db: f64,
+    /// Line of sight, by the prediction, else by the measurement.
+    los: Option<bool>,
+}
+
+/// The links, in order, with a usable prediction and measurement; a prediction beyond the floor
+/// is taken as the floor.
+fn scored_links(
+    p: &EvaluateParams,
+    pred: &Measurements,
+    meas: &Measurements,
+    terrain: Option<&Raster>,
+) -> Vec<ScoredLink> {
+    let mut links = Vec::new();
+    for (pl, ml) in pred.links.iter().zip(&meas.links) {
+        let Some(predicted) =
+            pl.path_loss_db
+                .filter(|v| !v.is_nan())
+                .and_then(|v| match p.floor_db {
+                    Some(f) => Some(v.min(f)),
+                    None => v.is_finite().then_some(v),
+                })
+        else {
+            continue;
+        };
+        let Some(measured) = measured_loss(ml) else {
+            continue;
+        };
+        links.push(ScoredLink {
+            tx: ml.tx.id.clone(),
+            distance_m: link_distance(ml, terrain),
+            freq_hz: ml.freq_hz,
+            predicted_db: predicted,
+            measured_db: measured,
+            los: pl.los.or(ml.los),
+        });
+    }
+    links
+}
+
+fn set_link_counts(
+    m: &mut Metrics,
+    p: &EvaluateParams,
+    pred: &Measurements,
+    meas: &Measurements,
+    scored: usize,
+) {
+    if let Some(f) = p.floor_db {
+        m.set("floor_db", f);
+    } else {
+        let no_path = pred
+            .links
+            .iter()
+            .filter(|l| l.path_loss_db.is_some_and(f64::is_infinite))
+            .count();
+        m.set("links_no_path", no_path as f64);
+    }
+    m.set("links", meas.links.len() as f64);
+    m.set("links_scored", scored as f64);
+}
+
+/// Per-transmitter offsets: the mean of measured − predicted, taken out of the measurements.
+fn take_out_tx_offsets(m: &mut Metrics, links: &mut [ScoredLink]) {
+    let mut by_tx: BTreeMap<String, (f64, usize)> = BTreeMap::new();
+    for l in links.iter() {
+        let e = by_tx.entry(l.tx.clone()).or_default();
+        e.0 += l.measured_db - l.predicted_db;
+        e.1 += 1;
+    }
+    for (tx, (sum, n)) in &by_tx {
+        let off = sum / *n as f64;
+        m.set(format!("offset_db/{tx}"), off);
+        for l in links.iter_mut().filter(|l| &l.tx == tx) {
+            l.measured_db -= off;
+        }
+    }
+}
+
+/// Per transmitter (a cell of a drive test): P2P after its offset.
+fn set_per_tx_p2p(m: &mut Metrics, links: &[ScoredLink]) {
+    let mut per_tx: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
+    for l in links {
+        per_tx
+            .entry(l.tx.as_str())
+            .or_default()
+            .push(l.predicted_db - l.measured_db);
+    }
+    if per_tx.len() > 1 {
+        for (tx, e) in &per_tx {
+            let s = p2p(e);
+            m.set(format!("tx/{tx}/n"), e.len() as f64);
+            m.set(format!("tx/{tx}/p2p_rmse_db"), s.rmse);
+            m.set(format!("tx/{tx}/p2p_std_db"), s.std);
+        }
+    }
+}
+
+/// P2P and trend-line metrics of one group of links, named `<prefix><metric>`.
+fn set_group_metrics(m: &mut Metrics, p: &EvaluateParams, prefix: &str, group: &[&ScoredLink]) {
+    let d: Vec<f64> = group.iter().map(|l| l.distance_m).collect();
+    let f: Vec<f64> = group.iter().map(|l| l.freq_hz).collect();
+    let pr: Vec<f64> = group.iter().map(|l| l.predicted_db).collect();
+    let ms: Vec<f64> = group.iter().map(|l| l.measured_db).collect();
+    let errors: Vec<f64> = pr.iter().zip(&ms).map(|(p, m)| p - m).collect();
+    let s = p2p(&errors);
+    m.set(format!("{prefix}n"), group.len() as f64);
+    m.set(format!("{prefix}p2p_me_db"), s.me);
+    m.set(format!("{prefix}p2p_rmse_db"), s.rmse);
+    m.set(format!("{prefix}p2p_std_db"), s.std);
+    if p.model_is_trend {
+        m.set(format!("{prefix}pd_rmse_db"), s.rmse);
+        m.set(format!("{prefix}ci_rmse_db"), s.rmse);
+    } else {
+        set_fitted_trends(m, prefix, &d, &f, &pr, &ms);
+    }
+}
+
+/// The power-distance and close-in lines fitted to the predictions `pr`, and the RMSE of the
+/// measurements `ms` about each.
+fn set_fitted_trends(m: &mut Metrics, prefix: &str, d: &[f64], f: &[f64], pr: &[f64], ms: &[f64]) {
+    let (alpha, beta) = fit_power_distance(d, pr);
+    m.set(format!("{prefix}pd_alpha_db"), alpha);
+    m.set(format!("{prefix}pd_beta"), beta);
+    m.set(
+        format!("{prefix}pd_rmse_db"),
+        rms_about(ms, |i| alpha + 10.0 * beta * d[i].log10()),
+    );
+    let n = fit_close_in(d, pr, f);
+    m.set(format!("{prefix}ci_n"), n);
+    m.set(
+        format!("{prefix}ci_rmse_db"),
+        rms_about(ms, |i| fspl_db(1.0, f[i]) + 10.0 * n * d[i].log10()),
+    );
+}
+
+/// The RMS of `values` about `line`, which gives the value at each index.
+fn rms_about(values: &[f64], line: impl Fn(usize) -> f64) -> f64 {
+    (values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| (v - line(i)).powi(2))
+        .sum::<f64>()
+        / values.len() as f64)
+        .sqrt()
 }
 
 #[cfg(test)]

@@ -125,120 +125,172 @@ fn assemble_rings(mut parts: Vec<Vec<i64>>) -> Vec<Vec<i64>> {
 /// Three passes: building relations and their member ways; building ways and members' node ids;
 /// the coordinates of just those nodes.
 pub fn read_osm_buildings(path: &Path, wgs84: &ToSite) -> Result<Footprints, StageError> {
-    struct Rel {
-        id: i64,
-        outer: Vec<i64>,
-        inner: Vec<i64>,
-        tags: Tags,
-    }
-    let mut rels = Vec::new();
-    ElementReader::from_path(path)
-        .map_err(|e| osm_error(path, e))?
-        .for_each(|el| {
-            if let Element::Relation(r) = el {
-                let mp = r
-                    .tags()
-                    .any(|(k, v)| k == "type" && (v == "multipolygon" || v == "building"));
-                if mp && is_building(r.tags()) {
-                    let (mut outer, mut inner) = (Vec::new(), Vec::new());
-                    for m in r.members().filter(|m| m.member_type == RelMemberType::Way) {
-                        match m.role() {
-                            Ok("inner") => inner.push(m.member_id),
-                            _ => outer.push(m.member_id),
-                        }
-                    }
-                    rels.push(Rel {
-                        id: r.id(),
-                        outer,
-                        inner,
-                        tags: tags(r.tags()),
-                    });
-                }
-            }
-        })
-        .map_err(|e| osm_error(path, e))?;
+    let rels = read_building_relations(path)?;
     let members: HashSet<i64> = rels
         .iter()
         .flat_map(|r| r.outer.iter().chain(&r.inner))
         .copied()
         .collect();
+    let ways = read_ways(path, &members)?;
+    let nodes = read_node_coords(path, wgs84, &ways.refs)?;
+    let mut items = way_footprints(ways.buildings, &ways.refs, &nodes);
+    items.extend(relation_footprints(rels, &ways.refs, &nodes));
+    Ok(Footprints { items })
+}
 
-    let mut ways: HashMap<i64, Vec<i64>> = HashMap::new();
-    let mut building_ways = Vec::new();
+/// A multipolygon (or `type=building`) relation tagged as a building.
+struct Rel {
+    id: i64,
+    outer: Vec<i64>,
+    inner: Vec<i64>,
+    tags: Tags,
+}
+
+/// One pass over the file.
+fn for_each_element(path: &Path, f: impl FnMut(Element)) -> Result<(), StageError> {
     ElementReader::from_path(path)
         .map_err(|e| osm_error(path, e))?
-        .for_each(|el| {
-            if let Element::Way(w) = el {
-                let building = is_building(w.tags());
-                if building || members.contains(&w.id()) {
-                    ways.insert(w.id(), w.refs().collect());
-                }
-                if building {
-                    building_ways.push((w.id(), tags(w.tags())));
-                }
-            }
-        })
-        .map_err(|e| osm_error(path, e))?;
-    let needed: HashSet<i64> = ways.values().flatten().copied().collect();
+        .for_each(f)
+        .map_err(|e| osm_error(path, e))
+}
 
+fn read_building_relations(path: &Path) -> Result<Vec<Rel>, StageError> {
+    let mut rels = Vec::new();
+    for_each_element(path, |el| {
+        if let Element::Relation(r) = el {
+            let mp = r
+                .tags()
+                .any(|(k, v)| k == "type" && (v == "multipolygon" || v == "building"));
+            if mp && is_building(r.tags()) {
+                let (mut outer, mut inner) = (Vec::new(), Vec::new());
+                for m in r.members().filter(|m| m.member_type == RelMemberType::Way) {
+                    match m.role() {
+                        Ok("inner") => inner.push(m.member_id),
+                        _ => outer.push(m.member_id),
+                    }
+                }
+                rels.push(Rel {
+                    id: r.id(),
+                    outer,
+                    inner,
+                    tags: tags(r.tags()),
+                });
+            }
+        }
+    })?;
+    Ok(rels)
+}
+
+/// The ways footprints are made of.
+struct Ways {
+    /// The node ids of each building way and relation member.
+    refs: HashMap<i64, Vec<i64>>,
+    /// Building ways and their tags, in file order.
+    buildings: Vec<(i64, Tags)>,
+}
+
+fn read_ways(path: &Path, members: &HashSet<i64>) -> Result<Ways, StageError> {
+    let mut refs: HashMap<i64, Vec<i64>> = HashMap::new();
+    let mut buildings = Vec::new();
+    for_each_element(path, |el| {
+        if let Element::Way(w) = el {
+            let building = is_building(w.tags());
+            if building || members.contains(&w.id()) {
+                refs.insert(w.id(), w.refs().collect());
+            }
+            if building {
+                buildings.push((w.id(), tags(w.tags())));
+            }
+        }
+    })?;
+    Ok(Ways { refs, buildings })
+}
+
+/// Site coordinates of the nodes `ways` use.
+fn read_node_coords(
+    path: &Path,
+    wgs84: &ToSite,
+    ways: &HashMap<i64, Vec<i64>>,
+) -> Result<HashMap<i64, [f64; 2]>, StageError> {
+    let needed: HashSet<i64> = ways.values().flatten().copied().collect();
     let mut nodes: HashMap<i64, [f64; 2]> = HashMap::with_capacity(needed.len());
     let mut failure = None;
-    ElementReader::from_path(path)
-        .map_err(|e| osm_error(path, e))?
-        .for_each(|el| {
-            let (id, lat, lon) = match el {
-                Element::Node(n) => (n.id(), n.lat(), n.lon()),
-                Element::DenseNode(n) => (n.id(), n.lat(), n.lon()),
-                _ => return,
-            };
-            if needed.contains(&id) {
-                match wgs84.apply(lon, lat, 0.0) {
-                    Ok((x, y, _)) => {
-                        nodes.insert(id, [x, y]);
-                    }
-                    Err(m) => failure = Some(StageError::bad_input(path, format!("node {id}"), m)),
+    for_each_element(path, |el| {
+        let (id, lat, lon) = match el {
+            Element::Node(n) => (n.id(), n.lat(), n.lon()),
+            Element::DenseNode(n) => (n.id(), n.lat(), n.lon()),
+            _ => return,
+        };
+        if needed.contains(&id) {
+            match wgs84.apply(lon, lat, 0.0) {
+                Ok((x, y, _)) => {
+                    nodes.insert(id, [x, y]);
                 }
+                Err(m) => failure = Some(StageError::bad_input(path, format!("node {id}"), m)),
             }
-        })
-        .map_err(|e| osm_error(path, e))?;
-    if let Some(e) = failure {
-        return Err(e);
+        }
+    })?;
+    match failure {
+        Some(e) => Err(e),
+        None => Ok(nodes),
     }
-    // Ways whose nodes are missing (clipped at the extract's edge) are skipped, as osmium does.
-    let coords = |refs: &[i64]| {
-        refs.iter()
-            .map(|r| nodes.get(r).copied())
-            .collect::<Option<Vec<[f64; 2]>>>()
-    };
+}
 
-    let mut out = Footprints::default();
+/// Ways whose nodes are missing (clipped at the extract's edge) are skipped, as osmium does.
+fn coords(nodes: &HashMap<i64, [f64; 2]>, refs: &[i64]) -> Option<Vec<[f64; 2]>> {
+    refs.iter().map(|r| nodes.get(r).copied()).collect()
+}
+
+fn footprint(id: String, polygons: Vec<Polygon>, t: Tags) -> Footprint {
+    Footprint {
+        id,
+        polygons,
+        height_m: t.height_m,
+        min_height_m: t.min_height_m,
+        levels: t.levels,
+        min_level: t.min_level,
+    }
+}
+
+/// Closed building ways, each one polygon.
+fn way_footprints(
+    building_ways: Vec<(i64, Tags)>,
+    ways: &HashMap<i64, Vec<i64>>,
+    nodes: &HashMap<i64, [f64; 2]>,
+) -> Vec<Footprint> {
+    let mut out = Vec::new();
     for (id, t) in building_ways {
         let refs = &ways[&id];
         if refs.len() < 4 || refs.first() != refs.last() {
             continue;
         }
-        let Some(ring) = coords(refs) else { continue };
+        let Some(ring) = coords(nodes, refs) else {
+            continue;
+        };
         if let Some(p) = Polygon::normalized(ring, Vec::new()) {
-            out.items.push(Footprint {
-                id: format!("w{id}"),
-                polygons: vec![p],
-                height_m: t.height_m,
-                min_height_m: t.min_height_m,
-                levels: t.levels,
-                min_level: t.min_level,
-            });
+            out.push(footprint(format!("w{id}"), vec![p], t));
         }
     }
+    out
+}
+
+/// Building relations, their member ways joined into rings.
+fn relation_footprints(
+    rels: Vec<Rel>,
+    ways: &HashMap<i64, Vec<i64>>,
+    nodes: &HashMap<i64, [f64; 2]>,
+) -> Vec<Footprint> {
+    let rings =
+        |ids: &[i64]| assemble_rings(ids.iter().filter_map(|w| ways.get(w).cloned()).collect());
+    let mut out = Vec::new();
     for r in rels {
-        let rings =
-            |ids: &[i64]| assemble_rings(ids.iter().filter_map(|w| ways.get(w).cloned()).collect());
         let inner: Vec<Vec<[f64; 2]>> = rings(&r.inner)
             .iter()
-            .filter_map(|ring| coords(ring))
+            .filter_map(|ring| coords(nodes, ring))
             .collect();
         let mut polygons = Vec::new();
         for outer in rings(&r.outer) {
-            let Some(outer) = coords(&outer) else {
+            let Some(outer) = coords(nodes, &outer) else {
                 continue;
             };
             // Each inner ring goes to the outer ring that contains its first vertex.
@@ -250,20 +302,11 @@ pub fn read_osm_buildings(path: &Path, wgs84: &ToSite) -> Result<Footprints, Sta
             polygons.extend(Polygon::normalized(outer, holes));
         }
         if !polygons.is_empty() {
-            let t = r.tags;
-            out.items.push(Footprint {
-                id: format!("r{}", r.id),
-                polygons,
-                height_m: t.height_m,
-                min_height_m: t.min_height_m,
-                levels: t.levels,
-                min_level: t.min_level,
-            });
+            out.push(footprint(format!("r{}", r.id), polygons, r.tags));
         }
     }
-    Ok(out)
+    out
 }
-
 
 #[cfg(test)]
 mod tests {
