@@ -9,12 +9,12 @@ use clap::Args;
 use glam::DVec3;
 
 use kodama_nodes::io::export::{Encoded, encode};
+use kodama_nodes::io::sionna_xml::read_scene;
 use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::links_csv::{read_links, write_results};
 use kodama_nodes::rf::paths::{TraceOptions, trace_links};
 use kodama_nodes::rf::radiomap::{default_plane, radio_map};
 use kodama_nodes::rf::scene::RfScene;
-use kodama_nodes::io::sionna_xml::read_scene;
 use kodama_nodes::{Artifact, Site, StageError};
 
 /// Interaction switches shared by both commands.
@@ -69,7 +69,6 @@ impl Interactions {
             diffuse: self.diffuse && !self.no_diffuse,
             scattering_coefficient: self.scattering_coefficient,
             rays: self.rays,
-            foliage_db_per_m: None,
             ..Default::default()
         }
     }
@@ -132,14 +131,9 @@ fn stage_fail(e: StageError) -> Fail {
 }
 
 fn load(scene: &Path, i: &Interactions) -> Result<RfScene, Fail> {
-    if !(0.0..=1.0).contains(&i.scattering_coefficient) {
-        return Err((
-            2,
-            format!(
-                "error: --scattering-coefficient {} is not in [0, 1]",
-                i.scattering_coefficient
-            ),
-        ));
+    if let Err((field, m)) = i.options().check() {
+        let flag = field.replace('_', "-");
+        return Err((2, format!("error: --{flag}: {m}")));
     }
     if !(i.freq_hz > 0.0 && i.freq_hz.is_finite()) {
         return Err((

@@ -1,14 +1,16 @@
 //! The tracer against closed forms (rf.md): free space, the two-ray ground reflection, a wall's
-//! slab transmission loss.
+//! slab transmission loss, the knife edge, diffuse ground scattering, and foliage loss through
+//! overlapping canopies.
 
 use glam::DVec3;
 use num_complex::Complex64 as C64;
 
 use kodama_nodes::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
-use kodama_nodes::rf::materials::Material;
+use kodama_nodes::geom::mesh_build::cuboid;
 use kodama_nodes::rf::antenna::{Antenna, Pattern, Polarization};
 use kodama_nodes::rf::em::{fspl_db, permittivity, slab};
-use kodama_nodes::rf::paths::{InteractionKind, TraceOptions, trace_links};
+use kodama_nodes::rf::materials::Material;
+use kodama_nodes::rf::paths::{InteractionKind, LinkEnds, LinkPaths, TraceOptions, trace_links};
 use kodama_nodes::rf::scene::RfScene;
 use kodama_nodes::rf::wavelength;
 
@@ -34,6 +36,19 @@ fn options(max_depth: u32) -> TraceOptions {
     }
 }
 
+/// The first link's paths, isotropic vertical antennas at both ends.
+fn trace_one(scene: &RfScene, links: &[LinkEnds], opt: &TraceOptions) -> LinkPaths {
+    trace_links(
+        scene,
+        links,
+        &Antenna::default(),
+        &Antenna::default(),
+        opt,
+        F,
+    )
+    .remove(0)
+}
+
 fn horizontal() -> Antenna {
     Antenna {
         pattern: Pattern::Isotropic,
@@ -46,14 +61,7 @@ fn horizontal() -> Antenna {
 fn free_space_is_friis_exactly() {
     let scene = RfScene::new(&Scene::default(), F, false).unwrap();
     let links = [([0.0, 0.0, 10.0], [300.0, 40.0, 1.5])];
-    let r = &trace_links(
-        &scene,
-        &links,
-        &Antenna::default(),
-        &Antenna::default(),
-        &options(3),
-        F,
-    )[0];
+    let r = &trace_one(&scene, &links, &options(3));
     let d = (DVec3::from(links[0].0) - DVec3::from(links[0].1)).length();
     assert_eq!(r.paths.len(), 1);
     // Vertical polarisation on both ends, tilted link: the θ̂ vectors at both ends are parallel.
@@ -127,14 +135,7 @@ fn a_concrete_wall_costs_its_slab_transmission_loss() {
     )
     .unwrap();
     let links = [([0.0, 0.0, 0.0], [100.0, 0.0, 0.0])];
-    let r = &trace_links(
-        &scene,
-        &links,
-        &Antenna::default(),
-        &Antenna::default(),
-        &options(1),
-        F,
-    )[0];
+    let r = &trace_one(&scene, &links, &options(1));
     assert_eq!(r.paths.len(), 1);
     assert_eq!(
         r.paths[0].interactions[0].kind,
@@ -150,14 +151,7 @@ fn a_concrete_wall_costs_its_slab_transmission_loss() {
         transmission: false,
         ..options(1)
     };
-    let r = &trace_links(
-        &scene,
-        &links,
-        &Antenna::default(),
-        &Antenna::default(),
-        &blocked,
-        F,
-    )[0];
+    let r = &trace_one(&scene, &links, &blocked);
     assert!(r.paths.is_empty());
     assert_eq!(r.gain_db, f64::NEG_INFINITY);
 }
@@ -195,14 +189,7 @@ fn diffraction_round_a_blade_matches_the_knife_edge() {
     for h in [1.0, 2.0, 5.0] {
         // The ends sit h metres behind the tip's line, 60 m and 40 m from it.
         let (tx, rx) = ([-h, -60.0, 0.0], [-h, 40.0, 0.0]);
-        let r = &trace_links(
-            &rf,
-            &[(tx, rx)],
-            &Antenna::default(),
-            &Antenna::default(),
-            &opt,
-            F,
-        )[0];
+        let r = &trace_one(&rf, &[(tx, rx)], &opt);
         assert_eq!(r.paths.len(), 1, "h {h}: {:?}", r.paths);
         assert_eq!(
             r.paths[0].interactions[0].kind,
@@ -223,47 +210,11 @@ fn diffraction_round_a_blade_matches_the_knife_edge() {
     }
 }
 
-/// Diffuse scattering off a ground plane (S = 1, Lambertian) against the surface integral it
-/// estimates, done here by quadrature: P = (λ/4π)² ∫ |R_TM|² (cos θ_s / π) cos θ_i / (r_i² r_s²) dA
-/// (a vertically polarised wave meets horizontal ground as TM).
-#[test]
-fn diffuse_ground_scattering_matches_its_surface_integral() {
-    use kodama_nodes::rf::scattering::ScatteringPattern;
-    let g = 2000.0;
-    let ground = quad(
-        "ground",
-        [[-g, -g, 0.0], [g, -g, 0.0], [g, g, 0.0], [-g, g, 0.0]],
-        Material::MediumDryGround,
-    );
-    let scene = RfScene::new(
-        &Scene {
-            objects: vec![ground],
-        },
-        F,
-        false,
-    )
-    .unwrap();
-    let (tx, rx) = ([0.0, 0.0, 20.0], [60.0, 0.0, 5.0]);
-    let opt = TraceOptions {
-        max_depth: 1,
-        los: false,
-        reflection: true,
-        transmission: false,
-        diffuse: true,
-        scattering_coefficient: 1.0,
-        scattering_pattern: ScatteringPattern::Lambertian,
-        rays: 1_000_000,
-        ..Default::default()
-    };
-    let r = &trace_links(
-        &scene,
-        &[(tx, rx)],
-        &Antenna::default(),
-        &Antenna::default(),
-        &opt,
-        F,
-    )[0];
-    assert!(r.paths.is_empty(), "S = 1 leaves no specular path");
+/// P = (λ/4π)² ∫ |R_TM|² (cos θ_s / π) cos θ_i / (r_i² r_s²) dA over a ground plane, by
+/// quadrature, for a vertically polarised wave from (0, 0, 20) scattered to (60, 0, 5) (it meets
+/// horizontal ground as TM); `layer` = (γ dB/m, thickness m) of a horizontal foliage layer below
+/// both ends, which the legs cross at their incidence angles.
+fn diffuse_ground_quadrature_db(layer: Option<(f64, f64)>) -> f64 {
     let eta = permittivity(Material::MediumDryGround, F, false).unwrap();
     let lam = wavelength(F);
     let step = 0.5;
@@ -276,21 +227,161 @@ fn diffuse_ground_scattering_matches_its_surface_integral() {
             let rs2 = (x - 60.0) * (x - 60.0) + y * y + 25.0;
             let (cos_i, cos_s) = (20.0 / ri2.sqrt(), 5.0 / rs2.sqrt());
             let ((_, r_tm), _) = slab(cos_i, eta, 0.1, lam);
-            sum +=
-                r_tm.norm_sqr() * cos_s / std::f64::consts::PI * cos_i / (ri2 * rs2) * step * step;
+            let foliage = layer.map_or(1.0, |(gamma, d)| {
+                10f64.powf(-gamma * (d / cos_i + d / cos_s) / 10.0)
+            });
+            sum += r_tm.norm_sqr() * cos_s / std::f64::consts::PI * cos_i / (ri2 * rs2)
+                * foliage
+                * step
+                * step;
             y += step;
         }
         x += step;
     }
-    let expected = 10.0 * ((lam / (4.0 * std::f64::consts::PI)).powi(2) * sum).log10();
-    println!(
-        "diffuse ground: traced {:.3} dB, quadrature {expected:.3} dB",
-        r.diffuse_gain_db
+    10.0 * ((lam / (4.0 * std::f64::consts::PI)).powi(2) * sum).log10()
+}
+
+/// Diffuse scattering off a ground plane (S = 1, Lambertian) against the surface integral it
+/// estimates, done here by quadrature.
+#[test]
+fn diffuse_ground_scattering_matches_its_surface_integral() {
+    use kodama_nodes::rf::scattering::ScatteringPattern;
+    let g = 2000.0;
+    let ground = quad(
+        "ground",
+        [[-g, -g, 0.0], [g, -g, 0.0], [g, g, 0.0], [-g, g, 0.0]],
+        Material::MediumDryGround,
     );
-    assert!(
-        (r.diffuse_gain_db - expected).abs() < 0.2,
-        "{} vs {expected}",
-        r.diffuse_gain_db
+    let (tx, rx) = ([0.0, 0.0, 20.0], [60.0, 0.0, 5.0]);
+    let opt = TraceOptions {
+        max_depth: 1,
+        los: false,
+        reflection: true,
+        transmission: false,
+        diffuse: true,
+        scattering_coefficient: 1.0,
+        scattering_pattern: ScatteringPattern::Lambertian,
+        rays: 1_000_000,
+        foliage_db_per_m: Some(1.0),
+        ..Default::default()
+    };
+    // On bare ground, then under a 2 m foliage layer (z in [1, 3]) that both legs cross: foliage
+    // attenuates the diffuse legs, it never blocks them.
+    let layer = SceneObject {
+        id: "layer".into(),
+        class: ObjectClass::Vegetation,
+        mesh: cuboid(
+            [0.0, 0.0],
+            [4000.0, 4000.0, 2.0],
+            0.0,
+            1.0,
+            Material::Foliage,
+        ),
+    };
+    for (objects, foliage) in [
+        (vec![ground.clone()], None),
+        (vec![ground, layer], Some((1.0, 2.0))),
+    ] {
+        let scene = RfScene::new(&Scene { objects }, F, false).unwrap();
+        let r = &trace_one(&scene, &[(tx, rx)], &opt);
+        assert!(r.paths.is_empty(), "S = 1 leaves no specular path");
+        let expected = diffuse_ground_quadrature_db(foliage);
+        println!(
+            "diffuse ground, foliage {foliage:?}: traced {:.3} dB, quadrature {expected:.3} dB",
+            r.diffuse_gain_db
+        );
+        assert!(
+            (r.diffuse_gain_db - expected).abs() < 0.2,
+            "{foliage:?}: {} vs {expected}",
+            r.diffuse_gain_db
+        );
+        assert!((r.gain_db - r.diffuse_gain_db).abs() < 1e-9);
+    }
+}
+
+/// Two overlapping foliage boxes: box `a` spans x in [-5, 5], `b` x in [1, 11] (16 m together,
+/// 20 m summed), both wide across y and z, with tops at z = 5 and 6; or, `flat`, two wide
+/// horizontal slabs z in [20, 30] and [25, 35] (15 m together, 20 m summed).
+fn overlapping_canopies(flat: bool) -> Scene {
+    let boxes: [([f64; 2], [f64; 3], f64); 2] = if flat {
+        [
+            ([3.7, -2.9], [200.0, 200.0, 10.0], 20.0),
+            ([3.7, -2.9], [200.0, 200.0, 10.0], 25.0),
+        ]
+    } else {
+        [
+            ([0.0, 0.0], [10.0, 10.0, 10.0], -5.0),
+            ([6.0, 0.0], [10.0, 10.0, 10.0], -4.0),
+        ]
+    };
+    Scene {
+        objects: boxes
+            .iter()
+            .enumerate()
+            .map(|(k, &(c, size, z0))| SceneObject {
+                id: format!("canopy{k}"),
+                class: ObjectClass::Vegetation,
+                mesh: cuboid(c, size, 0.0, z0, Material::Foliage),
+            })
+            .collect(),
+    }
+}
+
+/// A link through two overlapping canopies loses α × the length of their union, not of each.
+#[test]
+fn a_link_through_overlapping_canopies_loses_their_union_once() {
+    let scene = RfScene::new(&overlapping_canopies(false), F, false).unwrap();
+    let links = [([-50.0, 0.3, 0.2], [50.0, 0.3, 0.2])];
+    // α set, and P.833's default at 3.5 GHz (0.7 dB/m, rf.md §5.1).
+    for (set, alpha) in [(Some(1.0), 1.0), (None, 0.7)] {
+        let opt = TraceOptions {
+            foliage_db_per_m: set,
+            ..options(3)
+        };
+        let r = &trace_one(&scene, &links, &opt);
+        assert_eq!(r.paths.len(), 1, "{:?}", r.paths);
+        assert!(
+            (r.paths[0].foliage_m - 16.0).abs() < 1e-6,
+            "{:?}",
+            r.paths[0]
+        );
+        let expected = -fspl_db(100.0, F) - alpha * 16.0;
+        assert!(
+            (r.gain_db - expected).abs() < 1e-6,
+            "α {alpha}: {} vs {expected}",
+            r.gain_db
+        );
+    }
+}
+
+/// A radio-map cell below two overlapping horizontal canopies loses α × the thickness of their
+/// union (15 m), not the 20 m of both: the map against the same rays through empty space.
+#[test]
+fn a_radio_map_cell_behind_overlapping_canopies_loses_their_union_once() {
+    use kodama_nodes::artifact::Grid;
+    use kodama_nodes::rf::radiomap::{MapPlane, radio_map};
+    let plane = MapPlane::plane(
+        Grid {
+            x0: -5.0,
+            y0: 5.0,
+            cell_m: 2.0,
+            width: 5,
+            height: 5,
+        },
+        0.0,
     );
-    assert!((r.gain_db - r.diffuse_gain_db).abs() < 1e-9);
+    let tx = DVec3::new(0.0, 0.0, 50.0);
+    let opt = TraceOptions {
+        rays: 400_000,
+        foliage_db_per_m: Some(1.0),
+        ..Default::default()
+    };
+    let map = |scene: &Scene| {
+        let rf = RfScene::new(scene, F, false).unwrap();
+        radio_map(&rf, tx, &Antenna::default(), &plane, &opt, F)
+    };
+    let (free, canopies) = (map(&Scene::default()), map(&overlapping_canopies(true)));
+    let loss_db = 10.0 * (free.at(2, 2) as f64 / canopies.at(2, 2) as f64).log10();
+    // Rays into the centre cell lean at most 1.6° off vertical: 15 m / cos θ ≤ 15.006 m.
+    assert!((loss_db - 15.0).abs() < 0.02, "{loss_db} dB");
 }

@@ -1,7 +1,8 @@
-//! First-order edge diffraction by the UTD (rf.md §3.1: Kouyoumjian-Pathak, with Luebbers'
-//! finite-conductivity reflection factors): the wedges of a scene's meshes, the diffraction point
-//! on each edge (Keller's cone: equal angles, the shortest path over the edge), and the diffracted
-//! field in the edge-fixed bases.
+//! Edge diffraction by the UTD (rf.md §3.1: Kouyoumjian-Pathak, with Luebbers'
+//! finite-conductivity reflection factors), the geometry and the field: the wedges of a scene's
+//! meshes, the diffraction point on each edge (Keller's cone: equal angles, the shortest path over
+//! the edge), and the diffracted field in the edge-fixed bases. Which wedges a link tries and the
+//! paths over them are `diffracted`'s.
 
 use std::collections::HashMap;
 use std::f64::consts::PI;

@@ -1,18 +1,27 @@
 //! Radio propagation physics: ITU-R P.2040 materials as complex permittivities, Fresnel and
-//! thin-slab coefficients, UTD wedge diffraction and the P.526 knife edge, antenna patterns, and
-//! the ray tracer built on them. Formulas and test vectors: `shared/reference/rf.md`.
+//! thin-slab coefficients, UTD wedge diffraction and the P.526 knife edge, antenna patterns,
+//! foliage loss (P.833), and the ray tracers built on them: links (`paths`, the entry point, and
+//! its parts `sequences`, `image_method`, `path_field`, `diffracted`, `diffuse`) and radio maps
+//! (`radiomap`). Formulas and test vectors: `shared/reference/rf.md`.
 
 pub mod antenna;
+pub mod diffracted;
 pub mod diffraction;
+pub mod diffuse;
 pub mod em;
+pub mod fibonacci;
 pub mod field;
+pub mod foliage;
+pub mod image_method;
 pub mod links_csv;
 pub mod materials;
+pub mod path_field;
 pub mod paths;
 pub mod pathloss_fit;
 pub mod radiomap;
 pub mod scattering;
 pub mod scene;
+pub mod sequences;
 pub mod utd;
 
 /// Speed of light in vacuum, m/s (Sionna's constant).

@@ -14,12 +14,12 @@ use crate::rng::{mix, unit};
 
 use super::antenna::Antenna;
 use super::antenna::spherical_basis;
+use super::fibonacci::fibonacci_sphere;
 use super::field::{self, CVec};
-use super::paths::{TraceOptions, fibonacci_sphere};
+use super::foliage::{FoliageDepth, loss_amplitude};
+use super::paths::TraceOptions;
 use super::scattering::pattern;
-use super::scene::RfScene;
-
-const EPS: f64 = 1e-3;
+use super::scene::{EPS, RfScene};
 
 /// Where a map is measured: the cells of `grid` on the horizontal plane at height `z`, or on a
 /// surface following the terrain (`lifted`, e.g. 1.5 m above it), which rays cross transparently.
@@ -127,7 +127,8 @@ pub fn default_plane(scene: &RfScene, cell_m: f64, z: f64) -> MapPlane {
 }
 
 /// The mean path gain (linear) of every cell of `plane` from a transmitter at `tx`; 0 where no
-/// ray arrived. `opt.rays` rays, interactions as `opt` enables them.
+/// ray arrived. `opt.rays` rays, interactions as `opt` enables them (not diffraction), foliage
+/// crossed at `opt.foliage_loss_db_per_m` (rf.md §5.1).
 pub fn radio_map(
     scene: &RfScene,
     tx: DVec3,
@@ -138,7 +139,10 @@ pub fn radio_map(
 ) -> Raster {
     let g = plane.grid;
     let omega = 4.0 * std::f64::consts::PI / opt.rays.max(1) as f64;
-    let foliage_db_per_m = opt.foliage_db_per_m.unwrap_or(0.2 * freq_hz / 1e9);
+    let foliage = Foliage {
+        at_tx: FoliageDepth::at(scene, tx),
+        db_per_m: opt.foliage_loss_db_per_m(freq_hz),
+    };
     // Fixed chunks, summed in chunk order: the same bytes at any thread count.
     let chunks: Vec<Vec<(u32, f64)>> = fibonacci_sphere(opt.rays)
         .enumerate()
@@ -147,16 +151,7 @@ pub fn radio_map(
             let mut hits = Vec::new();
             for (i, d) in rays {
                 shoot(
-                    scene,
-                    tx,
-                    d,
-                    i as u64,
-                    antenna,
-                    plane,
-                    opt,
-                    omega,
-                    foliage_db_per_m,
-                    &mut hits,
+                    scene, tx, d, i as u64, antenna, plane, opt, omega, &foliage, &mut hits,
                 );
             }
             hits
@@ -173,6 +168,14 @@ pub fn radio_map(
     }
 }
 
+/// The foliage a map's rays start in, and its loss.
+struct Foliage {
+    at_tx: FoliageDepth,
+    db_per_m: f64,
+}
+
+/// One ray from `tx` along `d0` to the end of its bounces: every crossing of the plane adds the
+/// power it carries to its cell (rf.md §7.2); foliage passed through attenuates it (§5.1).
 #[allow(clippy::too_many_arguments)]
 fn shoot(
     scene: &RfScene,
@@ -183,20 +186,20 @@ fn shoot(
     plane: &MapPlane,
     opt: &TraceOptions,
     omega: f64,
-    foliage_db_per_m: f64,
+    foliage: &Foliage,
     out: &mut Vec<(u32, f64)>,
 ) {
     let mut omega = omega;
     let mut e: CVec = field::real(DVec3::from(antenna.field(d0.to_array())));
     let (mut o, mut d) = (tx, d0);
-    let (mut depth, mut in_foliage) = (0u32, 0i32);
+    let (mut depth, mut foliage_depth) = (0u32, foliage.at_tx);
     let mut crossings = Vec::new();
     loop {
         let hit = scene.cast(o, d, EPS, f64::INFINITY);
         let t_end = hit.map_or(f64::INFINITY, |h| h.t);
         let foliage_amp = |len: f64| {
-            if in_foliage > 0 {
-                10f64.powf(-foliage_db_per_m * len / 20.0)
+            if foliage_depth.inside() {
+                loss_amplitude(foliage.db_per_m, len)
             } else {
                 1.0
             }
@@ -213,13 +216,11 @@ fn shoot(
         let a = foliage_amp(h.t);
         e = e.map(|c| c * a);
         let p = o + d * h.t;
-        let n = scene.normals[h.triangle as usize];
-        if scene.is_foliage(h.triangle) {
-            in_foliage += if d.dot(n) < 0.0 { 1 } else { -1 };
-            in_foliage = in_foliage.max(0);
+        if foliage_depth.cross(scene, h.triangle, d) {
             o = p;
             continue;
         }
+        let n = scene.normals[h.triangle as usize];
         depth += 1;
         if depth > opt.max_depth {
             return;

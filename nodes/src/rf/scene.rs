@@ -13,6 +13,9 @@ use super::em::{permittivity, slab};
 /// Sionna's default slab thickness for every surface, metres.
 pub const SLAB_THICKNESS_M: f64 = 0.1;
 
+/// How far a ray keeps clear of the surface it leaves (and of a segment's ends), metres.
+pub const EPS: f64 = 1e-3;
+
 /// A surface hit along a ray.
 #[derive(Clone, Copy, Debug)]
 pub struct SurfaceHit {
@@ -152,5 +155,10 @@ impl RfScene {
     /// True for foliage triangles: volume boundaries, not surfaces.
     pub fn is_foliage(&self, tri: u32) -> bool {
         self.material[tri as usize] == Material::Foliage
+    }
+
+    /// True when any triangle is foliage.
+    pub fn has_foliage(&self) -> bool {
+        self.material.contains(&Material::Foliage)
     }
 }

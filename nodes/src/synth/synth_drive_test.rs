@@ -4,6 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::height_at;
 use crate::artifact::{ArtifactType, City, Endpoint, Height, Link, Measurements, Scene};
 use crate::rf::antenna::Antenna;
 use crate::rf::paths::{TraceOptions, trace_links};
@@ -11,7 +12,6 @@ use crate::rf::scattering::ScatteringPattern;
 use crate::rf::scene::RfScene;
 use crate::rng::{gaussian, mix};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
-use crate::artifact::height_at;
 
 /// Params of [`SynthDriveTest`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -21,13 +21,13 @@ pub struct SynthDriveTestParams {
     pub transmitters: Vec<(String, (f64, f64, f64))>,
     /// Carrier frequency, Hz.
     pub freq_hz: f64,
-    /// Receiver spacing along each street, metres. Default 10.
+    /// Receiver spacing along each street, metres (> 0). Default 10.
     #[serde(default = "ten")]
     pub spacing_m: f64,
     /// Receiver height above the ground, metres. Default 1.5.
     #[serde(default = "one_and_a_half")]
     pub rx_height_m: f64,
-    /// Log-normal shadowing standard deviation, dB. Default 4.
+    /// Log-normal shadowing standard deviation, dB (≥ 0). Default 4.
     #[serde(default = "four")]
     pub shadowing_db: f64,
     /// Links weaker than this path gain are below the noise floor and dropped, dB. Default -140.
@@ -36,11 +36,65 @@ pub struct SynthDriveTestParams {
     /// Seed of the shadowing draws. Default 1.
     #[serde(default = "one")]
     pub seed: u64,
-    /// The truth trace's settings. Default: depth 3, transmission, diffraction, rough surfaces
-    /// (S = 0.3: specular reflections keep √(1 − S²)), 200 000 rays. Diffuse paths are off by
-    /// default: their cost grows with the number of receivers.
-    #[serde(default = "truth_options")]
-    pub options: TraceOptions,
+    /// The truth trace's settings. Default: every field's default.
+    #[serde(default)]
+    pub options: TruthOptions,
+}
+
+/// `options` of [`SynthDriveTestParams`]: how far the truth trace goes. It always follows line of
+/// sight, specular reflection and transmission; richer than the twins' traces by default (deeper
+/// in effect, with diffraction and rough surfaces).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TruthOptions {
+    /// Most interactions (reflections + transmissions) along one path. Default 3.
+    pub max_depth: u32,
+    /// First-order UTD diffraction at convex edges. Default true.
+    pub diffraction: bool,
+    /// Diffuse reflection off the last surface. Default false: its cost grows with the number of
+    /// receivers.
+    pub diffuse: bool,
+    /// Scattering coefficient S of every surface, in [0, 1]; specular reflections keep
+    /// √(1 − S²) of the field. Default 0.3 (rough surfaces).
+    pub scattering_coefficient: f64,
+    /// The diffuse pattern. Default Lambertian.
+    pub scattering_pattern: ScatteringPattern,
+    /// Rays shot from each transmitter (> 0). Default 200 000.
+    pub rays: u32,
+    /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at `freq_hz` (rf.md §5.1).
+    pub foliage_db_per_m: Option<f64>,
+}
+
+impl Default for TruthOptions {
+    fn default() -> Self {
+        TruthOptions {
+            max_depth: 3,
+            diffraction: true,
+            diffuse: false,
+            scattering_coefficient: 0.3,
+            scattering_pattern: ScatteringPattern::Lambertian,
+            rays: 200_000,
+            foliage_db_per_m: None,
+        }
+    }
+}
+
+impl TruthOptions {
+    /// The tracer's settings.
+    pub fn trace_options(&self) -> TraceOptions {
+        TraceOptions {
+            max_depth: self.max_depth,
+            los: true,
+            reflection: true,
+            transmission: true,
+            diffraction: self.diffraction,
+            diffuse: self.diffuse,
+            scattering_coefficient: self.scattering_coefficient,
+            scattering_pattern: self.scattering_pattern,
+            rays: self.rays,
+            foliage_db_per_m: self.foliage_db_per_m,
+        }
+    }
 }
 
 fn ten() -> f64 {
@@ -58,23 +112,13 @@ fn floor() -> f64 {
 fn one() -> u64 {
     1
 }
-fn truth_options() -> TraceOptions {
-    TraceOptions {
-        max_depth: 3,
-        diffraction: true,
-        scattering_coefficient: 0.3,
-        scattering_pattern: ScatteringPattern::Lambertian,
-        rays: 200_000,
-        ..Default::default()
-    }
-}
 
 /// Links from every transmitter to receivers every `spacing_m` along every street.
 pub struct SynthDriveTest;
 
 impl Stage for SynthDriveTest {
     const KIND: &'static str = "SynthDriveTest";
-    const VERSION: u32 = 2;
+    const VERSION: u32 = 3;
     const DOC: &'static str = "drive-test measurements traced through the ground truth (richer settings) plus log-normal shadowing";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),
@@ -94,11 +138,30 @@ impl Stage for SynthDriveTest {
                 "expected at least one transmitter",
             ));
         }
-        if !(p.spacing_m > 0.0) {
+        if !p
+            .transmitters
+            .iter()
+            .all(|(_, (x, y, h))| [x, y, h].iter().all(|v| v.is_finite()))
+        {
+            return Err(ParamError::new(
+                "transmitters",
+                "expected finite positions and heights in metres",
+            ));
+        }
+        if !(p.spacing_m > 0.0 && p.spacing_m.is_finite()) {
             return Err(ParamError::new(
                 "spacing_m",
                 "expected a positive spacing in metres",
             ));
+        }
+        if !p.rx_height_m.is_finite() {
+            return Err(ParamError::new(
+                "rx_height_m",
+                "expected a finite height in metres",
+            ));
+        }
+        if p.floor_db.is_nan() {
+            return Err(ParamError::new("floor_db", "expected a path gain in dB"));
         }
         if !(p.freq_hz > 0.0 && p.freq_hz.is_finite()) {
             return Err(ParamError::new(
@@ -106,13 +169,16 @@ impl Stage for SynthDriveTest {
                 "expected a positive frequency in Hz",
             ));
         }
-        if !(p.shadowing_db >= 0.0) {
+        if !(p.shadowing_db >= 0.0 && p.shadowing_db.is_finite()) {
             return Err(ParamError::new(
                 "shadowing_db",
                 "expected a non-negative deviation in dB",
             ));
         }
-        Ok(())
+        p.options
+            .trace_options()
+            .check()
+            .map_err(|(field, m)| ParamError::new("options", format!("{field}: {m}")))
     }
 
     fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Measurements, StageError> {
@@ -134,6 +200,7 @@ impl Stage for SynthDriveTest {
         }
         let rf = RfScene::new(scene, p.freq_hz, false).map_err(StageError::Failed)?;
         ctx.progress.set_total(p.transmitters.len() as u64);
+        let options = p.options.trace_options();
         let mut links = Vec::new();
         for (t, (id, (x, y, h))) in p.transmitters.iter().enumerate() {
             let tx = [*x, *y, ground(*x, *y) + h];
@@ -143,7 +210,7 @@ impl Stage for SynthDriveTest {
                 &pairs,
                 &Antenna::default(),
                 &Antenna::default(),
-                &p.options,
+                &options,
                 p.freq_hz,
             );
             for (k, (r, got)) in receivers.iter().zip(res).enumerate() {
@@ -177,5 +244,60 @@ impl Stage for SynthDriveTest {
             ctx.progress.advance(1);
         }
         Ok(Measurements { links })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn params_default_to_the_truth_settings_and_reject_bad_numbers() {
+        let p: SynthDriveTestParams = serde_json::from_str(
+            r#"{"transmitters": [["A", [0.0, 0.0, 25.0]]], "freq_hz": 3.5e9}"#,
+        )
+        .unwrap();
+        assert!(SynthDriveTest::validate(&p).is_ok());
+        let o = p.options.trace_options();
+        assert!(o.los && o.reflection && o.transmission && o.diffraction && !o.diffuse);
+        assert_eq!((o.scattering_coefficient, o.rays), (0.3, 200_000));
+        for (q, field) in [
+            (
+                SynthDriveTestParams {
+                    spacing_m: f64::NAN,
+                    ..p.clone()
+                },
+                "spacing_m",
+            ),
+            (
+                SynthDriveTestParams {
+                    rx_height_m: f64::INFINITY,
+                    ..p.clone()
+                },
+                "rx_height_m",
+            ),
+            (
+                SynthDriveTestParams {
+                    options: TruthOptions {
+                        rays: 0,
+                        ..Default::default()
+                    },
+                    ..p.clone()
+                },
+                "options",
+            ),
+            (
+                SynthDriveTestParams {
+                    options: TruthOptions {
+                        foliage_db_per_m: Some(-0.5),
+                        ..Default::default()
+                    },
+                    ..p.clone()
+                },
+                "options",
+            ),
+        ] {
+            assert_eq!(SynthDriveTest::validate(&q).unwrap_err().field, field);
+        }
     }
 }

@@ -1,13 +1,13 @@
 //! RadioMap: a coverage map of one transmitter over a scene, by shoot-and-bounce (paper Sec. 5).
 
-
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Grid, Raster, Scene};
 use crate::rf::antenna::Antenna;
-use crate::rf::paths::{TraceOptions, check_options};
+use crate::rf::paths::TraceOptions;
 use crate::rf::radiomap::{MapPlane, default_plane, radio_map};
+use crate::rf::scattering::ScatteringPattern;
 use crate::rf::scene::RfScene;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -20,21 +20,81 @@ pub struct RadioMapParams {
     pub tx: (f64, f64, f64),
     /// Carrier frequency, Hz.
     pub freq_hz: f64,
-    /// Cell size, metres. Default 5.
+    /// Cell size, metres (> 0). Default 5.
     #[serde(default = "five")]
     pub cell_m: f64,
     /// Height of the map: above the terrain when a terrain is given, else site-frame z. Default 1.5.
     #[serde(default = "one_and_a_half")]
     pub height_m: f64,
-    /// Interactions and the number of rays.
+    /// Interactions and the number of rays. Default: every field's default.
     #[serde(default)]
-    pub options: TraceOptions,
+    pub options: MapOptions,
     /// The transmit antenna. Default isotropic, vertical.
     #[serde(default)]
     pub antenna: Antenna,
     /// Use P.2040 laws outside their frequency ranges. Default false.
     #[serde(default)]
     pub extrapolate: bool,
+}
+
+/// `options` of [`RadioMapParams`]: which interactions the rays follow, and how many there are.
+/// The defaults are Sionna RT's. No diffraction: radio maps do not model it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MapOptions {
+    /// Most interactions along one ray. Default 3.
+    pub max_depth: u32,
+    /// Count rays before their first interaction. Default true.
+    pub los: bool,
+    /// Specular reflection. Default true.
+    pub reflection: bool,
+    /// Transmission through surfaces as thin slabs (P.2040). Default true.
+    pub transmission: bool,
+    /// Diffuse reflection (effective roughness), at every bounce. Default false.
+    pub diffuse: bool,
+    /// Scattering coefficient S of every surface, in [0, 1]. Default 0.
+    pub scattering_coefficient: f64,
+    /// The diffuse pattern. Default Lambertian.
+    pub scattering_pattern: ScatteringPattern,
+    /// Rays shot from the transmitter (> 0). Default 1 000 000.
+    pub rays: u32,
+    /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at `freq_hz` (rf.md §5.1).
+    pub foliage_db_per_m: Option<f64>,
+}
+
+impl Default for MapOptions {
+    fn default() -> Self {
+        let o = TraceOptions::default();
+        MapOptions {
+            max_depth: o.max_depth,
+            los: o.los,
+            reflection: o.reflection,
+            transmission: o.transmission,
+            diffuse: o.diffuse,
+            scattering_coefficient: o.scattering_coefficient,
+            scattering_pattern: o.scattering_pattern,
+            rays: o.rays,
+            foliage_db_per_m: o.foliage_db_per_m,
+        }
+    }
+}
+
+impl MapOptions {
+    /// The tracer's settings.
+    pub fn trace_options(&self) -> TraceOptions {
+        TraceOptions {
+            max_depth: self.max_depth,
+            los: self.los,
+            reflection: self.reflection,
+            transmission: self.transmission,
+            diffraction: false,
+            diffuse: self.diffuse,
+            scattering_coefficient: self.scattering_coefficient,
+            scattering_pattern: self.scattering_pattern,
+            rays: self.rays,
+            foliage_db_per_m: self.foliage_db_per_m,
+        }
+    }
 }
 
 fn five() -> f64 {
@@ -50,7 +110,7 @@ pub struct RadioMap;
 
 impl Stage for RadioMap {
     const KIND: &'static str = "RadioMap";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
@@ -64,20 +124,36 @@ impl Stage for RadioMap {
     type Output = Raster;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        check_options(&p.options)?;
-        if p.options.diffraction {
-            return Err(ParamError::new(
-                "options",
-                "radio maps do not model diffraction yet (set diffraction: false)",
-            ));
-        }
+        p.options
+            .trace_options()
+            .check()
+            .map_err(|(field, m)| ParamError::new("options", format!("{field}: {m}")))?;
         if !(p.freq_hz > 0.0 && p.freq_hz.is_finite()) {
             return Err(ParamError::new(
                 "freq_hz",
                 "expected a positive frequency in Hz",
             ));
         }
-        crate::params::check_cell(Some(p.cell_m))
+        if ![p.tx.0, p.tx.1, p.tx.2].iter().all(|v| v.is_finite()) {
+            return Err(ParamError::new(
+                "tx",
+                "expected finite coordinates in metres",
+            ));
+        }
+        if !p.height_m.is_finite() {
+            return Err(ParamError::new(
+                "height_m",
+                "expected a finite height in metres",
+            ));
+        }
+        crate::params::check_cell(Some(p.cell_m))?;
+        if !p.cell_m.is_finite() {
+            return Err(ParamError::new(
+                "cell_m",
+                "expected a finite cell size in metres",
+            ));
+        }
+        Ok(())
     }
 
     fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Raster, StageError> {
@@ -109,7 +185,8 @@ impl Stage for RadioMap {
                 DVec3::new(p.tx.0, p.tx.1, p.tx.2),
             ),
         };
-        let map = radio_map(&rf, tx, &p.antenna, &plane, &p.options, p.freq_hz);
+        let options = p.options.trace_options();
+        let map = radio_map(&rf, tx, &p.antenna, &plane, &options, p.freq_hz);
         Ok(crate::rf::radiomap::to_db(&map))
     }
 }
@@ -144,6 +221,64 @@ mod tests {
     }
 
     #[test]
+    fn params_accept_only_what_maps_model() {
+        let parse = |options: &str| {
+            serde_json::from_str::<RadioMapParams>(&format!(
+                r#"{{"tx": [0.0, 0.0, 10.0], "freq_hz": 3.5e9, "options": {options}}}"#
+            ))
+        };
+        let p = parse(r#"{"rays": 1000}"#).unwrap();
+        assert!(RadioMap::validate(&p).is_ok());
+        assert!(parse(r#"{"diffraction": false}"#).is_err());
+        let bad = [
+            MapOptions {
+                rays: 0,
+                ..p.options.clone()
+            },
+            MapOptions {
+                scattering_coefficient: f64::NAN,
+                ..p.options.clone()
+            },
+            MapOptions {
+                foliage_db_per_m: Some(-1.0),
+                ..p.options.clone()
+            },
+        ];
+        for options in bad {
+            let q = RadioMapParams {
+                options,
+                ..p.clone()
+            };
+            assert_eq!(RadioMap::validate(&q).unwrap_err().field, "options");
+        }
+        for (q, field) in [
+            (
+                RadioMapParams {
+                    height_m: f64::NAN,
+                    ..p.clone()
+                },
+                "height_m",
+            ),
+            (
+                RadioMapParams {
+                    cell_m: f64::INFINITY,
+                    ..p.clone()
+                },
+                "cell_m",
+            ),
+            (
+                RadioMapParams {
+                    tx: (0.0, f64::NAN, 1.0),
+                    ..p.clone()
+                },
+                "tx",
+            ),
+        ] {
+            assert_eq!(RadioMap::validate(&q).unwrap_err().field, field);
+        }
+    }
+
+    #[test]
     fn radio_map_follows_the_terrain_surface() {
         // Free space over "terrain" at 12 m: the map at 1.5 m above it is Friis from a transmitter
         // 30 m above it, averaged over each 5 m cell.
@@ -161,10 +296,7 @@ mod tests {
             freq_hz: 3.5e9,
             cell_m: 5.0,
             height_m: 1.5,
-            options: TraceOptions {
-                rays: 1_000_000,
-                ..Default::default()
-            },
+            options: MapOptions::default(),
             antenna: Antenna::default(),
             extrapolate: false,
         };

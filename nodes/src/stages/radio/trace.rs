@@ -7,7 +7,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Endpoint, Measurements, Raster, Scene};
 use crate::rf::antenna::Antenna;
-use crate::rf::paths::{TraceOptions, check_options, trace_links};
+use crate::rf::paths::{TraceOptions, trace_links};
+use crate::rf::scattering::ScatteringPattern;
 use crate::rf::scene::RfScene;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -15,8 +16,8 @@ use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TraceParams {
-    /// Interactions and effort.
-    pub options: TraceOptions,
+    /// Interactions and effort. Default: every field's default.
+    pub options: LinkOptions,
     /// Transmit antenna; a link's own azimuth (from the measurements) turns it. Default
     /// isotropic, vertical.
     pub tx_antenna: Antenna,
@@ -28,13 +29,77 @@ pub struct TraceParams {
     pub extrapolate: bool,
 }
 
+/// `options` of [`TraceParams`]: which interactions the links follow, and how hard the trace
+/// looks. The defaults are Sionna RT's.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LinkOptions {
+    /// Most interactions (reflections + transmissions) along one path. Default 3.
+    pub max_depth: u32,
+    /// Line-of-sight paths. Default true.
+    pub los: bool,
+    /// Specular reflection. Default true.
+    pub reflection: bool,
+    /// Transmission through surfaces as thin slabs (P.2040). Default true.
+    pub transmission: bool,
+    /// First-order UTD diffraction at convex edges. Default false.
+    pub diffraction: bool,
+    /// Diffuse reflection off the last surface (effective roughness). Default false.
+    pub diffuse: bool,
+    /// Scattering coefficient S of every surface, in [0, 1]; specular reflection keeps
+    /// √(1 − S²) of the field. Default 0.
+    pub scattering_coefficient: f64,
+    /// The diffuse pattern. Default Lambertian.
+    pub scattering_pattern: ScatteringPattern,
+    /// Rays shot from each transmitter to find paths (> 0). Default 1 000 000.
+    pub rays: u32,
+    /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at the link's carrier (rf.md §5.1).
+    pub foliage_db_per_m: Option<f64>,
+}
+
+impl Default for LinkOptions {
+    fn default() -> Self {
+        let o = TraceOptions::default();
+        LinkOptions {
+            max_depth: o.max_depth,
+            los: o.los,
+            reflection: o.reflection,
+            transmission: o.transmission,
+            diffraction: o.diffraction,
+            diffuse: o.diffuse,
+            scattering_coefficient: o.scattering_coefficient,
+            scattering_pattern: o.scattering_pattern,
+            rays: o.rays,
+            foliage_db_per_m: o.foliage_db_per_m,
+        }
+    }
+}
+
+impl LinkOptions {
+    /// The tracer's settings.
+    pub fn trace_options(&self) -> TraceOptions {
+        TraceOptions {
+            max_depth: self.max_depth,
+            los: self.los,
+            reflection: self.reflection,
+            transmission: self.transmission,
+            diffraction: self.diffraction,
+            diffuse: self.diffuse,
+            scattering_coefficient: self.scattering_coefficient,
+            scattering_pattern: self.scattering_pattern,
+            rays: self.rays,
+            foliage_db_per_m: self.foliage_db_per_m,
+        }
+    }
+}
+
 /// The links of the measurements with their predicted path loss (`path_loss_db` = −10 log10 of
 /// the path gain; `los` = whether a line-of-sight path exists); measured values are dropped.
 pub struct Trace;
 
 impl Stage for Trace {
     const KIND: &'static str = "Trace";
-    const VERSION: u32 = 2;
+    const VERSION: u32 = 3;
     const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
@@ -53,7 +118,10 @@ impl Stage for Trace {
     type Output = Measurements;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        check_options(&p.options)
+        p.options
+            .trace_options()
+            .check()
+            .map_err(|(field, m)| ParamError::new("options", format!("{field}: {m}")))
     }
 
     fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Measurements, StageError> {
@@ -82,6 +150,7 @@ impl Stage for Trace {
         }
         ctx.progress.set_total(groups.len() as u64);
         let mut out = links.clone();
+        let options = p.options.trace_options();
         for ((f_bits, az_bits), idx) in groups {
             let freq = f64::from_bits(f_bits);
             let rf = RfScene::new(scene, freq, p.extrapolate).map_err(StageError::Failed)?;
@@ -91,7 +160,7 @@ impl Stage for Trace {
                 tx_antenna.azimuth_deg = az;
             }
             let pairs: Vec<_> = idx.iter().map(|&i| ends[i]).collect();
-            let res = trace_links(&rf, &pairs, &tx_antenna, &p.rx_antenna, &p.options, freq);
+            let res = trace_links(&rf, &pairs, &tx_antenna, &p.rx_antenna, &options, freq);
             for (&i, r) in idx.iter().zip(res) {
                 let g = if p.coherent {
                     r.coherent_gain_db
@@ -112,8 +181,8 @@ impl Stage for Trace {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::artifact::{Height, Link, PodVec};
     use crate::artifact::Grid;
+    use crate::artifact::{Height, Link, PodVec};
     use crate::stage::Slot;
     use crate::{Artifact, Site};
     use std::sync::Arc;
@@ -136,6 +205,34 @@ mod tests {
                 height: 40,
             },
             data: PodVec(vec![z; 1600]),
+        }
+    }
+
+    #[test]
+    fn params_keep_the_graph_syntax_and_reject_bad_numbers() {
+        let p: TraceParams =
+            serde_json::from_str(r#"{"options": {"rays": 200000, "diffraction": true}}"#).unwrap();
+        assert!(Trace::validate(&p).is_ok());
+        assert!(serde_json::from_str::<TraceParams>(r#"{"options": {"ray": 1}}"#).is_err());
+        for options in [
+            LinkOptions {
+                rays: 0,
+                ..Default::default()
+            },
+            LinkOptions {
+                scattering_coefficient: 1.5,
+                ..Default::default()
+            },
+            LinkOptions {
+                foliage_db_per_m: Some(f64::NAN),
+                ..Default::default()
+            },
+        ] {
+            let q = TraceParams {
+                options,
+                ..Default::default()
+            };
+            assert_eq!(Trace::validate(&q).unwrap_err().field, "options");
         }
     }
 

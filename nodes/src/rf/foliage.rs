@@ -1,0 +1,204 @@
+//! Foliage as volumes: closed meshes of `Material::Foliage` that a wave crosses, losing a fixed
+//! number of dB per metre inside (rf.md §5.1). Here: how deep a point is in foliage
+//! ([`FoliageDepth`]), the length of a segment inside the union of the volumes
+//! ([`foliage_length`], the one place that length is measured), the loss it costs, and the
+//! default specific attenuation (ITU-R P.833).
+
+use glam::DVec3;
+
+use super::scene::{EPS, RfScene, SurfaceHit};
+
+/// Digitised points of ITU-R P.833 Figure 2 (woodland, vertical polarisation): frequency in Hz,
+/// specific attenuation in dB/m (rf.md §5.1).
+const P833_FIGURE_2: [(f64, f64); 3] = [(30e6, 0.02), (1e9, 0.2), (30e9, 6.0)];
+
+/// The default specific attenuation of foliage at `freq_hz` (> 0), dB/m: ITU-R P.833 Figure 2
+/// (rf.md §5.1), interpolated log-log through its digitised points (0.02 dB/m at 30 MHz, 0.2 at
+/// 1 GHz, 6 at 30 GHz). Below 30 MHz the lowest segment's power law goes on (towards 0); above
+/// 30 GHz the value is held at 6 dB/m, the figure being read no further.
+pub fn specific_attenuation_db_per_m(freq_hz: f64) -> f64 {
+    let [low, mid, high] = P833_FIGURE_2;
+    if freq_hz >= high.0 {
+        return high.1;
+    }
+    let ((f0, g0), (f1, g1)) = if freq_hz < mid.0 {
+        (low, mid)
+    } else {
+        (mid, high)
+    };
+    let slope = (g1 / g0).ln() / (f1 / f0).ln();
+    g0 * (freq_hz / f0).powf(slope)
+}
+
+/// The amplitude factor of `length_m` metres of foliage at `db_per_m`: 10^(−γ d / 20).
+pub fn loss_amplitude(db_per_m: f64, length_m: f64) -> f64 {
+    10f64.powf(-db_per_m * length_m / 20.0)
+}
+
+/// How many foliage volumes a point moving along a ray is inside: each crossing of a foliage
+/// triangle against its outward normal enters one (+1), along it leaves one (−1). The point is
+/// in foliage while the depth is positive, so overlapping volumes count once.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FoliageDepth(u32);
+
+impl FoliageDepth {
+    /// The depth at `p`: the crossings of a ray from `p` out of the scene, each exit one volume
+    /// `p` is inside, each entry one it is not (0 for a scene without foliage).
+    pub fn at(scene: &RfScene, p: DVec3) -> FoliageDepth {
+        if !scene.has_foliage() {
+            return FoliageDepth(0);
+        }
+        // Upwards, where little stands, and off the axes so as not to run along mesh edges.
+        let d = DVec3::new(0.1234, 0.0567, 1.0).normalize();
+        let (mut net, mut tmin) = (0i64, EPS);
+        for _ in 0..10_000 {
+            let Some(h) = scene.cast(p, d, tmin, f64::INFINITY) else {
+                break;
+            };
+            net -= step(scene, h.triangle, d).unwrap_or(0);
+            tmin = h.t.max(tmin) + EPS;
+        }
+        FoliageDepth(net.max(0) as u32)
+    }
+
+    /// Whether the point is in foliage.
+    pub fn inside(self) -> bool {
+        self.0 > 0
+    }
+
+    /// Counts a crossing of triangle `tri` in direction `d`; false (and no change) when `tri` is
+    /// no foliage boundary. Never below zero: a leave without an entry means the ray started in
+    /// a volume it did not know of.
+    pub fn cross(&mut self, scene: &RfScene, tri: u32, d: DVec3) -> bool {
+        let Some(s) = step(scene, tri, d) else {
+            return false;
+        };
+        self.add(s);
+        true
+    }
+
+    fn add(&mut self, s: i64) {
+        self.0 = (self.0 as i64 + s).max(0) as u32;
+    }
+}
+
+/// +1 where `d` enters the foliage volume `tri` bounds, −1 where it leaves; `None` for other
+/// surfaces.
+fn step(scene: &RfScene, tri: u32, d: DVec3) -> Option<i64> {
+    scene.is_foliage(tri).then(|| {
+        if d.dot(scene.normals[tri as usize]) < 0.0 {
+            1
+        } else {
+            -1
+        }
+    })
+}
+
+/// The length of the segment `a -> b` inside the union of the foliage volumes (depth > 0), and
+/// the depth at `b`, from the depth at `a` and `hits`, the surfaces crossed between them in order
+/// ([`RfScene::hits_between`]; non-foliage ones are skipped). Where the crossings leave more
+/// volumes than `at_a` holds, `a` was inside those too.
+pub fn foliage_length(
+    scene: &RfScene,
+    a: DVec3,
+    b: DVec3,
+    hits: &[SurfaceHit],
+    at_a: FoliageDepth,
+) -> (f64, FoliageDepth) {
+    let len = (b - a).length();
+    let d = (b - a) / len;
+    let steps: Vec<(f64, i64)> = hits
+        .iter()
+        .filter_map(|h| step(scene, h.triangle, d).map(|s| (h.t, s)))
+        .collect();
+    let (mut sum, mut unmatched) = (0i64, 0i64);
+    for &(_, s) in &steps {
+        sum += s;
+        unmatched = unmatched.max(-sum);
+    }
+    let mut depth = FoliageDepth(at_a.0.max(unmatched as u32));
+    let (mut inside, mut from) = (0.0, 0.0);
+    for (t, s) in steps {
+        if depth.inside() {
+            inside += t - from;
+        }
+        depth.add(s);
+        from = t;
+    }
+    if depth.inside() {
+        inside += len - from;
+    }
+    (inside, depth)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::artifact::{Scene, SceneObject};
+    use crate::geom::mesh_build::cuboid;
+    use crate::rf::materials::Material;
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() < 1e-9 * b.abs().max(1.0)
+    }
+
+    #[test]
+    fn specific_attenuation_passes_through_p833_figure_2() {
+        assert!(close(specific_attenuation_db_per_m(30e6), 0.02));
+        assert!(close(specific_attenuation_db_per_m(1e9), 0.2));
+        assert!(close(specific_attenuation_db_per_m(30e9), 6.0));
+        // Log-log midway between 30 MHz and 1 GHz: the geometric mean of the two values.
+        let f = (30e6f64 * 1e9).sqrt();
+        assert!(close(
+            specific_attenuation_db_per_m(f),
+            (0.02f64 * 0.2).sqrt()
+        ));
+        // 1 to 30 GHz is proportional to f: 0.7 dB/m at 3.5 GHz.
+        assert!(close(specific_attenuation_db_per_m(3.5e9), 0.7));
+        // Held above the figure; lower still below it.
+        assert_eq!(specific_attenuation_db_per_m(100e9), 6.0);
+        let low = specific_attenuation_db_per_m(10e6);
+        assert!(low > 0.0 && low < 0.02, "{low}");
+    }
+
+    /// Two 10 m boxes overlapping by 4 m along x (x in [-5, 5] and [1, 11], tops at z = 5 and
+    /// z = 6): 16 m of foliage along x, not 20.
+    fn two_boxes() -> RfScene {
+        let object = |id: &str, x: f64, z0: f64| SceneObject {
+            id: id.into(),
+            class: crate::artifact::ObjectClass::Vegetation,
+            mesh: cuboid([x, 0.0], [10.0, 10.0, 10.0], 0.0, z0, Material::Foliage),
+        };
+        let scene = Scene {
+            objects: vec![object("a", 0.0, -5.0), object("b", 6.0, -4.0)],
+        };
+        RfScene::new(&scene, 3.5e9, false).unwrap()
+    }
+
+    #[test]
+    fn overlapping_volumes_count_once() {
+        let rf = two_boxes();
+        let (a, b) = (DVec3::new(-20.0, 0.3, 0.2), DVec3::new(30.0, 0.3, 0.2));
+        let hits = rf.hits_between(a, b, EPS);
+        assert_eq!(hits.len(), 4);
+        let (m, end) = foliage_length(&rf, a, b, &hits, FoliageDepth::default());
+        assert!((m - 16.0).abs() < 1e-6, "{m}");
+        assert!(!end.inside());
+        // From inside both boxes (x = 3): to x = 11 is 8 m, wherever the depth is known.
+        let a = DVec3::new(3.0, 0.3, 0.2);
+        assert_eq!(FoliageDepth::at(&rf, a), FoliageDepth(2));
+        let hits = rf.hits_between(a, b, EPS);
+        for start in [FoliageDepth::default(), FoliageDepth::at(&rf, a)] {
+            let (m, _) = foliage_length(&rf, a, b, &hits, start);
+            assert!((m - 8.0).abs() < 1e-6, "{m}");
+        }
+        // Ending inside both: from x = -20 to x = 2 is 7 m.
+        let b = DVec3::new(2.0, 0.3, 0.2);
+        let hits = rf.hits_between(DVec3::new(-20.0, 0.3, 0.2), b, EPS);
+        let (m, end) = foliage_length(&rf, DVec3::new(-20.0, 0.3, 0.2), b, &hits, FoliageDepth(0));
+        assert!(
+            (m - 7.0).abs() < 1e-6 && end == FoliageDepth(2),
+            "{m} {end:?}"
+        );
+    }
+}

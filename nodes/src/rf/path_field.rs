@@ -1,0 +1,78 @@
+//! The field along one path: from the transmit antenna's pattern through each reflection (thin
+//! slab, rf.md §2.2, scaled by √(1 − S²) for rough surfaces, §1.3), each wall crossed on the way
+//! (slab transmission, or a blocked path), the foliage it runs through (rf.md §5.1) and the
+//! spreading over its unfolded length, into the receive antenna's pattern (rf.md §7.1).
+
+use glam::DVec3;
+
+use super::field::{self, CVec};
+use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
+use super::paths::{Interaction, InteractionKind, Path, Tracer};
+use super::scene::EPS;
+
+/// The path along the polyline `points` whose inner points are reflections off `seq`, from a
+/// transmitter at foliage depth `at_tx`: a = (λ/4π) C_R^H T C_T / length (rf.md §7.1), with T
+/// the reflections' and transmissions' coefficients (rf.md §2.2) and 10^(−γ d/20) for d metres
+/// in foliage (rf.md §5.1). `None` if a wall blocks it (without transmission), the walls crossed
+/// take it over the depth, or no field arrives.
+pub(super) fn evaluate(
+    t: &Tracer,
+    points: &[DVec3],
+    seq: &[u32],
+    at_tx: FoliageDepth,
+) -> Option<Path> {
+    let (scene, opt) = (t.scene, t.opt);
+    let specular_factor = (1.0 - opt.scattering_coefficient.powi(2)).max(0.0).sqrt();
+    let k0 = (points[1] - points[0]).normalize();
+    let mut e: CVec = field::real(DVec3::from(t.tx_antenna.field(k0.to_array())));
+    let mut interactions = Vec::new();
+    let (mut length, mut foliage_m, mut foliage) = (0.0, 0.0, at_tx);
+    let mut depth = seq.len() as u32;
+    for s in 0..points.len() - 1 {
+        let (a, b) = (points[s], points[s + 1]);
+        let d = (b - a).normalize();
+        length += (b - a).length();
+        let hits = scene.hits_between(a, b, EPS);
+        let (inside, at_b) = foliage_length(scene, a, b, &hits, foliage);
+        foliage_m += inside;
+        foliage = at_b;
+        for h in hits.iter().filter(|h| !scene.is_foliage(h.triangle)) {
+            if !opt.transmission {
+                return None;
+            }
+            depth += 1;
+            if depth > opt.max_depth {
+                return None;
+            }
+            let n = scene.normals[h.triangle as usize];
+            let (_, tr) = scene.slab(h.triangle, d.dot(n));
+            e = field::transmit(&e, d, n, tr);
+            interactions.push(Interaction {
+                kind: InteractionKind::Transmission,
+                point: (a + d * h.t).to_array(),
+                triangle: h.triangle,
+            });
+        }
+        if s + 1 < points.len() - 1 {
+            let tri = seq[s];
+            let n = scene.normals[tri as usize];
+            let (r, _) = scene.slab(tri, d.dot(n));
+            let (e2, _) = field::reflect(&e, d, n, r);
+            e = e2.map(|c| c * specular_factor);
+            interactions.push(Interaction {
+                kind: InteractionKind::Reflection,
+                point: b.to_array(),
+                triangle: tri,
+            });
+        }
+    }
+    let k_last = (points[points.len() - 1] - points[points.len() - 2]).normalize();
+    let rx_pattern = DVec3::from(t.rx_antenna.field((-k_last).to_array()));
+    let amplitude = scene.wavelength / (4.0 * std::f64::consts::PI * length)
+        * loss_amplitude(t.foliage_db_per_m, foliage_m);
+    let a = field::dot(&e, rx_pattern) * amplitude;
+    if a.norm_sqr() == 0.0 {
+        return None; // e.g. specular reflection with S = 1: nothing travels this way
+    }
+    Some(Path::new(interactions, length, a, foliage_m))
+}

@@ -1,0 +1,61 @@
+//! The sequence search: rays shot from a transmitter record which surfaces they reflect off (and,
+//! with transmission, which walls they pass), and every distinct sequence of reflecting surfaces
+//! becomes a candidate path for the image method to solve exactly, as Sionna RT finds its
+//! specular candidates. Foliage volumes are passed through.
+
+use std::collections::HashSet;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use super::fibonacci::fibonacci_sphere;
+use super::field;
+use super::paths::TraceOptions;
+use super::scene::{EPS, RfScene};
+
+/// The distinct sequences of triangles that rays from `tx` reflect off, up to the depth, sorted.
+pub fn reflection_sequences(scene: &RfScene, tx: DVec3, opt: &TraceOptions) -> Vec<Vec<u32>> {
+    if !opt.reflection || opt.max_depth == 0 {
+        return Vec::new();
+    }
+    let chunks: Vec<HashSet<Vec<u32>>> = fibonacci_sphere(opt.rays)
+        .chunks(4096)
+        .map(|dirs| {
+            let mut found = HashSet::new();
+            for d in dirs {
+                // (origin, direction, reflections so far, interactions so far)
+                let mut stack = vec![(tx, d, Vec::new(), 0u32)];
+                while let Some((o, d, seq, depth)) = stack.pop() {
+                    let Some(h) = scene.cast(o, d, EPS, f64::INFINITY) else {
+                        continue;
+                    };
+                    let p = o + d * h.t;
+                    if scene.is_foliage(h.triangle) {
+                        stack.push((p, d, seq, depth));
+                        continue;
+                    }
+                    if depth + 1 > opt.max_depth {
+                        continue;
+                    }
+                    let n = scene.normals[h.triangle as usize];
+                    let mut next = seq.clone();
+                    next.push(h.triangle);
+                    found.insert(next.clone());
+                    stack.push((p, field::mirror(d, n), next, depth + 1));
+                    if opt.transmission {
+                        stack.push((p, d, seq, depth + 1));
+                    }
+                }
+            }
+            found
+        })
+        .collect();
+    let mut all: Vec<Vec<u32>> = chunks
+        .into_iter()
+        .flatten()
+        .collect::<HashSet<_>>()
+        .into_iter()
+        .collect();
+    all.sort_unstable();
+    all
+}
