@@ -3,9 +3,11 @@
 
 pub mod read_footprints;
 pub mod read_las;
+pub mod read_mapillary;
 pub mod read_measurements;
 pub mod read_ortho;
 pub mod read_osm;
+pub mod read_panoramax;
 pub mod read_raster;
 pub mod read_sionna;
 pub mod read_tiles;
