@@ -35,11 +35,13 @@ pub use site::Site;
 pub use stage::{Arity, Ctx, FileRef, InputSpec, Inputs, ParamError, Progress, Stage, StageError};
 
 /// Calls `$m!` with the type of every node kind, in one list, so the engine can build its registry
-/// without the stages knowing about it. A new stage is added here and nowhere else.
+/// without the stages knowing about it. A new stage is added here and nowhere else (a stage behind
+/// a cargo feature goes in `__with_optional_stages!` below). Keep the trailing comma: the optional
+/// stages are appended to this list.
 #[macro_export]
 macro_rules! for_each_stage {
     ($m:ident) => {
-        $m! {
+        $crate::__with_optional_stages! { $m;
             $crate::synth::synth_terrain::SynthTerrain,
             $crate::synth::synth_scan::SynthScan,
             $crate::synth::synth_city::SynthCity,
@@ -57,6 +59,8 @@ macro_rules! for_each_stage {
             $crate::stages::ingest::read_osm::ReadOsmBuildings,
             $crate::stages::ingest::read_tiles::ReadTileset,
             $crate::stages::ingest::read_views::ReadViews,
+            $crate::stages::ingest::read_mapillary::ReadMapillary,
+            $crate::stages::ingest::read_panoramax::ReadPanoramax,
             $crate::stages::ingest::read_ortho::ReadOrtho,
             $crate::stages::ingest::read_sionna::ReadSionnaScene,
             $crate::stages::ingest::read_xyz::ReadXyz,
@@ -73,6 +77,8 @@ macro_rules! for_each_stage {
             $crate::stages::baseline::osm_baseline::OsmBaseline,
             $crate::synth::osm_like::OsmLike,
             $crate::stages::buildings::assemble_scene::AssembleScene,
+            $crate::stages::street::surface_charts::SurfaceCharts,
+            $crate::stages::street::fuse_views::FuseViews,
             $crate::stages::heights::coarsen::Coarsen,
             $crate::stages::heights::gaussian_blur::GaussianBlur,
             $crate::stages::heights::clamp::Clamp,
@@ -86,5 +92,31 @@ macro_rules! for_each_stage {
             $crate::stages::eval::raster_stats::RasterStats,
             $crate::stages::eval::point_stats::PointStats,
         }
+    };
+}
+
+/// Calls `$m!` with the stage list it is given followed by the stages of this crate's enabled
+/// optional features. The `cfg` is decided here, when this crate is compiled, so the registry
+/// matches the features `kodama-nodes` was built with, whichever crate expands the macro.
+#[cfg(feature = "onnx")]
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __with_optional_stages {
+    ($m:ident; $($list:tt)*) => {
+        $m! {
+            $($list)*
+            $crate::stages::models::segment_views::SegmentViews,
+            $crate::stages::models::estimate_depth::EstimateDepth,
+        }
+    };
+}
+
+/// Without optional features: the list as it is.
+#[cfg(not(feature = "onnx"))]
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __with_optional_stages {
+    ($m:ident; $($list:tt)*) => {
+        $m! { $($list)* }
     };
 }

@@ -149,6 +149,48 @@ pub struct BuildingSpec {
 }
 
 impl BuildingSpec {
+    /// The façade feature at site-frame point `p`, if any: `p` lies within the feature's extent
+    /// along its edge and in height, and between the wall plane and the feature's depth (a recess
+    /// reaches `RECESS_M` in, a protrusion `depth_m` out), every extent widened by `slack_m` (the
+    /// reveals of an opening lie exactly on its edges: a slack above float rounding keeps them in).
+    /// The truth for scoring what views and fusion find on a façade.
+    pub fn feature_at(&self, p: [f64; 3], slack_m: f64) -> Option<usize> {
+        self.features.iter().position(|f| {
+            let ring = if f.ring == 0 {
+                &self.footprint.exterior
+            } else {
+                match self.footprint.holes.get(f.ring - 1) {
+                    Some(h) => h,
+                    None => return false,
+                }
+            };
+            if ring.len() < 2 {
+                return false;
+            }
+            let (a, c) = (ring[f.edge % ring.len()], ring[(f.edge + 1) % ring.len()]);
+            let len = (c[0] - a[0]).hypot(c[1] - a[1]);
+            if len == 0.0 {
+                return false;
+            }
+            let t = [(c[0] - a[0]) / len, (c[1] - a[1]) / len];
+            // The solid is left of every ring edge: `inward` grows into the building.
+            let d = [p[0] - a[0], p[1] - a[1]];
+            let along = d[0] * t[0] + d[1] * t[1];
+            let inward = -d[0] * t[1] + d[1] * t[0];
+            let (lo, hi) = if f.depth_m < 0.0 {
+                (0.0, RECESS_M.max(-f.depth_m))
+            } else {
+                (-f.depth_m, 0.0)
+            };
+            along >= f.along.0 - slack_m
+                && along <= f.along.1 + slack_m
+                && p[2] >= f.z.0 - slack_m
+                && p[2] <= f.z.1 + slack_m
+                && inward >= lo - slack_m
+                && inward <= hi + slack_m
+        })
+    }
+
     /// Highest point of the roof above `ground_z`, furniture excluded.
     pub fn top_m(&self) -> f64 {
         self.eave_m

@@ -1,6 +1,7 @@
 //! The artifact types that flow along graph edges. Plain data, serializable, deterministic.
 
 mod array;
+mod charts;
 mod city;
 mod footprints;
 mod measurements;
@@ -16,6 +17,7 @@ mod views;
 use serde::{Deserialize, Serialize};
 
 pub use array::PodVec;
+pub use charts::{Chart, ChartKind, ChartLayers, FusionStats, ChartSet, TexelLayers};
 pub use city::{
     BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, RECESS_M, Rect, Roof, RoofBox, Street,
     TreeSpec,
@@ -29,7 +31,7 @@ pub use raster::{Grid, Raster};
 pub use report::ReportFiles;
 pub use scene::{Mesh, ObjectClass, Scene, SceneObject};
 pub use terrain_model::{TerrainModel, height_at};
-pub use views::{Instances, Intrinsics, Pose, View, ViewSet};
+pub use views::{Instances, Intrinsics, Pose, RMSNET_CLASSES, View, ViewSet};
 
 /// The type of an artifact, as the loader checks it on every edge.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -54,6 +56,10 @@ pub enum ArtifactType {
     Views,
     /// A report folder.
     Report,
+    /// [`ChartSet`]: planar charts with texel grids on building surfaces.
+    Charts,
+    /// [`TexelLayers`]: per-texel exposure, hits and votes fused from street views.
+    Texels,
 }
 
 impl std::fmt::Display for ArtifactType {
@@ -85,6 +91,10 @@ pub enum Artifact {
     Views(ViewSet),
     /// A report folder.
     Report(ReportFiles),
+    /// See [`ChartSet`].
+    Charts(ChartSet),
+    /// See [`TexelLayers`].
+    Texels(TexelLayers),
 }
 
 impl Artifact {
@@ -101,6 +111,8 @@ impl Artifact {
             Artifact::City(_) => ArtifactType::City,
             Artifact::Views(_) => ArtifactType::Views,
             Artifact::Report(_) => ArtifactType::Report,
+            Artifact::Charts(_) => ArtifactType::Charts,
+            Artifact::Texels(_) => ArtifactType::Texels,
         }
     }
 }
@@ -137,4 +149,6 @@ typed!(
     Footprints => Footprints,
     Scene => Scene,
     City => City,
+    Charts => ChartSet,
+    Texels => TexelLayers,
 );

@@ -10,6 +10,31 @@ use serde::{Deserialize, Serialize};
 
 use super::PodVec;
 
+/// The 20 material classes of RMSNet (Cai et al. 2024), the vocabulary material maps use by
+/// default; `shared/DESIGN.md` maps them to ITU-R P.2040.
+pub const RMSNET_CLASSES: [&str; 20] = [
+    "asphalt",
+    "concrete",
+    "metal",
+    "road marking",
+    "fabric/leather",
+    "glass",
+    "plaster",
+    "plastic",
+    "rubber",
+    "sand",
+    "gravel",
+    "ceramic",
+    "cobblestone",
+    "brick",
+    "grass",
+    "wood",
+    "leaf",
+    "water",
+    "human body",
+    "sky",
+];
+
 /// Pinhole intrinsics, pixels.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Intrinsics {

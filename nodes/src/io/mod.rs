@@ -8,6 +8,11 @@ pub mod exr_io;
 pub mod export;
 pub mod geojson;
 pub mod geotiff;
+pub mod mapillary;
+/// ONNX models run on view images (feature `onnx`): the runtime found through `ORT_DYLIB_PATH`.
+#[cfg(feature = "onnx")]
+pub mod onnx;
+pub mod panoramax;
 pub mod sionna_xml;
 pub mod views_io;
 pub mod warp;

@@ -7,6 +7,8 @@
 pub mod ingest;
 pub mod heights;
 pub mod buildings;
+pub mod street;
+pub mod models;
 pub mod radio;
 pub mod baseline;
 pub mod eval;

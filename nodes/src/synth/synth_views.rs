@@ -9,7 +9,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{
-    ArtifactType, City, Instances, Intrinsics, ObjectClass, PodVec, Pose, Scene, View, ViewSet,
+    ArtifactType, BuildingSpec, City, FeatureKind, Instances, Intrinsics, ObjectClass, PodVec, Pose,
+    RMSNET_CLASSES, Scene, View, ViewSet,
 };
 use crate::io::export::material_color;
 use crate::rf::materials::Material;
@@ -36,9 +37,17 @@ pub struct SynthViewsParams {
     pub pitch_deg: f64,
     /// Relative standard deviation of depth noise. Default 0.02.
     pub depth_noise: f64,
-    /// Depth is reported times this factor (1 = metric; otherwise "relative" depth). Default 1.
+    /// Depth is reported as `depth_scale` x true depth + `depth_offset_m` (with the noise): the
+    /// affine bias of monocular depth before calibration. Default 1 (metric).
     pub depth_scale: f64,
-    /// Probability that an object's material is reported as another class. Default 0.05.
+    /// See `depth_scale`. Default 0.
+    pub depth_offset_m: f64,
+    /// Standard deviation of the reported camera position, horizontally, metres (the views are
+    /// rendered from the true pose; the metadata is off, as real metadata is). Default 0.
+    pub pose_noise_m: f64,
+    /// Standard deviation of the reported heading, degrees. Default 0.
+    pub heading_noise_deg: f64,
+    /// Probability that an object's material is reported as another RMSNet class. Default 0.05.
     pub material_error: f64,
     /// Probability that an instance is missed (its pixels get id 0). Default 0.1.
     pub instance_miss: f64,
@@ -57,6 +66,9 @@ impl Default for SynthViewsParams {
             pitch_deg: 8.0,
             depth_noise: 0.02,
             depth_scale: 1.0,
+            depth_offset_m: 0.0,
+            pose_noise_m: 0.0,
+            heading_noise_deg: 0.0,
             material_error: 0.05,
             instance_miss: 0.1,
             seed: 7,
@@ -69,7 +81,7 @@ pub struct SynthViews;
 
 impl Stage for SynthViews {
     const KIND: &'static str = "SynthViews";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const DOC: &'static str = "synthetic street views with instance, material, depth and normal maps (with error knobs), Sec. 4.2";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),
@@ -96,8 +108,20 @@ impl Stage for SynthViews {
                 "expected a field of view in (1, 170) degrees",
             ));
         }
-        if !(p.depth_scale > 0.0) {
+        if !(p.depth_scale > 0.0 && p.depth_scale.is_finite()) {
             return Err(ParamError::new("depth_scale", "expected a positive factor"));
+        }
+        for (name, v) in [
+            ("depth_offset_m", p.depth_offset_m.abs()),
+            ("pose_noise_m", p.pose_noise_m),
+            ("heading_noise_deg", p.heading_noise_deg),
+        ] {
+            if !(v >= 0.0 && v <= 1000.0) {
+                return Err(ParamError::new(name, "expected a finite value within 1000"));
+            }
+        }
+        if p.max_views > 100_000 {
+            return Err(ParamError::new("max_views", "expected at most 100000 views"));
         }
         for (name, v) in [
             ("depth_noise", p.depth_noise),
@@ -117,19 +141,15 @@ impl Stage for SynthViews {
         let rays = SceneRays::new(scene);
         let poses = stations(city, p);
         ctx.progress.set_total(poses.len() as u64);
-        let material_classes: Vec<String> = Material::ALL
-            .iter()
-            .map(|m| {
-                m.itu_type()
-                    .map(|t| format!("itu_{t}"))
-                    .unwrap_or_else(|| "foliage".into())
-            })
-            .collect();
+        let material_classes: Vec<String> = RMSNET_CLASSES.iter().map(|s| s.to_string()).collect();
+        let buildings: HashMap<&str, &BuildingSpec> =
+            city.buildings.iter().map(|b| (b.id.as_str(), b)).collect();
         let views = poses
             .par_iter()
             .enumerate()
             .map(|(k, pose)| {
-                let v = render(scene, &rays, p, k, *pose);
+                let mut v = render(scene, &rays, &buildings, p, k, *pose);
+                v.pose = reported_pose(&v.pose, p, k);
                 ctx.progress.advance(1);
                 v
             })
@@ -164,7 +184,74 @@ fn stations(city: &City, p: &SynthViewsParams) -> Vec<Pose> {
     out
 }
 
-fn render(scene: &Scene, rays: &SceneRays, p: &SynthViewsParams, k: usize, pose: Pose) -> View {
+/// The pose the metadata reports: the true one with position and heading noise.
+fn reported_pose(truth: &Pose, p: &SynthViewsParams, k: usize) -> Pose {
+    if p.pose_noise_m == 0.0 && p.heading_noise_deg == 0.0 {
+        return *truth;
+    }
+    let s = mix(p.seed ^ mix(k as u64 ^ 0x9051_7E00));
+    let (dx, dy) = (
+        p.pose_noise_m * gaussian(mix(s ^ 1)),
+        p.pose_noise_m * gaussian(mix(s ^ 2)),
+    );
+    let yaw = -(p.heading_noise_deg * gaussian(mix(s ^ 3))).to_radians();
+    // Heading noise turns the camera about the vertical: rotate its axes about site z.
+    let (sn, cs) = yaw.sin_cos();
+    let r = truth.rotation;
+    let rotation = [
+        [cs * r[0][0] - sn * r[1][0], cs * r[0][1] - sn * r[1][1], cs * r[0][2] - sn * r[1][2]],
+        [sn * r[0][0] + cs * r[1][0], sn * r[0][1] + cs * r[1][1], sn * r[0][2] + cs * r[1][2]],
+        r[2],
+    ];
+    Pose {
+        position: [truth.position[0] + dx, truth.position[1] + dy, truth.position[2]],
+        rotation,
+    }
+}
+
+/// What a material segmentation model (RMSNet's 20 classes) would call a truth material.
+fn rmsnet_class(m: Material) -> &'static str {
+    match m {
+        Material::Concrete => "concrete",
+        Material::Brick => "brick",
+        Material::Plasterboard | Material::CeilingBoard => "plaster",
+        Material::Wood | Material::Chipboard | Material::Plywood | Material::Floorboard => "wood",
+        Material::Glass => "glass",
+        Material::Marble => "cobblestone",
+        Material::Metal => "metal",
+        Material::VeryDryGround => "sand",
+        Material::MediumDryGround => "gravel",
+        Material::WetGround => "grass",
+        Material::Foliage => "leaf",
+    }
+}
+
+fn rmsnet_index(name: &str) -> u8 {
+    RMSNET_CLASSES.iter().position(|c| *c == name).unwrap_or(255) as u8
+}
+
+/// The architectural class of a building hit: the façade feature there, else wall or roof.
+fn arch_class(b: Option<&BuildingSpec>, at: [f64; 3], roof: bool) -> (Option<usize>, &'static str) {
+    if let Some(f) = b.and_then(|b| b.feature_at(at, 0.01).map(|k| (k, b.features[k].kind))) {
+        let name = match f.1 {
+            FeatureKind::Window => "window",
+            FeatureKind::Door => "door",
+            FeatureKind::Balcony => "balcony",
+            FeatureKind::Drainpipe => "drainpipe",
+        };
+        return (Some(f.0), name);
+    }
+    (None, if roof { "roof" } else { "wall" })
+}
+
+fn render(
+    scene: &Scene,
+    rays: &SceneRays,
+    buildings: &HashMap<&str, &BuildingSpec>,
+    p: &SynthViewsParams,
+    k: usize,
+    pose: Pose,
+) -> View {
     let (w, h) = p.size;
     let f = w as f64 / 2.0 / (p.hfov_deg.to_radians() / 2.0).tan();
     let intrinsics = Intrinsics {
@@ -183,7 +270,8 @@ fn render(scene: &Scene, rays: &SceneRays, p: &SynthViewsParams, k: usize, pose:
     let (mut arch_ids, mut clutter_ids) = (vec![0u16; n], vec![0u16; n]);
     let mut arch = Instances::default();
     let mut clutter = Instances::default();
-    let mut arch_of: HashMap<(usize, bool), u16> = HashMap::new();
+    // One instance per (object, feature) and per (object, wall or roof), numbered in pixel order.
+    let mut arch_of: HashMap<(usize, Option<usize>, bool), u16> = HashMap::new();
     let mut clutter_of: HashMap<usize, u16> = HashMap::new();
     let seed = mix(p.seed ^ mix(k as u64));
     let sun = [0.35f64, -0.45, 0.82];
@@ -200,6 +288,7 @@ fn render(scene: &Scene, rays: &SceneRays, p: &SynthViewsParams, k: usize, pose:
             let dir = pose.to_site(cam.map(|c| c / norm));
             let Some(hit) = rays.cast(origin, dir.map(|d| d as f32), 1e-3, 2000.0) else {
                 image[i] = [150, 185, 225];
+                material[i] = rmsnet_index("sky");
                 continue;
             };
             let obj = &scene.objects[hit.object];
@@ -209,7 +298,7 @@ fn render(scene: &Scene, rays: &SceneRays, p: &SynthViewsParams, k: usize, pose:
             }
             let z_depth = hit.t as f64 / norm;
             let noise = 1.0 + p.depth_noise * gaussian(mix(seed ^ (i as u64).wrapping_mul(0x9E37)));
-            depth[i] = (z_depth * noise * p.depth_scale) as f32;
+            depth[i] = (z_depth * noise * p.depth_scale + p.depth_offset_m) as f32;
             normal[i] = pose.to_camera(nrm).map(|c| c as f32);
             let m = obj
                 .mesh
@@ -220,12 +309,12 @@ fn render(scene: &Scene, rays: &SceneRays, p: &SynthViewsParams, k: usize, pose:
                 .unwrap_or(Material::Concrete);
             // Per-object material confusion: the same wrong class for all of the object's pixels.
             let h_obj = mix(seed ^ mix(hit.object as u64 ^ 0xA5A5));
-            let reported = if unit(h_obj) < p.material_error {
-                Material::ALL[(h_obj % 14) as usize]
+            let truth_class = rmsnet_index(rmsnet_class(m));
+            material[i] = if unit(h_obj) < p.material_error {
+                (h_obj % RMSNET_CLASSES.len() as u64) as u8
             } else {
-                m
+                truth_class
             };
-            material[i] = reported as u8;
             let lambert = (nrm[0] * sun[0] + nrm[1] * sun[1] + nrm[2] * sun[2]).max(0.0);
             let c = material_color(m);
             image[i] = c.map(|x| {
@@ -238,12 +327,15 @@ fn render(scene: &Scene, rays: &SceneRays, p: &SynthViewsParams, k: usize, pose:
             match obj.class {
                 ObjectClass::Building => {
                     let roof = nrm[2] > 0.7;
+                    let t = hit.t as f64;
+                    let at = std::array::from_fn(|a| pose.position[a] + dir[a] * t);
+                    let (feature, class) = arch_class(buildings.get(obj.id.as_str()).copied(), at, roof);
                     let next = arch_of.len() as u16 + 1;
-                    let id = *arch_of.entry((hit.object, roof)).or_insert(next);
-                    if !missed(hit.object as u64 * 2 + roof as u64) {
+                    let id = *arch_of.entry((hit.object, feature, roof)).or_insert(next);
+                    let key = (hit.object as u64) << 20 ^ feature.map_or(0xFFFFF, |f| f as u64) << 1 ^ roof as u64;
+                    if !missed(key) {
                         arch_ids[i] = id;
-                        arch.classes
-                            .insert(id, if roof { "roof".into() } else { "wall".into() });
+                        arch.classes.insert(id, class.into());
                     }
                 }
                 ObjectClass::Clutter | ObjectClass::Vegetation => {

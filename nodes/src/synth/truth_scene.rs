@@ -127,6 +127,27 @@ impl Stage for TruthScene {
     }
 }
 
+/// The truth's terrain and every building's outline extruded from its base to the eave: the
+/// walls the street views look at, without relief, roof shapes or clutter. What fusion is scored
+/// on, so the score is the operator's and not the building reconstruction's.
+pub fn wall_prisms(city: &City, truth: &Scene) -> Result<Scene, String> {
+    let mut objects: Vec<SceneObject> = truth
+        .objects
+        .iter()
+        .filter(|o| o.class == ObjectClass::Terrain)
+        .cloned()
+        .collect();
+    for b in &city.buildings {
+        objects.push(SceneObject {
+            id: b.id.clone(),
+            class: ObjectClass::Building,
+            mesh: prism(&b.footprint, b.base_z, b.ground_z + b.eave_m, b.facade, b.roof_material)
+                .map_err(|e| format!("{}: {e}", b.id))?,
+        });
+    }
+    Ok(Scene { objects })
+}
+
 /// The closed shells of one building: the main body with its roof, a stepped tier or dome, roof
 /// furniture and façade relief. Parts that touch start 0.05 m inside each other so no two shells
 /// share a face.

@@ -1,6 +1,7 @@
 //! Artifacts as ordinary files that other tools open: GeoTIFF, LAS, glTF, 3D Tiles, GeoJSON, CSV,
 //! JSON.
 
+mod atlas;
 pub mod colormap;
 mod glb;
 mod las;
@@ -35,6 +36,8 @@ pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
         ArtifactType::Points => &["las", "laz", "xyz"],
         ArtifactType::Views => &["views"],
         ArtifactType::Report => &["report"],
+        ArtifactType::Charts => &["json"],
+        ArtifactType::Texels => &["atlas"],
     }
 }
 
@@ -56,7 +59,9 @@ pub fn output_file(name: &str, ty: ArtifactType) -> Result<(String, &'static str
             }
         },
         // A report is a folder named as the output.
-        None if ty == ArtifactType::Report => Ok((name.to_owned(), fmts[0])),
+        None if matches!(ty, ArtifactType::Report | ArtifactType::Texels) => {
+            Ok((name.to_owned(), fmts[0]))
+        }
         None => Ok((format!("{name}.{}", fmts[0]), fmts[0])),
     }
 }
@@ -101,12 +106,38 @@ pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String
         (Artifact::Points(p), "xyz") => file(xyz_text(p, site).into_bytes()),
         (Artifact::Views(v), "views") => Ok(Encoded::Folder(crate::io::views_io::write_viewset(v)?)),
         (Artifact::Report(r), "report") => Ok(Encoded::Folder(r.files.clone())),
+        (Artifact::Charts(c), "json") => file(charts_json(c)?),
+        (Artifact::Texels(t), "atlas") => Ok(Encoded::Folder(atlas::write_atlas(t)?)),
         (a, f) => Err(format!(
             "{} cannot be written as {f:?}; formats: {}",
             a.ty(),
             formats(a.ty()).join(", ")
         )),
     }
+}
+
+/// Chart frames and grids (not the per-texel triangle index): where each texel lies in the world.
+fn charts_json(c: &crate::artifact::ChartSet) -> Result<Vec<u8>, String> {
+    let charts: Vec<serde_json::Value> = c
+        .charts
+        .iter()
+        .map(|ch| {
+            serde_json::json!({
+                "building": ch.building,
+                "kind": format!("{:?}", ch.kind),
+                "origin": ch.origin,
+                "u_axis": ch.u_axis,
+                "v_axis": ch.v_axis,
+                "normal": ch.normal,
+                "texel_m": ch.texel_m,
+                "width": ch.width,
+                "height": ch.height,
+                "covered_texels": ch.covered(),
+                "triangles": ch.triangles.len(),
+            })
+        })
+        .collect();
+    serde_json::to_vec_pretty(&serde_json::json!({ "charts": charts })).map_err(|e| e.to_string())
 }
 
 /// ASCII XYZ in absolute CRS coordinates: what PDAL's text writer and CloudCompare read.

@@ -1,0 +1,441 @@
+//! Exposure-weighted multi-view fusion (paper Sec. 4.2.2, eq. (2)-(3)): rays from street-view
+//! pixels hit building charts, and each hit splats a Gaussian kernel into the chart's texel grid,
+//! weighted by the projection Jacobian. Relief (eq. (4)) and materials (eq. (5)) call the same
+//! operator with their own per-pixel votes and exponent.
+
+use std::collections::BTreeMap;
+
+use rayon::prelude::*;
+
+use crate::artifact::{ChartLayers, ChartSet, FusionStats, PodVec, Scene, TexelLayers, View};
+use crate::geom::raycast::SceneRays;
+use crate::stage::Progress;
+
+/// What one pixel says about the surface its ray hits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Vote {
+    /// A class (an index into the fusion's class table): adds to W_exp and to that class's votes.
+    Class(u16),
+    /// Seen, but no class (the ignore label): adds to W_exp only.
+    Seen,
+    /// Not a view of the surface (the pixel belongs to a clutter instance in front of it): adds
+    /// nothing, so foreground objects neither vote nor count as exposure (occlusion masking).
+    Masked,
+}
+
+/// The fusion's knobs, named as in the paper.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FusionParams {
+    /// Stage exponent gamma_a on the Jacobian: high for relief, low for materials.
+    pub gamma: f64,
+    /// Views more oblique than theta_max (degrees from the surface normal) are gated out.
+    pub theta_max_deg: f64,
+    /// Kernel standard deviation sigma, texels; 0 deposits at the hit only (bilinearly).
+    pub sigma_texels: f64,
+    /// One ray every `stride` pixels each way; each stands for stride² pixels.
+    pub stride: u32,
+}
+
+/// The projection Jacobian of eq. (2): J = cos(theta) (f / t)², proportional to how many pixels
+/// of a view fall on a unit of surface area at the hit (`f` focal length in pixels, `t` hit
+/// distance in metres). Zero for views more oblique than `theta_max` (`cos_theta_max` its cosine)
+/// and for back faces.
+pub fn projection_jacobian(cos_theta: f64, f: f64, t: f64, cos_theta_max: f64) -> f64 {
+    if cos_theta <= 0.0 || cos_theta < cos_theta_max {
+        0.0
+    } else {
+        cos_theta * (f / t) * (f / t)
+    }
+}
+
+/// A normalised, truncated (3 sigma) Gaussian: the discrete K_sigma. Sums to 1.
+pub fn gaussian_kernel(sigma: f64) -> Vec<f64> {
+    if sigma <= 0.0 {
+        return vec![1.0];
+    }
+    let r = (3.0 * sigma).ceil() as i64;
+    let k: Vec<f64> = (-r..=r)
+        .map(|x| (-(x * x) as f64 / (2.0 * sigma * sigma)).exp())
+        .collect();
+    let s: f64 = k.iter().sum();
+    k.into_iter().map(|v| v / s).collect()
+}
+
+/// Eq. (2)-(3), exposure-weighted projection: for every pixel p of every view i (every
+/// `stride`-th each way) a ray from the camera finds its closest hit in `scene`; hits on a chart
+/// within the angle gate contribute
+///
+/// ω_ipq = J_ip^γ K_σ(q − u_ip),  W_exp(q) = Σ_ip ω_ipq,
+///
+/// and votes E_c(q) = Σ_ip ω_ipq 1[vote(i, p) = c] per class c. The kernel is applied as one
+/// separable convolution of the per-texel deposits after all views, which equals splatting each
+/// hit's kernel at its texel-centre-bilinear position (exact in mass: a splat sums to its weight
+/// away from the chart's border; texels off the surface are zeroed). `hits` counts the rays
+/// whose hit lands in each texel.
+///
+/// Deterministic at any thread count: each view is reduced in pixel order on its own, and views
+/// are merged in order.
+///
+/// # Units
+/// Weights are in pixels² per m² raised to γ (times stride², so strides compare).
+#[allow(clippy::too_many_arguments)]
+pub fn fuse_views(
+    scene: &Scene,
+    rays: &SceneRays,
+    charts: &ChartSet,
+    views: &[View],
+    classes: Vec<String>,
+    vote: &(dyn Fn(&View, usize) -> Vote + Sync),
+    p: &FusionParams,
+    progress: &dyn Progress,
+) -> TexelLayers {
+    let lookup = ChartLookup::new(scene, charts);
+    // Allocated on a chart's first deposit: most charts of a city are never seen.
+    let mut acc: Vec<Option<Accumulator>> = (0..charts.charts.len()).map(|_| None).collect();
+    let mut stats = FusionStats::default();
+    progress.set_total(views.len() as u64);
+    let chunk = (rayon::current_num_threads() * 2).max(1);
+    for batch in views.chunks(chunk) {
+        let deposits: Vec<ViewDeposits> = batch
+            .par_iter()
+            .map(|v| {
+                let d = view_deposits(v, rays, charts, &lookup, vote, p);
+                progress.advance(1);
+                d
+            })
+            .collect();
+        for d in deposits {
+            d.merge_into(charts, &mut acc, &mut stats);
+        }
+    }
+    let kernel = gaussian_kernel(p.sigma_texels);
+    let layers = charts
+        .charts
+        .par_iter()
+        .zip(acc)
+        .map(|(c, a)| {
+            let Some(a) = a else {
+                return ChartLayers {
+                    width: c.width,
+                    height: c.height,
+                    w_exp: PodVec(vec![0.0; c.len()]),
+                    hits: PodVec(vec![0; c.len()]),
+                    votes: Vec::new(),
+                };
+            };
+            let (w, h) = (c.width as usize, c.height as usize);
+            let on_surface = |k: usize| c.triangle_at[k] != u32::MAX;
+            let blur = |raw: &[f64]| -> PodVec<f32> {
+                let out = convolve(raw, w, h, &kernel);
+                PodVec(
+                    out.iter()
+                        .enumerate()
+                        .map(|(k, &v)| if on_surface(k) { v as f32 } else { 0.0 })
+                        .collect(),
+                )
+            };
+            ChartLayers {
+                width: c.width,
+                height: c.height,
+                w_exp: blur(&a.w),
+                hits: PodVec(a.hits.iter().map(|&n| n.min(u16::MAX as u32) as u16).collect()),
+                votes: a.votes.iter().map(|(&k, v)| (k, blur(v))).collect(),
+            }
+        })
+        .collect();
+    TexelLayers {
+        classes,
+        charts: layers,
+        stats,
+    }
+}
+
+/// Object and triangle -> chart index.
+struct ChartLookup {
+    of: Vec<Vec<u32>>,
+}
+
+impl ChartLookup {
+    fn new(scene: &Scene, charts: &ChartSet) -> ChartLookup {
+        let mut of: Vec<Vec<u32>> = scene
+            .objects
+            .iter()
+            .map(|o| vec![u32::MAX; o.mesh.triangles.len()])
+            .collect();
+        for (k, c) in charts.charts.iter().enumerate() {
+            if let Some(tris) = of.get_mut(c.object as usize) {
+                for &t in c.triangles.iter() {
+                    if let Some(slot) = tris.get_mut(t as usize) {
+                        *slot = k as u32;
+                    }
+                }
+            }
+        }
+        ChartLookup { of }
+    }
+
+    fn chart(&self, object: usize, triangle: usize) -> Option<u32> {
+        let c = *self.of.get(object)?.get(triangle)?;
+        (c != u32::MAX).then_some(c)
+    }
+}
+
+/// Raw (unblurred) sums on one chart.
+struct Accumulator {
+    w: Vec<f64>,
+    hits: Vec<u32>,
+    votes: BTreeMap<u16, Vec<f64>>,
+}
+
+impl Accumulator {
+    fn new(n: usize) -> Accumulator {
+        Accumulator {
+            w: vec![0.0; n],
+            hits: vec![0; n],
+            votes: BTreeMap::new(),
+        }
+    }
+}
+
+/// One weight at one texel: `slot` 0 is exposure only, `c + 1` a vote for class c.
+#[derive(Clone, Copy)]
+struct Deposit {
+    chart: u32,
+    texel: u32,
+    slot: u32,
+    w: f64,
+}
+
+/// One view's contributions, summed per (chart, texel, slot) in pixel order.
+struct ViewDeposits {
+    deposits: Vec<Deposit>,
+    hits: Vec<(u32, u32)>,
+    stats: FusionStats,
+}
+
+impl ViewDeposits {
+    fn merge_into(self, charts: &ChartSet, acc: &mut [Option<Accumulator>], stats: &mut FusionStats) {
+        for d in self.deposits {
+            let a = acc[d.chart as usize]
+                .get_or_insert_with(|| Accumulator::new(charts.charts[d.chart as usize].len()));
+            a.w[d.texel as usize] += d.w;
+            if d.slot > 0 {
+                let n = a.w.len();
+                a.votes
+                    .entry((d.slot - 1) as u16)
+                    .or_insert_with(|| vec![0.0; n])[d.texel as usize] += d.w;
+            }
+        }
+        for (c, t) in self.hits {
+            acc[c as usize]
+                .get_or_insert_with(|| Accumulator::new(charts.charts[c as usize].len()))
+                .hits[t as usize] += 1;
+        }
+        stats.views += self.stats.views;
+        stats.rays += self.stats.rays;
+        stats.chart_hits += self.stats.chart_hits;
+        stats.accepted += self.stats.accepted;
+        stats.masked += self.stats.masked;
+    }
+}
+
+fn view_deposits(
+    view: &View,
+    rays: &SceneRays,
+    charts: &ChartSet,
+    lookup: &ChartLookup,
+    vote: &(dyn Fn(&View, usize) -> Vote + Sync),
+    p: &FusionParams,
+) -> ViewDeposits {
+    let mut out = ViewDeposits {
+        deposits: Vec::new(),
+        hits: Vec::new(),
+        stats: FusionStats {
+            views: 1,
+            ..Default::default()
+        },
+    };
+    let k = view.intrinsics;
+    let s = p.stride.max(1);
+    let cos_max = p.theta_max_deg.to_radians().cos();
+    let pixel_weight = (s * s) as f64;
+    let origin = view.pose.position.map(|c| c as f32);
+    for y in (s / 2..view.height).step_by(s as usize) {
+        for x in (s / 2..view.width).step_by(s as usize) {
+            out.stats.rays += 1;
+            let cam = [
+                (x as f64 + 0.5 - k.cx) / k.fx,
+                (y as f64 + 0.5 - k.cy) / k.fy,
+                1.0,
+            ];
+            let norm = (cam[0] * cam[0] + cam[1] * cam[1] + 1.0).sqrt();
+            let d = view.pose.to_site(cam.map(|c| c / norm));
+            let Some(hit) = rays.cast(origin, d.map(|c| c as f32), 1e-3, 5000.0) else {
+                continue;
+            };
+            let Some(ci) = lookup.chart(hit.object, hit.triangle) else {
+                continue;
+            };
+            out.stats.chart_hits += 1;
+            let c = &charts.charts[ci as usize];
+            let cos_theta = -(c.normal[0] * d[0] + c.normal[1] * d[1] + c.normal[2] * d[2]);
+            let j = projection_jacobian(cos_theta, k.fx, hit.t as f64, cos_max);
+            if j == 0.0 {
+                continue;
+            }
+            let v = vote(view, (y * view.width + x) as usize);
+            let slot = match v {
+                Vote::Masked => {
+                    out.stats.masked += 1;
+                    continue;
+                }
+                Vote::Seen => 0,
+                Vote::Class(c) => c as u32 + 1,
+            };
+            out.stats.accepted += 1;
+            let t = hit.t as f64;
+            let at = std::array::from_fn(|a| view.pose.position[a] + d[a] * t);
+            let (u, vv) = c.uv_of(at);
+            if let Some((i, jj)) = c.texel_of(at) {
+                out.hits.push((ci, jj * c.width + i));
+            }
+            let w = j.powf(p.gamma) * pixel_weight;
+            deposit_bilinear(&mut out.deposits, ci, c.width, c.height, u - 0.5, vv - 0.5, slot, w);
+        }
+    }
+    // Sum equal keys; the stable sort keeps pixel order among them, so the sums are reproducible.
+    out.deposits
+        .sort_by_key(|d| (d.chart, d.texel, d.slot));
+    let mut merged: Vec<Deposit> = Vec::with_capacity(out.deposits.len() / 4);
+    for d in out.deposits.drain(..) {
+        match merged.last_mut() {
+            Some(m) if (m.chart, m.texel, m.slot) == (d.chart, d.texel, d.slot) => m.w += d.w,
+            _ => merged.push(d),
+        }
+    }
+    out.deposits = merged;
+    out
+}
+
+/// Spreads weight `w` at texel-centre coordinates (u, v) over the four nearest texel centres;
+/// parts falling outside the grid are dropped.
+#[allow(clippy::too_many_arguments)]
+fn deposit_bilinear(
+    out: &mut Vec<Deposit>,
+    chart: u32,
+    width: u32,
+    height: u32,
+    u: f64,
+    v: f64,
+    slot: u32,
+    w: f64,
+) {
+    let (i0, j0) = (u.floor(), v.floor());
+    let (a, b) = (u - i0, v - j0);
+    for (di, dj, f) in [
+        (0, 0, (1.0 - a) * (1.0 - b)),
+        (1, 0, a * (1.0 - b)),
+        (0, 1, (1.0 - a) * b),
+        (1, 1, a * b),
+    ] {
+        let (i, j) = (i0 as i64 + di, j0 as i64 + dj);
+        if f > 0.0 && i >= 0 && j >= 0 && i < width as i64 && j < height as i64 {
+            out.push(Deposit {
+                chart,
+                texel: (j * width as i64 + i) as u32,
+                slot,
+                w: w * f,
+            });
+        }
+    }
+}
+
+/// Separable convolution of a row-major `w` x `h` grid with a symmetric kernel; outside the grid
+/// counts as zero.
+fn convolve(raw: &[f64], w: usize, h: usize, kernel: &[f64]) -> Vec<f64> {
+    if kernel.len() == 1 {
+        return raw.to_vec();
+    }
+    let r = (kernel.len() / 2) as i64;
+    let mut rows = vec![0.0; raw.len()];
+    for y in 0..h {
+        for x in 0..w {
+            let v = raw[y * w + x];
+            if v == 0.0 {
+                continue;
+            }
+            for (k, kv) in kernel.iter().enumerate() {
+                let xx = x as i64 + k as i64 - r;
+                if xx >= 0 && (xx as usize) < w {
+                    rows[y * w + xx as usize] += v * kv;
+                }
+            }
+        }
+    }
+    let mut out = vec![0.0; raw.len()];
+    for y in 0..h {
+        for x in 0..w {
+            let v = rows[y * w + x];
+            if v == 0.0 {
+                continue;
+            }
+            for (k, kv) in kernel.iter().enumerate() {
+                let yy = y as i64 + k as i64 - r;
+                if yy >= 0 && (yy as usize) < h {
+                    out[yy as usize * w + x] += v * kv;
+                }
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn jacobian_head_on_and_at_sixty_degrees() {
+        // Head-on at 10 m with f = 500 px: (500 / 10)² = 2500 pixels per m².
+        assert!((projection_jacobian(1.0, 500.0, 10.0, 0.0) - 2500.0).abs() < 1e-9);
+        // At 60 degrees the same surface shows half as many pixels.
+        let c60 = 60f64.to_radians().cos();
+        assert!((projection_jacobian(c60, 500.0, 10.0, 0.0) - 1250.0).abs() < 1e-9);
+        // Twice as far, a quarter.
+        assert!((projection_jacobian(1.0, 500.0, 20.0, 0.0) - 625.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_gate_drops_views_beyond_theta_max_and_back_faces() {
+        let gate = 70f64.to_radians().cos();
+        assert!(projection_jacobian(65f64.to_radians().cos(), 500.0, 10.0, gate) > 0.0);
+        assert_eq!(projection_jacobian(75f64.to_radians().cos(), 500.0, 10.0, gate), 0.0);
+        assert_eq!(projection_jacobian(-0.5, 500.0, 10.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn a_splat_sums_to_its_weight() {
+        for sigma in [0.0, 0.7, 1.0, 2.5] {
+            let k = gaussian_kernel(sigma);
+            assert!((k.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            let (w, h) = (41, 37);
+            let mut deposits = Vec::new();
+            deposit_bilinear(&mut deposits, 0, w, h, 17.3, 20.8, 1, 3.5);
+            let mut raw = vec![0.0; (w * h) as usize];
+            for d in &deposits {
+                raw[d.texel as usize] += d.w;
+            }
+            let out = convolve(&raw, w as usize, h as usize, &k);
+            let total: f64 = out.iter().sum();
+            assert!((total - 3.5).abs() < 1e-9, "sigma {sigma}: {total}");
+            // The kernel's centre of mass stays at the hit.
+            let cx: f64 = out
+                .iter()
+                .enumerate()
+                .map(|(i, v)| (i % w as usize) as f64 * v)
+                .sum::<f64>()
+                / total;
+            assert!((cx - 17.3).abs() < 1e-9, "{cx}");
+        }
+    }
+}

@@ -1,0 +1,172 @@
+//! FuseViews: the per-pixel labels of a view set fused onto the building charts by
+//! exposure-weighted projection (paper eq. (2)-(3)), keeping exposure, hit counts and votes per
+//! class, and the winning class per texel.
+
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{ArtifactType, ChartSet, Scene, TexelLayers, View, ViewSet};
+use crate::geom::fusion::{FusionParams, Vote, fuse_views};
+use crate::geom::raycast::SceneRays;
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+
+/// Which per-pixel labels vote.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum LabelSource {
+    /// The architectural instances' classes (wall, window, door, balcony, ...).
+    Architecture,
+    /// The material classes of the view set's table.
+    Material,
+}
+
+/// Params of [`FuseViews`].
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FuseViewsParams {
+    /// The labels that vote. Default `Architecture`.
+    pub labels: LabelSource,
+    /// Stage exponent gamma on the projection Jacobian. Default 1.
+    pub gamma: f64,
+    /// Angle gate theta_max, degrees from the surface normal. Default 75.
+    pub theta_max_deg: f64,
+    /// Kernel sigma, texels. Default 1.
+    pub sigma_texels: f64,
+    /// One ray every `stride` pixels each way. Default 1 (every pixel).
+    pub stride: u32,
+    /// Pixels of clutter instances neither vote nor count as exposure. Default true.
+    pub mask_clutter: bool,
+}
+
+impl Default for FuseViewsParams {
+    fn default() -> Self {
+        FuseViewsParams {
+            labels: LabelSource::Architecture,
+            gamma: 1.0,
+            theta_max_deg: 75.0,
+            sigma_texels: 1.0,
+            stride: 1,
+            mask_clutter: true,
+        }
+    }
+}
+
+/// Street-view labels fused onto building charts, eq. (2)-(3).
+pub struct FuseViews;
+
+impl Stage for FuseViews {
+    const KIND: &'static str = "FuseViews";
+    const VERSION: u32 = 1;
+    const DOC: &'static str = "per-pixel labels of street views fused onto building charts by exposure-weighted projection, eq. (2)-(3)";
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::one("views", ArtifactType::Views, "the street views"),
+        InputSpec::one(
+            "scene",
+            ArtifactType::Scene,
+            "the scene the rays are cast in (the charts' scene: terrain and buildings)",
+        ),
+        InputSpec::one("charts", ArtifactType::Charts, "the charts made from that scene"),
+    ];
+    type Params = FuseViewsParams;
+    type Output = TexelLayers;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        if !(p.gamma >= 0.0 && p.gamma <= 8.0) {
+            return Err(ParamError::new("gamma", "expected an exponent in [0, 8]"));
+        }
+        if !(p.theta_max_deg > 0.0 && p.theta_max_deg <= 90.0) {
+            return Err(ParamError::new("theta_max_deg", "expected an angle in (0, 90] degrees"));
+        }
+        if !(p.sigma_texels >= 0.0 && p.sigma_texels <= 16.0) {
+            return Err(ParamError::new("sigma_texels", "expected a kernel width in [0, 16] texels"));
+        }
+        if !(1..=64).contains(&p.stride) {
+            return Err(ParamError::new("stride", "expected a stride of 1 to 64 pixels"));
+        }
+        Ok(())
+    }
+
+    fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<TexelLayers, StageError> {
+        let views: &ViewSet = inputs.one("views")?;
+        let scene: &Scene = inputs.one("scene")?;
+        let charts: &ChartSet = inputs.one("charts")?;
+        check_charts_match(scene, charts)?;
+        let classes = class_table(views, p.labels)?;
+        let vote = |v: &View, px: usize| pixel_vote(v, px, p, &classes);
+        let rays = SceneRays::new(scene);
+        let fp = FusionParams {
+            gamma: p.gamma,
+            theta_max_deg: p.theta_max_deg,
+            sigma_texels: p.sigma_texels,
+            stride: p.stride,
+        };
+        Ok(fuse_views(
+            scene,
+            &rays,
+            charts,
+            &views.views,
+            classes.clone(),
+            &vote,
+            &fp,
+            ctx.progress,
+        ))
+    }
+}
+
+/// Charts index objects and triangles of the scene they were made from: refuse any other.
+fn check_charts_match(scene: &Scene, charts: &ChartSet) -> Result<(), StageError> {
+    for c in &charts.charts {
+        let ok = scene.objects.get(c.object as usize).is_some_and(|o| {
+            o.id == c.building && c.triangles.iter().all(|&t| (t as usize) < o.mesh.triangles.len())
+        });
+        if !ok {
+            return Err(StageError::Failed(format!(
+                "the charts were not made from this scene (chart on {} at object {}): give FuseViews the scene its SurfaceCharts node read",
+                c.building, c.object
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The class names votes index: the material table, or every architectural class named by any
+/// view, sorted.
+fn class_table(views: &ViewSet, labels: LabelSource) -> Result<Vec<String>, StageError> {
+    let mut names: Vec<String> = match labels {
+        LabelSource::Material => return Ok(views.material_classes.clone()),
+        LabelSource::Architecture => views
+            .views
+            .iter()
+            .filter_map(|v| v.arch.as_ref())
+            .flat_map(|a| a.classes.values().cloned())
+            .collect(),
+    };
+    names.sort();
+    names.dedup();
+    if names.len() > u16::MAX as usize {
+        return Err(StageError::Failed("more than 65535 classes".into()));
+    }
+    Ok(names)
+}
+
+fn pixel_vote(v: &View, px: usize, p: &FuseViewsParams, classes: &[String]) -> Vote {
+    if p.mask_clutter
+        && v.clutter
+            .as_ref()
+            .is_some_and(|c| c.ids.get(px).is_some_and(|&id| id != 0))
+    {
+        return Vote::Masked;
+    }
+    match p.labels {
+        LabelSource::Architecture => {
+            let Some(a) = &v.arch else { return Vote::Seen };
+            let id = a.ids.get(px).copied().unwrap_or(0);
+            a.classes
+                .get(&id)
+                .and_then(|name| classes.binary_search(name).ok())
+                .map_or(Vote::Seen, |k| Vote::Class(k as u16))
+        }
+        LabelSource::Material => match v.material.as_ref().and_then(|m| m.get(px)) {
+            Some(&m) if (m as usize) < classes.len() => Vote::Class(m as u16),
+            _ => Vote::Seen,
+        },
+    }
+}

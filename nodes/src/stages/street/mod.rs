@@ -1,0 +1,6 @@
+//! Street level (Sec. 4.2): surface charts on the building solids, exposure-weighted multi-view
+//! fusion of street views onto them (eq. (2)-(3)), and the stages built on it: façade relief
+//! (eq. (4)), materials (eq. (5)), clutter and foliage.
+
+pub mod fuse_views;
+pub mod surface_charts;
