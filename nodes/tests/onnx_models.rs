@@ -87,6 +87,8 @@ fn view_set(rows: &[&str], materials: &[&str]) -> ViewSet {
             },
             pose: Pose::from_angles([0.0, 0.0, 2.0], 0.0, 0.0, 0.0),
             captured_at: None,
+            pose_source: None,
+            distortion: None,
             image: PodVec(expand(&colours)),
             arch: None,
             clutter: None,

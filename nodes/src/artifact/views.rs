@@ -82,6 +82,12 @@ pub struct View {
     pub pose: Pose,
     /// Capture time (ISO 8601), when known.
     pub captured_at: Option<String>,
+    /// Where the pose came from, e.g. `"computed_rotation, computed_geometry, terrain + 2.5 m"`
+    /// for a Mapillary image: evidence for how far to trust it.
+    pub pose_source: Option<String>,
+    /// Radial distortion [k1, k2] on normalised coordinates (OpenSfM's perspective model), not
+    /// applied to the image; `None` where the image is distortion-free.
+    pub distortion: Option<[f64; 2]>,
     /// 8-bit RGB, row-major.
     pub image: PodVec<[u8; 3]>,
     /// Architectural instances (walls, roofs, windows, doors, balconies...).

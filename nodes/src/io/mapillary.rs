@@ -735,6 +735,8 @@ pub fn plain_view(
         },
         pose,
         captured_at,
+        pose_source: None,
+        distortion: None,
         image: PodVec(img.pixels().map(|p| p.0).collect()),
         arch: None,
         clutter: None,
@@ -1152,10 +1154,14 @@ fn read_entity(
     };
     Ok(Ok(views
         .into_iter()
-        .map(|view| ProviderView {
-            view,
-            pose_source: pose_source.clone(),
-            distortion,
+        .map(|mut view| {
+            view.pose_source = Some(pose_source.clone());
+            view.distortion = distortion;
+            ProviderView {
+                view,
+                pose_source: pose_source.clone(),
+                distortion,
+            }
         })
         .collect()))
 }

@@ -169,10 +169,13 @@ fn read_item(
     };
     Ok(Ok(views
         .into_iter()
-        .map(|view| ProviderView {
-            view,
-            pose_source: pose_source.clone(),
-            distortion: None,
+        .map(|mut view| {
+            view.pose_source = Some(pose_source.clone());
+            ProviderView {
+                view,
+                pose_source: pose_source.clone(),
+                distortion: None,
+            }
         })
         .collect()))
 }

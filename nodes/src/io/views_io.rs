@@ -128,6 +128,11 @@ fn read_view(
             .get("captured_at")
             .and_then(Value::as_str)
             .map(str::to_owned),
+        pose_source: v
+            .get("pose_source")
+            .and_then(Value::as_str)
+            .map(str::to_owned),
+        distortion: distortion(&entry, v)?,
         image: PodVec(img.pixels().map(|p| p.0).collect()),
         arch: files.instances("arch")?,
         clutter: files.instances("clutter")?,
@@ -135,6 +140,19 @@ fn read_view(
         depth,
         normal,
     })
+}
+
+/// `"distortion": [k1, k2]`, when given: two finite numbers.
+fn distortion(entry: &Entry, v: &Value) -> Result<Option<[f64; 2]>, StageError> {
+    let Some(d) = v.get("distortion").filter(|d| !d.is_null()) else {
+        return Ok(None);
+    };
+    match d.as_array().map(|a| a.iter().map(Value::as_f64).collect::<Vec<_>>()) {
+        Some(k) if k.len() == 2 && k.iter().all(|x| x.is_some_and(f64::is_finite)) => {
+            Ok(Some([k[0].unwrap_or(0.0), k[1].unwrap_or(0.0)]))
+        }
+        _ => Err(entry.bad("distortion", "two finite numbers [k1, k2]")),
+    }
 }
 
 /// A string id, or a number as one.
@@ -464,6 +482,8 @@ pub fn write_viewset(set: &ViewSet) -> Result<Vec<(String, Vec<u8>)>, String> {
             "pose": {"x": v.pose.position[0], "y": v.pose.position[1], "z": v.pose.position[2]},
             "orientation": {"quat_wxyz": quaternion(&v.pose)},
             "captured_at": v.captured_at,
+            "pose_source": v.pose_source,
+            "distortion": v.distortion,
         }));
         files.push((
             format!("img/{}.png", v.id),

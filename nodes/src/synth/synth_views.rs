@@ -360,6 +360,8 @@ fn render(
         intrinsics,
         pose,
         captured_at: None,
+        pose_source: Some("synthetic: rendered from the true pose, reported with SynthViews' pose noise".into()),
+        distortion: None,
         image: PodVec(image),
         arch: Some(arch),
         clutter: Some(clutter),
