@@ -6,9 +6,9 @@
 use std::time::Instant;
 
 use kodama_nodes::artifact::ViewSet;
+use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::street::fuse_views::{FuseViews, FuseViewsParams};
 use kodama_nodes::stages::street::surface_charts::{SurfaceCharts, SurfaceChartsParams};
-use kodama_nodes::stage::Slot;
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
 use kodama_nodes::synth::truth_scene::{TruthScene, TruthSceneParams, wall_prisms};
@@ -23,7 +23,11 @@ fn main() {
         .skip(1)
         .filter_map(|a| a.parse().ok())
         .collect();
-    let counts = if counts.is_empty() { vec![16, 100, 1000] } else { counts };
+    let counts = if counts.is_empty() {
+        vec![16, 100, 1000]
+    } else {
+        counts
+    };
     let site = Site {
         crs: "EPSG:32618".into(),
         origin: (583200.0, 4506600.0),

@@ -7,9 +7,9 @@ use common::*;
 use std::sync::Arc;
 
 use kodama_nodes::artifact::Raster;
-use kodama_nodes::stages::buildings::building_mask::{BuildingMask, BuildingMaskParams};
 use kodama_nodes::geom::polygon::point_in_ring;
 use kodama_nodes::stage::Slot;
+use kodama_nodes::stages::buildings::building_mask::{BuildingMask, BuildingMaskParams};
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
 
@@ -106,7 +106,9 @@ fn masks_match_the_true_outlines() {
 /// The traced polygons, rasterized back at cell centres, are exactly the mask (outlines and
 /// courtyards), carry heights, and export as GeoJSON.
 fn check_traced_polygons(labels: &Raster, a: &Raster, site: &Site) {
-    use kodama_nodes::stages::buildings::trace_footprints::{TraceFootprints, TraceFootprintsParams};
+    use kodama_nodes::stages::buildings::trace_footprints::{
+        TraceFootprints, TraceFootprintsParams,
+    };
     let inputs = Inputs::new()
         .with("labels", slot(Artifact::Raster(labels.clone())))
         .with(

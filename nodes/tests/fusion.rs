@@ -81,7 +81,12 @@ fn score(f: &Fused) -> (f64, f64, usize) {
         if c.kind != ChartKind::Wall {
             continue;
         }
-        let b = f.city.buildings.iter().find(|b| b.id == c.building).unwrap();
+        let b = f
+            .city
+            .buildings
+            .iter()
+            .find(|b| b.id == c.building)
+            .unwrap();
         for j in 0..c.height {
             for i in 0..c.width {
                 let k = (j * c.width + i) as usize;
@@ -99,7 +104,9 @@ fn score(f: &Fused) -> (f64, f64, usize) {
                     None => "wall".to_owned(),
                 };
                 let got = &f.layers.classes[won as usize];
-                *confusion.entry((truth.clone(), got.clone())).or_insert(0usize) += 1;
+                *confusion
+                    .entry((truth.clone(), got.clone()))
+                    .or_insert(0usize) += 1;
                 if *got == truth {
                     right += 1;
                 }
@@ -121,7 +128,11 @@ fn perfect_views_reproduce_the_true_facade_labels() {
     for (c, l) in f.charts.charts.iter().zip(&f.layers.charts) {
         for k in 0..c.len() {
             if c.triangle_at[k] != u32::MAX && l.hits[k] > 0 {
-                assert!(l.w_exp[k] > 0.0, "{} texel {k}: hit but no exposure", c.building);
+                assert!(
+                    l.w_exp[k] > 0.0,
+                    "{} texel {k}: hit but no exposure",
+                    c.building
+                );
             }
         }
     }

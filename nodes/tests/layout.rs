@@ -63,7 +63,10 @@ fn stage_paths(text: &str, own: Option<&str>) -> Vec<(usize, String)> {
                 let module = match segs.first().copied() {
                     Some("stages") if segs.len() >= 3 => Some(segs[..3].join("::")),
                     Some("synth") if segs.len() >= 2 => Some(segs[..2].join("::")),
-                    Some(s) if s.starts_with('{') && (path.contains("stages") || path.contains("synth")) => {
+                    Some(s)
+                        if s.starts_with('{')
+                            && (path.contains("stages") || path.contains("synth")) =>
+                    {
                         Some(path.clone())
                     }
                     _ => None,
@@ -188,7 +191,10 @@ fn only_root_files_and_phase_folders_at_the_top() {
         }
     }
     stray.sort();
-    assert!(stray.is_empty(), "unexpected at nodes/src/ top level: {stray:?}");
+    assert!(
+        stray.is_empty(),
+        "unexpected at nodes/src/ top level: {stray:?}"
+    );
 }
 
 /// The checker itself: each kind of breach, written the ways Rust allows, is caught.
@@ -196,13 +202,34 @@ fn only_root_files_and_phase_folders_at_the_top() {
 fn the_checker_catches_each_kind_of_breach() {
     let f = |p: &str, t: &str| (PathBuf::from(p), t.to_string());
     let bad = [
-        f("rf/radiomap.rs", "use crate::stages::buildings::assemble_scene::terrain_mesh;\n"),
-        f("io/x.rs", "fn f() { crate::synth::synth_city::generate(); }\n"),
-        f("artifact/x.rs", "/// See [`crate::stages::eval::evaluate::p2p`].\npub struct X;\n"),
-        f("params.rs", "use crate::{stages::ingest::read_las, artifact::Raster};\n"),
-        f("stages/buildings/roof_clean.rs", "use crate::stages::buildings::building_mask::label_regions;\n"),
-        f("stages/buildings/unassigned.rs", "use super::roof_clean::label_ids;\n"),
-        f("synth/truth_scene.rs", "use crate::synth::synth_city::RECESS_M;\n"),
+        f(
+            "rf/radiomap.rs",
+            "use crate::stages::buildings::assemble_scene::terrain_mesh;\n",
+        ),
+        f(
+            "io/x.rs",
+            "fn f() { crate::synth::synth_city::generate(); }\n",
+        ),
+        f(
+            "artifact/x.rs",
+            "/// See [`crate::stages::eval::evaluate::p2p`].\npub struct X;\n",
+        ),
+        f(
+            "params.rs",
+            "use crate::{stages::ingest::read_las, artifact::Raster};\n",
+        ),
+        f(
+            "stages/buildings/roof_clean.rs",
+            "use crate::stages::buildings::building_mask::label_regions;\n",
+        ),
+        f(
+            "stages/buildings/unassigned.rs",
+            "use super::roof_clean::label_ids;\n",
+        ),
+        f(
+            "synth/truth_scene.rs",
+            "use crate::synth::synth_city::RECESS_M;\n",
+        ),
         f("stray.rs", "\n"),
     ];
     for case in &bad {
@@ -210,10 +237,19 @@ fn the_checker_catches_each_kind_of_breach() {
         assert_eq!(v.len(), 1, "{}: {v:?}", case.0.display());
     }
     let good = [
-        f("stages/buildings/roof_clean.rs", "use crate::raster::label::label_regions;\nuse crate::stages::buildings::roof_clean::RoofClean;\n#[cfg(test)]\nmod tests {\n    use super::*;\n}\n"),
+        f(
+            "stages/buildings/roof_clean.rs",
+            "use crate::raster::label::label_regions;\nuse crate::stages::buildings::roof_clean::RoofClean;\n#[cfg(test)]\nmod tests {\n    use super::*;\n}\n",
+        ),
         f("stages/mod.rs", "pub mod buildings;\n"),
-        f("lib.rs", "$crate::stages::buildings::roof_clean::RoofClean,\n"),
-        f("rf/paths.rs", "use super::scene::RfScene; // crate::stages::x::y in a comment\n"),
+        f(
+            "lib.rs",
+            "$crate::stages::buildings::roof_clean::RoofClean,\n",
+        ),
+        f(
+            "rf/paths.rs",
+            "use super::scene::RfScene; // crate::stages::x::y in a comment\n",
+        ),
     ];
     for case in &good {
         let v = violations(std::slice::from_ref(case));
@@ -221,7 +257,9 @@ fn the_checker_catches_each_kind_of_breach() {
     }
     let msg = &violations(&bad[..1])[0];
     assert!(
-        msg.starts_with("nodes/src/rf/radiomap.rs:1: uses the stage `stages::buildings::assemble_scene`"),
+        msg.starts_with(
+            "nodes/src/rf/radiomap.rs:1: uses the stage `stages::buildings::assemble_scene`"
+        ),
         "{msg}"
     );
 }

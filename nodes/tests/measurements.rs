@@ -6,7 +6,9 @@ use common::*;
 use std::path::PathBuf;
 
 use kodama_nodes::artifact::{Height, Measurements};
-use kodama_nodes::stages::ingest::read_measurements::{Layout, ReadMeasurements, ReadMeasurementsParams};
+use kodama_nodes::stages::ingest::read_measurements::{
+    Layout, ReadMeasurements, ReadMeasurementsParams,
+};
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
 
 fn read(

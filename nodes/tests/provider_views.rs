@@ -138,7 +138,12 @@ fn check_poses(got: &ProviderViews, e: &Value, mode: &str, ids: &str) {
         let a = angle_deg(&v.pose.rotation, &rows(&x["rotation"]));
         assert!(a < 1e-3, "{}: rotation off by {a} degrees", v.id);
         // The view itself carries where its pose came from, for every stage downstream.
-        assert_eq!(v.pose_source.as_deref(), Some(pv.pose_source.as_str()), "{}", v.id);
+        assert_eq!(
+            v.pose_source.as_deref(),
+            Some(pv.pose_source.as_str()),
+            "{}",
+            v.id
+        );
         assert_eq!(v.distortion, pv.distortion, "{}", v.id);
         assert_eq!(
             (v.width as u64, v.height as u64),

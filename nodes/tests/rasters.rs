@@ -10,9 +10,9 @@ use std::path::PathBuf;
 use kodama_nodes::artifact::{Grid, Ortho, PodVec, Raster};
 use kodama_nodes::io::crs::{Crs, ToSite};
 use kodama_nodes::io::geotiff::{read_geotiff, write_geotiff, write_geotiff_rgb};
+use kodama_nodes::io::warp::Resample;
 use kodama_nodes::stages::ingest::read_ortho::{ReadOrtho, ReadOrthoParams};
 use kodama_nodes::stages::ingest::read_raster::{ReadRaster, ReadRasterParams};
-use kodama_nodes::io::warp::Resample;
 use kodama_nodes::{Ctx, Inputs, Site, Stage};
 
 fn raster_params(path: &str) -> ReadRasterParams {

@@ -7,10 +7,10 @@ use common::*;
 
 use std::collections::BTreeMap;
 
+use kodama_nodes::io::sionna_xml::read_scene;
 use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::paths::{TraceOptions, trace_links};
 use kodama_nodes::rf::scene::RfScene;
-use kodama_nodes::io::sionna_xml::read_scene;
 
 struct Row {
     tx: [f64; 3],

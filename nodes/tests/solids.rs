@@ -8,18 +8,18 @@ use common::*;
 use std::sync::Arc;
 
 use kodama_nodes::artifact::{Metrics, ObjectClass, PointSet, Raster, Scene};
+use kodama_nodes::geom::mesh_check::check_solid;
+use kodama_nodes::geom::polygon::point_in_ring;
+use kodama_nodes::geom::raycast::SceneRays;
+use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::buildings::building_mask::{BuildingMask, BuildingMaskParams};
 use kodama_nodes::stages::buildings::building_solids::{BuildingSolids, BuildingSolidsParams};
-use kodama_nodes::synth::city_footprints::CityFootprints;
-use kodama_nodes::stages::eval::footprint_score::FootprintScore;
-use kodama_nodes::geom::mesh_check::check_solid;
-use kodama_nodes::geom::raycast::SceneRays;
-use kodama_nodes::geom::polygon::point_in_ring;
 use kodama_nodes::stages::buildings::roof_clean::{RoofClean, RoofCleanParams};
 use kodama_nodes::stages::buildings::split_buildings::{SplitBuildings, SplitBuildingsParams};
-use kodama_nodes::stage::Slot;
-use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::stages::buildings::trace_footprints::{TraceFootprints, TraceFootprintsParams};
+use kodama_nodes::stages::eval::footprint_score::FootprintScore;
+use kodama_nodes::synth::city_footprints::CityFootprints;
+use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
 
 /// What the chain made of one site, scored.

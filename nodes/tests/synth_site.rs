@@ -6,16 +6,16 @@ use common::*;
 
 use std::sync::Arc;
 
+use kodama_nodes::artifact::height_at;
 use kodama_nodes::artifact::{ObjectClass, PointSet, Roof, Scene};
-use kodama_nodes::synth::city_footprints::{CityFootprints, CityFootprintsParams};
-use kodama_nodes::io::export::{write_glb, write_las};
 use kodama_nodes::geom::mesh_check::check_closed_solid;
-use kodama_nodes::stages::heights::rasterize_scene::{RasterizeScene, RasterizeSceneParams};
 use kodama_nodes::geom::polygon::point_in_ring;
+use kodama_nodes::io::export::{write_glb, write_las};
 use kodama_nodes::stage::Slot;
+use kodama_nodes::stages::heights::rasterize_scene::{RasterizeScene, RasterizeSceneParams};
+use kodama_nodes::synth::city_footprints::{CityFootprints, CityFootprintsParams};
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::synth::synth_lidar::{SynthLidar, SynthLidarParams};
-use kodama_nodes::artifact::height_at;
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
 
 fn scan(scene: &Scene, p: &SynthLidarParams) -> PointSet {
@@ -281,7 +281,9 @@ fn las_and_laz_round_trip_through_our_reader() {
             .path()
             .join(if compressed { "scan.laz" } else { "scan.las" });
         std::fs::write(&path, write_las(&pts, &s, compressed).unwrap()).unwrap();
-        let back = kodama_nodes::stages::ingest::read_las::read_las(&path, None, &Ctx::new(&s, &[])).unwrap();
+        let back =
+            kodama_nodes::stages::ingest::read_las::read_las(&path, None, &Ctx::new(&s, &[]))
+                .unwrap();
         assert_eq!(back.len(), pts.len());
         assert_eq!(back.class, pts.class);
         assert_eq!(back.return_number, pts.return_number);
@@ -356,8 +358,8 @@ fn glb_loads_in_the_gltf_crate_with_a_node_per_object() {
 #[test]
 fn facade_relief_is_where_the_city_says() {
     use kodama_nodes::artifact::FeatureKind;
-    use kodama_nodes::rf::materials::Material;
     use kodama_nodes::geom::raycast::SceneRays;
+    use kodama_nodes::rf::materials::Material;
     let city = generate(&SynthCityParams::default());
     let count = |k: FeatureKind| {
         city.buildings

@@ -6,12 +6,12 @@ use common::*;
 
 use std::sync::Arc;
 
+use kodama_nodes::artifact::height_at;
 use kodama_nodes::artifact::{City, RMSNET_CLASSES, Scene, ViewSet};
+use kodama_nodes::io::views_io::{read_viewset, write_viewset};
 use kodama_nodes::stage::Slot;
 use kodama_nodes::synth::synth_city::generate;
-use kodama_nodes::artifact::height_at;
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
-use kodama_nodes::io::views_io::{read_viewset, write_viewset};
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
 
 fn city_and_scene() -> (City, Scene) {
@@ -228,7 +228,14 @@ fn facade_features_are_instances_and_metadata_noise_moves_only_the_reported_pose
     let classes: std::collections::BTreeSet<&str> = exact
         .views
         .iter()
-        .flat_map(|v| v.arch.as_ref().unwrap().classes.values().map(String::as_str))
+        .flat_map(|v| {
+            v.arch
+                .as_ref()
+                .unwrap()
+                .classes
+                .values()
+                .map(String::as_str)
+        })
         .collect();
     for c in ["wall", "window", "door"] {
         assert!(classes.contains(c), "no {c} instance in {classes:?}");
@@ -250,14 +257,24 @@ fn facade_features_are_instances_and_metadata_noise_moves_only_the_reported_pose
     for (a, b) in exact.views.iter().zip(&noisy.views) {
         // Rendered from the same true pose: the same pixels.
         assert!(a.image == b.image && a.arch == b.arch, "{}", a.id);
-        moved += (a.pose.position[0] - b.pose.position[0]).hypot(a.pose.position[1] - b.pose.position[1]);
+        moved += (a.pose.position[0] - b.pose.position[0])
+            .hypot(a.pose.position[1] - b.pose.position[1]);
         // Depth d' = 0.8 d + 1.5, the affine bias a calibration must undo.
-        for (x, y) in a.depth.as_ref().unwrap().iter().zip(b.depth.as_ref().unwrap().iter()) {
+        for (x, y) in a
+            .depth
+            .as_ref()
+            .unwrap()
+            .iter()
+            .zip(b.depth.as_ref().unwrap().iter())
+        {
             if x.is_finite() {
                 assert!((0.8 * x + 1.5 - y).abs() <= 1e-3 * (1.0 + x), "{x} -> {y}");
             }
         }
     }
     let mean = moved / exact.views.len() as f64;
-    assert!(mean > 0.3 && mean < 3.0, "mean position error {mean} m for sigma 1 m");
+    assert!(
+        mean > 0.3 && mean < 3.0,
+        "mean position error {mean} m for sigma 1 m"
+    );
 }

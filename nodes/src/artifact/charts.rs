@@ -85,9 +85,9 @@ impl Chart {
     pub fn world_of(&self, u: f64, v: f64) -> [f64; 3] {
         let (su, sv) = (u * self.texel_m, v * self.texel_m);
         match self.kind {
-            ChartKind::Wall => std::array::from_fn(|k| {
-                self.origin[k] + su * self.u_axis[k] + sv * self.v_axis[k]
-            }),
+            ChartKind::Wall => {
+                std::array::from_fn(|k| self.origin[k] + su * self.u_axis[k] + sv * self.v_axis[k])
+            }
             ChartKind::Roof => {
                 let (x, y) = (self.origin[0] + su, self.origin[1] + sv);
                 // On the plane n . (p - origin) = 0, solved for z (roofs look up: n_z > 0.5).

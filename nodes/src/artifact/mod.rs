@@ -17,10 +17,10 @@ mod views;
 use serde::{Deserialize, Serialize};
 
 pub use array::PodVec;
-pub use charts::{Chart, ChartKind, ChartLayers, FusionStats, ChartSet, TexelLayers};
+pub use charts::{Chart, ChartKind, ChartLayers, ChartSet, FusionStats, TexelLayers};
 pub use city::{
-    BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, RECESS_M, Rect, Roof, RoofBox, Street,
-    TreeSpec,
+    BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, RECESS_M, Rect, Roof, RoofBox,
+    Street, TreeSpec,
 };
 pub use footprints::{Footprint, Footprints, Polygon};
 pub use measurements::{Endpoint, Height, Link, Measurements, link_distance, measured_loss};

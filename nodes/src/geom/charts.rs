@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 
-use crate::artifact::{Chart, ChartKind, Mesh, ObjectClass, PodVec, Scene, ChartSet};
+use crate::artifact::{Chart, ChartKind, ChartSet, Mesh, ObjectClass, PodVec, Scene};
 
 /// How charts are cut and gridded.
 #[derive(Clone, Copy, Debug)]
@@ -96,7 +96,10 @@ fn planar_groups(m: &Mesh, spec: &ChartSpec) -> Vec<Vec<u32>> {
     for (t, tri) in m.triangles.iter().enumerate() {
         for e in 0..3 {
             let (a, b) = (tri[e], tri[(e + 1) % 3]);
-            by_edge.entry((a.min(b), a.max(b))).or_default().push(t as u32);
+            by_edge
+                .entry((a.min(b), a.max(b)))
+                .or_default()
+                .push(t as u32);
         }
     }
     let cos_max = spec.max_bend_deg.to_radians().cos();
@@ -148,7 +151,12 @@ fn chart_of(
     let len = dot(n, n).sqrt();
     let n = n.map(|c| c / len);
     let (kind, u_axis, v_axis, texel_m) = if n[2] > WALL_NZ {
-        (ChartKind::Roof, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], spec.roof_texel_m)
+        (
+            ChartKind::Roof,
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            spec.roof_texel_m,
+        )
     } else if n[2] >= -WALL_NZ {
         // u along the wall (horizontal), v up the wall in its plane: (u, v, n) right-handed.
         let h = (n[0] * n[0] + n[1] * n[1]).sqrt();
@@ -181,7 +189,10 @@ fn chart_of(
             hi = [hi[0].max(u), hi[1].max(v)];
         }
     }
-    let (w, h) = ((hi[0] - lo[0]).ceil().max(1.0), (hi[1] - lo[1]).ceil().max(1.0));
+    let (w, h) = (
+        (hi[0] - lo[0]).ceil().max(1.0),
+        (hi[1] - lo[1]).ceil().max(1.0),
+    );
     if !(w * h <= spec.max_texels as f64) {
         return Err(format!(
             "a chart of {id} would need {w} x {h} texels; use larger texels"
@@ -200,8 +211,14 @@ fn texel_triangles(c: &Chart, m: &Mesh) -> Vec<u32> {
     let mut at = vec![u32::MAX; c.len()];
     for &t in c.triangles.iter() {
         let uv = m.triangles[t as usize].map(|i| c.uv_of(vertex(m, i)));
-        let (u0, u1) = (uv.iter().map(|p| p.0).fold(f64::INFINITY, f64::min), uv.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max));
-        let (v0, v1) = (uv.iter().map(|p| p.1).fold(f64::INFINITY, f64::min), uv.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max));
+        let (u0, u1) = (
+            uv.iter().map(|p| p.0).fold(f64::INFINITY, f64::min),
+            uv.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max),
+        );
+        let (v0, v1) = (
+            uv.iter().map(|p| p.1).fold(f64::INFINITY, f64::min),
+            uv.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max),
+        );
         let area = orient(uv[0], uv[1], uv[2]);
         if area == 0.0 {
             continue;
@@ -267,8 +284,16 @@ mod tests {
     #[test]
     fn a_box_has_four_walls_and_a_roof_and_no_floor_chart() {
         let c = building_charts(&box_scene(), &ChartSpec::default()).unwrap();
-        let walls = c.charts.iter().filter(|c| c.kind == ChartKind::Wall).count();
-        let roofs = c.charts.iter().filter(|c| c.kind == ChartKind::Roof).count();
+        let walls = c
+            .charts
+            .iter()
+            .filter(|c| c.kind == ChartKind::Wall)
+            .count();
+        let roofs = c
+            .charts
+            .iter()
+            .filter(|c| c.kind == ChartKind::Roof)
+            .count();
         assert_eq!((walls, roofs), (4, 1));
         for ch in &c.charts {
             // v runs up every wall; every texel centre of a rectangle face is on it.

@@ -138,7 +138,12 @@ pub fn fuse_views(
                 width: c.width,
                 height: c.height,
                 w_exp: blur(&a.w),
-                hits: PodVec(a.hits.iter().map(|&n| n.min(u16::MAX as u32) as u16).collect()),
+                hits: PodVec(
+                    a.hits
+                        .iter()
+                        .map(|&n| n.min(u16::MAX as u32) as u16)
+                        .collect(),
+                ),
                 votes: a.votes.iter().map(|(&k, v)| (k, blur(v))).collect(),
             }
         })
@@ -214,7 +219,12 @@ struct ViewDeposits {
 }
 
 impl ViewDeposits {
-    fn merge_into(self, charts: &ChartSet, acc: &mut [Option<Accumulator>], stats: &mut FusionStats) {
+    fn merge_into(
+        self,
+        charts: &ChartSet,
+        acc: &mut [Option<Accumulator>],
+        stats: &mut FusionStats,
+    ) {
         for d in self.deposits {
             let a = acc[d.chart as usize]
                 .get_or_insert_with(|| Accumulator::new(charts.charts[d.chart as usize].len()));
@@ -300,12 +310,20 @@ fn view_deposits(
                 out.hits.push((ci, jj * c.width + i));
             }
             let w = j.powf(p.gamma) * pixel_weight;
-            deposit_bilinear(&mut out.deposits, ci, c.width, c.height, u - 0.5, vv - 0.5, slot, w);
+            deposit_bilinear(
+                &mut out.deposits,
+                ci,
+                c.width,
+                c.height,
+                u - 0.5,
+                vv - 0.5,
+                slot,
+                w,
+            );
         }
     }
     // Sum equal keys; the stable sort keeps pixel order among them, so the sums are reproducible.
-    out.deposits
-        .sort_by_key(|d| (d.chart, d.texel, d.slot));
+    out.deposits.sort_by_key(|d| (d.chart, d.texel, d.slot));
     let mut merged: Vec<Deposit> = Vec::with_capacity(out.deposits.len() / 4);
     for d in out.deposits.drain(..) {
         match merged.last_mut() {
@@ -409,7 +427,10 @@ mod tests {
     fn the_gate_drops_views_beyond_theta_max_and_back_faces() {
         let gate = 70f64.to_radians().cos();
         assert!(projection_jacobian(65f64.to_radians().cos(), 500.0, 10.0, gate) > 0.0);
-        assert_eq!(projection_jacobian(75f64.to_radians().cos(), 500.0, 10.0, gate), 0.0);
+        assert_eq!(
+            projection_jacobian(75f64.to_radians().cos(), 500.0, 10.0, gate),
+            0.0
+        );
         assert_eq!(projection_jacobian(-0.5, 500.0, 10.0, 0.0), 0.0);
     }
 

@@ -7,8 +7,8 @@ use spade::handles::FixedVertexHandle;
 use spade::{ConstrainedDelaunayTriangulation, HasPosition, Point2, Triangulation};
 
 use crate::artifact::{Mesh, PodVec, Polygon, Rect};
-use crate::rf::materials::Material;
 use crate::geom::polygon::point_in_ring;
+use crate::rf::materials::Material;
 
 /// A mesh under construction.
 #[derive(Default)]

@@ -293,8 +293,8 @@ fn faces_intersect(mesh: &Mesh, tris: &[[P3; 3]], i: usize, j: usize) -> bool {
 mod tests {
     use super::*;
     use crate::artifact::Polygon;
-    use crate::rf::materials::Material;
     use crate::geom::mesh_build::{cuboid, dome, gabled, prism};
+    use crate::rf::materials::Material;
 
     fn two(a: &Mesh, b: &Mesh) -> Mesh {
         let mut m = a.clone();

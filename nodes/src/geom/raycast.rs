@@ -166,8 +166,8 @@ impl ShearedRay {
 mod tests {
     use super::*;
     use crate::artifact::{ObjectClass, SceneObject};
-    use crate::rf::materials::Material;
     use crate::geom::mesh_build::cuboid;
+    use crate::rf::materials::Material;
 
     #[test]
     fn hits_the_nearest_face_with_an_outward_normal() {

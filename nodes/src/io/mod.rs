@@ -4,8 +4,8 @@
 
 pub mod crs;
 pub mod ecef;
-pub mod exr_io;
 pub mod export;
+pub mod exr_io;
 pub mod geojson;
 pub mod geotiff;
 pub mod mapillary;

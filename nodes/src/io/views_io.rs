@@ -147,7 +147,10 @@ fn distortion(entry: &Entry, v: &Value) -> Result<Option<[f64; 2]>, StageError> 
     let Some(d) = v.get("distortion").filter(|d| !d.is_null()) else {
         return Ok(None);
     };
-    match d.as_array().map(|a| a.iter().map(Value::as_f64).collect::<Vec<_>>()) {
+    match d
+        .as_array()
+        .map(|a| a.iter().map(Value::as_f64).collect::<Vec<_>>())
+    {
         Some(k) if k.len() == 2 && k.iter().all(|x| x.is_some_and(f64::is_finite)) => {
             Ok(Some([k[0].unwrap_or(0.0), k[1].unwrap_or(0.0)]))
         }

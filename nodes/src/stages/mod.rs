@@ -4,11 +4,11 @@
 //! **Invariant:** no stage imports another stage. What two stages share lives below them, in
 //! `io`, `geom`, `raster`, `rf` or `artifact` (checked by `tests/layout.rs`).
 
-pub mod ingest;
-pub mod heights;
+pub mod baseline;
 pub mod buildings;
-pub mod street;
+pub mod eval;
+pub mod heights;
+pub mod ingest;
 pub mod models;
 pub mod radio;
-pub mod baseline;
-pub mod eval;
+pub mod street;

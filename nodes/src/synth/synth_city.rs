@@ -13,10 +13,10 @@ use crate::artifact::{
     BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, Polygon, Rect, Roof, RoofBox,
     Street, TreeSpec,
 };
+use crate::artifact::{TerrainModel, height_at};
 use crate::rf::materials::Material;
 use crate::rng::{mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
-use crate::artifact::{TerrainModel, height_at};
 
 /// Params of [`SynthCity`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

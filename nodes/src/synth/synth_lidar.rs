@@ -12,8 +12,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, ObjectClass, PointSet, Scene};
-use crate::rf::materials::Material;
 use crate::geom::raycast::SceneRays;
+use crate::rf::materials::Material;
 use crate::rng::{gaussian, mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 

@@ -8,16 +8,16 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::height_at;
 use crate::artifact::{
-    ArtifactType, BuildingSpec, City, FeatureKind, Instances, Intrinsics, ObjectClass, PodVec, Pose,
-    RMSNET_CLASSES, Scene, View, ViewSet,
+    ArtifactType, BuildingSpec, City, FeatureKind, Instances, Intrinsics, ObjectClass, PodVec,
+    Pose, RMSNET_CLASSES, Scene, View, ViewSet,
 };
+use crate::geom::raycast::SceneRays;
 use crate::io::export::material_color;
 use crate::rf::materials::Material;
-use crate::geom::raycast::SceneRays;
 use crate::rng::{gaussian, mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
-use crate::artifact::height_at;
 
 /// Params of [`SynthViews`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -121,7 +121,10 @@ impl Stage for SynthViews {
             }
         }
         if p.max_views > 100_000 {
-            return Err(ParamError::new("max_views", "expected at most 100000 views"));
+            return Err(ParamError::new(
+                "max_views",
+                "expected at most 100000 views",
+            ));
         }
         for (name, v) in [
             ("depth_noise", p.depth_noise),
@@ -199,12 +202,24 @@ fn reported_pose(truth: &Pose, p: &SynthViewsParams, k: usize) -> Pose {
     let (sn, cs) = yaw.sin_cos();
     let r = truth.rotation;
     let rotation = [
-        [cs * r[0][0] - sn * r[1][0], cs * r[0][1] - sn * r[1][1], cs * r[0][2] - sn * r[1][2]],
-        [sn * r[0][0] + cs * r[1][0], sn * r[0][1] + cs * r[1][1], sn * r[0][2] + cs * r[1][2]],
+        [
+            cs * r[0][0] - sn * r[1][0],
+            cs * r[0][1] - sn * r[1][1],
+            cs * r[0][2] - sn * r[1][2],
+        ],
+        [
+            sn * r[0][0] + cs * r[1][0],
+            sn * r[0][1] + cs * r[1][1],
+            sn * r[0][2] + cs * r[1][2],
+        ],
         r[2],
     ];
     Pose {
-        position: [truth.position[0] + dx, truth.position[1] + dy, truth.position[2]],
+        position: [
+            truth.position[0] + dx,
+            truth.position[1] + dy,
+            truth.position[2],
+        ],
         rotation,
     }
 }
@@ -227,7 +242,10 @@ fn rmsnet_class(m: Material) -> &'static str {
 }
 
 fn rmsnet_index(name: &str) -> u8 {
-    RMSNET_CLASSES.iter().position(|c| *c == name).unwrap_or(255) as u8
+    RMSNET_CLASSES
+        .iter()
+        .position(|c| *c == name)
+        .unwrap_or(255) as u8
 }
 
 /// The architectural class of a building hit: the façade feature there, else wall or roof.
@@ -329,10 +347,13 @@ fn render(
                     let roof = nrm[2] > 0.7;
                     let t = hit.t as f64;
                     let at = std::array::from_fn(|a| pose.position[a] + dir[a] * t);
-                    let (feature, class) = arch_class(buildings.get(obj.id.as_str()).copied(), at, roof);
+                    let (feature, class) =
+                        arch_class(buildings.get(obj.id.as_str()).copied(), at, roof);
                     let next = arch_of.len() as u16 + 1;
                     let id = *arch_of.entry((hit.object, feature, roof)).or_insert(next);
-                    let key = (hit.object as u64) << 20 ^ feature.map_or(0xFFFFF, |f| f as u64) << 1 ^ roof as u64;
+                    let key = (hit.object as u64) << 20
+                        ^ feature.map_or(0xFFFFF, |f| f as u64) << 1
+                        ^ roof as u64;
                     if !missed(key) {
                         arch_ids[i] = id;
                         arch.classes.insert(id, class.into());
@@ -360,7 +381,9 @@ fn render(
         intrinsics,
         pose,
         captured_at: None,
-        pose_source: Some("synthetic: rendered from the true pose, reported with SynthViews' pose noise".into()),
+        pose_source: Some(
+            "synthetic: rendered from the true pose, reported with SynthViews' pose noise".into(),
+        ),
         distortion: None,
         image: PodVec(image),
         arch: Some(arch),

@@ -3,15 +3,15 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::RECESS_M;
+use crate::artifact::height_at;
 use crate::artifact::{
     ArtifactType, BuildingSpec, City, FacadeFeature, FeatureKind, Mesh, ObjectClass, Polygon, Rect,
     Roof, Scene, SceneObject,
 };
-use crate::rf::materials::Material;
 use crate::geom::mesh_build::{cuboid, dome, ellipsoid, gabled, height_surface, hipped, prism};
+use crate::rf::materials::Material;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
-use crate::artifact::RECESS_M;
-use crate::artifact::height_at;
 
 /// Params of [`TruthScene`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -141,8 +141,14 @@ pub fn wall_prisms(city: &City, truth: &Scene) -> Result<Scene, String> {
         objects.push(SceneObject {
             id: b.id.clone(),
             class: ObjectClass::Building,
-            mesh: prism(&b.footprint, b.base_z, b.ground_z + b.eave_m, b.facade, b.roof_material)
-                .map_err(|e| format!("{}: {e}", b.id))?,
+            mesh: prism(
+                &b.footprint,
+                b.base_z,
+                b.ground_z + b.eave_m,
+                b.facade,
+                b.roof_material,
+            )
+            .map_err(|e| format!("{}: {e}", b.id))?,
         });
     }
     Ok(Scene { objects })

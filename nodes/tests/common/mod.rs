@@ -5,14 +5,16 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use kodama_nodes::artifact::{City, PointSet, Raster, Scene};
-use kodama_nodes::stages::heights::rasterize_surface::{CellMode, RasterizeSurface, RasterizeSurfaceParams};
-use kodama_nodes::stage::Slot;
-use kodama_nodes::synth::synth_city::SynthCityParams;
-use kodama_nodes::synth::synth_lidar::{SynthLidar, SynthLidarParams};
 use kodama_nodes::artifact::TerrainModel;
+use kodama_nodes::artifact::{City, PointSet, Raster, Scene};
+use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::buildings::above_ground::{AboveGround, AboveGroundParams};
 use kodama_nodes::stages::buildings::terrain_pass::{TerrainPass, TerrainPassParams};
+use kodama_nodes::stages::heights::rasterize_surface::{
+    CellMode, RasterizeSurface, RasterizeSurfaceParams,
+};
+use kodama_nodes::synth::synth_city::SynthCityParams;
+use kodama_nodes::synth::synth_lidar::{SynthLidar, SynthLidarParams};
 use kodama_nodes::synth::truth_scene::{TruthScene, TruthSceneParams};
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
 

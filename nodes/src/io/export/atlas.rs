@@ -27,7 +27,10 @@ const PALETTE: [[u8; 3]; 12] = [
 /// Shelf packing, tallest first (ties by chart order), one texel of gap: each chart's corner in
 /// the atlas, and the atlas size.
 fn pack(sizes: &[(u32, u32)]) -> (Vec<(u32, u32)>, u32, u32) {
-    let area: f64 = sizes.iter().map(|&(w, h)| (w as f64 + 1.0) * (h as f64 + 1.0)).sum();
+    let area: f64 = sizes
+        .iter()
+        .map(|&(w, h)| (w as f64 + 1.0) * (h as f64 + 1.0))
+        .sum();
     let widest = sizes.iter().map(|s| s.0 + 1).max().unwrap_or(1);
     let width = widest.max(area.sqrt().ceil() as u32);
     let mut order: Vec<usize> = (0..sizes.len()).collect();
@@ -57,7 +60,9 @@ pub fn write_atlas(t: &TexelLayers) -> Result<Vec<(String, Vec<u8>)>, String> {
     let sizes: Vec<(u32, u32)> = t.charts.iter().map(|c| (c.width, c.height)).collect();
     let (at, w, h) = pack(&sizes);
     if w as u64 * h as u64 > 1 << 30 {
-        return Err(format!("the atlas would be {w} x {h} texels; too large to write"));
+        return Err(format!(
+            "the atlas would be {w} x {h} texels; too large to write"
+        ));
     }
     let n = (w * h) as usize;
     let (mut w_exp, mut hits) = (vec![0f32; n], vec![0f32; n]);
@@ -95,7 +100,10 @@ pub fn write_atlas(t: &TexelLayers) -> Result<Vec<(String, Vec<u8>)>, String> {
                 height: h,
             },
             data: crate::artifact::PodVec(
-                w_exp.iter().map(|&v| if v > 0.0 { v.log10() } else { f32::NAN }).collect(),
+                w_exp
+                    .iter()
+                    .map(|&v| if v > 0.0 { v.log10() } else { f32::NAN })
+                    .collect(),
             ),
         };
         super::colormap::raster_png(&r)?
@@ -124,8 +132,14 @@ pub fn write_atlas(t: &TexelLayers) -> Result<Vec<(String, Vec<u8>)>, String> {
             "atlas.json".into(),
             serde_json::to_vec_pretty(&index).map_err(|e| e.to_string())?,
         ),
-        ("w_exp.exr".into(), write_exr(w as usize, h as usize, vec![("Y", w_exp)])?),
-        ("hits.exr".into(), write_exr(w as usize, h as usize, vec![("Y", hits)])?),
+        (
+            "w_exp.exr".into(),
+            write_exr(w as usize, h as usize, vec![("Y", w_exp)])?,
+        ),
+        (
+            "hits.exr".into(),
+            write_exr(w as usize, h as usize, vec![("Y", hits)])?,
+        ),
         ("w_exp.png".into(), exposure_png),
         ("label.png".into(), png(&label)?),
     ])

@@ -91,7 +91,9 @@ pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String
         }
         (Artifact::Scene(s), "glb") => file(write_glb(s)?),
         (Artifact::Scene(s), "3dtiles") => Ok(Encoded::Folder(write_tileset(s, site, 100.0)?)),
-        (Artifact::Scene(s), "sionna") => Ok(Encoded::Folder(crate::io::sionna_xml::write_scene(s)?)),
+        (Artifact::Scene(s), "sionna") => {
+            Ok(Encoded::Folder(crate::io::sionna_xml::write_scene(s)?))
+        }
         (Artifact::Footprints(f), "geojson") => {
             file(crate::io::geojson::write_footprints(f, site)?.into_bytes())
         }
@@ -104,7 +106,9 @@ pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String
         (Artifact::Points(p), "las") => file(write_las(p, site, false)?),
         (Artifact::Points(p), "laz") => file(write_las(p, site, true)?),
         (Artifact::Points(p), "xyz") => file(xyz_text(p, site).into_bytes()),
-        (Artifact::Views(v), "views") => Ok(Encoded::Folder(crate::io::views_io::write_viewset(v)?)),
+        (Artifact::Views(v), "views") => {
+            Ok(Encoded::Folder(crate::io::views_io::write_viewset(v)?))
+        }
         (Artifact::Report(r), "report") => Ok(Encoded::Folder(r.files.clone())),
         (Artifact::Charts(c), "json") => file(charts_json(c)?),
         (Artifact::Texels(t), "atlas") => Ok(Encoded::Folder(atlas::write_atlas(t)?)),

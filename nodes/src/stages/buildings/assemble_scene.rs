@@ -7,10 +7,10 @@ use std::collections::BTreeSet;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, ObjectClass, Raster, Scene, SceneObject};
-use crate::rf::materials::{Material, default_material};
 use crate::geom::mesh_check::check_solid;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 use crate::geom::terrain_mesh::terrain_mesh;
+use crate::rf::materials::{Material, default_material};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`AssembleScene`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -7,9 +7,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Footprints, PodVec, PointSet, Raster};
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 use crate::raster::label::{label_components, label_regions};
 use crate::raster::morph::{dilate, erode};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`BuildingMask`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -20,13 +20,13 @@ use spade::{
 use crate::artifact::{
     ArtifactType, Grid, ObjectClass, PodVec, Polygon, Raster, Scene, SceneObject,
 };
-use crate::rf::materials::{Material, default_material};
 use crate::geom::mesh_build::{Builder, insert_rings, triangulate};
 use crate::geom::mesh_check::check_solid;
 use crate::geom::polygon::point_in_ring;
-use crate::raster::label::label_ids;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 use crate::geom::polygon::{simplify_polygon, trace};
+use crate::raster::label::label_ids;
+use crate::rf::materials::{Material, default_material};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`BuildingSolids`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

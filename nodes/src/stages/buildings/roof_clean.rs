@@ -11,9 +11,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, PodVec, PointSet, Raster};
+use crate::raster::label::label_ids;
 use crate::raster::label::label_regions;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
-use crate::raster::label::label_ids;
 
 /// ASPRS class of building returns.
 const BUILDING_CLASS: u8 = 6;

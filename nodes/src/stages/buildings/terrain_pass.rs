@@ -7,8 +7,8 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{ArtifactType, Grid, PodVec, Raster};
 use crate::raster::blur::gaussian_blur;
 use crate::raster::gap_fill::fill_gaps;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 use crate::raster::normal::normal_z;
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`TerrainPass`] (the symbols of eq. (1)).
 #[derive(Clone, Debug, Serialize, Deserialize)]

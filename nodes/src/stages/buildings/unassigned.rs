@@ -5,8 +5,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, PodVec, Raster};
-use crate::raster::morph::dilate;
 use crate::raster::label::label_ids;
+use crate::raster::morph::dilate;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`UnassignedAbove`].

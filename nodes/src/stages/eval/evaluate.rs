@@ -9,10 +9,10 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Measurements, Metrics, Raster};
-use crate::rf::em::fspl_db;
-use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
 use crate::artifact::{link_distance, measured_loss};
+use crate::rf::em::fspl_db;
 use crate::rf::pathloss_fit::{fit_close_in, fit_power_distance};
+use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
 
 /// Params of [`Evaluate`].
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]

@@ -3,6 +3,6 @@
 
 pub mod evaluate;
 pub mod footprint_score;
-pub mod report;
 pub mod point_stats;
 pub mod raster_stats;
+pub mod report;

@@ -1,6 +1,5 @@
 //! Summary statistics of a point set: a quick check, and numbers tests assert on.
 
-
 use crate::artifact::{ArtifactType, Metrics, PointSet};
 use crate::params::NoParams;
 use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};

@@ -1,7 +1,6 @@
 //! Summary statistics of a raster: a quick check, and the numbers tests assert on (the RMSE of a
 //! difference raster).
 
-
 use crate::artifact::{ArtifactType, Metrics, Raster};
 use crate::params::NoParams;
 use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};

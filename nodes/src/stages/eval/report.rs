@@ -9,8 +9,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Measurements, Metrics, Ortho, Raster, ReportFiles};
 use crate::artifact::{link_distance, measured_loss};
-use crate::rf::pathloss_fit::fit_power_distance;
 use crate::io::export::plot::{Chart, PALETTE, range};
+use crate::rf::pathloss_fit::fit_power_distance;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`Report`].

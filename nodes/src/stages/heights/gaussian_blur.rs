@@ -3,8 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Raster};
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 use crate::raster::blur::gaussian_blur_with_progress;
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`GaussianBlur`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

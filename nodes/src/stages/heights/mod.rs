@@ -1,8 +1,8 @@
 //! Height fields (Sec. 4): each source rasterized onto the site grid, composited, filtered and
 //! compared.
 
-pub mod coarsen;
 pub mod clamp;
+pub mod coarsen;
 pub mod composite_height;
 pub mod difference;
 pub mod gaussian_blur;

@@ -61,4 +61,3 @@ impl Stage for RasterizeScene {
         })
     }
 }
-

@@ -5,8 +5,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Grid, PodVec, PointSet, Raster};
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 use crate::raster::gap_fill::fill_gaps;
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// How the points falling into one cell become its value.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]

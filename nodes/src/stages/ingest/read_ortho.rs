@@ -7,11 +7,11 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{Ortho, PodVec};
+use crate::io::crs::source_crs;
 use crate::io::crs::{Crs, ToSite};
 use crate::io::geotiff::{PixelGrid, read_geotiff};
-use crate::io::crs::source_crs;
-use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 use crate::io::warp::{Resample, SourceMap, covering_grid, sample};
+use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`ReadOrtho`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -8,9 +8,9 @@ use osmpbf::{Element, ElementReader, RelMemberType};
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{Footprint, Footprints, Polygon};
+use crate::geom::polygon::point_in_ring;
 use crate::io::crs::{Crs, ToSite};
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, Stage, StageError};
-use crate::geom::polygon::point_in_ring;
 
 /// Params of [`ReadOsmBuildings`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

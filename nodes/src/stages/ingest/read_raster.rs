@@ -6,10 +6,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{PodVec, Raster};
 use crate::io::crs::ToSite;
-use crate::io::geotiff::{GeoTiff, read_geotiff};
-use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
-use crate::io::warp::{Resample, SourceMap, covering_grid, sample};
 use crate::io::crs::source_crs;
+use crate::io::geotiff::{GeoTiff, read_geotiff};
+use crate::io::warp::{Resample, SourceMap, covering_grid, sample};
+use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`ReadRaster`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -6,8 +6,8 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::ViewSet;
-use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 use crate::io::views_io::read_viewset;
+use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`ReadViews`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

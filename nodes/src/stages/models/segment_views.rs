@@ -13,9 +13,9 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Instances, PodVec, RMSNET_CLASSES, ViewSet};
-use crate::raster::label::label_regions;
 use crate::io::onnx::{ImageInput, ModelOutput, OnnxModel, OutputData};
 use crate::io::onnx::{check_model_params, model_files, resize_nearest, single_plane};
+use crate::raster::label::label_regions;
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Architectural classes: building parts, written to `View::arch`.

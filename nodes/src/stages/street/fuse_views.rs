@@ -63,7 +63,11 @@ impl Stage for FuseViews {
             ArtifactType::Scene,
             "the scene the rays are cast in (the charts' scene: terrain and buildings)",
         ),
-        InputSpec::one("charts", ArtifactType::Charts, "the charts made from that scene"),
+        InputSpec::one(
+            "charts",
+            ArtifactType::Charts,
+            "the charts made from that scene",
+        ),
     ];
     type Params = FuseViewsParams;
     type Output = TexelLayers;
@@ -73,13 +77,22 @@ impl Stage for FuseViews {
             return Err(ParamError::new("gamma", "expected an exponent in [0, 8]"));
         }
         if !(p.theta_max_deg > 0.0 && p.theta_max_deg <= 90.0) {
-            return Err(ParamError::new("theta_max_deg", "expected an angle in (0, 90] degrees"));
+            return Err(ParamError::new(
+                "theta_max_deg",
+                "expected an angle in (0, 90] degrees",
+            ));
         }
         if !(p.sigma_texels >= 0.0 && p.sigma_texels <= 16.0) {
-            return Err(ParamError::new("sigma_texels", "expected a kernel width in [0, 16] texels"));
+            return Err(ParamError::new(
+                "sigma_texels",
+                "expected a kernel width in [0, 16] texels",
+            ));
         }
         if !(1..=64).contains(&p.stride) {
-            return Err(ParamError::new("stride", "expected a stride of 1 to 64 pixels"));
+            return Err(ParamError::new(
+                "stride",
+                "expected a stride of 1 to 64 pixels",
+            ));
         }
         Ok(())
     }
@@ -115,7 +128,10 @@ impl Stage for FuseViews {
 fn check_charts_match(scene: &Scene, charts: &ChartSet) -> Result<(), StageError> {
     for c in &charts.charts {
         let ok = scene.objects.get(c.object as usize).is_some_and(|o| {
-            o.id == c.building && c.triangles.iter().all(|&t| (t as usize) < o.mesh.triangles.len())
+            o.id == c.building
+                && c.triangles
+                    .iter()
+                    .all(|&t| (t as usize) < o.mesh.triangles.len())
         });
         if !ok {
             return Err(StageError::Failed(format!(

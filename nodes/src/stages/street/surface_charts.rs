@@ -52,13 +52,22 @@ impl Stage for SurfaceCharts {
     type Output = ChartSet;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        for (name, v) in [("wall_texel_m", p.wall_texel_m), ("roof_texel_m", p.roof_texel_m)] {
+        for (name, v) in [
+            ("wall_texel_m", p.wall_texel_m),
+            ("roof_texel_m", p.roof_texel_m),
+        ] {
             if !(v >= 0.01 && v <= 10.0) {
-                return Err(ParamError::new(name, "expected a texel size in [0.01, 10] metres"));
+                return Err(ParamError::new(
+                    name,
+                    "expected a texel size in [0.01, 10] metres",
+                ));
             }
         }
         if !(p.max_bend_deg >= 0.0 && p.max_bend_deg < 45.0) {
-            return Err(ParamError::new("max_bend_deg", "expected an angle in [0, 45) degrees"));
+            return Err(ParamError::new(
+                "max_bend_deg",
+                "expected an angle in [0, 45) degrees",
+            ));
         }
         if p.max_texels == 0 {
             return Err(ParamError::new("max_texels", "expected a positive count"));
@@ -75,6 +84,7 @@ impl Stage for SurfaceCharts {
             max_texels: p.max_texels,
             ..ChartSpec::default()
         };
-        building_charts(scene, &spec).map_err(|m| StageError::Param(ParamError::new("wall_texel_m", m)))
+        building_charts(scene, &spec)
+            .map_err(|m| StageError::Param(ParamError::new("wall_texel_m", m)))
     }
 }
