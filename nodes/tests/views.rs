@@ -278,3 +278,76 @@ fn facade_features_are_instances_and_metadata_noise_moves_only_the_reported_pose
         "mean position error {mean} m for sigma 1 m"
     );
 }
+
+/// Provider views carry poses and pixels only; the outputs of models run on them come from a
+/// folder and are attached by view id. A view without files keeps nothing (and is warned
+/// about), a file of the wrong size is refused by name, a folder with no outputs at all is
+/// refused.
+#[test]
+fn model_outputs_attach_to_provider_views_by_id() {
+    use kodama_nodes::stages::ingest::read_view_outputs::{ReadViewOutputs, ReadViewOutputsParams};
+    let (_, set) = render(&small(SynthViewsParams::default()));
+    let dir = tempfile::tempdir().unwrap();
+    for (rel, bytes) in write_viewset(&set).unwrap() {
+        // The images and views.json stay with the provider; only the model outputs are here.
+        if rel.starts_with("img/") || rel == "views.json" {
+            continue;
+        }
+        let f = dir.path().join(rel);
+        std::fs::create_dir_all(f.parent().unwrap()).unwrap();
+        std::fs::write(f, bytes).unwrap();
+    }
+    let mut bare = set.clone();
+    bare.material_classes.clear();
+    for v in &mut bare.views {
+        (v.arch, v.clutter, v.material, v.depth, v.normal) = (None, None, None, None, None);
+    }
+    let last = &set.views.last().unwrap().id;
+    for kind in ["arch", "clutter", "material", "depth", "normal"] {
+        for ext in ["png", "json", "exr"] {
+            let _ = std::fs::remove_file(dir.path().join(kind).join(format!("{last}.{ext}")));
+        }
+    }
+    let params = |require_all: bool| ReadViewOutputsParams {
+        path: "outputs".into(),
+        material_classes: RMSNET_CLASSES.iter().map(|s| s.to_string()).collect(),
+        require_all,
+    };
+    let run = |p: &ReadViewOutputsParams, d: &std::path::Path| {
+        let files = [d.to_path_buf()];
+        ReadViewOutputs::run(
+            p,
+            &Inputs::new().with("views", Slot::One(Arc::new(Artifact::Views(bare.clone())))),
+            &Ctx::new(&site(), &files),
+        )
+    };
+    let got = run(&params(false), dir.path()).unwrap();
+    assert_eq!(got.material_classes, set.material_classes);
+    let n = set.views.len();
+    for (a, b) in got.views.iter().zip(&set.views).take(n - 1) {
+        assert!(a.arch == b.arch && a.clutter == b.clutter, "{}", a.id);
+        assert!(a.material == b.material && a.normal == b.normal, "{}", a.id);
+        assert!(a.depth.is_some() && a.image == b.image && a.pose == b.pose);
+    }
+    let l = got.views.last().unwrap();
+    assert!(l.arch.is_none() && l.material.is_none() && l.depth.is_none());
+    let e = run(&params(true), dir.path()).unwrap_err().to_string();
+    assert!(
+        e.contains("1 view(s) have no model output") && e.contains(last.as_str()),
+        "{e}"
+    );
+
+    // A material map of the wrong size is refused with its path.
+    let first = &set.views[0].id;
+    let tiny = image::GrayImage::new(3, 2);
+    tiny.save(dir.path().join("material").join(format!("{first}.png")))
+        .unwrap();
+    let e = run(&params(false), dir.path()).unwrap_err().to_string();
+    assert!(
+        e.contains(&format!("material/{first}.png")) && e.contains("3 x 2 pixels"),
+        "{e}"
+    );
+    let empty = tempfile::tempdir().unwrap();
+    let e = run(&params(false), empty.path()).unwrap_err().to_string();
+    assert!(e.contains("no model output for any of the"), "{e}");
+}

@@ -168,6 +168,58 @@ fn view_id(views_json: &Path, i: usize, v: &Value) -> Result<String, StageError>
     id.ok_or_else(|| StageError::bad_input(views_json, format!("view {i}"), "expected an `id`"))
 }
 
+/// The model outputs of one view, as found on disk.
+#[derive(Debug, Default)]
+pub struct ViewOutputs {
+    /// `arch/<id>.png` with its class table.
+    pub arch: Option<Instances>,
+    /// `clutter/<id>.png` with its class table.
+    pub clutter: Option<Instances>,
+    /// `material/<id>.png`.
+    pub material: Option<PodVec<u8>>,
+    /// `depth/<id>.exr`.
+    pub depth: Option<PodVec<f32>>,
+    /// `normal/<id>.exr`.
+    pub normal: Option<PodVec<[f32; 3]>>,
+}
+
+impl ViewOutputs {
+    /// True when no output was found.
+    pub fn is_empty(&self) -> bool {
+        self.arch.is_none()
+            && self.clutter.is_none()
+            && self.material.is_none()
+            && self.depth.is_none()
+            && self.normal.is_none()
+    }
+}
+
+/// The model outputs of view `id` (`width` x `height` pixels) under `dir` in the layout above,
+/// for views whose pose came from elsewhere (a provider download): absent files give `None`, a
+/// present file must be valid and of the view's size. `table` names where `material_classes`
+/// came from, for the error when a material map exists without one.
+pub fn read_view_outputs(
+    dir: &Path,
+    id: &str,
+    (width, height): (u32, u32),
+    material_classes: &[String],
+    table: &Path,
+) -> Result<ViewOutputs, StageError> {
+    let files = ViewFiles {
+        dir,
+        id,
+        width,
+        height,
+    };
+    Ok(ViewOutputs {
+        arch: files.instances("arch")?,
+        clutter: files.instances("clutter")?,
+        material: files.material(table, material_classes)?,
+        depth: files.depth()?,
+        normal: files.normal()?,
+    })
+}
+
 /// One entry of views.json, for errors that name the view.
 struct Entry<'a> {
     views_json: &'a Path,

@@ -11,5 +11,6 @@ pub mod read_panoramax;
 pub mod read_raster;
 pub mod read_sionna;
 pub mod read_tiles;
+pub mod read_view_outputs;
 pub mod read_views;
 pub mod read_xyz;
