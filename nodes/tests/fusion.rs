@@ -121,9 +121,15 @@ fn score(f: &Fused) -> (f64, f64, usize) {
     )
 }
 
+/// The perfect views fused once, shared by the tests that read them.
+fn perfect_fused() -> &'static Fused {
+    static F: std::sync::OnceLock<Fused> = std::sync::OnceLock::new();
+    F.get_or_init(|| fuse(perfect()))
+}
+
 #[test]
 fn perfect_views_reproduce_the_true_facade_labels() {
-    let f = fuse(perfect());
+    let f = perfect_fused();
     // Every texel a ray landed in has exposure.
     for (c, l) in f.charts.charts.iter().zip(&f.layers.charts) {
         for k in 0..c.len() {
@@ -136,7 +142,7 @@ fn perfect_views_reproduce_the_true_facade_labels() {
             }
         }
     }
-    let (seen, accuracy, n) = score(&f);
+    let (seen, accuracy, n) = score(f);
     println!(
         "perfect views: {:.1} % of facade texels observed ({n}), labels right at {:.2} %",
         100.0 * seen,
@@ -182,4 +188,86 @@ fn fusion_is_the_same_at_any_thread_count() {
             })
     };
     assert!(run(1) == run(3));
+}
+
+/// The draped glb, read back with the `gltf` crate: one quad per chart, lifted off its surface,
+/// and at every labelled texel's centre the texture shows the colour the glb's own legend gives
+/// that texel's winning class.
+#[test]
+fn the_draped_glb_shows_each_texel_where_it_lies() {
+    let f = perfect_fused();
+    let bytes = kodama_nodes::io::export::write_chart_glb(&f.layers).unwrap();
+    let (doc, buffers, images) = gltf::import_slice(&bytes).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_slice(&gltf::Glb::from_slice(&bytes).unwrap().json).unwrap();
+    let variants: Vec<&str> = json["extensions"]["KHR_materials_variants"]["variants"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(variants, ["label", "exposure", "hits"]);
+    let legend: Vec<[u8; 3]> = json["materials"][0]["extras"]["legend"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| serde_json::from_value(e["colour"].clone()).unwrap())
+        .collect();
+    assert_eq!(legend.len(), f.layers.classes.len());
+
+    let prim = doc.meshes().next().unwrap().primitives().next().unwrap();
+    let reader = prim.reader(|b| Some(&buffers[b.index()]));
+    let pos: Vec<[f32; 3]> = reader.read_positions().unwrap().collect();
+    let uv: Vec<[f32; 2]> = reader.read_tex_coords(0).unwrap().into_f32().collect();
+    let img = &images[0];
+    assert_eq!(img.format, gltf::image::Format::R8G8B8A8);
+    let colour_at = |t: [f64; 2]| {
+        let (x, y) = (
+            (t[0] * img.width as f64) as usize,
+            (t[1] * img.height as f64) as usize,
+        );
+        let k = 4 * (y * img.width as usize + x);
+        [img.pixels[k], img.pixels[k + 1], img.pixels[k + 2]]
+    };
+    let nonempty: Vec<usize> = (0..f.charts.charts.len())
+        .filter(|&c| !f.charts.charts[c].is_empty())
+        .collect();
+    assert_eq!(pos.len(), 4 * nonempty.len(), "one quad per chart");
+    let (mut checked, mut wrong) = (0usize, 0usize);
+    for (q, &ci) in nonempty.iter().enumerate() {
+        let (c, l) = (&f.charts.charts[ci], &f.layers.charts[ci]);
+        // Corner 0 is texel coordinate (0, 0), lifted 2 cm along the normal, in glTF's y-up.
+        let o = c.world_of(0.0, 0.0);
+        let lifted: [f64; 3] = std::array::from_fn(|k| o[k] + 0.02 * c.normal[k]);
+        let want = [lifted[0], lifted[2], -lifted[1]];
+        for k in 0..3 {
+            assert!(
+                (pos[4 * q][k] as f64 - want[k]).abs() < 1e-3,
+                "chart {ci} corner"
+            );
+        }
+        let (t0, t1, t3) = (uv[4 * q], uv[4 * q + 1], uv[4 * q + 3]);
+        for j in (0..c.height).step_by(3) {
+            for i in (0..c.width).step_by(3) {
+                let k = (j * c.width + i) as usize;
+                let Some(won) = l.winner(k) else { continue };
+                let (a, b) = (
+                    (i as f64 + 0.5) / c.width as f64,
+                    (j as f64 + 0.5) / c.height as f64,
+                );
+                let t = [0, 1].map(|d| {
+                    t0[d] as f64 + a * (t1[d] - t0[d]) as f64 + b * (t3[d] - t0[d]) as f64
+                });
+                checked += 1;
+                if colour_at(t) != legend[won as usize] {
+                    wrong += 1;
+                }
+            }
+        }
+    }
+    assert!(checked > 1000, "only {checked} labelled texels checked");
+    assert_eq!(
+        wrong, 0,
+        "{wrong} of {checked} texels show another class's colour"
+    );
 }

@@ -83,18 +83,35 @@ impl Chart {
 
     /// World position of continuous texel coordinates (u, v), on the chart's plane.
     pub fn world_of(&self, u: f64, v: f64) -> [f64; 3] {
-        let (su, sv) = (u * self.texel_m, v * self.texel_m);
-        match self.kind {
-            ChartKind::Wall => {
-                std::array::from_fn(|k| self.origin[k] + su * self.u_axis[k] + sv * self.v_axis[k])
+        plane_point(
+            self.kind,
+            self.origin,
+            [self.u_axis, self.v_axis, self.normal],
+            self.texel_m,
+            u,
+            v,
+        )
+    }
+
+    /// Where the chart lies and which of its texels are on the surface, without the triangles:
+    /// what a viewer needs to drape texel layers over the building.
+    pub fn frame(&self) -> ChartFrame {
+        let mut covered = vec![0u64; self.len().div_ceil(64)];
+        for (k, &t) in self.triangle_at.iter().enumerate() {
+            if t != u32::MAX {
+                covered[k / 64] |= 1 << (k % 64);
             }
-            ChartKind::Roof => {
-                let (x, y) = (self.origin[0] + su, self.origin[1] + sv);
-                // On the plane n . (p - origin) = 0, solved for z (roofs look up: n_z > 0.5).
-                let n = self.normal;
-                let z = self.origin[2] - (n[0] * su + n[1] * sv) / n[2];
-                [x, y, z]
-            }
+        }
+        ChartFrame {
+            kind: self.kind,
+            origin: self.origin,
+            u_axis: self.u_axis,
+            v_axis: self.v_axis,
+            normal: self.normal,
+            texel_m: self.texel_m,
+            width: self.width,
+            height: self.height,
+            covered,
         }
     }
 
@@ -112,11 +129,98 @@ impl Chart {
     }
 }
 
+/// A chart's plane, grid and surface coverage: [`Chart`] without its triangle index.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ChartFrame {
+    /// Wall or roof.
+    pub kind: ChartKind,
+    /// World position of texel coordinate (0, 0).
+    pub origin: [f64; 3],
+    /// Unit vector of increasing `u`.
+    pub u_axis: [f64; 3],
+    /// Unit vector of increasing `v`.
+    pub v_axis: [f64; 3],
+    /// Outward unit normal.
+    pub normal: [f64; 3],
+    /// Texel edge, metres.
+    pub texel_m: f64,
+    /// Texels along `u`.
+    pub width: u32,
+    /// Texels along `v`.
+    pub height: u32,
+    /// Bit k (row-major) set when texel k's centre lies on the surface.
+    pub covered: Vec<u64>,
+}
+
+impl ChartFrame {
+    /// World position of continuous texel coordinates (u, v), as [`Chart::world_of`].
+    pub fn world_of(&self, u: f64, v: f64) -> [f64; 3] {
+        plane_point(
+            self.kind,
+            self.origin,
+            [self.u_axis, self.v_axis, self.normal],
+            self.texel_m,
+            u,
+            v,
+        )
+    }
+
+    /// True when texel k's centre lies on the surface.
+    pub fn is_covered(&self, k: usize) -> bool {
+        self.covered
+            .get(k / 64)
+            .is_some_and(|w| w >> (k % 64) & 1 == 1)
+    }
+}
+
+/// The point at texel coordinates (u, v) of a chart plane: walls span `u_axis` and `v_axis`;
+/// roofs are parametrised by plan x and y and lifted onto the plane.
+fn plane_point(
+    kind: ChartKind,
+    origin: [f64; 3],
+    [u_axis, v_axis, normal]: [[f64; 3]; 3],
+    texel_m: f64,
+    u: f64,
+    v: f64,
+) -> [f64; 3] {
+    let (su, sv) = (u * texel_m, v * texel_m);
+    match kind {
+        ChartKind::Wall => std::array::from_fn(|k| origin[k] + su * u_axis[k] + sv * v_axis[k]),
+        ChartKind::Roof => {
+            // On the plane n . (p - origin) = 0, solved for z (roofs look up: n_z > 0.5).
+            let z = origin[2] - (normal[0] * su + normal[1] * sv) / normal[2];
+            [origin[0] + su, origin[1] + sv, z]
+        }
+    }
+}
+
 /// The charts of every building of a scene.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ChartSet {
     /// In object order, then by first triangle.
     pub charts: Vec<Chart>,
+}
+
+impl ChartSet {
+    /// Charts index the objects and triangles of the scene they were made from: `Err` naming
+    /// the first chart that does not fit `scene`.
+    pub fn check_made_from(&self, scene: &super::Scene) -> Result<(), String> {
+        for c in &self.charts {
+            let ok = scene.objects.get(c.object as usize).is_some_and(|o| {
+                o.id == c.building
+                    && c.triangles
+                        .iter()
+                        .all(|&t| (t as usize) < o.mesh.triangles.len())
+            });
+            if !ok {
+                return Err(format!(
+                    "the charts were not made from this scene (chart on {} at object {})",
+                    c.building, c.object
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The per-texel layers of one chart, fused from street views (eq. (2)-(3)).
@@ -157,6 +261,10 @@ pub struct TexelLayers {
     pub classes: Vec<String>,
     /// One per chart.
     pub charts: Vec<ChartLayers>,
+    /// The charts' frames, in the same order, so the layers can be draped over the buildings
+    /// (the glb export); empty for layers made before frames were kept.
+    #[serde(default)]
+    pub frames: Vec<ChartFrame>,
     /// Views that contributed, and pixel rays cast, hit a chart, passed the angle gate.
     pub stats: FusionStats,
 }

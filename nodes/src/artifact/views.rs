@@ -102,6 +102,18 @@ pub struct View {
     pub normal: Option<PodVec<[f32; 3]>>,
 }
 
+impl View {
+    /// The unit site-frame direction through image point (`x`, `y`) (pixel (i, j)'s centre is
+    /// (i + 0.5, j + 0.5)), and the ray length per unit of depth along the optical axis (so a
+    /// pixel's depth d is t = d times it along the ray).
+    pub fn pixel_ray(&self, x: f64, y: f64) -> ([f64; 3], f64) {
+        let k = self.intrinsics;
+        let cam = [(x - k.cx) / k.fx, (y - k.cy) / k.fy, 1.0];
+        let norm = (cam[0] * cam[0] + cam[1] * cam[1] + 1.0).sqrt();
+        (self.pose.to_site(cam.map(|c| c / norm)), norm)
+    }
+}
+
 /// A set of views sharing a material class table.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ViewSet {

@@ -3,11 +3,11 @@
 //! weighted by the projection Jacobian. Relief (eq. (4)) and materials (eq. (5)) call the same
 //! operator with their own per-pixel votes and exponent.
 
-use std::collections::BTreeMap;
-
 use rayon::prelude::*;
 
-use crate::artifact::{ChartLayers, ChartSet, FusionStats, PodVec, Scene, TexelLayers, View};
+use crate::artifact::{
+    Chart, ChartLayers, ChartSet, FusionStats, PodVec, Scene, TexelLayers, View,
+};
 use crate::geom::raycast::SceneRays;
 use crate::stage::Progress;
 
@@ -67,7 +67,8 @@ pub fn gaussian_kernel(sigma: f64) -> Vec<f64> {
 ///
 /// ω_ipq = J_ip^γ K_σ(q − u_ip),  W_exp(q) = Σ_ip ω_ipq,
 ///
-/// and votes E_c(q) = Σ_ip ω_ipq 1[vote(i, p) = c] per class c. The kernel is applied as one
+/// and votes E_c(q) = Σ_ip ω_ipq 1[vote(i, p) = c] per class c (`vote` takes the view's index
+/// in `views` and the pixel's row-major index). The kernel is applied as one
 /// separable convolution of the per-texel deposits after all views, which equals splatting each
 /// hit's kernel at its texel-centre-bilinear position (exact in mass: a splat sums to its weight
 /// away from the chart's border; texels off the surface are zeroed). `hits` counts the rays
@@ -85,72 +86,72 @@ pub fn fuse_views(
     charts: &ChartSet,
     views: &[View],
     classes: Vec<String>,
-    vote: &(dyn Fn(&View, usize) -> Vote + Sync),
+    vote: &(dyn Fn(usize, usize) -> Vote + Sync),
+    p: &FusionParams,
+    progress: &dyn Progress,
+) -> TexelLayers {
+    fuse_views_displaced(
+        scene,
+        rays,
+        charts,
+        views,
+        classes,
+        vote,
+        &|_, _| 0.0,
+        p,
+        progress,
+    )
+}
+
+/// [`fuse_views`] with each pixel's hit moved onto the chart's plane offset by `displace(view
+/// index, pixel)` metres along its outward normal (0: the chart itself): a pixel that sees a protrusion
+/// standing `h` in front of the wall is deposited where the ray crosses the plane at `h`, then
+/// projected along the normal onto the chart, so the feature lands where it stands rather than
+/// where its parallax throws it (façade relief, eq. (4)). The weight J is the one at the wall hit.
+#[allow(clippy::too_many_arguments)]
+pub fn fuse_views_displaced(
+    scene: &Scene,
+    rays: &SceneRays,
+    charts: &ChartSet,
+    views: &[View],
+    classes: Vec<String>,
+    vote: &(dyn Fn(usize, usize) -> Vote + Sync),
+    displace: &(dyn Fn(usize, usize) -> f64 + Sync),
     p: &FusionParams,
     progress: &dyn Progress,
 ) -> TexelLayers {
     let lookup = ChartLookup::new(scene, charts);
-    // Allocated on a chart's first deposit: most charts of a city are never seen.
-    let mut acc: Vec<Option<Accumulator>> = (0..charts.charts.len()).map(|_| None).collect();
+    let mut per_chart: Vec<ChartDeposits> = (0..charts.charts.len())
+        .map(|_| ChartDeposits::default())
+        .collect();
     let mut stats = FusionStats::default();
     progress.set_total(views.len() as u64);
     let chunk = (rayon::current_num_threads() * 2).max(1);
-    for batch in views.chunks(chunk) {
+    for (b, batch) in views.chunks(chunk).enumerate() {
         let deposits: Vec<ViewDeposits> = batch
             .par_iter()
-            .map(|v| {
-                let d = view_deposits(v, rays, charts, &lookup, vote, p);
+            .enumerate()
+            .map(|(k, v)| {
+                let d = view_deposits(b * chunk + k, v, rays, charts, &lookup, vote, displace, p);
                 progress.advance(1);
                 d
             })
             .collect();
         for d in deposits {
-            d.merge_into(charts, &mut acc, &mut stats);
+            d.merge_into(&mut per_chart, &mut stats);
         }
     }
     let kernel = gaussian_kernel(p.sigma_texels);
     let layers = charts
         .charts
         .par_iter()
-        .zip(acc)
-        .map(|(c, a)| {
-            let Some(a) = a else {
-                return ChartLayers {
-                    width: c.width,
-                    height: c.height,
-                    w_exp: PodVec(vec![0.0; c.len()]),
-                    hits: PodVec(vec![0; c.len()]),
-                    votes: Vec::new(),
-                };
-            };
-            let (w, h) = (c.width as usize, c.height as usize);
-            let on_surface = |k: usize| c.triangle_at[k] != u32::MAX;
-            let blur = |raw: &[f64]| -> PodVec<f32> {
-                let out = convolve(raw, w, h, &kernel);
-                PodVec(
-                    out.iter()
-                        .enumerate()
-                        .map(|(k, &v)| if on_surface(k) { v as f32 } else { 0.0 })
-                        .collect(),
-                )
-            };
-            ChartLayers {
-                width: c.width,
-                height: c.height,
-                w_exp: blur(&a.w),
-                hits: PodVec(
-                    a.hits
-                        .iter()
-                        .map(|&n| n.min(u16::MAX as u32) as u16)
-                        .collect(),
-                ),
-                votes: a.votes.iter().map(|(&k, v)| (k, blur(v))).collect(),
-            }
-        })
+        .zip(per_chart)
+        .map(|(c, d)| d.into_layers(c, &kernel))
         .collect();
     TexelLayers {
         classes,
         charts: layers,
+        frames: charts.charts.iter().map(Chart::frame).collect(),
         stats,
     }
 }
@@ -185,19 +186,67 @@ impl ChartLookup {
     }
 }
 
-/// Raw (unblurred) sums on one chart.
-struct Accumulator {
-    w: Vec<f64>,
+/// What the views left on one chart, in view order (pixel order within a view): the raw,
+/// unblurred deposits and the texels rays landed in. Kept sparse until the chart's layers are
+/// made, so memory follows what was seen rather than every texel of every class.
+#[derive(Default)]
+struct ChartDeposits {
+    deposits: Vec<(u32, u32, f64)>,
     hits: Vec<u32>,
-    votes: BTreeMap<u16, Vec<f64>>,
 }
 
-impl Accumulator {
-    fn new(n: usize) -> Accumulator {
-        Accumulator {
-            w: vec![0.0; n],
-            hits: vec![0; n],
-            votes: BTreeMap::new(),
+impl ChartDeposits {
+    /// The chart's blurred layers. Sums run in a fixed order (slot, texel, then view and pixel
+    /// order), so they are the same at any thread count.
+    fn into_layers(mut self, c: &Chart, kernel: &[f64]) -> ChartLayers {
+        let n = c.len();
+        let mut hits = vec![0u16; n];
+        for &t in &self.hits {
+            hits[t as usize] = hits[t as usize].saturating_add(1);
+        }
+        let (w, h) = (c.width as usize, c.height as usize);
+        let blur = |raw: &[f64]| -> PodVec<f32> {
+            let out = convolve(raw, w, h, kernel);
+            PodVec(
+                out.iter()
+                    .zip(c.triangle_at.iter())
+                    .map(|(&v, &t)| if t != u32::MAX { v as f32 } else { 0.0 })
+                    .collect(),
+            )
+        };
+        if self.deposits.is_empty() {
+            return ChartLayers {
+                width: c.width,
+                height: c.height,
+                w_exp: PodVec(vec![0.0; n]),
+                hits: PodVec(hits),
+                votes: Vec::new(),
+            };
+        }
+        self.deposits.sort_by_key(|&(t, slot, _)| (slot, t));
+        let mut raw = vec![0.0; n];
+        for &(t, _, x) in &self.deposits {
+            raw[t as usize] += x;
+        }
+        let w_exp = blur(&raw);
+        let mut votes = Vec::new();
+        for group in self.deposits.chunk_by(|a, b| a.1 == b.1) {
+            let slot = group[0].1;
+            if slot == 0 {
+                continue;
+            }
+            raw.fill(0.0);
+            for &(t, _, x) in group {
+                raw[t as usize] += x;
+            }
+            votes.push(((slot - 1) as u16, blur(&raw)));
+        }
+        ChartLayers {
+            width: c.width,
+            height: c.height,
+            w_exp,
+            hits: PodVec(hits),
+            votes,
         }
     }
 }
@@ -219,27 +268,14 @@ struct ViewDeposits {
 }
 
 impl ViewDeposits {
-    fn merge_into(
-        self,
-        charts: &ChartSet,
-        acc: &mut [Option<Accumulator>],
-        stats: &mut FusionStats,
-    ) {
+    fn merge_into(self, per_chart: &mut [ChartDeposits], stats: &mut FusionStats) {
         for d in self.deposits {
-            let a = acc[d.chart as usize]
-                .get_or_insert_with(|| Accumulator::new(charts.charts[d.chart as usize].len()));
-            a.w[d.texel as usize] += d.w;
-            if d.slot > 0 {
-                let n = a.w.len();
-                a.votes
-                    .entry((d.slot - 1) as u16)
-                    .or_insert_with(|| vec![0.0; n])[d.texel as usize] += d.w;
-            }
+            per_chart[d.chart as usize]
+                .deposits
+                .push((d.texel, d.slot, d.w));
         }
         for (c, t) in self.hits {
-            acc[c as usize]
-                .get_or_insert_with(|| Accumulator::new(charts.charts[c as usize].len()))
-                .hits[t as usize] += 1;
+            per_chart[c as usize].hits.push(t);
         }
         stats.views += self.stats.views;
         stats.rays += self.stats.rays;
@@ -249,12 +285,15 @@ impl ViewDeposits {
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn view_deposits(
+    index: usize,
     view: &View,
     rays: &SceneRays,
     charts: &ChartSet,
     lookup: &ChartLookup,
-    vote: &(dyn Fn(&View, usize) -> Vote + Sync),
+    vote: &(dyn Fn(usize, usize) -> Vote + Sync),
+    displace: &(dyn Fn(usize, usize) -> f64 + Sync),
     p: &FusionParams,
 ) -> ViewDeposits {
     let mut out = ViewDeposits {
@@ -273,13 +312,7 @@ fn view_deposits(
     for y in (s / 2..view.height).step_by(s as usize) {
         for x in (s / 2..view.width).step_by(s as usize) {
             out.stats.rays += 1;
-            let cam = [
-                (x as f64 + 0.5 - k.cx) / k.fx,
-                (y as f64 + 0.5 - k.cy) / k.fy,
-                1.0,
-            ];
-            let norm = (cam[0] * cam[0] + cam[1] * cam[1] + 1.0).sqrt();
-            let d = view.pose.to_site(cam.map(|c| c / norm));
+            let (d, _) = view.pixel_ray(x as f64 + 0.5, y as f64 + 0.5);
             let Some(hit) = rays.cast(origin, d.map(|c| c as f32), 1e-3, 5000.0) else {
                 continue;
             };
@@ -293,7 +326,7 @@ fn view_deposits(
             if j == 0.0 {
                 continue;
             }
-            let v = vote(view, (y * view.width + x) as usize);
+            let v = vote(index, (y * view.width + x) as usize);
             let slot = match v {
                 Vote::Masked => {
                     out.stats.masked += 1;
@@ -303,7 +336,9 @@ fn view_deposits(
                 Vote::Class(c) => c as u32 + 1,
             };
             out.stats.accepted += 1;
-            let t = hit.t as f64;
+            // On the plane `h` in front of the chart the ray arrives h / cos(theta) earlier.
+            let h = displace(index, (y * view.width + x) as usize);
+            let t = hit.t as f64 - if h.is_finite() { h / cos_theta } else { 0.0 };
             let at = std::array::from_fn(|a| view.pose.position[a] + d[a] * t);
             let (u, vv) = c.uv_of(at);
             if let Some((i, jj)) = c.texel_of(at) {

@@ -19,7 +19,7 @@ const VIRIDIS: [[f32; 3]; 9] = [
     [253.0, 231.0, 37.0],
 ];
 
-fn viridis(t: f64) -> [u8; 3] {
+pub(crate) fn viridis(t: f64) -> [u8; 3] {
     let x = t.clamp(0.0, 1.0) * (VIRIDIS.len() - 1) as f64;
     let (i, f) = (x.floor() as usize, (x - x.floor()) as f32);
     let (a, b) = (VIRIDIS[i], VIRIDIS[(i + 1).min(VIRIDIS.len() - 1)]);

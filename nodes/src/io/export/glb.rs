@@ -121,11 +121,25 @@ pub fn write_glb_objects(
         "bufferViews": views,
         "buffers": [{"byteLength": bin.len()}],
     });
-    let mut json_bytes = serde_json::to_vec(&doc).map_err(|e| e.to_string())?;
+    glb_container(&doc, bin)
+}
+
+/// The binary glTF container: a 12-byte header, the JSON chunk and the binary chunk, each padded
+/// to four bytes.
+pub(super) fn glb_container(doc: &Value, mut bin: Vec<u8>) -> Result<Vec<u8>, String> {
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    let mut json_bytes = serde_json::to_vec(doc).map_err(|e| e.to_string())?;
     while json_bytes.len() % 4 != 0 {
         json_bytes.push(b' ');
     }
     let total = 12 + 8 + json_bytes.len() + 8 + bin.len();
+    if total > u32::MAX as usize {
+        return Err(format!(
+            "the glb would be {total} bytes; the format holds at most 4 GiB"
+        ));
+    }
     let mut out = Vec::with_capacity(total);
     out.extend_from_slice(b"glTF");
     out.extend_from_slice(&2u32.to_le_bytes());

@@ -54,7 +54,8 @@ pub struct FuseViews;
 
 impl Stage for FuseViews {
     const KIND: &'static str = "FuseViews";
-    const VERSION: u32 = 1;
+    // 2: the output keeps the charts' frames; sums run slot by slot.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "per-pixel labels of street views fused onto building charts by exposure-weighted projection, eq. (2)-(3)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),
@@ -101,9 +102,13 @@ impl Stage for FuseViews {
         let views: &ViewSet = inputs.one("views")?;
         let scene: &Scene = inputs.one("scene")?;
         let charts: &ChartSet = inputs.one("charts")?;
-        check_charts_match(scene, charts)?;
+        charts.check_made_from(scene).map_err(|e| {
+            StageError::Failed(format!(
+                "{e}: give FuseViews the scene its SurfaceCharts node read"
+            ))
+        })?;
         let classes = class_table(views, p.labels)?;
-        let vote = |v: &View, px: usize| pixel_vote(v, px, p, &classes);
+        let vote = |k: usize, px: usize| pixel_vote(&views.views[k], px, p, &classes);
         let rays = SceneRays::new(scene);
         let fp = FusionParams {
             gamma: p.gamma,
@@ -122,25 +127,6 @@ impl Stage for FuseViews {
             ctx.progress,
         ))
     }
-}
-
-/// Charts index objects and triangles of the scene they were made from: refuse any other.
-fn check_charts_match(scene: &Scene, charts: &ChartSet) -> Result<(), StageError> {
-    for c in &charts.charts {
-        let ok = scene.objects.get(c.object as usize).is_some_and(|o| {
-            o.id == c.building
-                && c.triangles
-                    .iter()
-                    .all(|&t| (t as usize) < o.mesh.triangles.len())
-        });
-        if !ok {
-            return Err(StageError::Failed(format!(
-                "the charts were not made from this scene (chart on {} at object {}): give FuseViews the scene its SurfaceCharts node read",
-                c.building, c.object
-            )));
-        }
-    }
-    Ok(())
 }
 
 /// The class names votes index: the material table, or every architectural class named by any
