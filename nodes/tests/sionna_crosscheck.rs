@@ -55,7 +55,10 @@ fn path_gains_match_sionna_rt() {
         let xml = shared(&format!("sionna-scenes/{name}/{name}.xml"));
         let scene = read_scene(&xml).unwrap();
         let freq = rows[0].freq;
-        let rf = RfScene::new(&scene, freq, false).unwrap();
+        // Sionna's scene files give every material its default 0.1 m slab: trace them so.
+        let rf = RfScene::new(&scene, freq, false)
+            .unwrap()
+            .with_uniform_thickness(kodama_nodes::rf::scene::SLAB_THICKNESS_M);
         let opt = TraceOptions {
             max_depth: rows[0].depth,
             los: true,

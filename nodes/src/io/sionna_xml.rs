@@ -9,7 +9,8 @@ use crate::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
 use crate::rf::materials::Material;
 use crate::stage::StageError;
 
-/// Sionna's default slab thickness, metres; the only one our scenes carry.
+/// Sionna's default slab thickness, metres. Our scenes write each material's thickness from
+/// [`Material::slab_thickness_m`]; a scene read back accepts either.
 pub const THICKNESS_M: f64 = 0.1;
 
 /// Reads a Sionna/Mitsuba scene XML and the PLY files it names (relative to the XML's folder).
@@ -59,10 +60,13 @@ pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
                     "a number",
                 )
             })?;
-            if (t - THICKNESS_M).abs() > 1e-9 {
+            let ours = material.slab_thickness_m();
+            if (t - THICKNESS_M).abs() > 1e-9 && (t - ours).abs() > 1e-9 {
                 return Err(bad(
                     format!("line {}: bsdf \"{id}\" thickness {t}", line(b)),
-                    "the default 0.1 m (other slab thicknesses are not supported yet)",
+                    &format!(
+                        "Sionna's default 0.1 m or our table's {ours} m for this material (other slab thicknesses are not supported yet)"
+                    ),
                 ));
             }
         }
@@ -332,7 +336,9 @@ pub fn write_ply(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<u8> {
 }
 
 /// The files of a Sionna scene folder: `scene.xml` and `meshes/<object>-<material>.ply`, one
-/// shape per object and material. Foliage has no P.2040 class and is left out (our tracer applies
+/// shape per object (one per building) and material, named by the object, so a user can edit one
+/// building in Sionna; one `itu-radio-material` per class used, with the slab thickness the
+/// tracer uses for it ([`Material::slab_thickness_m`]). Foliage has no P.2040 class and is left out (our tracer applies
 /// it as a volume loss; Sionna has no such material).
 pub fn write_scene(scene: &Scene) -> Result<Vec<(String, Vec<u8>)>, String> {
     let mut files = Vec::new();
@@ -383,7 +389,8 @@ pub fn write_scene(scene: &Scene) -> Result<Vec<(String, Vec<u8>)>, String> {
     for m in &used {
         let itu = m.itu_type().expect("only ITU classes are used");
         xml.push_str(&format!(
-            "\t<bsdf type=\"itu-radio-material\" id=\"itu_{itu}\">\n\t\t<string name=\"type\" value=\"{itu}\"/>\n\t\t<float name=\"thickness\" value=\"{THICKNESS_M}\"/>\n\t</bsdf>\n"
+            "\t<bsdf type=\"itu-radio-material\" id=\"itu_{itu}\">\n\t\t<string name=\"type\" value=\"{itu}\"/>\n\t\t<float name=\"thickness\" value=\"{}\"/>\n\t</bsdf>\n",
+            m.slab_thickness_m()
         ));
     }
     xml.push_str("\n<!-- Shapes -->\n\n");

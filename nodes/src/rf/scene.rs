@@ -10,7 +10,8 @@ use crate::rf::materials::Material;
 
 use super::em::{permittivity, slab};
 
-/// Sionna's default slab thickness for every surface, metres.
+/// Sionna's default slab thickness for every surface, metres (what its scene files assume unless
+/// they say otherwise). Our scenes use [`Material::slab_thickness_m`] per material.
 pub const SLAB_THICKNESS_M: f64 = 0.1;
 
 /// How far a ray keeps clear of the surface it leaves (and of a segment's ends), metres.
@@ -36,6 +37,8 @@ pub struct RfScene {
     /// Material per triangle.
     pub material: Vec<Material>,
     eta: Vec<Option<C64>>,
+    /// Slab thickness per material (index = discriminant), metres.
+    thickness: Vec<f64>,
     /// The carrier's wavelength, metres.
     pub wavelength: f64,
     /// Axis-aligned bounds of every vertex.
@@ -90,9 +93,17 @@ impl RfScene {
             normals,
             material,
             eta,
+            thickness: Material::ALL.iter().map(|m| m.slab_thickness_m()).collect(),
             wavelength: super::wavelength(freq_hz),
             bounds: (lo, hi),
         })
+    }
+
+    /// Every surface a slab of `d` metres, whatever its material: a scene made for Sionna's
+    /// default ([`SLAB_THICKNESS_M`]), traced as Sionna traces it.
+    pub fn with_uniform_thickness(mut self, d: f64) -> RfScene {
+        self.thickness = vec![d; Material::ALL.len()];
+        self
     }
 
     /// The closest surface along `o + t d` for t in (`tmin`, `tmax`).
@@ -138,11 +149,12 @@ impl RfScene {
     /// Slab reflection and transmission coefficients ((R_TE, R_TM), (T_TE, T_TM)) of triangle
     /// `tri` at incidence cosine `cos_theta`; foliage is transparent.
     pub fn slab(&self, tri: u32, cos_theta: f64) -> ((C64, C64), (C64, C64)) {
-        match self.eta[self.material[tri as usize] as usize] {
+        let m = self.material[tri as usize] as usize;
+        match self.eta[m] {
             Some(eta) => slab(
                 cos_theta.abs().min(1.0),
                 eta,
-                SLAB_THICKNESS_M,
+                self.thickness[m],
                 self.wavelength,
             ),
             None => {

@@ -118,7 +118,8 @@ pub struct SynthDriveTest;
 
 impl Stage for SynthDriveTest {
     const KIND: &'static str = "SynthDriveTest";
-    const VERSION: u32 = 3;
+    // 4: slabs take their thickness per material (rf::materials).
+    const VERSION: u32 = 4;
     const DOC: &'static str = "drive-test measurements traced through the ground truth (richer settings) plus log-normal shadowing";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),

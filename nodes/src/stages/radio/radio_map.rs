@@ -110,7 +110,7 @@ pub struct RadioMap;
 
 impl Stage for RadioMap {
     const KIND: &'static str = "RadioMap";
-    const VERSION: u32 = 2;
+    const VERSION: u32 = 3;
     const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
