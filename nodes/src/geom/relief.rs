@@ -1,0 +1,1408 @@
+//! Façade relief (paper Sec. 4.2.2, Fig. 2): per-view region relief votes from semantic and
+//! geometric cues, fused onto the wall charts by the exposure-weighted operator of eq. (2)-(3)
+//! at a high gamma, turned into a per-texel posterior over the displacement class by discrete
+//! Bayesian fusion (eq. (4)), and extracted as rectangular instances with a depth.
+//!
+//! Per view: the reported depth is calibrated against the twin (a robust affine fit of reported
+//! depth against the ray-cast depth on wall pixels: monocular depth is affinely biased); regions
+//! are connected pixels of one non-wall architectural instance, or unlabelled pixels (what
+//! segmentation missed), kept when a dominant wall encloses them; each kept region is classified
+//! recessed, neutral or protruding by `g(v)` over three cues: the depth step against the wall
+//! plane fitted around it, the flow of its normals (side faces point toward the centre of a
+//! recess and away from a protrusion's), and its semantic class as a prior.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{
+    ChartKind, ChartSet, PodVec, ReliefInstance, ReliefLayers, ReliefSet, ReliefStats, Scene, View,
+};
+use crate::geom::fusion::{FusionParams, Vote, fuse_views_displaced};
+use crate::geom::raycast::SceneRays;
+use crate::raster::label::label_components;
+use crate::raster::label::label_regions;
+use crate::raster::morph::{dilate, erode};
+use crate::stage::Progress;
+
+/// The displacement classes Y, in the order every probability triple uses.
+pub const RELIEF_CLASSES: [&str; 3] = ["recessed", "neutral", "protruding"];
+
+/// Per semantic class: its prior sign and the depths it may be carved at.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ClassRule {
+    /// The architectural class name the views use.
+    pub name: String,
+    /// The semantic cue v_semantic: -1 recessed, 0 none, +1 protruding.
+    pub prior: i8,
+    /// Depth range, metres (min, max): an instance's measured depth is clamped into it.
+    pub depth_m: (f64, f64),
+}
+
+/// Weights of the cues in g(v).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CueWeights {
+    /// The class prior.
+    pub semantic: f64,
+    /// The depth step against the surrounding wall plane.
+    pub depth: f64,
+    /// The normal flow.
+    pub normal: f64,
+}
+
+/// The conditional probability table of eq. (4), stored as the two small tables it is built
+/// from (see [`Cpt::expand`]) plus optional explicit rows that replace derived ones.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Cpt {
+    /// Pr(Y | R, P) from the images alone (the latent mesh state unknown): 9 triples (recessed,
+    /// neutral, protruding), R level major (R = 0, P = 0..2; R = 1, ...).
+    pub image: Vec<(f64, f64, f64)>,
+    /// Pr(d | Y): for Y = recessed, neutral, protruding (rows) the probability that a source
+    /// mesh shows the façade behind (d = in), at (flush) or in front of (out) ours.
+    pub mesh: Vec<(f64, f64, f64)>,
+    /// Pr(Y) where no view observed the texel (used with a mesh only).
+    pub prior: (f64, f64, f64),
+    /// Rows that replace derived ones: Pr(Y | d, R, P) given outright.
+    pub rows: Vec<CptRow>,
+}
+
+/// One explicit row of the CPT.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CptRow {
+    /// The latent mesh state.
+    pub d: MeshState,
+    /// Recessed evidence level (0, 1, 2).
+    pub r: u8,
+    /// Protruding evidence level (0, 1, 2).
+    pub p: u8,
+    /// Pr(Y = recessed, neutral, protruding).
+    pub y: (f64, f64, f64),
+}
+
+/// The latent mesh-discrepancy state d of eq. (4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum MeshState {
+    /// The source mesh lies behind our façade.
+    In,
+    /// It agrees with our façade.
+    Flush,
+    /// It stands in front of our façade.
+    Out,
+    /// No information (no source mesh, or none found along the normal).
+    Unknown,
+}
+
+impl Default for Cpt {
+    /// The defaults, and why:
+    /// - `image`: a texel most of whose exposure voted recessed (R = 2, share >= the upper level)
+    ///   is recessed with 0.85; some votes (R = 1) give 0.35, not enough alone (a view whose
+    ///   region spilled over, or one view among many), but enough with a mesh that agrees; no
+    ///   votes either way is flat with 0.94 (the wall was seen and looked flat). Conflicting
+    ///   strong votes (R = P = 2, e.g. a window behind a balcony railing) split evenly between
+    ///   the two relief classes. The table is symmetric in R and P.
+    /// - `mesh`: a photogrammetry mesh is right about a recess 70 % of the time (it smooths
+    ///   shallow relief: 25 % flush), and shows spurious relief on a flat wall 10 % of the time.
+    /// - `prior`: 10 % of façade area is recessed, 10 % protruding (the synthetic city's windows
+    ///   cover about 15 % of its walls), 80 % flat.
+    fn default() -> Self {
+        Cpt {
+            image: vec![
+                (0.03, 0.94, 0.03),
+                (0.03, 0.62, 0.35),
+                (0.03, 0.12, 0.85),
+                (0.35, 0.62, 0.03),
+                (0.25, 0.50, 0.25),
+                (0.15, 0.25, 0.60),
+                (0.85, 0.12, 0.03),
+                (0.60, 0.25, 0.15),
+                (0.45, 0.10, 0.45),
+            ],
+            mesh: vec![(0.70, 0.25, 0.05), (0.05, 0.90, 0.05), (0.05, 0.25, 0.70)],
+            prior: (0.1, 0.8, 0.1),
+            rows: Vec::new(),
+        }
+    }
+}
+
+/// The CPT expanded to every (d, R, P): Pr(Y | d, R, P), and Pr(Y | d) where unobserved.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExpandedCpt {
+    /// `[d][r][p]` -> (recessed, neutral, protruding); d in the order In, Flush, Out, Unknown.
+    pub observed: [[[[f64; 3]; 3]; 3]; 4],
+    /// `[d]` -> Pr(Y | d, unobserved); `None` for Unknown (no evidence at all).
+    pub unobserved: [Option<[f64; 3]>; 4],
+}
+
+fn tri(t: (f64, f64, f64)) -> [f64; 3] {
+    [t.0, t.1, t.2]
+}
+
+fn normalised(y: [f64; 3]) -> [f64; 3] {
+    let s: f64 = y.iter().sum();
+    if s > 0.0 {
+        y.map(|v| v / s)
+    } else {
+        [0.0, 1.0, 0.0]
+    }
+}
+
+fn check_triple(t: (f64, f64, f64), what: &str) -> Result<(), String> {
+    let y = tri(t);
+    if y.iter().any(|v| !v.is_finite() || *v < 0.0) || (y.iter().sum::<f64>() - 1.0).abs() > 1e-6 {
+        return Err(format!(
+            "{what}: expected three probabilities summing to 1, got {t:?}"
+        ));
+    }
+    Ok(())
+}
+
+fn state_index(d: MeshState) -> usize {
+    match d {
+        MeshState::In => 0,
+        MeshState::Flush => 1,
+        MeshState::Out => 2,
+        MeshState::Unknown => 3,
+    }
+}
+
+impl Cpt {
+    /// Checks shapes and that every row is a distribution.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.image.len() != 9 {
+            return Err(format!(
+                "cpt.image: expected 9 rows (R 0..2 x P 0..2), got {}",
+                self.image.len()
+            ));
+        }
+        if self.mesh.len() != 3 {
+            return Err(format!(
+                "cpt.mesh: expected 3 rows (Y = recessed, neutral, protruding), got {}",
+                self.mesh.len()
+            ));
+        }
+        for (k, t) in self.image.iter().enumerate() {
+            check_triple(*t, &format!("cpt.image[{k}]"))?;
+        }
+        for (k, t) in self.mesh.iter().enumerate() {
+            check_triple(*t, &format!("cpt.mesh[{k}]"))?;
+        }
+        check_triple(self.prior, "cpt.prior")?;
+        let mut seen = BTreeSet::new();
+        for (k, row) in self.rows.iter().enumerate() {
+            if row.r > 2 || row.p > 2 {
+                return Err(format!("cpt.rows[{k}]: levels are 0, 1 or 2"));
+            }
+            check_triple(row.y, &format!("cpt.rows[{k}].y"))?;
+            if !seen.insert((state_index(row.d), row.r, row.p)) {
+                return Err(format!(
+                    "cpt.rows[{k}]: ({:?}, {}, {}) given twice",
+                    row.d, row.r, row.p
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The full table: Pr(Y | Unknown, R, P) is `image`; for a mesh state d,
+    /// Pr(Y | d, R, P) ∝ Pr(Y | R, P) Pr(d | Y) (the mesh and the views err independently given
+    /// the true class); unobserved, Pr(Y | d) ∝ Pr(Y) Pr(d | Y). Explicit `rows` then replace
+    /// derived entries.
+    pub fn expand(&self) -> ExpandedCpt {
+        let mut observed = [[[[0.0; 3]; 3]; 3]; 4];
+        let mut unobserved = [None; 4];
+        for (d, by_r) in observed.iter_mut().enumerate() {
+            for (r, by_p) in by_r.iter_mut().enumerate() {
+                for (p, row) in by_p.iter_mut().enumerate() {
+                    let img = tri(self.image[r * 3 + p]);
+                    *row = if d == 3 {
+                        img
+                    } else {
+                        normalised(std::array::from_fn(|y| img[y] * tri(self.mesh[y])[d]))
+                    };
+                }
+            }
+            if d < 3 {
+                let prior = tri(self.prior);
+                unobserved[d] = Some(normalised(std::array::from_fn(|y| {
+                    prior[y] * tri(self.mesh[y])[d]
+                })));
+            }
+        }
+        for row in &self.rows {
+            observed[state_index(row.d)][row.r as usize][row.p as usize] = tri(row.y);
+        }
+        ExpandedCpt {
+            observed,
+            unobserved,
+        }
+    }
+}
+
+/// How the source mesh's discrepancy Delta becomes Pr(d | Delta).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DeltaParams {
+    /// |Delta| at which in (or out) and flush are equally likely, metres.
+    pub tau_m: f64,
+    /// Width of the logistic transition, metres (the mesh's noise).
+    pub scale_m: f64,
+    /// Weight of the mesh: Pr(d = Unknown | Delta) = 1 - trust.
+    pub trust: f64,
+    /// How far along the normal to look for the mesh, each way, metres.
+    pub search_m: f64,
+}
+
+impl Default for DeltaParams {
+    fn default() -> Self {
+        DeltaParams {
+            tau_m: 0.1,
+            scale_m: 0.03,
+            trust: 0.8,
+            search_m: 1.0,
+        }
+    }
+}
+
+/// Pr(d | Delta) over (In, Flush, Out, Unknown): logistic in Delta around ±tau, scaled by the
+/// mesh's trust; all Unknown when Delta is not finite (no mesh there).
+pub fn mesh_state_probabilities(delta: f64, p: &DeltaParams) -> [f64; 4] {
+    if !delta.is_finite() {
+        return [0.0, 0.0, 0.0, 1.0];
+    }
+    let s = |x: f64| 1.0 / (1.0 + (-x / p.scale_m).exp());
+    let pin = s(-delta - p.tau_m);
+    let pout = s(delta - p.tau_m);
+    let flush = (1.0 - pin - pout).max(0.0);
+    let t = p.trust;
+    [t * pin, t * flush, t * pout, 1.0 - t]
+}
+
+/// Eq. (4), discrete Bayesian fusion of the evidence e_q = (R_q, P_q, Delta_q):
+///
+/// Pr(Y_q = y | e_q) = Σ_d Pr(Y_q = y | d, R_q, P_q) Pr(d | Delta_q),
+///
+/// with `levels` the discretised (R, P), `None` where the texel is unobserved, and `pd` =
+/// Pr(d | Delta) over (In, Flush, Out, Unknown). Returns (recessed, neutral, protruding), or
+/// `None` where there is no evidence at all (unobserved and no mesh): an unobserved texel is
+/// never evidence for a flat wall.
+pub fn relief_posterior(
+    cpt: &ExpandedCpt,
+    levels: Option<(u8, u8)>,
+    pd: [f64; 4],
+) -> Option<[f64; 3]> {
+    let mut y = [0.0; 3];
+    let mut mass = 0.0;
+    for (d, w) in pd.iter().enumerate() {
+        if *w <= 0.0 {
+            continue;
+        }
+        let row = match levels {
+            Some((r, p)) => cpt.observed[d][r.min(2) as usize][p.min(2) as usize],
+            None => match cpt.unobserved[d] {
+                Some(row) => row,
+                None => continue,
+            },
+        };
+        for k in 0..3 {
+            y[k] += w * row[k];
+        }
+        mass += w;
+    }
+    // Unobserved, the Unknown state carries no row: what remains is conditioned on the mesh.
+    (mass > 0.0).then(|| y.map(|v| v / mass))
+}
+
+/// Discretises an evidence share into levels 0, 1, 2 at the two thresholds.
+pub fn level(share: f64, levels: (f64, f64)) -> u8 {
+    if share >= levels.1 {
+        2
+    } else if share >= levels.0 {
+        1
+    } else {
+        0
+    }
+}
+
+/// Everything the relief needs, named as in the paper where it has a name.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReliefParams {
+    /// gamma_fac: the stage exponent on the Jacobian, high (close, head-on views dominate).
+    /// Default 2.
+    pub gamma: f64,
+    /// Angle gate theta_max, degrees. Default 70.
+    pub theta_max_deg: f64,
+    /// Kernel sigma, texels. Default 0.5 (a drainpipe is about one texel wide).
+    pub sigma_texels: f64,
+    /// One fusion ray every `stride` pixels each way. Default 1.
+    pub stride: u32,
+    /// Clutter pixels neither vote nor count as exposure. Default true.
+    pub mask_clutter: bool,
+    /// The architectural class of the walls regions must sit in. Default "wall".
+    pub wall_class: String,
+    /// Classes that never form regions (roofs). Default ["roof"].
+    pub ignore_classes: Vec<String>,
+    /// Per class: prior sign and depth range.
+    pub classes: Vec<ClassRule>,
+    /// Depth range of recesses of no known class, metres. Default (0.05, 0.5).
+    pub unknown_recess_m: (f64, f64),
+    /// Depth range of protrusions of no known class, metres. Default (0.05, 1.5).
+    pub unknown_protrusion_m: (f64, f64),
+    /// Smallest region, pixels. Default 6.
+    pub min_region_px: u32,
+    /// Width of the ring around a region where its enclosing wall is looked for, pixels.
+    /// Default 3.
+    pub ring_px: u32,
+    /// Share of the ring (clutter aside) the dominant wall must hold. Default 0.5.
+    pub enclosure_min: f64,
+    /// Smallest depth step that counts, metres. Default 0.05.
+    pub min_step_m: f64,
+    /// And its significance: step over its standard error. Default 3.
+    pub step_z_min: f64,
+    /// A pixel whose normal is further than this from the wall's is a side face, degrees.
+    /// Default 30.
+    pub side_angle_deg: f64,
+    /// Share of side-face pixels needed for the normal cue. Default 0.05.
+    pub min_side_share: f64,
+    /// Agreement of the side faces' flow needed for the normal cue, in [0, 1]. Default 0.3.
+    pub flow_min: f64,
+    /// Cue weights in g(v).
+    pub weights: CueWeights,
+    /// |score| needed for a non-neutral region label. Default 1.
+    pub score_min: f64,
+    /// Exposure unit: one head-on view from this far, metres. Default 30.
+    pub ref_distance_m: f64,
+    /// Texels with less exposure (in those units) stay unobserved. Default 1.
+    pub exposure_min: f64,
+    /// Thresholds discretising R and P into levels 0, 1, 2. Default (0.2, 0.5).
+    pub levels: (f64, f64),
+    /// The CPT of eq. (4).
+    pub cpt: Cpt,
+    /// Pr(d | Delta).
+    pub delta: DeltaParams,
+    /// Posterior an instance's texels need. Default 0.5.
+    pub threshold: f64,
+    /// Morphological opening radius for recesses and protrusions, texels. Default (1, 0): a
+    /// drainpipe is one texel wide.
+    pub open_texels: (u32, u32),
+    /// Closing radius, texels. Default 1.
+    pub close_texels: u32,
+    /// Smallest instance, texels. Default 6.
+    pub min_texels: u32,
+}
+
+impl Default for ReliefParams {
+    fn default() -> Self {
+        let rule = |name: &str, prior, depth_m| ClassRule {
+            name: name.into(),
+            prior,
+            depth_m,
+        };
+        ReliefParams {
+            gamma: 2.0,
+            theta_max_deg: 70.0,
+            sigma_texels: 0.5,
+            stride: 1,
+            mask_clutter: true,
+            wall_class: "wall".into(),
+            ignore_classes: vec!["roof".into()],
+            classes: vec![
+                rule("window", -1, (0.1, 0.3)),
+                rule("door", -1, (0.1, 0.3)),
+                rule("balcony", 1, (0.3, 1.5)),
+                rule("drainpipe", 1, (0.05, 0.3)),
+            ],
+            unknown_recess_m: (0.05, 0.5),
+            unknown_protrusion_m: (0.05, 1.5),
+            min_region_px: 6,
+            ring_px: 3,
+            enclosure_min: 0.5,
+            min_step_m: 0.05,
+            step_z_min: 3.0,
+            side_angle_deg: 30.0,
+            min_side_share: 0.05,
+            flow_min: 0.3,
+            weights: CueWeights {
+                semantic: 1.0,
+                depth: 2.0,
+                normal: 1.0,
+            },
+            score_min: 1.0,
+            ref_distance_m: 30.0,
+            exposure_min: 1.0,
+            levels: (0.2, 0.5),
+            cpt: Cpt::default(),
+            delta: DeltaParams::default(),
+            threshold: 0.5,
+            open_texels: (1, 0),
+            close_texels: 1,
+            min_texels: 6,
+        }
+    }
+}
+
+impl ReliefParams {
+    /// Checks every knob: (field, message) of the first bad one.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        let range = |name: &'static str, v: f64, lo: f64, hi: f64| {
+            if v.is_finite() && v >= lo && v <= hi {
+                Ok(())
+            } else {
+                Err((name, format!("expected a value in [{lo}, {hi}], got {v}")))
+            }
+        };
+        range("gamma", self.gamma, 0.0, 8.0)?;
+        range("theta_max_deg", self.theta_max_deg, 1.0, 90.0)?;
+        range("sigma_texels", self.sigma_texels, 0.0, 8.0)?;
+        if !(1..=64).contains(&self.stride) {
+            return Err(("stride", "expected 1 to 64 pixels".into()));
+        }
+        let depth_range = |name: &'static str, r: (f64, f64)| {
+            if r.0.is_finite() && r.1.is_finite() && r.0 >= 0.0 && r.0 <= r.1 && r.1 <= 10.0 {
+                Ok(())
+            } else {
+                Err((name, format!("expected 0 <= min <= max <= 10 m, got {r:?}")))
+            }
+        };
+        for c in &self.classes {
+            depth_range("classes", c.depth_m)?;
+            if !(-1..=1).contains(&c.prior) {
+                return Err(("classes", format!("{}: prior is -1, 0 or 1", c.name)));
+            }
+        }
+        let names: BTreeSet<&str> = self.classes.iter().map(|c| c.name.as_str()).collect();
+        if names.len() != self.classes.len() {
+            return Err(("classes", "a class is listed twice".into()));
+        }
+        depth_range("unknown_recess_m", self.unknown_recess_m)?;
+        depth_range("unknown_protrusion_m", self.unknown_protrusion_m)?;
+        if !(1..=100_000).contains(&self.min_region_px) {
+            return Err(("min_region_px", "expected 1 to 100000 pixels".into()));
+        }
+        if !(1..=32).contains(&self.ring_px) {
+            return Err(("ring_px", "expected 1 to 32 pixels".into()));
+        }
+        range("enclosure_min", self.enclosure_min, 0.0, 1.0)?;
+        range("min_step_m", self.min_step_m, 0.0, 5.0)?;
+        range("step_z_min", self.step_z_min, 0.0, 100.0)?;
+        range("side_angle_deg", self.side_angle_deg, 1.0, 89.0)?;
+        range("min_side_share", self.min_side_share, 0.0, 1.0)?;
+        range("flow_min", self.flow_min, 0.0, 1.0)?;
+        range("weights.semantic", self.weights.semantic, 0.0, 100.0)?;
+        range("weights.depth", self.weights.depth, 0.0, 100.0)?;
+        range("weights.normal", self.weights.normal, 0.0, 100.0)?;
+        range("score_min", self.score_min, 0.0, 1000.0)?;
+        range("ref_distance_m", self.ref_distance_m, 0.1, 10_000.0)?;
+        range("exposure_min", self.exposure_min, 0.0, 1e9)?;
+        range("levels", self.levels.0, 0.0, 1.0)?;
+        range("levels", self.levels.1, self.levels.0, 1.0)?;
+        self.cpt.validate().map_err(|m| ("cpt", m))?;
+        range("delta.tau_m", self.delta.tau_m, 0.0, 10.0)?;
+        range("delta.scale_m", self.delta.scale_m, 1e-4, 10.0)?;
+        range("delta.trust", self.delta.trust, 0.0, 1.0)?;
+        range("delta.search_m", self.delta.search_m, 0.01, 50.0)?;
+        range("threshold", self.threshold, 0.0, 1.0)?;
+        if self.open_texels.0 > 16 || self.open_texels.1 > 16 || self.close_texels > 16 {
+            return Err(("open_texels", "expected radii of at most 16 texels".into()));
+        }
+        if !(1..=1_000_000).contains(&self.min_texels) {
+            return Err(("min_texels", "expected 1 to 10^6 texels".into()));
+        }
+        Ok(())
+    }
+
+    /// The depth range of an instance of `class` and `sign`.
+    pub fn depth_range(&self, class: &str, sign: i8) -> (f64, f64) {
+        match self.classes.iter().find(|c| c.name == class) {
+            Some(c) => c.depth_m,
+            None if sign < 0 => self.unknown_recess_m,
+            None => self.unknown_protrusion_m,
+        }
+    }
+}
+
+/// What one kept region of one view said, located on a chart.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RegionVote {
+    /// View index.
+    pub view: u32,
+    /// Chart its centre ray hit.
+    pub chart: u32,
+    /// Its centre in texel coordinates (after the protrusion displacement).
+    pub uv: (f64, f64),
+    /// Semantic class (`unknown` for unlabelled pixels).
+    pub class: String,
+    /// g(v): -1, 0, +1.
+    pub sign: i8,
+    /// Depth step against the surrounding wall plane, metres, + out; NaN where not measured.
+    pub step_m: f64,
+    /// Pixels.
+    pub pixels: u32,
+}
+
+/// Per-pixel codes of a view's relief labels.
+const RECESSED: i8 = -1;
+const NEUTRAL: i8 = 0;
+const PROTRUDING: i8 = 1;
+const SEEN: i8 = 2;
+const MASKED: i8 = 3;
+
+/// One view's labels: per pixel a code, the displacement of protruding pixels, and its regions.
+pub struct ViewRelief {
+    codes: Vec<i8>,
+    displace: Vec<f32>,
+    /// Kept regions.
+    pub regions: Vec<RegionVote>,
+    /// Candidate regions before the enclosure test.
+    pub candidates: u64,
+    /// Whether the depth calibrated.
+    pub calibrated: bool,
+}
+
+/// Object and triangle -> chart index.
+struct Lookup {
+    of: Vec<Vec<u32>>,
+    terrain: Vec<bool>,
+}
+
+impl Lookup {
+    fn new(scene: &Scene, charts: &ChartSet) -> Lookup {
+        let mut of: Vec<Vec<u32>> = scene
+            .objects
+            .iter()
+            .map(|o| vec![u32::MAX; o.mesh.triangles.len()])
+            .collect();
+        for (k, c) in charts.charts.iter().enumerate() {
+            if let Some(tris) = of.get_mut(c.object as usize) {
+                for &t in c.triangles.iter() {
+                    if let Some(s) = tris.get_mut(t as usize) {
+                        *s = k as u32;
+                    }
+                }
+            }
+        }
+        let terrain = scene
+            .objects
+            .iter()
+            .map(|o| o.class == crate::artifact::ObjectClass::Terrain)
+            .collect();
+        Lookup { of, terrain }
+    }
+
+    fn wall_chart(&self, charts: &ChartSet, object: usize, tri: usize) -> Option<u32> {
+        let c = *self.of.get(object)?.get(tri)?;
+        (c != u32::MAX && charts.charts[c as usize].kind == ChartKind::Wall).then_some(c)
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        (v[n / 2 - 1] + v[n / 2]) / 2.0
+    }
+}
+
+/// Median and its standard error (1.4826 MAD x 1.2533 / sqrt(n)).
+fn median_se(v: &mut [f64]) -> (f64, f64) {
+    let m = median(v);
+    let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
+    let mad = median(&mut dev);
+    (m, 1.4826 * mad * 1.2533 / (v.len() as f64).sqrt())
+}
+
+/// Robust affine fit y = a x + b: least squares, then refits on the points within three robust
+/// standard deviations of the line, four times. `None` when too few points or too little spread
+/// in x to separate scale from offset.
+pub fn robust_affine(xs: &[f64], ys: &[f64]) -> Option<(f64, f64)> {
+    let n = xs.len();
+    if n < 30 {
+        return None;
+    }
+    let mut keep = vec![true; n];
+    let mut fit = None;
+    for _ in 0..5 {
+        let (mut sx, mut sy, mut c) = (0.0, 0.0, 0.0);
+        for i in 0..n {
+            if keep[i] {
+                sx += xs[i];
+                sy += ys[i];
+                c += 1.0;
+            }
+        }
+        if c < 30.0 {
+            return None;
+        }
+        let (mx, my) = (sx / c, sy / c);
+        let (mut sxx, mut sxy) = (0.0, 0.0);
+        for i in 0..n {
+            if keep[i] {
+                sxx += (xs[i] - mx) * (xs[i] - mx);
+                sxy += (xs[i] - mx) * (ys[i] - my);
+            }
+        }
+        // Depth must spread over at least 1 m (std) to tell scale from offset.
+        if sxx / c < 1.0 {
+            return None;
+        }
+        let a = sxy / sxx;
+        let b = my - a * mx;
+        fit = Some((a, b));
+        let mut res: Vec<f64> = (0..n).map(|i| (ys[i] - a * xs[i] - b).abs()).collect();
+        let mad = median(&mut res.clone()).max(1e-6);
+        for i in 0..n {
+            keep[i] = res[i] <= 3.0 * 1.4826 * mad;
+        }
+        res.clear();
+    }
+    fit.filter(|(a, b)| *a > 0.0 && a.is_finite() && b.is_finite())
+}
+
+/// Calibrates a view's reported depth against the twin: (a, b) with reported = a z + b, from
+/// wall pixels whose ray hits a wall chart and unlabelled pixels whose ray hits the terrain
+/// (every 4th pixel each way): the ground spreads the depths a head-on wall alone does not.
+fn calibrate(
+    view: &View,
+    rays: &SceneRays,
+    charts: &ChartSet,
+    lookup: &Lookup,
+    is_wall: &dyn Fn(usize) -> bool,
+    is_ground: &dyn Fn(usize) -> bool,
+) -> Option<(f64, f64)> {
+    let depth = view.depth.as_ref()?;
+    let (mut xs, mut ys) = (Vec::new(), Vec::new());
+    let origin = view.pose.position.map(|c| c as f32);
+    for y in (2..view.height).step_by(4) {
+        for x in (2..view.width).step_by(4) {
+            let px = (y * view.width + x) as usize;
+            let d = depth.get(px).copied().unwrap_or(f32::NAN) as f64;
+            let (wall, ground) = (is_wall(px), is_ground(px));
+            if !d.is_finite() || !(wall || ground) {
+                continue;
+            }
+            let (dir, norm) = view.pixel_ray(x as f64 + 0.5, y as f64 + 0.5);
+            let Some(hit) = rays.cast(origin, dir.map(|c| c as f32), 1e-3, 2000.0) else {
+                continue;
+            };
+            let ok = if wall {
+                lookup
+                    .wall_chart(charts, hit.object, hit.triangle)
+                    .is_some()
+            } else {
+                lookup.terrain.get(hit.object).copied().unwrap_or(false)
+            };
+            if !ok {
+                continue;
+            }
+            xs.push(hit.t as f64 / norm);
+            ys.push(d);
+        }
+    }
+    robust_affine(&xs, &ys)
+}
+
+const UNLABELLED: u32 = 1 << 16;
+
+/// The relief labels of one view: regions, their cues, g(v), and the per-pixel codes.
+fn view_relief(
+    vi: usize,
+    view: &View,
+    rays: &SceneRays,
+    charts: &ChartSet,
+    lookup: &Lookup,
+    p: &ReliefParams,
+) -> ViewRelief {
+    let (w, h) = (view.width, view.height);
+    let n = (w * h) as usize;
+    let mut out = ViewRelief {
+        codes: vec![SEEN; n],
+        displace: Vec::new(),
+        regions: Vec::new(),
+        candidates: 0,
+        calibrated: false,
+    };
+    let masked = |px: usize| {
+        p.mask_clutter
+            && view
+                .clutter
+                .as_ref()
+                .is_some_and(|c| c.ids.get(px).is_some_and(|&id| id != 0))
+    };
+    let Some(arch) = view.arch.as_ref().filter(|a| a.ids.len() == n) else {
+        for (px, c) in out.codes.iter_mut().enumerate() {
+            if masked(px) {
+                *c = MASKED;
+            }
+        }
+        return out;
+    };
+    let class_of = |px: usize| -> Option<&str> {
+        let id = arch.ids[px];
+        (id != 0)
+            .then(|| arch.classes.get(&id).map(String::as_str))
+            .flatten()
+    };
+    let is_wall = |px: usize| class_of(px) == Some(p.wall_class.as_str());
+    let depth = view.depth.as_ref().filter(|d| d.len() == n);
+    let normals = view.normal.as_ref().filter(|d| d.len() == n);
+    let is_ground = |px: usize| arch.ids[px] == 0 && !masked(px);
+    let cal = depth.and_then(|_| calibrate(view, rays, charts, lookup, &is_wall, &is_ground));
+    out.calibrated = cal.is_some();
+    // Region keys: a non-wall instance's id, or all unlabelled pixels with a depth.
+    let mut key = vec![0u32; n];
+    for px in 0..n {
+        if masked(px) {
+            out.codes[px] = MASKED;
+            continue;
+        }
+        let id = arch.ids[px];
+        if id == 0 {
+            let has_depth = depth.is_some_and(|d| d[px].is_finite());
+            if has_depth {
+                key[px] = UNLABELLED;
+            }
+            continue;
+        }
+        match arch.classes.get(&id) {
+            Some(c) if *c == p.wall_class => out.codes[px] = NEUTRAL,
+            Some(c) if p.ignore_classes.contains(c) => {}
+            _ => key[px] = id as u32,
+        }
+    }
+    let labels = label_regions(&key, w, h, p.min_region_px as usize);
+    let mut members: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
+    for (px, &l) in labels.iter().enumerate() {
+        if l != 0 {
+            members.entry(l).or_default().push(px as u32);
+        }
+    }
+    out.candidates = members.len() as u64;
+    let origin = view.pose.position.map(|c| c as f32);
+    let point = |px: usize, (a, b): (f64, f64)| -> Option<[f64; 3]> {
+        let d = depth?[px] as f64;
+        if !d.is_finite() {
+            return None;
+        }
+        let z = (d - b) / a;
+        let (x, y) = ((px as u32 % w) as f64 + 0.5, (px as u32 / w) as f64 + 0.5);
+        let (dir, norm) = view.pixel_ray(x, y);
+        Some(std::array::from_fn(|k| {
+            view.pose.position[k] + dir[k] * z * norm
+        }))
+    };
+    let r = p.ring_px as i64;
+    for pixels in members.values() {
+        let first = pixels[0] as usize;
+        let class = match arch.ids[first] {
+            0 => "unknown".to_owned(),
+            id => arch
+                .classes
+                .get(&id)
+                .cloned()
+                .unwrap_or_else(|| "unknown".into()),
+        };
+        // Bounding box, then the ring in a crop around it.
+        let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
+        let (mut sx, mut sy) = (0.0, 0.0);
+        for &q in pixels {
+            let (x, y) = (q % w, q / w);
+            x0 = x0.min(x);
+            y0 = y0.min(y);
+            x1 = x1.max(x);
+            y1 = y1.max(y);
+            sx += x as f64 + 0.5;
+            sy += y as f64 + 0.5;
+        }
+        let (cx, cy) = (sx / pixels.len() as f64, sy / pixels.len() as f64);
+        let bx0 = (x0 as i64 - r).max(0) as u32;
+        let by0 = (y0 as i64 - r).max(0) as u32;
+        let bx1 = (x1 as i64 + r).min(w as i64 - 1) as u32;
+        let by1 = (y1 as i64 + r).min(h as i64 - 1) as u32;
+        let (cw, ch) = (bx1 - bx0 + 1, by1 - by0 + 1);
+        let mut mask = vec![false; (cw * ch) as usize];
+        for &q in pixels {
+            let (x, y) = (q % w - bx0, q / w - by0);
+            mask[(y * cw + x) as usize] = true;
+        }
+        let grown = dilate(&mask, cw, ch, r);
+        let mut ring_walls: BTreeMap<u16, u32> = BTreeMap::new();
+        let mut ring_total = 0u32;
+        let mut ring_px: Vec<usize> = Vec::new();
+        for yy in 0..ch {
+            for xx in 0..cw {
+                let k = (yy * cw + xx) as usize;
+                if !grown[k] || mask[k] {
+                    continue;
+                }
+                let px = ((yy + by0) * w + xx + bx0) as usize;
+                if out.codes[px] == MASKED {
+                    continue;
+                }
+                ring_total += 1;
+                if is_wall(px) {
+                    *ring_walls.entry(arch.ids[px]).or_default() += 1;
+                    ring_px.push(px);
+                }
+            }
+        }
+        let dominant = ring_walls
+            .iter()
+            .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
+            .map(|(&id, &c)| (id, c));
+        let Some((wall_id, count)) = dominant else {
+            continue;
+        };
+        if ring_total == 0 || (count as f64) < p.enclosure_min * ring_total as f64 {
+            continue;
+        }
+        // The region's chart: where its centre ray meets the twin.
+        let (dir, _) = view.pixel_ray(cx, cy);
+        let Some(hit) = rays.cast(origin, dir.map(|c| c as f32), 1e-3, 2000.0) else {
+            continue;
+        };
+        let Some(ci) = lookup.wall_chart(charts, hit.object, hit.triangle) else {
+            continue;
+        };
+        let chart = &charts.charts[ci as usize];
+        let nrm = chart.normal;
+        // Depth cue: step against the plane with the wall's normal fitted to the ring.
+        let mut step = f64::NAN;
+        let mut v_depth = 0.0;
+        if let Some(cal) = cal {
+            let mut ring_s: Vec<f64> = ring_px
+                .iter()
+                .filter(|&&px| arch.ids[px] == wall_id)
+                .filter_map(|&px| point(px, cal))
+                .map(|x| dot(x, nrm))
+                .collect();
+            let mut reg_s: Vec<f64> = pixels
+                .iter()
+                .filter_map(|&q| point(q as usize, cal))
+                .map(|x| dot(x, nrm))
+                .collect();
+            if ring_s.len() >= 5 && reg_s.len() >= 5 {
+                let (off, se0) = median_se(&mut ring_s);
+                let (m, se1) = median_se(&mut reg_s);
+                step = m - off;
+                let se = (se0 * se0 + se1 * se1).sqrt().max(1e-4);
+                if step.abs() >= p.min_step_m && step.abs() / se >= p.step_z_min {
+                    v_depth = step.signum();
+                }
+            }
+        }
+        // Normal cue: side faces' normals point toward a recess's centre, away from a
+        // protrusion's (image-plane flow).
+        let mut v_normal = 0.0;
+        if let Some(nm) = normals {
+            let cos_side = p.side_angle_deg.to_radians().cos();
+            let (mut side, mut flow) = (0u32, 0.0);
+            for &q in pixels {
+                let nc = nm[q as usize].map(|c| c as f64);
+                let ns = view.pose.to_site(nc);
+                if dot(ns, nrm) >= cos_side {
+                    continue;
+                }
+                side += 1;
+                let (x, y) = ((q % w) as f64 + 0.5 - cx, (q / w) as f64 + 0.5 - cy);
+                let f = nc[0] * x + nc[1] * y;
+                flow += if f > 0.0 {
+                    1.0
+                } else if f < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                };
+            }
+            if side as f64 >= p.min_side_share * pixels.len() as f64 && side > 0 {
+                let f = flow / side as f64;
+                if f.abs() >= p.flow_min {
+                    v_normal = f.signum();
+                }
+            }
+        }
+        let v_sem = p
+            .classes
+            .iter()
+            .find(|c| c.name == class)
+            .map_or(0.0, |c| c.prior as f64);
+        let score =
+            p.weights.semantic * v_sem + p.weights.depth * v_depth + p.weights.normal * v_normal;
+        let sign: i8 = if score >= p.score_min && score > 0.0 {
+            1
+        } else if score <= -p.score_min && score < 0.0 {
+            -1
+        } else {
+            0
+        };
+        // A protrusion is deposited on the plane where it stands.
+        let disp = if sign > 0 && step.is_finite() && step > 0.0 {
+            let (_, hi) = p.depth_range(&class, 1);
+            step.min(hi)
+        } else {
+            0.0
+        };
+        if disp > 0.0 && out.displace.is_empty() {
+            out.displace = vec![0.0; n];
+        }
+        for &q in pixels {
+            out.codes[q as usize] = sign;
+            if disp > 0.0 {
+                out.displace[q as usize] = disp as f32;
+            }
+        }
+        let t = hit.t as f64 - disp / (-dot(nrm, dir)).max(1e-3);
+        let at: [f64; 3] = std::array::from_fn(|k| view.pose.position[k] + dir[k] * t);
+        out.regions.push(RegionVote {
+            view: vi as u32,
+            chart: ci,
+            uv: chart.uv_of(at),
+            class,
+            sign,
+            step_m: step,
+            pixels: pixels.len() as u32,
+        });
+    }
+    out
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Delta_q on every wall texel: the signed distance from our façade to the source mesh along
+/// the outward normal (positive: the mesh stands in front), found by casting from `search_m` in
+/// front of the texel back through it to the first mesh face that faces the same way (within
+/// 45 degrees: the ground and the sides of openings are passed through); NaN where there is none
+/// within `search_m` either way.
+pub fn mesh_delta(charts: &ChartSet, mesh: &Scene, search_m: f64) -> Vec<Vec<f32>> {
+    let rays = SceneRays::new(mesh);
+    charts
+        .charts
+        .par_iter()
+        .map(|c| {
+            if c.kind != ChartKind::Wall {
+                return Vec::new();
+            }
+            let mut out = vec![f32::NAN; c.len()];
+            let dir = c.normal.map(|v| -v as f32);
+            for j in 0..c.height {
+                for i in 0..c.width {
+                    let k = (j * c.width + i) as usize;
+                    if c.triangle_at[k] == u32::MAX {
+                        continue;
+                    }
+                    let x = c.texel_center(i, j);
+                    let o: [f32; 3] =
+                        std::array::from_fn(|a| (x[a] + c.normal[a] * search_m) as f32);
+                    // The first surface facing the way the wall does (not the ground, not a
+                    // side face): up to four tries past what is not.
+                    let mut tmin = 0.0f32;
+                    for _ in 0..4 {
+                        let Some(hit) = rays.cast(o, dir, tmin, (2.0 * search_m) as f32) else {
+                            break;
+                        };
+                        let facing: f64 = (0..3).map(|a| hit.normal[a] as f64 * c.normal[a]).sum();
+                        if facing >= 0.7 {
+                            out[k] = (search_m - hit.t as f64) as f32;
+                            break;
+                        }
+                        tmin = hit.t + 1e-3;
+                    }
+                }
+            }
+            out
+        })
+        .collect()
+}
+
+/// Façade relief over a chart set: per-view region votes, the fusion of eq. (2)-(3) at
+/// gamma_fac, evidence levels, Delta from `mesh` (if any), the posterior of eq. (4), and the
+/// instances. Deterministic at any thread count.
+pub fn relief(
+    scene: &Scene,
+    charts: &ChartSet,
+    views: &[View],
+    mesh: Option<&Scene>,
+    p: &ReliefParams,
+    progress: &dyn Progress,
+) -> ReliefSet {
+    let rays = SceneRays::new(scene);
+    let lookup = Lookup::new(scene, charts);
+    let deltas = mesh.map(|m| mesh_delta(charts, m, p.delta.search_m));
+    let ctx = PassCtx {
+        scene,
+        rays: &rays,
+        lookup: &lookup,
+        charts,
+        deltas: deltas.as_deref(),
+        p,
+        progress,
+    };
+    relief_pass(&ctx, views)
+}
+
+/// What a pass reads besides the views.
+struct PassCtx<'a> {
+    scene: &'a Scene,
+    rays: &'a SceneRays,
+    lookup: &'a Lookup,
+    charts: &'a ChartSet,
+    deltas: Option<&'a [Vec<f32>]>,
+    p: &'a ReliefParams,
+    progress: &'a dyn Progress,
+}
+
+/// Region votes per view, the fusion, evidence, posterior and instances.
+fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
+    let (scene, rays, lookup, charts, p, progress) = (
+        ctx.scene,
+        ctx.rays,
+        ctx.lookup,
+        ctx.charts,
+        ctx.p,
+        ctx.progress,
+    );
+    let per_view: Vec<ViewRelief> = views
+        .par_iter()
+        .enumerate()
+        .map(|(vi, v)| view_relief(vi, v, rays, charts, lookup, p))
+        .collect();
+    let mut stats = ReliefStats {
+        views: views.len() as u64,
+        ..Default::default()
+    };
+    for v in &per_view {
+        stats.calibrated += v.calibrated as u64;
+        stats.regions += v.candidates;
+        stats.enclosed += v.regions.len() as u64;
+        stats.recessed += v.regions.iter().filter(|r| r.sign < 0).count() as u64;
+        stats.protruding += v.regions.iter().filter(|r| r.sign > 0).count() as u64;
+    }
+    let vote = |k: usize, px: usize| -> Vote {
+        match per_view.get(k).and_then(|r| r.codes.get(px)) {
+            Some(&RECESSED) => Vote::Class(0),
+            Some(&NEUTRAL) => Vote::Class(1),
+            Some(&PROTRUDING) => Vote::Class(2),
+            Some(&MASKED) => Vote::Masked,
+            _ => Vote::Seen,
+        }
+    };
+    let displace = |k: usize, px: usize| -> f64 {
+        per_view
+            .get(k)
+            .and_then(|r| r.displace.get(px))
+            .map_or(0.0, |&d| d as f64)
+    };
+    let fp = FusionParams {
+        gamma: p.gamma,
+        theta_max_deg: p.theta_max_deg,
+        sigma_texels: p.sigma_texels,
+        stride: p.stride,
+    };
+    let fused = fuse_views_displaced(
+        scene,
+        rays,
+        charts,
+        views,
+        RELIEF_CLASSES.iter().map(|s| s.to_string()).collect(),
+        &vote,
+        &displace,
+        &fp,
+        progress,
+    );
+    // The exposure unit: one head-on view from ref_distance_m at the views' median focal
+    // length, one ray per pixel: J_ref^gamma x (pixels per texel = J_ref texel²).
+    let mut focals: Vec<f64> = views.iter().map(|v| v.intrinsics.fx).collect();
+    let f = if focals.is_empty() {
+        1.0
+    } else {
+        median(&mut focals)
+    };
+    let j_ref = (f / p.ref_distance_m).powi(2);
+    let deltas = ctx.deltas;
+    let with_mesh = deltas.is_some();
+    let cpt = p.cpt.expand();
+    let mut regions_by_chart: BTreeMap<u32, Vec<&RegionVote>> = BTreeMap::new();
+    for v in &per_view {
+        for r in &v.regions {
+            regions_by_chart.entry(r.chart).or_default().push(r);
+        }
+    }
+    let results: Vec<(ReliefLayers, Vec<ReliefInstance>, u64)> = charts
+        .charts
+        .par_iter()
+        .enumerate()
+        .map(|(ci, c)| {
+            let l = &fused.charts[ci];
+            let w_ref = j_ref.powf(p.gamma) * j_ref * c.texel_m * c.texel_m;
+            let delta = deltas.map(|d| &d[ci]).filter(|d| !d.is_empty());
+            let seen = l.w_exp.iter().any(|&w| w > 0.0);
+            if c.kind != ChartKind::Wall || (!seen && delta.is_none()) {
+                return (
+                    ReliefLayers {
+                        width: c.width,
+                        height: c.height,
+                        ..Default::default()
+                    },
+                    Vec::new(),
+                    0,
+                );
+            }
+            let votes = |k: u16| l.votes.iter().find(|(c, _)| *c == k).map(|(_, v)| v);
+            let (em, ep) = (votes(0), votes(2));
+            let n = c.len();
+            let mut lay = ReliefLayers {
+                width: c.width,
+                height: c.height,
+                exposure: PodVec(vec![0.0; n]),
+                recessed: PodVec(vec![f32::NAN; n]),
+                protruding: PodVec(vec![f32::NAN; n]),
+                delta: PodVec(vec![f32::NAN; n]),
+                pr_recessed: PodVec(vec![f32::NAN; n]),
+                pr_protruding: PodVec(vec![f32::NAN; n]),
+            };
+            let mut observed = 0u64;
+            let mut pd_all = vec![[0.0f64; 4]; n];
+            for k in 0..n {
+                if c.triangle_at[k] == u32::MAX {
+                    continue;
+                }
+                let wexp = l.w_exp[k] as f64;
+                let e = wexp / w_ref;
+                lay.exposure[k] = e as f32;
+                let levels = if e >= p.exposure_min && wexp > 0.0 {
+                    observed += 1;
+                    let r = em.map_or(0.0, |v| v[k] as f64) / wexp;
+                    let pp = ep.map_or(0.0, |v| v[k] as f64) / wexp;
+                    lay.recessed[k] = r as f32;
+                    lay.protruding[k] = pp as f32;
+                    Some((level(r, p.levels), level(pp, p.levels)))
+                } else {
+                    None
+                };
+                let dq = delta.map_or(f64::NAN, |d| d[k] as f64);
+                lay.delta[k] = dq as f32;
+                let pd = mesh_state_probabilities(dq, &p.delta);
+                pd_all[k] = pd;
+                if let Some(y) = relief_posterior(&cpt, levels, pd) {
+                    lay.pr_recessed[k] = y[0] as f32;
+                    lay.pr_protruding[k] = y[2] as f32;
+                }
+            }
+            let regions = regions_by_chart
+                .get(&(ci as u32))
+                .map(Vec::as_slice)
+                .unwrap_or(&[]);
+            let inst = instances(ci as u32, c, &lay, &pd_all, regions, with_mesh, p);
+            (lay, inst, observed)
+        })
+        .collect();
+    let mut set = ReliefSet {
+        with_mesh,
+        ..Default::default()
+    };
+    for (lay, inst, obs) in results {
+        set.layers.push(lay);
+        set.instances.extend(inst);
+        stats.observed_texels += obs;
+    }
+    set.stats = stats;
+    set
+}
+
+/// Threshold, opening, closing and connected components of one chart's posteriors, each
+/// component a rectangle (from its second moments: exact for a filled rectangle) with a class,
+/// a depth and its evidence.
+fn instances(
+    ci: u32,
+    c: &crate::artifact::Chart,
+    lay: &ReliefLayers,
+    pd: &[[f64; 4]],
+    regions: &[&RegionVote],
+    with_mesh: bool,
+    p: &ReliefParams,
+) -> Vec<ReliefInstance> {
+    let (w, h) = (c.width, c.height);
+    let n = c.len();
+    let mut out = Vec::new();
+    for sign in [-1i8, 1] {
+        let (mine, other) = if sign < 0 {
+            (&lay.pr_recessed, &lay.pr_protruding)
+        } else {
+            (&lay.pr_protruding, &lay.pr_recessed)
+        };
+        let mut mask: Vec<bool> = (0..n)
+            .map(|k| {
+                let (a, b) = (mine[k] as f64, other[k] as f64);
+                a.is_finite() && a >= p.threshold && a >= b && a >= 1.0 - a - b
+            })
+            .collect();
+        let open = if sign < 0 {
+            p.open_texels.0
+        } else {
+            p.open_texels.1
+        } as i64;
+        if open > 0 {
+            mask = dilate(&erode(&mask, w, h, open), w, h, open);
+        }
+        let close = p.close_texels as i64;
+        if close > 0 {
+            mask = erode(&dilate(&mask, w, h, close), w, h, close);
+            // Closing never reaches off the surface.
+            for (k, m) in mask.iter_mut().enumerate() {
+                *m &= c.triangle_at[k] != u32::MAX;
+            }
+        }
+        let labels = label_components(&mask, w, h, p.min_texels as usize);
+        let mut comps: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
+        for (k, &l) in labels.iter().enumerate() {
+            if l != 0 {
+                comps.entry(l).or_default().push(k);
+            }
+        }
+        for texels in comps.values() {
+            let m = texels.len() as f64;
+            let (mut su, mut sv) = (0.0, 0.0);
+            for &k in texels {
+                su += (k % w as usize) as f64 + 0.5;
+                sv += (k / w as usize) as f64 + 0.5;
+            }
+            let (mu, mv) = (su / m, sv / m);
+            let (mut vu, mut vv) = (0.0, 0.0);
+            for &k in texels {
+                let du = (k % w as usize) as f64 + 0.5 - mu;
+                let dv = (k / w as usize) as f64 + 0.5 - mv;
+                vu += du * du;
+                vv += dv * dv;
+            }
+            let (hu, hv) = ((3.0 * vu / m + 0.25).sqrt(), (3.0 * vv / m + 0.25).sqrt());
+            let r = [mu - hu, mv - hv, mu + hu, mv + hv];
+            let rect = [
+                r[0].max(0.0),
+                r[1].max(0.0),
+                r[2].min(w as f64),
+                r[3].min(h as f64),
+            ];
+            let mean = |l: &PodVec<f32>| {
+                texels
+                    .iter()
+                    .map(|&k| l[k] as f64)
+                    .filter(|v| v.is_finite())
+                    .sum::<f64>()
+                    / m
+            };
+            let posterior = mean(mine);
+            let exposure = mean(&lay.exposure);
+            let delta_agreement = with_mesh.then(|| {
+                let d = if sign < 0 { 0 } else { 2 };
+                texels.iter().filter(|&&k| pd[k][d] > 0.5).count() as f64 / m
+            });
+            // The regions that voted for it: class by pixel-weighted majority (named classes
+            // first), depth by pixel-weighted median of the measured steps.
+            let slack = 2.0;
+            let inside: Vec<&&RegionVote> = regions
+                .iter()
+                .filter(|r| {
+                    r.sign == sign
+                        && r.uv.0 >= rect[0] - slack
+                        && r.uv.0 <= rect[2] + slack
+                        && r.uv.1 >= rect[1] - slack
+                        && r.uv.1 <= rect[3] + slack
+                })
+                .collect();
+            let mut by_class: BTreeMap<&str, u64> = BTreeMap::new();
+            for r in &inside {
+                *by_class.entry(r.class.as_str()).or_default() += r.pixels as u64;
+            }
+            let class = by_class
+                .iter()
+                .filter(|(c, _)| **c != "unknown")
+                .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
+                .map_or("unknown", |(c, _)| c)
+                .to_owned();
+            let mut steps: Vec<(f64, f64)> = inside
+                .iter()
+                .filter(|r| r.step_m.is_finite() && r.step_m * sign as f64 > 0.0)
+                .map(|r| (r.step_m.abs(), r.pixels as f64))
+                .collect();
+            let measured = weighted_median(&mut steps);
+            let (lo, hi) = p.depth_range(&class, sign);
+            let depth_m = measured.unwrap_or((lo + hi) / 2.0).clamp(lo, hi);
+            let views: BTreeSet<u32> = inside.iter().map(|r| r.view).collect();
+            let corners = [
+                c.world_of(rect[0], rect[1]),
+                c.world_of(rect[2], rect[1]),
+                c.world_of(rect[2], rect[3]),
+                c.world_of(rect[0], rect[3]),
+            ];
+            out.push(ReliefInstance {
+                chart: ci,
+                building: c.building.clone(),
+                sign,
+                class,
+                rect,
+                corners,
+                depth_m,
+                measured_depth_m: measured,
+                posterior,
+                exposure,
+                texels: texels.len() as u32,
+                views: views.len() as u32,
+                delta_agreement,
+            });
+        }
+    }
+    out
+}
+
+fn weighted_median(v: &mut [(f64, f64)]) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = v.iter().map(|x| x.1).sum();
+    let mut acc = 0.0;
+    for x in v.iter() {
+        acc += x.1;
+        if acc >= total / 2.0 {
+            return Some(x.0);
+        }
+    }
+    v.last().map(|x| x.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn robust_affine_recovers_scale_and_offset_despite_outliers() {
+        let xs: Vec<f64> = (0..200).map(|i| 5.0 + i as f64 * 0.1).collect();
+        let mut ys: Vec<f64> = xs.iter().map(|x| 0.8 * x + 1.0).collect();
+        for k in (0..200).step_by(10) {
+            ys[k] -= 3.0; // balconies in front of the wall
+        }
+        let (a, b) = robust_affine(&xs, &ys).unwrap();
+        assert!((a - 0.8).abs() < 1e-9 && (b - 1.0).abs() < 1e-9, "{a} {b}");
+        // No spread, no fit.
+        assert!(robust_affine(&vec![10.0; 100], &vec![9.0; 100]).is_none());
+    }
+
+    #[test]
+    fn weighted_median_follows_the_weights() {
+        let mut v = vec![(0.25, 10.0), (0.1, 1.0), (0.3, 2.0)];
+        assert_eq!(weighted_median(&mut v), Some(0.25));
+        let mut v = vec![(0.25, 1.0), (0.1, 10.0)];
+        assert_eq!(weighted_median(&mut v), Some(0.1));
+    }
+}

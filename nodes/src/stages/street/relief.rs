@@ -1,0 +1,55 @@
+//! Relief: façade relief from street views (paper Sec. 4.2.2): per-view region votes (recessed,
+//! neutral, protruding from semantic, depth-step and normal cues), fused onto the wall charts by
+//! the exposure-weighted operator at a high gamma (eq. (2)-(3)), the per-texel posterior of
+//! eq. (4) (with Delta from a source mesh where the graph gives one), and the instances
+//! extracted from it, each with its evidence.
+
+use crate::artifact::{ArtifactType, ChartSet, ReliefSet, Scene, ViewSet};
+use crate::geom::relief::{ReliefParams, relief};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+
+/// Façade relief instances with their evidence, eq. (4).
+pub struct Relief;
+
+impl Stage for Relief {
+    const KIND: &'static str = "Relief";
+    const VERSION: u32 = 1;
+    const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::one("views", ArtifactType::Views, "the street views"),
+        InputSpec::one(
+            "scene",
+            ArtifactType::Scene,
+            "the scene the rays are cast in (the charts' scene)",
+        ),
+        InputSpec::one(
+            "charts",
+            ArtifactType::Charts,
+            "the charts made from that scene",
+        ),
+        InputSpec::optional(
+            "mesh",
+            ArtifactType::Scene,
+            "a photogrammetry mesh (ReadTiles) giving Delta, the signed discrepancy along each wall's normal",
+        ),
+    ];
+    type Params = ReliefParams;
+    type Output = ReliefSet;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        p.validate().map_err(|(f, m)| ParamError::new(f, m))
+    }
+
+    fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<ReliefSet, StageError> {
+        let views: &ViewSet = inputs.one("views")?;
+        let scene: &Scene = inputs.one("scene")?;
+        let charts: &ChartSet = inputs.one("charts")?;
+        let mesh: Option<&Scene> = inputs.optional("mesh")?;
+        charts.check_made_from(scene).map_err(|e| {
+            StageError::Failed(format!(
+                "{e}: give Relief the scene its SurfaceCharts node read"
+            ))
+        })?;
+        Ok(relief(scene, charts, &views.views, mesh, p, ctx.progress))
+    }
+}
