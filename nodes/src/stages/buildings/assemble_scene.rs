@@ -45,7 +45,7 @@ impl Stage for AssembleScene {
         InputSpec::many(
             "objects",
             ArtifactType::Scene,
-            "scenes whose objects join the terrain (building solids, ...)",
+            "scenes whose objects join the terrain (building solids, clutter, canopies; a terrain among them is replaced)",
         ),
     ];
     type Params = AssembleSceneParams;
@@ -78,7 +78,13 @@ impl Stage for AssembleScene {
         let mut ids: BTreeSet<String> = BTreeSet::from(["terrain".to_string()]);
         let total: usize = scenes.iter().map(|s| s.objects.len()).sum();
         ctx.progress.set_total(total as u64);
-        for o in scenes.iter().flat_map(|s| &s.objects) {
+        // A terrain inside an input scene (one carved or painted from a whole scene) gives way
+        // to the mesh of `terrain`.
+        for o in scenes
+            .iter()
+            .flat_map(|s| &s.objects)
+            .filter(|o| o.class != ObjectClass::Terrain)
+        {
             if !ids.insert(o.id.clone()) {
                 return Err(StageError::Failed(format!(
                     "two objects are called {:?}: give each input scene distinct ids",

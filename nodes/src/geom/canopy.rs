@@ -1,0 +1,376 @@
+//! Canopy envelopes from the unassigned above-ground field (paper Sec. 4.2.4): connected regions
+//! that are large, elevated and irregular (height roughness, or the share of multiple LiDAR
+//! returns) become closed foliage volumes. The crown's upper surface is the field itself; its
+//! lower surface mirrors it about the crown's widest level, read where the crown outline is (an
+//! ellipsoidal crown is widest at its centre height, so the field on the outline is that height).
+//! The envelope is a stack of prisms: per height slice, the outline of the cells the crown covers
+//! there, simplified. Foliage volumes are `Material::Foliage` solids of class `Vegetation`: what
+//! the tracer attenuates through (rf/foliage.rs).
+
+use std::collections::BTreeMap;
+
+use crate::artifact::{Grid, Metrics, ObjectClass, PodVec, PointSet, Raster, Scene, SceneObject};
+use crate::geom::mesh_build::prism;
+use crate::geom::mesh_check::check_solid;
+use crate::geom::polygon::{simplify_polygon, trace};
+use crate::raster::label::label_components;
+use crate::rf::materials::Material;
+
+/// Knobs of the canopy extraction.
+#[derive(Clone, Debug)]
+pub struct CanopyConfig {
+    /// Cells lower than this above ground are not canopy, metres.
+    pub min_height_m: f64,
+    /// Regions smaller than this are not canopy, m².
+    pub min_area_m2: f64,
+    /// Regions whose highest cell is lower than this are not canopy, metres.
+    pub min_top_m: f64,
+    /// Standard deviation of the heights in a region at or above which it is irregular, metres.
+    pub min_roughness_m: f64,
+    /// Share of multiple-return points at or above which a region is irregular (with points).
+    pub min_multi_share: f64,
+    /// Height slices of each envelope.
+    pub slices: u32,
+    /// Douglas-Peucker tolerance of the slice outlines, metres.
+    pub simplify_m: f64,
+    /// The lowest the crown's bottom may come, above ground, metres.
+    pub min_clearance_m: f64,
+    /// The outline is moved this far in (the field marks a cell any return falls in), metres.
+    pub inset_m: f64,
+    /// Quantile of the field on the outline taken as the crown's widest level.
+    pub edge_quantile: f64,
+}
+
+impl Default for CanopyConfig {
+    fn default() -> Self {
+        CanopyConfig {
+            min_height_m: 1.5,
+            min_area_m2: 8.0,
+            min_top_m: 4.0,
+            min_roughness_m: 0.3,
+            min_multi_share: 0.2,
+            slices: 8,
+            simplify_m: 0.3,
+            min_clearance_m: 1.0,
+            inset_m: 0.25,
+            edge_quantile: 0.4,
+        }
+    }
+}
+
+/// One canopy: its cells' envelope and the checked closed solids of its slices.
+#[derive(Clone, Debug)]
+pub struct Canopy {
+    /// Region label.
+    pub label: u32,
+    /// Area, m².
+    pub area_m2: f64,
+    /// Crown top and the mirror level, above ground, metres.
+    pub top_m: f64,
+    /// The widest level, above ground.
+    pub mid_m: f64,
+    /// One closed solid per slice polygon.
+    pub shells: Vec<crate::artifact::Mesh>,
+}
+
+/// Canopies of `unassigned` (above-ground heights of cells no building claims, NaN elsewhere) on
+/// `terrain`, with `points` for the multiple-return share when given. Returns the scene of
+/// foliage volumes (`canopy-<n>`) and counts.
+pub fn canopies(
+    unassigned: &Raster,
+    terrain: &Raster,
+    points: Option<&PointSet>,
+    cfg: &CanopyConfig,
+) -> (Scene, Metrics) {
+    let g = unassigned.grid;
+    let (w, h) = (g.width as usize, g.height as usize);
+    let mask: Vec<bool> = unassigned
+        .data
+        .iter()
+        .map(|&v| v.is_finite() && v as f64 >= cfg.min_height_m)
+        .collect();
+    let labels = label_components(&mask, g.width, g.height, 1);
+    let mut cells: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
+    for (i, &l) in labels.iter().enumerate() {
+        if l > 0 {
+            cells.entry(l).or_default().push(i);
+        }
+    }
+    // Multiple-return share per region.
+    let mut multi: BTreeMap<u32, (usize, usize)> = BTreeMap::new();
+    if let Some(ps) = points {
+        for (k, p) in ps.xyz.iter().enumerate() {
+            let Some((c, r)) = g.cell_of(p[0] as f64, p[1] as f64) else {
+                continue;
+            };
+            let l = labels[r as usize * w + c as usize];
+            if l == 0 {
+                continue;
+            }
+            let e = multi.entry(l).or_default();
+            e.0 += 1;
+            if ps.number_of_returns.get(k).is_some_and(|&n| n > 1) {
+                e.1 += 1;
+            }
+        }
+    }
+    let mut m = Metrics::default();
+    let mut bump = |name: &str| {
+        let v = m.get(name).unwrap_or(0.0);
+        m.set(name, v + 1.0);
+    };
+    let cell_area = g.cell_m * g.cell_m;
+    let mut objects = Vec::new();
+    for (&l, idx) in &cells {
+        bump("regions");
+        let area = idx.len() as f64 * cell_area;
+        let hs: Vec<f64> = idx.iter().map(|&i| unassigned.data[i] as f64).collect();
+        let top = hs.iter().copied().fold(f64::MIN, f64::max);
+        if area < cfg.min_area_m2 {
+            bump("rejected_small");
+            continue;
+        }
+        if top < cfg.min_top_m {
+            bump("rejected_low");
+            continue;
+        }
+        let mean = hs.iter().sum::<f64>() / hs.len() as f64;
+        let sd = (hs.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / hs.len() as f64).sqrt();
+        let share = multi
+            .get(&l)
+            .filter(|e| e.0 >= 10)
+            .map(|e| e.1 as f64 / e.0 as f64);
+        let irregular =
+            sd >= cfg.min_roughness_m || share.is_some_and(|s| s >= cfg.min_multi_share);
+        if !irregular {
+            bump("rejected_regular");
+            continue;
+        }
+        let mut failed = 0;
+        let env = envelope(&mut failed, l, idx, &labels, unassigned, terrain, cfg);
+        for _ in 0..failed {
+            bump("slice_outlines_dropped");
+        }
+        match env {
+            Some(c) if !c.shells.is_empty() => {
+                bump("canopies");
+                let mut mesh = crate::artifact::Mesh::default();
+                for s in &c.shells {
+                    mesh.append(s);
+                }
+                objects.push(SceneObject {
+                    id: format!("canopy-{}", objects.len()),
+                    class: ObjectClass::Vegetation,
+                    mesh,
+                });
+            }
+            _ => bump("rejected_no_envelope"),
+        }
+    }
+    let _ = h;
+    (Scene { objects }, m)
+}
+
+/// The envelope of region `l` (its cells `idx`).
+fn envelope(
+    failed: &mut usize,
+    l: u32,
+    idx: &[usize],
+    labels: &[u32],
+    a: &Raster,
+    terrain: &Raster,
+    cfg: &CanopyConfig,
+) -> Option<Canopy> {
+    let g = a.grid;
+    let w = g.width as usize;
+    let h = g.height as usize;
+    // Ground under the crown: the median terrain height over its cells.
+    let mut ground: Vec<f64> = idx
+        .iter()
+        .filter_map(|&i| {
+            let (x, y) = g.center((i % w) as u32, (i / w) as u32);
+            terrain.bilinear(x, y)
+        })
+        .collect();
+    let gz = crate::geom::theil_sen::median(&mut ground)?;
+    // The region's bounding box, one cell of margin.
+    let (mut c0, mut r0, mut c1, mut r1) = (usize::MAX, usize::MAX, 0, 0);
+    for &i in idx {
+        let (c, r) = (i % w, i / w);
+        (c0, r0, c1, r1) = (c0.min(c), r0.min(r), c1.max(c), r1.max(r));
+    }
+    let (c0, r0) = (c0.saturating_sub(1), r0.saturating_sub(1));
+    let (c1, r1) = ((c1 + 1).min(w - 1), (r1 + 1).min(h - 1));
+    let sub = Grid {
+        x0: g.x0 + c0 as f64 * g.cell_m,
+        y0: g.y0 - r0 as f64 * g.cell_m,
+        cell_m: g.cell_m,
+        width: (c1 - c0 + 1) as u32,
+        height: (r1 - r0 + 1) as u32,
+    };
+    let (sw, sh) = (sub.width as usize, sub.height as usize);
+    // Outside: the cells of other labels reachable from the box's border; the gaps inside the
+    // crown (returns that reached the ground) are crown.
+    let other: Vec<bool> = (0..sw * sh)
+        .map(|j| labels[(r0 + j / sw) * w + c0 + j % sw] != l)
+        .collect();
+    let mut outside = vec![false; sw * sh];
+    let mut stack: Vec<usize> = (0..sw * sh)
+        .filter(|&j| {
+            let (c, r) = (j % sw, j / sw);
+            other[j] && (c == 0 || r == 0 || c + 1 == sw || r + 1 == sh)
+        })
+        .collect();
+    for &j in &stack {
+        outside[j] = true;
+    }
+    while let Some(j) = stack.pop() {
+        let (c, r) = (j % sw, j / sw);
+        let mut visit = |k: usize| {
+            if other[k] && !outside[k] {
+                outside[k] = true;
+                stack.push(k);
+            }
+        };
+        if c > 0 {
+            visit(j - 1);
+        }
+        if c + 1 < sw {
+            visit(j + 1);
+        }
+        if r > 0 {
+            visit(j - sw);
+        }
+        if r + 1 < sh {
+            visit(j + sw);
+        }
+    }
+    let dist = crate::geom::clutter::distance_transform(&outside, sw, sh, g.cell_m);
+    // Distance from the outline, less the inset: a cell is in the field when any return falls in
+    // it, so the region overstates the crown by about a cell.
+    let depth = |i: usize| {
+        (dist[(i / w - r0) * sw + (i % w - c0)] as f64 - g.cell_m / 2.0 - cfg.inset_m).max(0.0)
+    };
+    let d_max = idx
+        .iter()
+        .map(|&i| depth(i))
+        .fold(0.0, f64::max)
+        .max(g.cell_m / 2.0);
+    // The crown's top: the 98.5th percentile of the field (returns inside the crown make it
+    // rough below the top; a pole or sign standing in the crown pokes above it). Its widest level:
+    // a lower quantile (`edge_quantile`) of the field on the outline (an outline cell's highest return comes
+    // from the part of the crown inside it, above the widest level).
+    let mut hs: Vec<f64> = idx.iter().map(|&i| a.data[i] as f64).collect();
+    hs.sort_by(f64::total_cmp);
+    let top = hs[((hs.len() - 1) as f64 * 0.985).round() as usize];
+    let mut edge: Vec<f64> = idx
+        .iter()
+        .filter(|&&i| {
+            let (c, r) = (i % w, i / w);
+            c == 0
+                || r == 0
+                || c + 1 == w
+                || r + 1 == h
+                || labels[i - 1] != l
+                || labels[i + 1] != l
+                || labels[i - w] != l
+                || labels[i + w] != l
+        })
+        .map(|&i| a.data[i] as f64)
+        .collect();
+    if edge.is_empty() {
+        return None;
+    }
+    edge.sort_by(f64::total_cmp);
+    let mid = edge[((edge.len() - 1) as f64 * cfg.edge_quantile).round() as usize];
+    let half = top - mid;
+    if !(half > 0.25) {
+        return None;
+    }
+    // The profile: an ellipse in the distance from the outline, rho = 1 - d / d_max (0 at the
+    // deepest cell, 1 on the outline), so the envelope at a cell spans mid -/+ half
+    // sqrt(1 - rho^2), mirrored about the widest level; the outline is the region's own.
+    let span = |i: usize| {
+        let rho = 1.0 - depth(i) / d_max;
+        let e = if rho >= 1.0 {
+            0.0
+        } else {
+            half * (1.0 - rho * rho).max(0.0).sqrt()
+        };
+        ((mid - e).max(cfg.min_clearance_m), mid + e)
+    };
+    let bottom = idx.iter().map(|&i| span(i).0).fold(f64::MAX, f64::min);
+    let n = cfg.slices.max(1);
+    let dz = (top - bottom) / n as f64;
+    let mut shells = Vec::new();
+    for k in 0..n {
+        let (z0, z1) = (bottom + k as f64 * dz, bottom + (k + 1) as f64 * dz);
+        let zm = (z0 + z1) / 2.0;
+        let mut data = vec![0f32; sub.len()];
+        let mut any = false;
+        for r in r0..=r1 {
+            for c in c0..=c1 {
+                let i = r * w + c;
+                if outside[(r - r0) * sw + (c - c0)] {
+                    continue;
+                }
+                let (b, t) = span(i);
+                if b <= zm && zm <= t {
+                    data[(r - r0) * sub.width as usize + (c - c0)] = 1.0;
+                    any = true;
+                }
+            }
+        }
+        if !any {
+            continue;
+        }
+        fill_pinches(&mut data, sub.width as usize, sub.height as usize);
+        let lab = Raster {
+            grid: sub,
+            data: PodVec(data),
+        };
+        let polys = trace(&lab).remove(&1).unwrap_or_default();
+        // Slices stop 1 cm short of each other so no two shells share a face.
+        let (za, zb) = (gz + z0 + 0.005, gz + z1 - 0.005);
+        for p in polys {
+            let simplified = simplify_polygon(p.clone(), cfg.simplify_m);
+            let shell = [simplified, p].into_iter().find_map(|q| {
+                prism(&q, za, zb, Material::Foliage, Material::Foliage)
+                    .ok()
+                    .filter(|m| check_solid(m).is_ok())
+            });
+            match shell {
+                Some(s) => shells.push(s),
+                None => *failed += 1,
+            }
+        }
+    }
+    Some(Canopy {
+        label: l,
+        area_m2: idx.len() as f64 * g.cell_m * g.cell_m,
+        top_m: top,
+        mid_m: mid,
+        shells,
+    })
+}
+
+/// Fills one cell of every 2 x 2 block whose set cells touch only diagonally, so traced outlines
+/// never pinch at a vertex.
+fn fill_pinches(data: &mut [f32], w: usize, h: usize) {
+    for r in 0..h.saturating_sub(1) {
+        for c in 0..w.saturating_sub(1) {
+            let at = |data: &[f32], rr: usize, cc: usize| data[rr * w + cc] > 0.0;
+            let (a, b, d, e) = (
+                at(data, r, c),
+                at(data, r, c + 1),
+                at(data, r + 1, c),
+                at(data, r + 1, c + 1),
+            );
+            if a && e && !b && !d {
+                data[r * w + c + 1] = 1.0;
+            } else if b && d && !a && !e {
+                data[r * w + c] = 1.0;
+            }
+        }
+    }
+}
