@@ -15,6 +15,7 @@ pub mod key;
 pub mod progress;
 pub mod record;
 pub mod registry;
+pub mod serve;
 pub mod sweep;
 pub mod syntax;
 pub mod watch;

@@ -121,6 +121,14 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Serve a folder (a report) on localhost, for browsers that refuse file:// pages.
+    Serve {
+        /// The folder, e.g. out/demo/report.
+        dir: PathBuf,
+        /// Port on 127.0.0.1 (0: any free port).
+        #[arg(long, default_value_t = 8000)]
+        port: u16,
+    },
     /// Evict least recently used artifacts until the cache holds at most --max-bytes.
     Gc {
         /// Cache directory (default: $KODAMA_DAG_CACHE, else ./cache).
@@ -278,6 +286,17 @@ fn run_once(
             n.kind,
             n.error.as_deref().unwrap_or("?")
         );
+    }
+    if !quiet {
+        for path in record.outputs.values() {
+            let html = Path::new(path).join("report.html");
+            if html.is_file() {
+                eprintln!(
+                    "report: {} (if a browser refuses it from disk: kodama-dag serve {path})",
+                    html.display()
+                );
+            }
+        }
     }
     Ok(match () {
         _ if failed.iter().any(|n| n.user_error) => 2,
@@ -517,6 +536,10 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
                     Format::Mermaid => to_mermaid(&g),
                 }
             );
+            Ok(0)
+        }
+        Command::Serve { dir, port } => {
+            kodama_dag::serve::serve(&dir, port).map_err(|m| Fail(2, format!("error: {m}")))?;
             Ok(0)
         }
         Command::Kinds => {

@@ -90,6 +90,129 @@ fn check_report(dir: &Path) {
         csv.starts_with("site,metric,KODAMA twin,OSM baseline,3GPP UMi\nsynthetic,P2P RMSE (dB),"),
         "{csv}"
     );
+    check_report_in_browser(dir);
+}
+
+/// A Chromium to drive: `$KODAMA_CHROMIUM`, else the usual names on PATH.
+fn find_chromium() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("KODAMA_CHROMIUM") {
+        return Some(PathBuf::from(p));
+    }
+    let path = std::env::var_os("PATH")?;
+    [
+        "chromium",
+        "chromium-browser",
+        "google-chrome",
+        "google-chrome-stable",
+    ]
+    .iter()
+    .flat_map(|n| std::env::split_paths(&path).map(move |d| d.join(n)))
+    .find(|p| p.is_file())
+}
+
+/// Runs headless Chromium with software WebGL on `url`, with `extra` arguments, killed after
+/// two minutes; its stdout.
+fn chromium(browser: &Path, url: &str, extra: &[&str]) -> String {
+    let profile = tempfile::tempdir().unwrap();
+    let mut child = std::process::Command::new(browser)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--use-angle=swiftshader",
+            "--enable-unsafe-swiftshader",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--window-size=1280,1400",
+            "--virtual-time-budget=30000",
+        ])
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .args(extra)
+        .arg(url)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut stdout = child.stdout.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        std::io::Read::read_to_string(&mut stdout, &mut s).ok();
+        s
+    });
+    let start = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > std::time::Duration::from_secs(120) {
+            child.kill().ok();
+            panic!(
+                "{} did not finish {url} within 2 minutes",
+                browser.display()
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    reader.join().unwrap()
+}
+
+/// report.html in a real browser: the page finishes its first frame, the 3D view is not blank
+/// (over a fifth of the canvas differs from the background), and no script error is reported.
+/// A screenshot lands beside the report. Skipped, saying so, where no Chromium is installed
+/// (.ci/run installs Debian's).
+fn check_report_in_browser(dir: &Path) {
+    let Some(browser) = find_chromium() else {
+        eprintln!(
+            "SKIPPED: report.html browser check: no Chromium found (install Debian's `chromium`, or set KODAMA_CHROMIUM)"
+        );
+        return;
+    };
+    let url = format!(
+        "file://{}",
+        dir.join("report.html").canonicalize().unwrap().display()
+    );
+    let dom = chromium(&browser, &url, &["--dump-dom"]);
+    let body = dom
+        .split("<body")
+        .nth(1)
+        .and_then(|b| b.split('>').next())
+        .unwrap_or_else(|| panic!("no <body> in what Chromium dumped: {dom:.300}"));
+    let attr = |name: &str| {
+        body.split(&format!("{name}=\""))
+            .nth(1)
+            .and_then(|v| v.split('"').next())
+            .map(str::to_owned)
+    };
+    assert!(
+        attr("data-errors").is_none(),
+        "script errors: {}",
+        dom.split("id=\"errors\">")
+            .nth(1)
+            .unwrap_or("")
+            .split('<')
+            .next()
+            .unwrap_or("")
+    );
+    assert_eq!(
+        attr("data-ready").as_deref(),
+        Some("1"),
+        "never drew: {body}"
+    );
+    let nonblank: f64 = attr("data-nonblank").unwrap().parse().unwrap();
+    println!(
+        "report.html in {}: {:.1} % of the 3D view drawn",
+        browser.display(),
+        100.0 * nonblank
+    );
+    assert!(nonblank > 0.2, "the 3D view is nearly blank: {nonblank}");
+    let shot = dir.join("screenshot.png");
+    chromium(
+        &browser,
+        &url,
+        &[&format!("--screenshot={}", shot.display())],
+    );
+    let img = image::open(&shot).unwrap();
+    assert!(img.width() >= 1000, "screenshot {} wide", img.width());
 }
 
 #[test]

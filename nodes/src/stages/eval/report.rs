@@ -7,9 +7,12 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Measurements, Metrics, Ortho, Raster, ReportFiles};
+use crate::artifact::{
+    ArtifactType, Height, Measurements, Metrics, Ortho, Raster, ReportFiles, Scene,
+};
 use crate::artifact::{link_distance, measured_loss};
 use crate::io::export::plot::{Chart, PALETTE, range};
+use crate::io::export::report_html::{LinkPoint, Page, TableRow, report_html};
 use crate::rf::pathloss_fit::fit_power_distance;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -22,6 +25,9 @@ pub struct ReportParams {
     /// The site's name (the table's row group). Default "site".
     #[serde(default = "site")]
     pub site: String,
+    /// Names of the `scenes` in report.html's 3D view, in order. Default "scene 1", ...
+    #[serde(default)]
+    pub scene_names: Vec<String>,
 }
 
 fn site() -> String {
@@ -41,12 +47,14 @@ const ROWS: [(&str, &str); 9] = [
     ("links_scored", "links scored"),
 ];
 
-/// Table 1 and its plots as a folder: `report.md`, `table.csv`, `metrics.json`, `plots/*.png`.
+/// Table 1 and its plots as a folder: `report.md`, `table.csv`, `metrics.json`, `plots/*.png`,
+/// and `report.html` with all of it and the scenes in 3D.
 pub struct Report;
 
 impl Stage for Report {
     const KIND: &'static str = "Report";
-    const VERSION: u32 = 2;
+    // 3: report.html with the 3D view.
+    const VERSION: u32 = 3;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -74,6 +82,11 @@ impl Stage for Report {
             ArtifactType::Ortho,
             "an orthophoto under the radio map",
         ),
+        InputSpec::many(
+            "scenes",
+            ArtifactType::Scene,
+            "scenes for report.html's 3D view (the twin first: its terrain carries the map and points)",
+        ),
     ];
     type Params = ReportParams;
     type Output = ReportFiles;
@@ -81,6 +94,9 @@ impl Stage for Report {
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         if p.models.is_empty() {
             return Err(ParamError::new("models", "expected the models' names"));
+        }
+        if p.scene_names.len() > 16 {
+            return Err(ParamError::new("scene_names", "expected at most 16 scenes"));
         }
         Ok(())
     }
@@ -99,6 +115,14 @@ impl Stage for Report {
         }
         let radio_map: Option<&Raster> = inputs.optional("radio_map")?;
         let ortho: Option<&Ortho> = inputs.optional("ortho")?;
+        let scenes: Vec<&Scene> = inputs.many("scenes")?;
+        if !p.scene_names.is_empty() && p.scene_names.len() != scenes.len() {
+            return Err(StageError::Failed(format!(
+                "{} scene names for {} scenes: name each scene, or none",
+                p.scene_names.len(),
+                scenes.len()
+            )));
+        }
         let fail = StageError::Failed;
         let mut files = Vec::new();
         let (md_table, csv) = tables(p, &evals);
@@ -123,13 +147,13 @@ impl Stage for Report {
         if let Some(map) = radio_map {
             plots.push(("plots/radio_map.png", map_png(map, ortho).map_err(fail)?));
         }
-        let mut md = format!(
-            "# KODAMA report: {}\n\n{} measured links; every model is scored at the same links \
-             (rf.md §6: P2P = predicted − measured; PD and CI = RMSE of the measurements about the \
-             trend line fitted to the model's predictions; 3GPP's trend is its own formula).\n\n{md_table}\n",
-            p.site,
+        let intro = format!(
+            "{} measured links; every model is scored at the same links (rf.md §6: P2P = \
+             predicted − measured; PD and CI = RMSE of the measurements about the trend line \
+             fitted to the model's predictions; 3GPP's trend is its own formula).",
             meas.links.len()
         );
+        let mut md = format!("# KODAMA report: {}\n\n{intro}\n\n{md_table}\n", p.site);
         for (name, _) in &plots {
             md.push_str(&format!("![{name}]({name})\n\n"));
         }
@@ -140,11 +164,101 @@ impl Stage for Report {
             (serde_json::to_string_pretty(&json).map_err(|e| fail(e.to_string()))? + "\n")
                 .into_bytes(),
         ));
+        let names: Vec<String> = (0..scenes.len())
+            .map(|k| {
+                p.scene_names
+                    .get(k)
+                    .cloned()
+                    .unwrap_or_else(|| format!("scene {}", k + 1))
+            })
+            .collect();
+        let named: Vec<(&str, &Scene)> = names
+            .iter()
+            .map(String::as_str)
+            .zip(scenes.iter().copied())
+            .collect();
+        let points = link_points(meas, &preds, &evals);
+        let plot_names: Vec<&str> = plots.iter().map(|(n, _)| *n).collect();
+        let html = report_html(&Page {
+            site: &p.site,
+            intro: &intro,
+            models: &p.models,
+            table: &table_rows(&evals),
+            plots: &plot_names,
+            scenes: &named,
+            radio_map,
+            points: &points,
+        })
+        .map_err(fail)?;
+        files.push(("report.html".to_string(), html.into_bytes()));
         for (name, bytes) in plots {
             files.push((name.to_string(), bytes));
         }
         Ok(ReportFiles { files })
     }
+}
+
+/// Table 1's rows for report.html: the rows some model has, the best RMSE of each marked.
+fn table_rows(evals: &[&Metrics]) -> Vec<TableRow> {
+    ROWS.iter()
+        .filter_map(|&(key, label)| {
+            let vals: Vec<Option<f64>> = evals.iter().map(|e| e.get(key)).collect();
+            if vals.iter().all(Option::is_none) {
+                return None;
+            }
+            let best = key.ends_with("rmse_db").then(|| {
+                vals.iter()
+                    .enumerate()
+                    .filter_map(|(i, v)| v.map(|v| (i, v)))
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .map(|x| x.0)
+            });
+            Some(TableRow {
+                label: label.to_owned(),
+                values: vals
+                    .iter()
+                    .map(|v| match v {
+                        Some(v) if key == "links_scored" => format!("{v:.0}"),
+                        Some(v) => format!("{v:.2}"),
+                        None => "–".into(),
+                    })
+                    .collect(),
+                best: best.flatten(),
+            })
+        })
+        .collect()
+}
+
+/// Every measured link at its receiver, with the measurement (the first model's offset taken
+/// out) and each model's prediction, for the 3D view.
+fn link_points(meas: &Measurements, preds: &[&Measurements], evals: &[&Metrics]) -> Vec<LinkPoint> {
+    meas.links
+        .iter()
+        .enumerate()
+        .map(|(k, m)| {
+            let offset = evals
+                .first()
+                .and_then(|e| e.get(&format!("offset_db/{}", m.tx.id)))
+                .unwrap_or(0.0);
+            let z = match m.rx.z {
+                Height::Absolute(z) => z,
+                Height::AboveGround(_) => 0.0,
+            };
+            LinkPoint {
+                at: [m.rx.x, m.rx.y, z],
+                measured: measured_loss(m).map(|v| v - offset),
+                predicted: preds
+                    .iter()
+                    .map(|pr| {
+                        pr.links
+                            .get(k)
+                            .and_then(|l| l.path_loss_db)
+                            .filter(|v| v.is_finite())
+                    })
+                    .collect(),
+            }
+        })
+        .collect()
 }
 
 fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
