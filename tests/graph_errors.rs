@@ -174,6 +174,10 @@ fn bad_set_arguments() {
         &fails(nodes, &["--set", "b=Blur(raster: \"t\")"]),
         "unknown node kind `Blur`",
     );
+    has(
+        &fails(nodes, &["--set", "b.sigma_m.x=2"]),
+        "--set b.sigma_m.x=2 (column 1): node \"b\": `x` names an entry, but the value it is in is float `1`, not a map or struct",
+    );
 }
 
 #[test]
@@ -225,7 +229,7 @@ fn site_graphs_without_their_data_name_each_missing_file() {
         let g = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("graphs/{site}.ron"));
         let r = env.cli(&["explain", g.to_str().unwrap()]);
         assert_eq!(r.code, 2, "{site}: {}", r.stderr);
-        for f in ["lidar.laz", "measurements.csv"] {
+        for f in ["lidar.laz", "measurements.csv", "mapillary", "view_outputs"] {
             assert!(
                 r.stderr.contains("file not found: ") && r.stderr.contains(&format!("{site}/{f}")),
                 "{site}: {}",

@@ -345,14 +345,82 @@ fn apply_sets(raw: &mut [RawNode], opts: &LoadOptions, diags: &mut Vec<Diagnosti
             v: Value::Str(value.to_owned()),
             span: at(value_col),
         });
+        // NODE.PARAM.KEY...=VALUE sets one entry of a map or struct param, keeping the rest.
+        let mut path = param.split('.');
+        let top = path.next().unwrap_or_default();
         let name = Name {
-            name: param.to_owned(),
+            name: top.to_owned(),
             span: at(node.chars().count() + 2),
         };
-        match r.fields.iter_mut().find(|(n, _)| n.name == param) {
-            Some(f) => *f = (name, v),
-            None => r.fields.push((name, v)),
+        let rest: Vec<&str> = path.collect();
+        match r.fields.iter_mut().find(|(n, _)| n.name == top) {
+            Some(f) => {
+                f.0 = name;
+                if let Err(m) = set_at(&mut f.1, &rest, v) {
+                    diags.push(Diagnostic::at(at(1), Some(node), m));
+                }
+            }
+            None => r.fields.push((name, nest(&rest, v))),
         }
+    }
+}
+
+/// `v` under the struct fields `path`, innermost last: `a.b=1` on a param left at its default.
+fn nest(path: &[&str], v: Ast) -> Ast {
+    path.iter().rev().fold(v, |inner, key| Ast {
+        span: inner.span,
+        v: Value::Struct {
+            name: None,
+            fields: vec![(
+                Name {
+                    name: (*key).to_owned(),
+                    span: inner.span,
+                },
+                inner,
+            )],
+        },
+    })
+}
+
+/// Replaces the value at `path` inside `target` (map entries by string key, struct fields by
+/// name), adding the entry or field when missing.
+fn set_at(target: &mut Ast, path: &[&str], v: Ast) -> Result<(), String> {
+    let Some((key, rest)) = path.split_first() else {
+        *target = v;
+        return Ok(());
+    };
+    match &mut target.v {
+        Value::Map(entries) => {
+            match entries
+                .iter_mut()
+                .find(|(k, _)| matches!(&k.v, Value::Str(s) if s == key))
+            {
+                Some((_, val)) => set_at(val, rest, v),
+                None => {
+                    let k = Ast {
+                        v: Value::Str((*key).to_owned()),
+                        span: v.span,
+                    };
+                    entries.push((k, nest(rest, v)));
+                    Ok(())
+                }
+            }
+        }
+        Value::Struct { fields, .. } => match fields.iter_mut().find(|(n, _)| n.name == *key) {
+            Some((_, val)) => set_at(val, rest, v),
+            None => {
+                let n = Name {
+                    name: (*key).to_owned(),
+                    span: v.span,
+                };
+                fields.push((n, nest(rest, v)));
+                Ok(())
+            }
+        },
+        other => Err(format!(
+            "`{key}` names an entry, but the value it is in is {}, not a map or struct",
+            other.describe()
+        )),
     }
 }
 
