@@ -4,11 +4,13 @@ mod array;
 mod charts;
 mod city;
 mod footprints;
+mod material_layers;
 mod measurements;
 mod metrics;
 mod ortho;
 mod points;
 mod raster;
+mod relief;
 mod report;
 mod scene;
 mod terrain_model;
@@ -17,17 +19,21 @@ mod views;
 use serde::{Deserialize, Serialize};
 
 pub use array::PodVec;
-pub use charts::{Chart, ChartKind, ChartLayers, ChartSet, FusionStats, TexelLayers};
+pub use charts::{Chart, ChartFrame, ChartKind, ChartLayers, ChartSet, FusionStats, TexelLayers};
 pub use city::{
     BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, RECESS_M, Rect, Roof, RoofBox,
     Street, TreeSpec,
 };
 pub use footprints::{Footprint, Footprints, Polygon};
+pub use material_layers::{
+    ChartMaterials, MaterialLayers, MaterialSource, MaterialStats, NO_MATERIAL,
+};
 pub use measurements::{Endpoint, Height, Link, Measurements, link_distance, measured_loss};
 pub use metrics::Metrics;
 pub use ortho::Ortho;
 pub use points::PointSet;
 pub use raster::{Grid, Raster};
+pub use relief::{ReliefInstance, ReliefLayers, ReliefSet, ReliefStats};
 pub use report::ReportFiles;
 pub use scene::{Mesh, ObjectClass, Scene, SceneObject};
 pub use terrain_model::{TerrainModel, height_at};
@@ -60,6 +66,10 @@ pub enum ArtifactType {
     Charts,
     /// [`TexelLayers`]: per-texel exposure, hits and votes fused from street views.
     Texels,
+    /// [`ReliefSet`]: façade relief posteriors (eq. (4)) and instances with their evidence.
+    Relief,
+    /// [`MaterialLayers`]: per-texel P.2040 materials (eq. (5)) with their evidence.
+    Materials,
 }
 
 impl std::fmt::Display for ArtifactType {
@@ -95,6 +105,10 @@ pub enum Artifact {
     Charts(ChartSet),
     /// See [`TexelLayers`].
     Texels(TexelLayers),
+    /// See [`ReliefSet`].
+    Relief(ReliefSet),
+    /// See [`MaterialLayers`].
+    Materials(MaterialLayers),
 }
 
 impl Artifact {
@@ -113,6 +127,8 @@ impl Artifact {
             Artifact::Report(_) => ArtifactType::Report,
             Artifact::Charts(_) => ArtifactType::Charts,
             Artifact::Texels(_) => ArtifactType::Texels,
+            Artifact::Relief(_) => ArtifactType::Relief,
+            Artifact::Materials(_) => ArtifactType::Materials,
         }
     }
 }
@@ -151,4 +167,6 @@ typed!(
     City => City,
     Charts => ChartSet,
     Texels => TexelLayers,
+    Relief => ReliefSet,
+    Materials => MaterialLayers,
 );

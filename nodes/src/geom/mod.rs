@@ -1,11 +1,19 @@
 //! Geometry shared by the stages: closed solids and their checks, polygons, the terrain mesh, and
 //! ray casting over a BVH. Never imports a stage.
 
+pub mod assets;
+pub mod canopy;
+pub mod carve;
 pub mod charts;
+pub mod clutter;
 pub mod from_above;
 pub mod fusion;
+pub mod material_apply;
+pub mod material_fusion;
 pub mod mesh_build;
 pub mod mesh_check;
 pub mod polygon;
 pub mod raycast;
+pub mod relief;
 pub mod terrain_mesh;
+pub mod theil_sen;

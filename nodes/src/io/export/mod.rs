@@ -2,16 +2,21 @@
 //! JSON.
 
 mod atlas;
+mod chart_glb;
 pub mod colormap;
 mod glb;
 mod las;
+mod material_atlas;
 pub mod plot;
+mod relief_json;
+pub mod report_html;
 mod tiles;
 
 use crate::artifact::{Artifact, ArtifactType};
 use crate::io::geotiff::{write_geotiff, write_geotiff_rgb};
 use crate::site::Site;
 
+pub use chart_glb::write_chart_glb;
 pub use glb::{material_color, write_glb, write_glb_objects};
 pub use las::write_las;
 pub use tiles::write_tileset;
@@ -37,7 +42,9 @@ pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
         ArtifactType::Views => &["views"],
         ArtifactType::Report => &["report"],
         ArtifactType::Charts => &["json"],
-        ArtifactType::Texels => &["atlas"],
+        ArtifactType::Texels => &["atlas", "glb"],
+        ArtifactType::Relief => &["json", "geojson"],
+        ArtifactType::Materials => &["atlas"],
     }
 }
 
@@ -59,7 +66,11 @@ pub fn output_file(name: &str, ty: ArtifactType) -> Result<(String, &'static str
             }
         },
         // A report is a folder named as the output.
-        None if matches!(ty, ArtifactType::Report | ArtifactType::Texels) => {
+        None if matches!(
+            ty,
+            ArtifactType::Report | ArtifactType::Texels | ArtifactType::Materials
+        ) =>
+        {
             Ok((name.to_owned(), fmts[0]))
         }
         None => Ok((format!("{name}.{}", fmts[0]), fmts[0])),
@@ -111,7 +122,13 @@ pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String
         }
         (Artifact::Report(r), "report") => Ok(Encoded::Folder(r.files.clone())),
         (Artifact::Charts(c), "json") => file(charts_json(c)?),
+        (Artifact::Materials(m), "atlas") => {
+            Ok(Encoded::Folder(material_atlas::write_material_atlas(m)?))
+        }
+        (Artifact::Relief(r), "json") => file(relief_json::relief_json(r)?),
+        (Artifact::Relief(r), "geojson") => file(relief_json::relief_geojson(r, site)?),
         (Artifact::Texels(t), "atlas") => Ok(Encoded::Folder(atlas::write_atlas(t)?)),
+        (Artifact::Texels(t), "glb") => file(chart_glb::write_chart_glb(t)?),
         (a, f) => Err(format!(
             "{} cannot be written as {f:?}; formats: {}",
             a.ty(),
