@@ -9,7 +9,7 @@ use clap::Args;
 use glam::DVec3;
 
 use kodama_nodes::io::export::{Encoded, encode};
-use kodama_nodes::io::sionna_xml::read_scene;
+use kodama_nodes::io::sionna_xml::read_scene_with_thickness;
 use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::links_csv::{read_links, write_results};
 use kodama_nodes::rf::paths::{TraceOptions, trace_links};
@@ -141,9 +141,13 @@ fn load(scene: &Path, i: &Interactions) -> Result<RfScene, Fail> {
             format!("error: --freq-hz {} is not a positive frequency", i.freq_hz),
         ));
     }
-    let s = read_scene(scene).map_err(stage_fail)?;
-    RfScene::new(&s, i.freq_hz, i.extrapolate)
-        .map_err(|e| (2, format!("error: {}: {e}", scene.display())))
+    let (s, thickness) = read_scene_with_thickness(scene).map_err(stage_fail)?;
+    // Traced as Sionna traces the file: with the slab thickness it gives each material.
+    let rf = RfScene::new(&s, i.freq_hz, i.extrapolate)
+        .map_err(|e| (2, format!("error: {}: {e}", scene.display())))?;
+    Ok(thickness
+        .into_iter()
+        .fold(rf, |rf, (m, d)| rf.with_thickness(m, d)))
 }
 
 /// Writes `bytes` to `dest` through a temporary file in the same folder, so a failure never

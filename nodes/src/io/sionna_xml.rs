@@ -17,6 +17,14 @@ pub const THICKNESS_M: f64 = 0.1;
 /// Each shape becomes one object (id without the `mesh-` prefix, class `Unsegmented`) whose
 /// triangles carry the shape's material.
 pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
+    read_scene_with_thickness(path).map(|(scene, _)| scene)
+}
+
+/// [`read_scene`], with each material's slab thickness as the file gives it (Sionna's default
+/// [`THICKNESS_M`] where a material names none): what tracing the file as Sionna does needs.
+pub fn read_scene_with_thickness(
+    path: &Path,
+) -> Result<(Scene, BTreeMap<Material, f64>), StageError> {
     let bad = |place: String, expected: &str| StageError::bad_input(path, place, expected);
     let text = std::fs::read_to_string(path)
         .map_err(|e| bad("file".into(), &format!("a readable XML file ({e})")))?;
@@ -29,6 +37,7 @@ pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
     })?;
     let line = |n: roxmltree::Node| doc.text_pos_at(n.range().start).row;
     let mut materials: BTreeMap<String, Material> = BTreeMap::new();
+    let mut thickness: BTreeMap<Material, f64> = BTreeMap::new();
     for b in doc
         .descendants()
         .filter(|n| n.has_tag_name("bsdf") && n.parent().is_some_and(|p| p.has_tag_name("scene")))
@@ -53,6 +62,7 @@ pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
                  permittivities are not supported)",
             )
         })?;
+        let mut slab = THICKNESS_M;
         if let Some(t) = prop("float", "thickness") {
             let t: f64 = t.parse().map_err(|_| {
                 bad(
@@ -69,6 +79,13 @@ pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
                     ),
                 ));
             }
+            slab = t;
+        }
+        if thickness.insert(material, slab).is_some_and(|d| d != slab) {
+            return Err(bad(
+                format!("line {}: bsdf \"{id}\" thickness {slab}", line(b)),
+                "one thickness per ITU class (another bsdf of this class has another)",
+            ));
         }
         materials.insert(id, material);
     }
@@ -104,7 +121,7 @@ pub fn read_scene(path: &Path) -> Result<Scene, StageError> {
             mesh,
         });
     }
-    Ok(Scene { objects })
+    Ok((Scene { objects }, thickness))
 }
 
 /// Reads a binary little-endian PLY: vertex x, y, z (any other vertex properties skipped) and

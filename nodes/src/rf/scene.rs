@@ -106,6 +106,12 @@ impl RfScene {
         self
     }
 
+    /// Surfaces of material `m` as slabs of `d` metres (a scene file's own thickness).
+    pub fn with_thickness(mut self, m: Material, d: f64) -> RfScene {
+        self.thickness[m as usize] = d;
+        self
+    }
+
     /// The closest surface along `o + t d` for t in (`tmin`, `tmax`).
     pub fn cast(&self, o: DVec3, d: DVec3, tmin: f64, tmax: f64) -> Option<SurfaceHit> {
         let h = self.rays.cast(
