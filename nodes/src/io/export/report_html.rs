@@ -22,6 +22,9 @@ const THREE_JS: &str = include_str!("../../../assets/three/three.module.min.js")
 const THREE_LICENSE: &str = include_str!("../../../assets/three/LICENSE");
 const VIEWER_JS: &str = include_str!("report_viewer.js");
 
+/// Triangles the 3D view carries over all its scenes (about 36 bytes each in the page).
+const MAX_TRIANGLES: usize = 6_000_000;
+
 /// One row of the score table.
 pub struct TableRow {
     /// Metric label.
@@ -229,10 +232,25 @@ pub fn report_html(p: &Page) -> Result<String, String> {
             json!({"at": [l.at[0], l.at[1], z], "measured": l.measured, "predicted": l.predicted})
         })
         .collect();
+    // Browsers choke on pages of hundreds of megabytes: scenes past the budget are left out
+    // (named in the page), in the order given, so the first (the twin) is kept first.
+    let mut budget = MAX_TRIANGLES;
+    let mut left_out = Vec::new();
+    let mut scenes = Vec::new();
+    for (n, s) in p.scenes {
+        let tris: usize = s.objects.iter().map(|o| o.mesh.triangles.len()).sum();
+        if tris <= budget {
+            budget -= tris;
+            scenes.push(scene_json(n, s));
+        } else {
+            left_out.push(format!("{n} ({tris} triangles)"));
+        }
+    }
     let data = json!({
         "site": p.site,
         "models": p.models,
-        "scenes": p.scenes.iter().map(|(n, s)| scene_json(n, s)).collect::<Vec<_>>(),
+        "scenes": scenes,
+        "left_out": left_out,
         "radio_map": p.radio_map.map(|m| radio_map_json(m, terrain.as_ref())).transpose()?,
         "points": points,
     });

@@ -100,6 +100,7 @@ const legend = document.getElementById('legend');
 let html = '';
 for (const [name, c] of materials) html += `<span class="sw" style="background:#${c.getHexString()}"></span>${name}`;
 if (mapLegend) html += `<br>${mapLegend}`;
+if (data.left_out.length) html += `<br>left out (too large for a page): ${data.left_out.join(', ')}`;
 if (pointsMesh) html += `<br>points: ${data.models[0]} error <span class="bar" style="background:linear-gradient(90deg,#0066ff,#fff,#ff0000)"></span>-15 to +15 dB`;
 legend.innerHTML = html;
 

@@ -53,8 +53,8 @@ pub struct Report;
 
 impl Stage for Report {
     const KIND: &'static str = "Report";
-    // 3: report.html with the 3D view.
-    const VERSION: u32 = 3;
+    // 3: report.html with the 3D view; 4: scenes past the page's budget left out, named.
+    const VERSION: u32 = 4;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
