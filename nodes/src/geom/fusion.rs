@@ -36,6 +36,25 @@ pub struct FusionParams {
     pub stride: u32,
 }
 
+impl FusionParams {
+    /// The knobs' ranges, as `(field, expected)` for the stage's `ParamError`.
+    pub fn check(&self) -> Result<(), (&'static str, &'static str)> {
+        if !(self.gamma >= 0.0 && self.gamma <= 8.0) {
+            return Err(("gamma", "expected an exponent in [0, 8]"));
+        }
+        if !(self.theta_max_deg > 0.0 && self.theta_max_deg <= 90.0) {
+            return Err(("theta_max_deg", "expected an angle in (0, 90] degrees"));
+        }
+        if !(self.sigma_texels >= 0.0 && self.sigma_texels <= 16.0) {
+            return Err(("sigma_texels", "expected a kernel width in [0, 16] texels"));
+        }
+        if !(1..=64).contains(&self.stride) {
+            return Err(("stride", "expected a stride of 1 to 64 pixels"));
+        }
+        Ok(())
+    }
+}
+
 /// The projection Jacobian of eq. (2): J = cos(theta) (f / t)², proportional to how many pixels
 /// of a view fall on a unit of surface area at the hit (`f` focal length in pixels, `t` hit
 /// distance in metres). Zero for views more oblique than `theta_max` (`cos_theta_max` its cosine)
@@ -157,12 +176,12 @@ pub fn fuse_views_displaced(
 }
 
 /// Object and triangle -> chart index.
-struct ChartLookup {
+pub(crate) struct ChartLookup {
     of: Vec<Vec<u32>>,
 }
 
 impl ChartLookup {
-    fn new(scene: &Scene, charts: &ChartSet) -> ChartLookup {
+    pub(crate) fn new(scene: &Scene, charts: &ChartSet) -> ChartLookup {
         let mut of: Vec<Vec<u32>> = scene
             .objects
             .iter()
@@ -180,7 +199,7 @@ impl ChartLookup {
         ChartLookup { of }
     }
 
-    fn chart(&self, object: usize, triangle: usize) -> Option<u32> {
+    pub(crate) fn chart(&self, object: usize, triangle: usize) -> Option<u32> {
         let c = *self.of.get(object)?.get(triangle)?;
         (c != u32::MAX).then_some(c)
     }

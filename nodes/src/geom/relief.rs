@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{
     ChartKind, ChartSet, PodVec, ReliefInstance, ReliefLayers, ReliefSet, ReliefStats, Scene, View,
 };
-use crate::geom::fusion::{FusionParams, Vote, fuse_views_displaced};
+use crate::geom::fusion::{ChartLookup, FusionParams, Vote, fuse_views_displaced};
 use crate::geom::raycast::SceneRays;
 use crate::raster::label::label_components;
 use crate::raster::label::label_regions;
@@ -564,39 +564,28 @@ pub struct ViewRelief {
     pub calibrated: bool,
 }
 
-/// Object and triangle -> chart index.
+/// Object and triangle -> chart index, and which objects are terrain.
 struct Lookup {
-    of: Vec<Vec<u32>>,
+    charts: ChartLookup,
     terrain: Vec<bool>,
 }
 
 impl Lookup {
     fn new(scene: &Scene, charts: &ChartSet) -> Lookup {
-        let mut of: Vec<Vec<u32>> = scene
-            .objects
-            .iter()
-            .map(|o| vec![u32::MAX; o.mesh.triangles.len()])
-            .collect();
-        for (k, c) in charts.charts.iter().enumerate() {
-            if let Some(tris) = of.get_mut(c.object as usize) {
-                for &t in c.triangles.iter() {
-                    if let Some(s) = tris.get_mut(t as usize) {
-                        *s = k as u32;
-                    }
-                }
-            }
-        }
         let terrain = scene
             .objects
             .iter()
             .map(|o| o.class == crate::artifact::ObjectClass::Terrain)
             .collect();
-        Lookup { of, terrain }
+        Lookup {
+            charts: ChartLookup::new(scene, charts),
+            terrain,
+        }
     }
 
     fn wall_chart(&self, charts: &ChartSet, object: usize, tri: usize) -> Option<u32> {
-        let c = *self.of.get(object)?.get(tri)?;
-        (c != u32::MAX && charts.charts[c as usize].kind == ChartKind::Wall).then_some(c)
+        let c = self.charts.chart(object, tri)?;
+        (charts.charts[c as usize].kind == ChartKind::Wall).then_some(c)
     }
 }
 

@@ -74,27 +74,14 @@ impl Stage for FuseViews {
     type Output = TexelLayers;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        if !(p.gamma >= 0.0 && p.gamma <= 8.0) {
-            return Err(ParamError::new("gamma", "expected an exponent in [0, 8]"));
+        FusionParams {
+            gamma: p.gamma,
+            theta_max_deg: p.theta_max_deg,
+            sigma_texels: p.sigma_texels,
+            stride: p.stride,
         }
-        if !(p.theta_max_deg > 0.0 && p.theta_max_deg <= 90.0) {
-            return Err(ParamError::new(
-                "theta_max_deg",
-                "expected an angle in (0, 90] degrees",
-            ));
-        }
-        if !(p.sigma_texels >= 0.0 && p.sigma_texels <= 16.0) {
-            return Err(ParamError::new(
-                "sigma_texels",
-                "expected a kernel width in [0, 16] texels",
-            ));
-        }
-        if !(1..=64).contains(&p.stride) {
-            return Err(ParamError::new(
-                "stride",
-                "expected a stride of 1 to 64 pixels",
-            ));
-        }
+        .check()
+        .map_err(|(field, expected)| ParamError::new(field, expected))?;
         Ok(())
     }
 
