@@ -2,12 +2,12 @@
 
     kodama-dag radiomap --scene S/munich/munich.xml --tx 8.5,21,27 --freq-hz 3.5e9 --max-depth 3 \
         --rays 1000000 --cell-m 5 --height-m 1.5 --no-diffraction --out ours.tif
-    python3 scripts/sionna_radiomap_bench.py S/munich/munich.xml ours.tif
+    python3 scripts/sionna_radiomap_bench.py S/munich/munich.xml ours.tif [--rays N] [--depth D] [--runs R]
 
-Sionna: RadioMapSolver, 10^6 rays, depth 3, 5 m cells at 1.5 m, LOS + specular + refraction, no
-diffuse, no diffraction, isotropic V antennas; timed warm (best of 3 after one run). The maps are
+Sionna: RadioMapSolver, 10^6 rays (--rays), depth 3 (--depth), 5 m cells at 1.5 m, LOS + specular + refraction, no
+diffuse, no diffraction, isotropic V antennas; timed warm (best of --runs, default 3, after one run). The maps are
 compared cell by cell in dB where both are reached. Needs sionna-rt 2.2, rasterio, libLLVM 19."""
-import sys
+import argparse
 import time
 
 import sionna_env  # noqa: F401
@@ -15,27 +15,35 @@ import numpy as np
 import rasterio
 from sionna.rt import PlanarArray, RadioMapSolver, Transmitter, load_scene
 
-scene = load_scene(sys.argv[1])
+ap = argparse.ArgumentParser()
+ap.add_argument("scene")
+ap.add_argument("ours")
+ap.add_argument("--rays", type=float, default=1e6)
+ap.add_argument("--depth", type=int, default=3)
+ap.add_argument("--runs", type=int, default=3)
+args = ap.parse_args()
+
+scene = load_scene(args.scene)
 scene.frequency = 3.5e9
 scene.tx_array = PlanarArray(num_rows=1, num_cols=1, pattern="iso", polarization="V")
 scene.rx_array = PlanarArray(num_rows=1, num_cols=1, pattern="iso", polarization="V")
 scene.add(Transmitter(name="tx", position=[8.5, 21.0, 27.0]))
 solver = RadioMapSolver()
-kw = dict(cell_size=(5.0, 5.0), samples_per_tx=10**6, max_depth=3, los=True,
+kw = dict(cell_size=(5.0, 5.0), samples_per_tx=int(args.rays), max_depth=args.depth, los=True,
           specular_reflection=True, diffuse_reflection=False, refraction=True,
           diffraction=False)
 rm = solver(scene, **kw)
 times = []
-for _ in range(3):
+for _ in range(args.runs):
     t = time.perf_counter()
     rm = solver(scene, **kw)
     pg = rm.path_gain.numpy()[0]  # forces evaluation
     times.append(time.perf_counter() - t)
 centers = rm.cell_centers.numpy()
-print(f"sionna: {pg.shape[1]} x {pg.shape[0]} cells, warm {min(times):.3f} s (runs {', '.join(f'{t:.3f}' for t in times)}), "
+print(f"sionna: {int(args.rays)} rays, depth {args.depth}, {pg.shape[1]} x {pg.shape[0]} cells, warm {min(times):.3f} s (runs {', '.join(f'{t:.3f}' for t in times)}), "
       f"{np.count_nonzero(pg)} cells reached")
 
-ours = rasterio.open(sys.argv[2])
+ours = rasterio.open(args.ours)
 o = ours.read(1)
 # Sionna's row 0 is the southernmost (y grows with the row); GeoTIFF row 0 is north.
 o = o[::-1, :]

@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
-use kodama_nodes::io::export::{Encoded, encode, output_file};
+use kodama_nodes::io::export::{Encoded, check_names, encode, output_file};
 use kodama_nodes::stage::{Arity, Slot};
 use kodama_nodes::{Artifact, Ctx, Inputs, StageError};
 use rayon::prelude::*;
@@ -121,10 +121,35 @@ pub fn file_digests(
         .collect()
 }
 
-fn pool(jobs: Option<usize>) -> Result<rayon::ThreadPool, RunError> {
+/// Worker threads per available core at most: more only adds memory and contention, and an
+/// absurd `--jobs` would otherwise try to start that many threads.
+pub const MAX_JOBS_PER_CORE: usize = 4;
+
+/// The worker threads for `jobs`, clamped to [`MAX_JOBS_PER_CORE`] per core, with a warning
+/// when clamped.
+pub fn worker_threads(jobs: Option<usize>) -> (Option<usize>, Option<String>) {
+    let Some(j) = jobs else {
+        return (None, None);
+    };
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let max = cores * MAX_JOBS_PER_CORE;
+    if j > max {
+        let warning = format!(
+            "--jobs {j} is more than {MAX_JOBS_PER_CORE} per core ({cores} cores); using {max}"
+        );
+        return (Some(max), Some(warning));
+    }
+    (Some(j.max(1)), None)
+}
+
+fn pool(jobs: Option<usize>, reporter: &Reporter) -> Result<rayon::ThreadPool, RunError> {
     let mut b = rayon::ThreadPoolBuilder::new().thread_name(|i| format!("kodama-{i}"));
+    let (jobs, warning) = worker_threads(jobs);
+    if let Some(w) = warning {
+        reporter.warn(&w);
+    }
     if let Some(j) = jobs {
-        b = b.num_threads(j.max(1));
+        b = b.num_threads(j);
     }
     b.build()
         .map_err(|e| RunError::Io(format!("cannot start worker threads: {e}")))
@@ -143,30 +168,33 @@ pub fn run(
     let _lock = cache
         .lock_shared()
         .map_err(|e| io("cannot lock the cache", e))?;
+    remove_stale_temps(&cache.tmp());
     let runs_dir = cache.runs_dir(&graph_key(graph));
     let last = LastRun::load(&runs_dir);
     let started = Instant::now();
-    let pool = pool(opts.jobs)?;
-    let (records, snapshots, outputs) = pool.install(|| -> Result<_, RunError> {
-        let files = file_digests(graph, cache, &need)?;
-        let exec = Exec::new(graph, cache, &last, reporter, files, need.clone());
-        rayon::scope(|s| {
-            let exec = &exec;
-            for i in 0..graph.nodes.len() {
-                if exec.need[i] && graph.nodes[i].deps.is_empty() {
-                    s.spawn(move |s| exec.visit(s, i));
+    let pool = pool(opts.jobs, reporter)?;
+    let (records, snapshots, outputs, output_errors) =
+        pool.install(|| -> Result<_, RunError> {
+            let files = file_digests(graph, cache, &need)?;
+            let exec = Exec::new(graph, cache, &last, reporter, files, need.clone());
+            rayon::scope(|s| {
+                let exec = &exec;
+                for i in 0..graph.nodes.len() {
+                    if exec.need[i] && graph.nodes[i].deps.is_empty() {
+                        s.spawn(move |s| exec.visit(s, i));
+                    }
                 }
-            }
-        });
-        let outputs = exec.export(&opts.out_dir)?;
-        let (records, snapshots) = exec.into_results();
-        Ok((records, snapshots, outputs))
-    })?;
+            });
+            let (outputs, output_errors) = exec.export(&opts.out_dir);
+            let (records, snapshots) = exec.into_results();
+            Ok((records, snapshots, outputs, output_errors))
+        })?;
     reporter.finish(&records, started.elapsed().as_secs_f64());
     let record = RunRecord {
         graph: graph.path.display().to_string(),
         nodes: records,
         outputs,
+        output_errors,
     };
     let mut next = last;
     next.nodes.extend(snapshots);
@@ -545,49 +573,88 @@ impl<'a> Exec<'a> {
     }
 
     /// Writes every declared output whose node succeeded into `dir`, each file atomically. An
-    /// output whose file is still the one written from the same digest (by the manifest in `dir`)
-    /// is not written again, so a no-op rerun does not rewrite large exports.
-    fn export(&self, dir: &Path) -> Result<BTreeMap<String, String>, RunError> {
-        let mut manifest = OutputManifest::load(dir);
+    /// output whose files are still the ones written from the same digest (by the manifest in
+    /// `dir`) is not written again, so a no-op rerun does not rewrite large exports. An output
+    /// that cannot be written is reported by name and the others are still written.
+    fn export(&self, dir: &Path) -> (BTreeMap<String, String>, BTreeMap<String, OutputError>) {
         let mut written = BTreeMap::new();
-        for (name, i) in &self.graph.outputs {
-            let digest = match lock(&self.state).outcomes[*i].as_ref() {
-                Some(o) if self.need[*i] => o.digest,
-                _ => None,
-            };
-            let Some(digest) = digest else { continue };
-            if let Some(path) = manifest.unchanged(name, &digest) {
-                written.insert(name.clone(), path.display().to_string());
-                continue;
+        let mut errors = BTreeMap::new();
+        let wanted: Vec<(&String, usize)> = self
+            .graph
+            .outputs
+            .iter()
+            .filter(|(_, i)| self.need[*i])
+            .map(|(n, i)| (n, *i))
+            .collect();
+        if wanted.is_empty() {
+            return (written, errors);
+        }
+        if let Err(e) = std::fs::create_dir_all(dir) {
+            for (name, _) in wanted {
+                errors.insert(
+                    name.clone(),
+                    OutputError::io(format!("cannot create {}: {e}", dir.display())),
+                );
             }
-            let art = self
-                .artifact(*i)
-                .map_err(|e| RunError::Io(format!("output \"{name}\": {e}")))?;
-            let fail = |e: String| RunError::Io(format!("output \"{name}\": {e}"));
-            let (file_name, format) = output_file(name, art.ty()).map_err(fail)?;
-            let encoded = encode(&art, &self.graph.site, format).map_err(fail)?;
-            std::fs::create_dir_all(dir)
-                .map_err(|e| RunError::Io(format!("cannot create {}: {e}", dir.display())))?;
-            let path = dir.join(&file_name);
-            let probe = write_output(dir, &path, encoded)
-                .map_err(|e| RunError::Io(format!("cannot write {}: {e}", path.display())))?;
-            // The artifact may have been rebuilt while loading; record the digest it has now.
-            let digest = lock(&self.state).outcomes[*i]
+            return (written, errors);
+        }
+        remove_stale_temps(dir);
+        let mut manifest = OutputManifest::load(dir);
+        for (name, i) in wanted {
+            let Some(digest) = lock(&self.state).outcomes[i]
                 .as_ref()
                 .and_then(|o| o.digest)
-                .unwrap_or(digest);
-            manifest.record(name, &digest, &path, &probe);
-            written.insert(name.clone(), path.display().to_string());
+            else {
+                continue;
+            };
+            if let Some(file) = manifest.unchanged(dir, name, &digest) {
+                written.insert(name.clone(), dir.join(file).display().to_string());
+                continue;
+            }
+            match self.export_one(dir, name, i, digest) {
+                Ok((file_name, stamps, digest)) => {
+                    manifest.record(name, &digest, &file_name, stamps);
+                    written.insert(name.clone(), dir.join(&file_name).display().to_string());
+                }
+                Err(e) => {
+                    manifest.outputs.remove(name);
+                    errors.insert(name.clone(), e);
+                }
+            }
         }
-        if !written.is_empty() {
-            manifest.save(dir).map_err(|e| {
-                RunError::Io(format!(
-                    "cannot write the output manifest in {}: {e}",
-                    dir.display()
-                ))
-            })?;
+        if let Err(e) = manifest.save(dir) {
+            self.reporter.warn(&format!(
+                "cannot write the output manifest in {}: {e}; the next run rewrites every output",
+                dir.display()
+            ));
         }
-        Ok(written)
+        (written, errors)
+    }
+
+    /// Encodes and writes output `name` of node `i`: its file name, the stamps of the files
+    /// written, and the digest it was written from.
+    fn export_one(
+        &self,
+        dir: &Path,
+        name: &str,
+        i: usize,
+        digest: Digest,
+    ) -> Result<(String, Vec<FileStamp>, Digest), OutputError> {
+        let art = self
+            .artifact(i)
+            .map_err(|e| OutputError::io(e.to_string()))?;
+        check_names(&art).map_err(OutputError::user)?;
+        let (file_name, format) = output_file(name, art.ty()).map_err(OutputError::io)?;
+        let encoded = encode(&art, &self.graph.site, format).map_err(OutputError::io)?;
+        let path = dir.join(&file_name);
+        let stamps = write_output(dir, &file_name, encoded)
+            .map_err(|e| OutputError::io(format!("cannot write {}: {e}", path.display())))?;
+        // The artifact may have been rebuilt while loading; record the digest it has now.
+        let digest = lock(&self.state).outcomes[i]
+            .as_ref()
+            .and_then(|o| o.digest)
+            .unwrap_or(digest);
+        Ok((file_name, stamps, digest))
     }
 
     fn into_results(self) -> (Vec<NodeRecord>, Vec<(String, Snapshot)>) {
@@ -605,28 +672,69 @@ impl<'a> Exec<'a> {
     }
 }
 
-/// `.kodama-outputs.json` in an output folder: which artifact digest each output file was written
-/// from, with the file's size and mtime then, so an unchanged output is not rewritten.
+/// Why a declared output was not written.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct OutputError {
+    /// What went wrong.
+    pub error: String,
+    /// True when the artifact's own content cannot be written (a view id that is not a file
+    /// name): the CLI exits 2, not 1.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub user_error: bool,
+}
+
+impl OutputError {
+    fn io(error: String) -> OutputError {
+        OutputError {
+            error,
+            user_error: false,
+        }
+    }
+    fn user(error: String) -> OutputError {
+        OutputError {
+            error,
+            user_error: true,
+        }
+    }
+}
+
+/// `.kodama-outputs.json` in an output folder: which artifact digest each output was written
+/// from, with every file it wrote (path relative to the folder, size, mtime and content digest
+/// then). A file whose size and mtime still match is trusted; one whose mtime moved is hashed,
+/// so a touched file is kept and a replaced or deleted one is written again.
 #[derive(Default, serde::Serialize, serde::Deserialize)]
 struct OutputManifest {
+    version: u32,
     outputs: BTreeMap<String, ManifestEntry>,
 }
+
+const MANIFEST_VERSION: u32 = 2;
 
 #[derive(serde::Serialize, serde::Deserialize)]
 struct ManifestEntry {
     digest: String,
-    /// The output as reported: a file, or a folder.
+    /// The output as reported (a file, or a folder), relative to the output folder.
     file: String,
-    /// The file whose size and mtime stand for it (the folder's entry point).
-    probe: String,
+    /// Every file written for it.
+    files: Vec<FileStamp>,
+}
+
+/// One file an output wrote, relative to the output folder.
+#[derive(Clone, serde::Serialize, serde::Deserialize)]
+struct FileStamp {
+    path: String,
     size: u64,
     mtime_ns: u128,
+    blake3: String,
 }
 
 const MANIFEST: &str = ".kodama-outputs.json";
 
 fn size_and_mtime(path: &Path) -> Option<(u64, u128)> {
-    let m = std::fs::metadata(path).ok()?;
+    let m = std::fs::symlink_metadata(path).ok()?;
+    if !m.is_file() {
+        return None;
+    }
     let t = m
         .modified()
         .ok()?
@@ -635,32 +743,56 @@ fn size_and_mtime(path: &Path) -> Option<(u64, u128)> {
     Some((m.len(), t.as_nanos()))
 }
 
+impl FileStamp {
+    /// Whether the file is still the one written; refreshes the mtime of a touched but
+    /// unchanged file.
+    fn verify(&mut self, dir: &Path) -> bool {
+        // Only names the engine wrote are followed: a hand-edited manifest cannot point outside.
+        if kodama_nodes::io::safe_name::check_relative_path(&self.path).is_err() {
+            return false;
+        }
+        let path = dir.join(&self.path);
+        let Some((size, mtime_ns)) = size_and_mtime(&path) else {
+            return false;
+        };
+        if (size, mtime_ns) == (self.size, self.mtime_ns) {
+            return true;
+        }
+        let same = size == self.size
+            && crate::cache::hash_file(&path).is_ok_and(|d| d.to_hex().as_str() == self.blake3);
+        if same {
+            self.mtime_ns = mtime_ns;
+        }
+        same
+    }
+}
+
 impl OutputManifest {
     fn load(dir: &Path) -> OutputManifest {
         std::fs::read(dir.join(MANIFEST))
             .ok()
-            .and_then(|b| serde_json::from_slice(&b).ok())
+            .and_then(|b| serde_json::from_slice::<OutputManifest>(&b).ok())
+            .filter(|m| m.version == MANIFEST_VERSION)
             .unwrap_or_default()
     }
-    fn unchanged(&self, name: &str, digest: &Digest) -> Option<PathBuf> {
-        let e = self.outputs.get(name)?;
+    /// The output's file name if every file it wrote from `digest` is still there unchanged.
+    fn unchanged(&mut self, dir: &Path, name: &str, digest: &Digest) -> Option<String> {
+        let e = self.outputs.get_mut(name)?;
         let same = e.digest == digest.to_hex().as_str()
-            && size_and_mtime(Path::new(&e.probe)) == Some((e.size, e.mtime_ns));
-        same.then(|| PathBuf::from(&e.file))
+            && !e.files.is_empty()
+            && e.files.iter_mut().all(|f| f.verify(dir));
+        same.then(|| e.file.clone())
     }
-    fn record(&mut self, name: &str, digest: &Digest, path: &Path, probe: &Path) {
-        if let Some((size, mtime_ns)) = size_and_mtime(probe) {
-            let entry = ManifestEntry {
-                digest: digest.to_hex().to_string(),
-                file: path.display().to_string(),
-                probe: probe.display().to_string(),
-                size,
-                mtime_ns,
-            };
-            self.outputs.insert(name.to_owned(), entry);
-        }
+    fn record(&mut self, name: &str, digest: &Digest, file: &str, files: Vec<FileStamp>) {
+        let entry = ManifestEntry {
+            digest: digest.to_hex().to_string(),
+            file: file.to_owned(),
+            files,
+        };
+        self.outputs.insert(name.to_owned(), entry);
     }
-    fn save(&self, dir: &Path) -> std::io::Result<()> {
+    fn save(&mut self, dir: &Path) -> std::io::Result<()> {
+        self.version = MANIFEST_VERSION;
         write_atomic(
             dir,
             &dir.join(MANIFEST),
@@ -669,21 +801,73 @@ impl OutputManifest {
     }
 }
 
-/// Writes an encoded output at `path` so that it never exists half-written: a file through a temp
-/// file and rename; a folder assembled under a hidden temp name, then renamed over the old one.
-/// Returns the file whose size and mtime stand for the output.
-fn write_output(dir: &Path, path: &Path, encoded: Encoded) -> std::io::Result<PathBuf> {
+/// Removes the temp files and folders (`.kodama-<pid>-...tmp`) that a killed process left in
+/// `dir`. A temp of a process that still runs is left alone, as are temps younger than an hour
+/// where there is no `/proc` to ask.
+pub fn remove_stale_temps(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    let have_proc = Path::new("/proc/self").exists();
+    let me = std::process::id().to_string();
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(rest) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(".kodama-"))
+            .filter(|n| n.ends_with(".tmp"))
+        else {
+            continue;
+        };
+        let pid = rest.split('-').next().unwrap_or_default();
+        if pid == me || pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+            continue;
+        }
+        let dead = if have_proc {
+            !Path::new("/proc").join(pid).exists()
+        } else {
+            entry
+                .metadata()
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|t| t.elapsed().ok())
+                .is_some_and(|age| age.as_secs() > 3600)
+        };
+        if dead {
+            let p = entry.path();
+            let _ = match entry.file_type() {
+                Ok(t) if t.is_dir() => std::fs::remove_dir_all(&p),
+                _ => std::fs::remove_file(&p),
+            };
+        }
+    }
+}
+
+fn stamp(rel: String, path: &Path, bytes: &[u8]) -> std::io::Result<FileStamp> {
+    let (size, mtime_ns) = size_and_mtime(path)
+        .ok_or_else(|| std::io::Error::other(format!("{} vanished", path.display())))?;
+    Ok(FileStamp {
+        path: rel,
+        size,
+        mtime_ns,
+        blake3: blake3::hash(bytes).to_hex().to_string(),
+    })
+}
+
+/// Writes an encoded output as `file_name` in `dir` so that it never exists half-written: a file
+/// through a temp file and rename; a folder assembled under a hidden temp name, then renamed over
+/// the old one. Returns the stamps of the files written.
+fn write_output(dir: &Path, file_name: &str, encoded: Encoded) -> std::io::Result<Vec<FileStamp>> {
+    let path = dir.join(file_name);
     match encoded {
         Encoded::File(bytes) => {
-            write_atomic(dir, path, &bytes)?;
-            Ok(path.to_path_buf())
+            write_atomic(dir, &path, &bytes)?;
+            Ok(vec![stamp(file_name.to_owned(), &path, &bytes)?])
         }
         Encoded::Folder(files) => {
-            let name = path
-                .file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            let tmp = dir.join(format!(".kodama-{name}-{}.tmp", std::process::id()));
+            // Named by pid first, as write_atomic's temps are, so a later run can tell whether
+            // the process that left it is gone.
+            let tmp = dir.join(format!(".kodama-{}-{file_name}.tmp", std::process::id()));
             let _ = std::fs::remove_dir_all(&tmp);
             for (rel, bytes) in &files {
                 let f = tmp.join(rel);
@@ -691,12 +875,15 @@ fn write_output(dir: &Path, path: &Path, encoded: Encoded) -> std::io::Result<Pa
                 std::fs::write(&f, bytes)?;
             }
             if path.is_dir() {
-                std::fs::remove_dir_all(path)?;
+                std::fs::remove_dir_all(&path)?;
             } else if path.exists() {
-                std::fs::remove_file(path)?;
+                std::fs::remove_file(&path)?;
             }
-            std::fs::rename(&tmp, path)?;
-            Ok(path.join(files.first().map(|f| f.0.as_str()).unwrap_or("")))
+            std::fs::rename(&tmp, &path)?;
+            files
+                .iter()
+                .map(|(rel, bytes)| stamp(format!("{file_name}/{rel}"), &path.join(rel), bytes))
+                .collect()
         }
     }
 }

@@ -48,8 +48,8 @@ enum Command {
         /// Run only this node and what it needs (repeatable).
         #[arg(long = "target", value_name = "NODE")]
         targets: Vec<String>,
-        /// Worker threads (default: all cores).
-        #[arg(long, short)]
+        /// Worker threads (default: all cores; at most 4 per core).
+        #[arg(long, short, value_parser = parse_jobs)]
         jobs: Option<usize>,
         /// Print the run record as one JSON object on stdout.
         #[arg(long)]
@@ -68,8 +68,8 @@ enum Command {
         /// Where the declared outputs go (default: out/<graph name>/).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Worker threads (default: all cores).
-        #[arg(long, short)]
+        /// Worker threads (default: all cores; at most 4 per core).
+        #[arg(long, short, value_parser = parse_jobs)]
         jobs: Option<usize>,
         /// Print each run record as one JSON line on stdout.
         #[arg(long)]
@@ -97,8 +97,8 @@ enum Command {
         /// Where the table and each variant's outputs go (default: out/<sweep name>/).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Worker threads per variant (default: all cores).
-        #[arg(long, short)]
+        /// Worker threads per variant (default: all cores; at most 4 per core).
+        #[arg(long, short, value_parser = parse_jobs)]
         jobs: Option<usize>,
         /// Print only warnings, errors and the table.
         #[arg(long, short)]
@@ -106,6 +106,10 @@ enum Command {
         /// Check every variant's graph and list the variants, without running anything.
         #[arg(long)]
         dry_run: bool,
+        /// Let the base graph lie outside the sweep's folder and the one above it, and its data
+        /// paths leave its folder (or --data).
+        #[arg(long)]
+        allow_outside: bool,
     },
     /// Say what `run` would do and why, without running anything.
     Explain {
@@ -143,6 +147,9 @@ enum Command {
         /// Resolve the kept graphs' data paths against this folder.
         #[arg(long)]
         data: Option<PathBuf>,
+        /// Let the kept graphs' data paths leave their folder (or --data).
+        #[arg(long)]
+        allow_outside: bool,
     },
     /// Print the graph as Graphviz dot or Mermaid.
     Graph {
@@ -166,12 +173,23 @@ struct GraphArgs {
     /// Override one parameter for this run: NODE.PARAM=VALUE, VALUE in RON syntax (repeatable).
     #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
     sets: Vec<String>,
+    /// Let data paths leave the graph file's folder (or --data): `..`, absolute paths, symlinks.
+    #[arg(long)]
+    allow_outside: bool,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
 enum Format {
     Dot,
     Mermaid,
+}
+
+fn parse_jobs(s: &str) -> Result<usize, String> {
+    match s.trim().parse::<usize>() {
+        Ok(0) => Err("expected at least 1 worker thread".into()),
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("expected a number of threads, found {s:?}")),
+    }
 }
 
 fn parse_bytes(s: &str) -> Result<u64, String> {
@@ -218,6 +236,7 @@ fn load_graph(args: &GraphArgs) -> Result<Graph, Fail> {
     let opts = LoadOptions {
         data_dir: args.data.clone(),
         sets: args.sets.clone(),
+        allow_outside: args.allow_outside,
     };
     if let Some(d) = &args.data
         && !d.is_dir()
@@ -287,6 +306,9 @@ fn run_once(
             n.error.as_deref().unwrap_or("?")
         );
     }
+    for (name, e) in &record.output_errors {
+        eprintln!("error: output \"{name}\" was not written: {}", e.error);
+    }
     if !quiet {
         for path in record.outputs.values() {
             let html = Path::new(path).join("report.html");
@@ -298,9 +320,11 @@ fn run_once(
             }
         }
     }
+    let user_error =
+        failed.iter().any(|n| n.user_error) || record.output_errors.values().any(|e| e.user_error);
     Ok(match () {
-        _ if failed.iter().any(|n| n.user_error) => 2,
-        _ if !failed.is_empty() => 1,
+        _ if user_error => 2,
+        _ if !failed.is_empty() || !record.output_errors.is_empty() => 1,
         _ => 0,
     })
 }
@@ -320,6 +344,9 @@ fn watch_loop(
     let cache = open_cache(cache)?;
     let mut ignore =
         vec![std::fs::canonicalize(cache.root()).unwrap_or_else(|_| cache.root().to_path_buf())];
+    // The inputs of the last graph that loaded: kept while the graph does not load (an input was
+    // deleted), so that recreating the input is seen.
+    let mut inputs: Vec<PathBuf> = Vec::new();
     loop {
         let loaded = load_graph(&args);
         let out_dir = match (&out, &loaded) {
@@ -332,7 +359,14 @@ fn watch_loop(
             ignore.push(o);
         }
         // Watch before running, so an edit made during the run is not missed.
-        let paths = kodama_dag::watch::watched_paths(&args.graph, loaded.as_ref().ok());
+        let mut paths = kodama_dag::watch::watched_paths(&args.graph, loaded.as_ref().ok());
+        if loaded.is_ok() {
+            inputs = paths.clone();
+        } else {
+            paths.extend(inputs.iter().cloned());
+            paths.sort();
+            paths.dedup();
+        }
         let (_watcher, rx) = kodama_dag::watch::watcher(&paths).map_err(|e| {
             Fail(
                 1,
@@ -410,13 +444,15 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             jobs,
             quiet,
             dry_run,
+            allow_outside,
         } => {
-            let sw = kodama_dag::sweep::load_sweep(&sweep)
+            let sw = kodama_dag::sweep::load_sweep(&sweep, allow_outside)
                 .map_err(|e| Fail(2, format!("error: {e}")))?;
             if dry_run {
                 let opts = kodama_dag::sweep::SweepOptions {
                     data_dir: data,
                     sets,
+                    allow_outside,
                     ..Default::default()
                 };
                 let variants = kodama_dag::sweep::check_variants(&sw, &opts)
@@ -433,6 +469,7 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
                 sets,
                 out_dir: out_dir.clone(),
                 jobs,
+                allow_outside,
             };
             let reporter = Reporter::new(Mode::detect(quiet), 0);
             let results = kodama_dag::sweep::run_sweep(&sw, &cache, &opts, &reporter, |i, n, v| {
@@ -497,6 +534,7 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             max_bytes,
             keep,
             data,
+            allow_outside,
         } => {
             let cache = open_cache(cache)?;
             let mut pinned = BTreeSet::new();
@@ -505,6 +543,7 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
                     graph: g,
                     data: data.clone(),
                     sets: Vec::new(),
+                    allow_outside,
                 })?;
                 pinned.extend(kodama_dag::exec::last_run_digests(&graph, &cache));
             }

@@ -189,3 +189,65 @@ impl Drop for NodeProgress<'_> {
         }
     }
 }
+
+/// The progress of one long command outside a graph (`trace`, `radiomap`): a bar when the amount
+/// of work is known, else a spinner, both with the elapsed time, on a terminal; one line per step
+/// elsewhere.
+pub struct Task {
+    mode: Mode,
+    bar: Option<ProgressBar>,
+}
+
+impl Task {
+    /// Starts a task: `what` it does, and how many steps when known.
+    pub fn new(mode: Mode, what: &str, total: Option<u64>) -> Task {
+        let bar = (mode == Mode::Bars).then(|| {
+            let (bar, template) = match total {
+                Some(n) => (
+                    ProgressBar::with_draw_target(Some(n), ProgressDrawTarget::stderr()),
+                    "{spinner} {msg} [{bar:30}] {pos}/{len} {elapsed} (eta {eta})",
+                ),
+                None => (
+                    ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr()),
+                    "{spinner} {msg} {elapsed}",
+                ),
+            };
+            bar.set_style(
+                ProgressStyle::with_template(template)
+                    .expect("valid template")
+                    .progress_chars("=> "),
+            );
+            bar.set_message(what.to_owned());
+            bar.enable_steady_tick(Duration::from_millis(100));
+            bar
+        });
+        if mode == Mode::Lines {
+            eprintln!("{what}");
+        }
+        Task { mode, bar }
+    }
+
+    /// `n` more steps done.
+    pub fn advance(&self, n: u64) {
+        if let Some(bar) = &self.bar {
+            bar.inc(n);
+        }
+    }
+
+    /// Now doing `what`.
+    pub fn step(&self, what: &str) {
+        match &self.bar {
+            Some(bar) => bar.set_message(what.to_owned()),
+            None if self.mode == Mode::Lines => eprintln!("{what}"),
+            None => {}
+        }
+    }
+}
+
+impl Drop for Task {
+    fn drop(&mut self) {
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
+        }
+    }
+}

@@ -57,6 +57,9 @@ pub struct RunRecord {
     pub nodes: Vec<NodeRecord>,
     /// Output name -> file written.
     pub outputs: BTreeMap<String, String>,
+    /// Output name -> why it was not written; absent when every output was.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub output_errors: BTreeMap<String, crate::exec::OutputError>,
 }
 
 /// What a node's action key was made of.

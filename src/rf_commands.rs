@@ -17,6 +17,8 @@ use kodama_nodes::rf::radiomap::{default_plane, radio_map};
 use kodama_nodes::rf::scene::RfScene;
 use kodama_nodes::{Artifact, Site, StageError};
 
+use kodama_dag::progress::{Mode, Task};
+
 /// Interaction switches shared by both commands.
 #[derive(Args, Debug)]
 pub struct Interactions {
@@ -130,7 +132,30 @@ fn stage_fail(e: StageError) -> Fail {
     (if e.is_user_error() { 2 } else { 1 }, format!("error: {e}"))
 }
 
+/// A file named on the command line must be a regular file: a FIFO or device would block the
+/// reader, a folder gives a confusing error later.
+fn regular_file(flag: &str, path: &Path) -> Result<(), Fail> {
+    let meta = std::fs::metadata(path)
+        .map_err(|e| (2, format!("error: {flag} {}: {e}", path.display())))?;
+    if meta.is_file() {
+        return Ok(());
+    }
+    let what = if meta.is_dir() {
+        "a folder"
+    } else {
+        kodama_dag::cache::describe_file_type(&meta.file_type())
+    };
+    Err((
+        2,
+        format!(
+            "error: {flag} {}: expected a regular file, found {what}",
+            path.display()
+        ),
+    ))
+}
+
 fn load(scene: &Path, i: &Interactions) -> Result<RfScene, Fail> {
+    regular_file("--scene", scene)?;
     if let Err((field, m)) = i.options().check() {
         let flag = field.replace('_', "-");
         return Err((2, format!("error: --{flag}: {m}")));
@@ -180,21 +205,58 @@ fn note_unmodelled(i: &Interactions, radio_map: bool) {
     }
 }
 
+/// At most this many calls into the tracer per `trace` command: steps of the progress bar. Each
+/// call repeats some per-scene work (diffraction wedges), so they stay few.
+const TRACE_STEPS: usize = 20;
+
 /// `kodama-dag trace`.
 pub fn trace(a: TraceArgs) -> Result<u8, Fail> {
+    let task = Task::new(Mode::detect(false), "reading the scene", None);
     let scene = load(&a.scene, &a.interactions)?;
+    regular_file("--links", &a.links)?;
     let links = read_links(&a.links).map_err(stage_fail)?;
+    drop(task);
     note_unmodelled(&a.interactions, false);
     let t = Instant::now();
     let ant = Antenna::default();
-    let results = trace_links(
-        &scene,
-        &links,
-        &ant,
-        &ant,
-        &a.interactions.options(),
-        a.interactions.freq_hz,
+    // Links sharing a transmitter share its ray search, so the steps split by transmitter.
+    let mut txs: Vec<[u64; 3]> = links.iter().map(|l| l.0.map(f64::to_bits)).collect();
+    txs.sort_unstable();
+    txs.dedup();
+    let per_step = txs.len().div_ceil(TRACE_STEPS).max(1);
+    let task = Task::new(
+        Mode::detect(false),
+        &format!(
+            "tracing {} links from {} transmitters",
+            links.len(),
+            txs.len()
+        ),
+        Some(txs.len() as u64),
     );
+    let mut results = vec![None; links.len()];
+    for batch in txs.chunks(per_step) {
+        let idx: Vec<usize> = (0..links.len())
+            .filter(|&i| batch.binary_search(&links[i].0.map(f64::to_bits)).is_ok())
+            .collect();
+        let pairs: Vec<_> = idx.iter().map(|&i| links[i]).collect();
+        let traced = trace_links(
+            &scene,
+            &pairs,
+            &ant,
+            &ant,
+            &a.interactions.options(),
+            a.interactions.freq_hz,
+        );
+        for (i, r) in idx.into_iter().zip(traced) {
+            results[i] = Some(r);
+        }
+        task.advance(batch.len() as u64);
+    }
+    drop(task);
+    let results: Vec<_> = results
+        .into_iter()
+        .map(|r| r.expect("every link is in one batch"))
+        .collect();
     write_file(&a.out, write_results(&links, &results).as_bytes())?;
     eprintln!(
         "traced {} links in {:.2} s -> {}",
@@ -228,9 +290,14 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
             format!("error: --cell-m {} is not a positive size", a.cell_m),
         ));
     }
+    let task = Task::new(Mode::detect(false), "reading the scene", None);
     let scene = load(&a.scene, &a.interactions)?;
     note_unmodelled(&a.interactions, true);
     let plane = default_plane(&scene, a.cell_m, a.height_m);
+    task.step(&format!(
+        "radio map: {} rays over {} x {} cells",
+        a.interactions.rays, plane.grid.width, plane.grid.height
+    ));
     let t = Instant::now();
     let map = radio_map(
         &scene,
@@ -241,6 +308,7 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
         a.interactions.freq_hz,
     );
     let secs = t.elapsed().as_secs_f64();
+    drop(task);
     let db = kodama_nodes::rf::radiomap::to_db(&map);
     let site = Site {
         crs: String::new(),

@@ -83,9 +83,15 @@ fn string(path: &Path, a: &Ast, what: &str) -> Result<String, String> {
     }
 }
 
-/// Reads and checks a sweep file.
-pub fn load_sweep(path: &Path) -> Result<Sweep, String> {
-    let text = std::fs::read_to_string(path)
+/// The most variants a sweep may have: each is a full graph load and run, so more is a mistake in
+/// the axes, and the product of a few long axes would otherwise exhaust memory before anything
+/// runs.
+pub const MAX_VARIANTS: usize = 10_000;
+
+/// Reads and checks a sweep file. Its base graph must lie in the sweep file's folder or the one
+/// above it (sweeps sit in `graphs/sweeps/` beside the graphs they vary), unless `allow_outside`.
+pub fn load_sweep(path: &Path, allow_outside: bool) -> Result<Sweep, String> {
+    let text = crate::graph::read_graph_text(path)
         .map_err(|e| format!("{}: cannot read the sweep file: {e}", path.display()))?;
     let ast = syntax::parse(&text, 0, 1, 1).map_err(|e| {
         format!(
@@ -109,7 +115,7 @@ pub fn load_sweep(path: &Path) -> Result<Sweep, String> {
     let (mut graph, mut axes, mut metrics) = (None, Vec::new(), Vec::new());
     for (n, v) in fields {
         match n.name.as_str() {
-            "graph" => graph = Some(string(path, v, "the base graph's path")?),
+            "graph" => graph = Some((v, string(path, v, "the base graph's path")?)),
             "metrics" => {
                 let Value::List(items) = &v.v else {
                     return Err(err(path, v, "expected a list of \"NODE.KEY\" metric names"));
@@ -145,17 +151,68 @@ pub fn load_sweep(path: &Path) -> Result<Sweep, String> {
             }
         }
     }
-    let graph = graph.ok_or_else(|| err(path, &ast, "missing field `graph`"))?;
-    let base = path.parent().unwrap_or(Path::new("."));
+    let count = axes
+        .iter()
+        .fold(1usize, |n, (_, choices)| n.saturating_mul(choices.len()));
+    if count > MAX_VARIANTS {
+        return Err(err(
+            path,
+            &ast,
+            format!(
+                "{count} variants (the product of the axes) is more than the {MAX_VARIANTS} a sweep runs"
+            ),
+        ));
+    }
+    let (graph_ast, graph) = graph.ok_or_else(|| err(path, &ast, "missing field `graph`"))?;
+    let base = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let graph = base.join(graph);
+    check_base_graph(&graph, base, allow_outside).map_err(|m| err(path, graph_ast, m))?;
     Ok(Sweep {
         path: path.to_path_buf(),
         name: path
             .file_stem()
             .map_or("sweep".into(), |s| s.to_string_lossy().into_owned()),
-        graph: base.join(graph),
+        graph,
         axes,
         metrics,
     })
+}
+
+/// The base graph: a regular file inside the sweep's folder or its parent, unless allowed out.
+fn check_base_graph(graph: &Path, base: &Path, allow_outside: bool) -> Result<(), String> {
+    let meta =
+        std::fs::metadata(graph).map_err(|e| format!("the base graph {}: {e}", graph.display()))?;
+    if !meta.is_file() {
+        return Err(format!(
+            "the base graph {} is {}, not a graph file",
+            graph.display(),
+            if meta.is_dir() {
+                "a folder"
+            } else {
+                crate::cache::describe_file_type(&meta.file_type())
+            }
+        ));
+    }
+    if allow_outside {
+        return Ok(());
+    }
+    let root = std::fs::canonicalize(base)
+        .map_err(|e| format!("the sweep's folder {}: {e}", base.display()))?;
+    let root = root.parent().map(Path::to_path_buf).unwrap_or(root);
+    let target = std::fs::canonicalize(graph)
+        .map_err(|e| format!("the base graph {}: {e}", graph.display()))?;
+    if !target.starts_with(&root) {
+        return Err(format!(
+            "the base graph {} is outside {} (a sweep's graph lies in its folder or the one \
+             above); pass --allow-outside to use it",
+            target.display(),
+            root.display()
+        ));
+    }
+    Ok(())
 }
 
 fn axis_variants(path: &Path, a: &Ast) -> Result<Vec<Choice>, String> {
@@ -272,6 +329,8 @@ pub struct SweepOptions {
     pub out_dir: PathBuf,
     /// Worker threads per variant.
     pub jobs: Option<usize>,
+    /// Let the base graph's data paths reach outside its folder (or `--data`).
+    pub allow_outside: bool,
 }
 
 /// One variant's result.
@@ -335,11 +394,39 @@ pub fn run_sweep(
                 f.error.as_deref().unwrap_or(&f.reason)
             )));
         }
-        let metrics = sweep
-            .metrics
-            .iter()
-            .map(|m| metric(cache, &record, m))
-            .collect();
+        if let Some((name, e)) = record.output_errors.iter().next() {
+            return Err(SweepError::Failed(format!(
+                "variant {}: output {name:?} was not written: {}",
+                v.name(),
+                e.error
+            )));
+        }
+        let mut metrics = Vec::with_capacity(sweep.metrics.len());
+        for m in &sweep.metrics {
+            match metric(cache, &record, m) {
+                Ok(x) => metrics.push(x),
+                // Known only once the metrics node has run: a key it never reports is a typo in
+                // the sweep file, not a missing value, so the first variant settles it.
+                Err(keys) if i == 0 => {
+                    let hint = syntax::did_you_mean(
+                        m.split_once('.').map_or("", |(_, k)| k),
+                        keys.iter().map(String::as_str),
+                    )
+                    .map(|k| format!("; did you mean `{k}`?"))
+                    .unwrap_or_default();
+                    return Err(SweepError::Graph(format!(
+                        "{}: metric {m:?} names nothing: its node reports {}{hint}",
+                        sweep.path.display(),
+                        if keys.is_empty() {
+                            "no values".to_string()
+                        } else {
+                            keys.join(", ")
+                        }
+                    )));
+                }
+                Err(_) => metrics.push(f64::NAN),
+            }
+        }
         results.push(VariantResult {
             variant: v.clone(),
             record,
@@ -357,6 +444,18 @@ fn checked_graphs(
     opts: &SweepOptions,
     variants: &[Variant],
 ) -> Result<Vec<Graph>, SweepError> {
+    let mut folders = std::collections::HashMap::new();
+    for v in variants {
+        let folder = folder_name(&v.name());
+        if let Some(first) = folders.insert(folder.to_lowercase(), v.name()) {
+            return Err(SweepError::Graph(format!(
+                "{}: variants {first:?} and {:?} would write the same folder {folder:?}; \
+                 give their labels distinct letters or digits",
+                sweep.path.display(),
+                v.name()
+            )));
+        }
+    }
     let mut graphs = Vec::with_capacity(variants.len());
     for v in variants {
         let g = load_variant(sweep, opts, v)?;
@@ -395,14 +494,16 @@ fn load_variant(sweep: &Sweep, opts: &SweepOptions, v: &Variant) -> Result<Graph
     let lo = LoadOptions {
         data_dir: opts.data_dir.clone(),
         sets: opts.sets.iter().chain(&v.sets).cloned().collect(),
+        allow_outside: opts.allow_outside,
     };
     load(&sweep.graph, &lo).map_err(|e| SweepError::Graph(format!("variant {}:\n{e}", v.name())))
 }
 
-/// The value of `NODE.KEY` in the Metrics artifact the run produced for NODE.
-fn metric(cache: &Cache, record: &RunRecord, m: &str) -> f64 {
+/// The value of `NODE.KEY` in the Metrics artifact the run produced for NODE: NaN where the
+/// artifact cannot be had; the keys it has when it has no KEY.
+fn metric(cache: &Cache, record: &RunRecord, m: &str) -> Result<f64, Vec<String>> {
     let (node, key) = m.split_once('.').expect("checked on load");
-    record
+    let values = record
         .nodes
         .iter()
         .find(|n| n.id == node)
@@ -411,10 +512,16 @@ fn metric(cache: &Cache, record: &RunRecord, m: &str) -> f64 {
         .and_then(|d| cache.get_blob(&d).ok())
         .and_then(|b| rmp_serde::from_slice::<Artifact>(&b).ok())
         .and_then(|a| match a {
-            Artifact::Metrics(Metrics { values }) => values.get(key).copied(),
+            Artifact::Metrics(Metrics { values }) => Some(values),
             _ => None,
-        })
-        .unwrap_or(f64::NAN)
+        });
+    match values {
+        None => Ok(f64::NAN),
+        Some(v) => v
+            .get(key)
+            .copied()
+            .ok_or_else(|| v.keys().cloned().collect()),
+    }
 }
 
 /// A variant name as a folder name.
@@ -517,7 +624,8 @@ mod tests {
 )"#,
         )
         .unwrap();
-        let s = load_sweep(&p).unwrap();
+        std::fs::write(dir.path().join("g.ron"), "Graph()").unwrap();
+        let s = load_sweep(&p, false).unwrap();
         let v = s.variants();
         assert_eq!(v.len(), 6);
         assert_eq!(v[0].name(), "a=1.0,b=on");
@@ -536,7 +644,7 @@ mod tests {
             "Sweep(graph: \"g.ron\", axes: { \"a\": Grid(set: \"nx\", values: [1]) })",
         )
         .unwrap();
-        let e = load_sweep(&p).unwrap_err();
+        let e = load_sweep(&p, false).unwrap_err();
         assert!(e.contains("s.ron:1:") && e.contains("NODE.PARAM"), "{e}");
     }
 }

@@ -36,27 +36,28 @@ fn absolute(p: &Path) -> PathBuf {
 }
 
 /// A notify watcher on the folders holding `paths` (files are watched through their folder, so
-/// editors that replace a file by renaming still count), with the events it sends.
+/// editors that replace a file by renaming still count), with the events it sends. A folder input
+/// is watched inside and through its parent, so deleting and recreating it is seen; a path that
+/// does not exist (an input deleted since) is watched through its nearest existing ancestor.
 pub fn watcher(
     paths: &[PathBuf],
 ) -> notify::Result<(RecommendedWatcher, Receiver<notify::Result<Event>>)> {
     let (tx, rx) = std::sync::mpsc::channel();
     let mut w = notify::recommended_watcher(tx)?;
-    let mut dirs: Vec<(PathBuf, RecursiveMode)> = paths
-        .iter()
-        .map(|p| {
-            if p.is_dir() {
-                (p.clone(), RecursiveMode::Recursive)
-            } else {
-                (
-                    p.parent()
-                        .map(Path::to_path_buf)
-                        .unwrap_or_else(|| PathBuf::from(".")),
-                    RecursiveMode::NonRecursive,
-                )
-            }
-        })
-        .collect();
+    let mut dirs: Vec<(PathBuf, RecursiveMode)> = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            dirs.push((p.clone(), RecursiveMode::Recursive));
+        }
+        let mut parent = p.parent().map(Path::to_path_buf);
+        while let Some(d) = parent.clone().filter(|d| !d.is_dir()) {
+            parent = d.parent().map(Path::to_path_buf);
+        }
+        dirs.push((
+            parent.unwrap_or_else(|| PathBuf::from(".")),
+            RecursiveMode::NonRecursive,
+        ));
+    }
     dirs.sort();
     dirs.dedup();
     for (d, mode) in dirs {
@@ -67,14 +68,22 @@ pub fn watcher(
     Ok((w, rx))
 }
 
-/// Whether `event` touches one of `paths` (or something inside a watched folder) and none of the
-/// `ignore` folders.
+/// Whether `event` touches one of `paths` (or something inside a watched folder, or a folder on
+/// the way to one, created or removed) and none of the `ignore` folders.
 pub fn relevant(event: &Event, paths: &[PathBuf], ignore: &[PathBuf]) -> bool {
     if matches!(event.kind, EventKind::Access(_)) {
         return false;
     }
+    let structural = matches!(event.kind, EventKind::Create(_) | EventKind::Remove(_))
+        || matches!(
+            event.kind,
+            EventKind::Modify(notify::event::ModifyKind::Name(_))
+        );
     event.paths.iter().any(|p| {
-        !ignore.iter().any(|i| p.starts_with(i)) && paths.iter().any(|w| p == w || p.starts_with(w))
+        !ignore.iter().any(|i| p.starts_with(i))
+            && paths
+                .iter()
+                .any(|w| p == w || p.starts_with(w) || (structural && w.starts_with(p)))
     })
 }
 

@@ -81,9 +81,38 @@ fn check_report(dir: &Path) {
         assert_eq!(metrics[m]["links_scored"].as_f64().unwrap(), links, "{m}");
     }
     assert!(links > 100.0, "{links}");
-    for plot in ["scatter", "error_cdf", "path_loss_distance", "radio_map"] {
+    // Every figure in both encodings: the charts at print size, the maps at the orthophoto's
+    // resolution or finer (400 m at 0.5 m: at least 800 pixels across).
+    for plot in [
+        "scatter",
+        "error_cdf",
+        "path_loss_distance",
+        "radio_map",
+        "footprints",
+        "terrain_error",
+        "clutter",
+        "relief",
+        "materials",
+    ] {
         let img = image::open(dir.join(format!("plots/{plot}.png"))).unwrap();
-        assert!(img.width() > 100 && img.height() > 100, "{plot}");
+        assert!(
+            img.width() >= 1000 && img.height() >= 700,
+            "{plot}: {:?}",
+            (img.width(), img.height())
+        );
+        let svg = std::fs::read_to_string(dir.join(format!("plots/{plot}.svg"))).unwrap();
+        assert!(
+            svg.contains("<svg") && svg.trim_end().ends_with("</svg>"),
+            "{plot}.svg"
+        );
+        assert!(
+            md.contains(&format!("plots/{plot}.png")),
+            "report.md shows {plot}"
+        );
+    }
+    for chart in ["scatter", "error_cdf", "path_loss_distance"] {
+        let img = image::open(dir.join(format!("plots/{chart}.png"))).unwrap();
+        assert_eq!((img.width(), img.height()), (1600, 1000), "{chart}");
     }
     let csv = std::fs::read_to_string(dir.join("table.csv")).unwrap();
     assert!(

@@ -45,15 +45,8 @@ fn demo_sweep_shares_upstream_nodes_and_matches_single_runs() {
 )"#
         ),
     );
-    let r = env.cli(&[
-        "sweep",
-        sweep.to_str().unwrap(),
-        "--cache",
-        env.cache().to_str().unwrap(),
-        "--out",
-        env.out().to_str().unwrap(),
-        "-q",
-    ]);
+    // The sweep sits in a temp folder, its base graph in the repository: allowed explicitly.
+    let r = env.sweep(&sweep, &["--allow-outside"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let rows = table(&env.out().join("table.csv"));
     assert_eq!(rows.len(), 6);
@@ -353,12 +346,7 @@ fn the_ablation_sweep_checks() {
             Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/demo.ron")
         ),
     );
-    let r = env.cli(&[
-        "sweep",
-        bad.to_str().unwrap(),
-        "--cache",
-        env.cache().to_str().unwrap(),
-    ]);
+    let r = env.sweep(&bad, &["--allow-outside"]);
     assert_eq!(r.code, 2);
     assert!(r.stderr.contains("nope"), "{}", r.stderr);
     assert!(

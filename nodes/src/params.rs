@@ -36,7 +36,111 @@ pub fn folder_of(path: &str) -> String {
         .unwrap_or_else(|| ".".into())
 }
 
+/// An antenna's boresight must be finite (RON writes `NaN` and `inf`): a NaN azimuth would make
+/// every gain NaN without an error.
+pub fn check_antenna(
+    field: &'static str,
+    a: &crate::rf::antenna::Antenna,
+) -> Result<(), ParamError> {
+    if !(a.azimuth_deg.is_finite() && a.tilt_deg.is_finite()) {
+        return Err(ParamError::new(
+            field,
+            format!(
+                "expected a finite azimuth_deg and tilt_deg, found {} and {}",
+                a.azimuth_deg, a.tilt_deg
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The params of a stage that takes none.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NoParams {}
+
+/// The most cells one grid a node makes may have (rasters, orthophotos, radio maps, the synthetic
+/// site): 2^31, 8 GiB as f32. Past it a run would more likely exhaust memory than finish, so it is
+/// refused before anything is allocated; real data that large is tiled.
+pub const MAX_CELLS: u64 = 1 << 31;
+
+/// The most bytes one buffer sized by the user's values (a file's element counts, an image's
+/// size, a kernel) may take: 16 GiB.
+pub const MAX_BYTES: u64 = 16 << 30;
+
+/// `width` x `height` cells of `bytes_each`, checked against [`MAX_CELLS`] and [`MAX_BYTES`].
+/// The sizes are f64 so that an extent over a tiny cell size, or an infinite or NaN one, is caught
+/// before any integer conversion saturates or overflows. The error says what it would have needed.
+pub fn check_cells(width: f64, height: f64, bytes_each: usize) -> Result<(), String> {
+    let cells = width * height;
+    if !(width >= 0.0 && height >= 0.0 && cells.is_finite() && cells <= MAX_CELLS as f64) {
+        return Err(format!(
+            "a grid of {} x {} cells would need {} of memory; the limit is {} cells ({})",
+            count(width),
+            count(height),
+            bytes(cells * bytes_each as f64),
+            MAX_CELLS,
+            bytes((MAX_CELLS * bytes_each as u64) as f64),
+        ));
+    }
+    check_bytes("the grid", cells, bytes_each)
+}
+
+/// `n` items of `bytes_each` for `what`, checked against [`MAX_BYTES`]; the error says how much it
+/// would have needed.
+pub fn check_bytes(what: &str, n: f64, bytes_each: usize) -> Result<(), String> {
+    let need = n * bytes_each as f64;
+    if !(n >= 0.0 && need <= MAX_BYTES as f64) {
+        return Err(format!(
+            "{what} ({} items) would need {} of memory; the limit is {}",
+            count(n),
+            bytes(need),
+            bytes(MAX_BYTES as f64)
+        ));
+    }
+    Ok(())
+}
+
+fn count(n: f64) -> String {
+    if n.is_finite() && n.abs() < 1e12 {
+        format!("{n:.0}")
+    } else {
+        format!("{n:.3e}")
+    }
+}
+
+/// A byte count for people: `16.0 GiB`, `180.0 PiB`.
+fn bytes(b: f64) -> String {
+    if !b.is_finite() {
+        return "unbounded memory".into();
+    }
+    let units = ["bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB"];
+    let mut v = b;
+    let mut u = 0;
+    while v >= 1024.0 && u + 1 < units.len() {
+        v /= 1024.0;
+        u += 1;
+    }
+    if u == 0 {
+        format!("{v:.0} bytes")
+    } else if v < 1e6 {
+        format!("{v:.1} {}", units[u])
+    } else {
+        format!("{v:.3e} {}", units[u])
+    }
+}
+
+#[cfg(test)]
+mod limit_tests {
+    use super::*;
+
+    #[test]
+    fn grids_past_the_budget_say_what_they_would_need() {
+        assert!(check_cells(1000.0, 1000.0, 4).is_ok());
+        let e = check_cells(1e9, 1e9, 4).unwrap_err();
+        assert!(e.contains("3.5 EiB"), "{e}");
+        assert!(check_cells(f64::INFINITY, 1.0, 4).is_err());
+        assert!(check_cells(f64::NAN, 1.0, 4).is_err());
+        assert!(check_bytes("faces", 1e12, 12).unwrap_err().contains("TiB"));
+    }
+}

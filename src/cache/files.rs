@@ -45,8 +45,7 @@ impl Cache {
     /// every file below it, in sorted order.
     pub fn file_digest(&self, path: &Path) -> io::Result<Digest> {
         if path.is_dir() {
-            let mut files = Vec::new();
-            collect_files(path, path, &mut files)?;
+            let mut files = folder_files(path, false)?;
             files.sort();
             let mut h = blake3::Hasher::new();
             h.update(b"kodama-dag folder 1\0");
@@ -63,6 +62,18 @@ impl Cache {
     fn regular_file_digest(&self, path: &Path) -> io::Result<Digest> {
         let abs = fs::canonicalize(path)?;
         let meta = fs::metadata(&abs)?;
+        if !meta.is_file() {
+            // Checked when the graph loaded, but it may have been replaced since: never read a
+            // FIFO or device, which could block the run forever.
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "{} is {}, not a regular file",
+                    path.display(),
+                    describe_file_type(&meta.file_type())
+                ),
+            ));
+        }
         let mtime_ns = meta.mtime() as i128 * 1_000_000_000 + meta.mtime_nsec() as i128;
         let name = blake3::hash(abs.as_os_str().as_encoded_bytes()).to_hex();
         let entry_path = self.root.join("stat").join(name.as_str());
@@ -97,25 +108,93 @@ impl Cache {
     }
 }
 
-fn collect_files(
-    root: &Path,
-    dir: &Path,
-    out: &mut Vec<(String, std::path::PathBuf)>,
-) -> io::Result<()> {
-    for entry in fs::read_dir(dir)? {
-        let p = entry?.path();
-        if p.is_dir() {
-            collect_files(root, &p, out)?;
-        } else {
-            let rel = p
-                .strip_prefix(root)
-                .unwrap_or(&p)
-                .to_string_lossy()
-                .replace('\\', "/");
-            out.push((rel, p));
+/// What a file that is neither a regular file nor a folder is, for messages.
+pub fn describe_file_type(t: &fs::FileType) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    if t.is_fifo() {
+        "a FIFO (named pipe)"
+    } else if t.is_socket() {
+        "a socket"
+    } else if t.is_char_device() {
+        "a character device"
+    } else if t.is_block_device() {
+        "a block device"
+    } else if t.is_symlink() {
+        "a symlink"
+    } else {
+        "a special file"
+    }
+}
+
+/// Checks that every entry below folder `root` is a regular file or a folder (symlinks followed),
+/// reached once: no FIFO, socket or device, no symlink loop. With `contained`, no symlink may
+/// lead out of `root`. Nothing is opened, so a FIFO cannot block.
+pub fn check_folder(root: &Path, contained: bool) -> io::Result<()> {
+    folder_files(root, contained).map(|_| ())
+}
+
+/// Every regular file below `root`, as (relative path with `/`, full path), after the checks of
+/// [`check_folder`].
+pub fn folder_files(root: &Path, contained: bool) -> io::Result<Vec<(String, std::path::PathBuf)>> {
+    let canonical_root = fs::canonicalize(root)?;
+    let mut seen = std::collections::HashSet::new();
+    let mut out = Vec::new();
+    let mut stack = vec![root.to_path_buf()];
+    let refuse = |p: &Path, what: String| {
+        io::Error::new(
+            io::ErrorKind::InvalidInput,
+            format!("{}: {what}", p.display()),
+        )
+    };
+    while let Some(dir) = stack.pop() {
+        let meta = fs::metadata(&dir)?;
+        // Each folder once, whatever symlinks lead to it: a loop cannot make the walk endless.
+        if !seen.insert((meta.dev(), meta.ino())) {
+            return Err(refuse(
+                &dir,
+                "a folder reached twice through symlinks (a loop?)".into(),
+            ));
+        }
+        for entry in fs::read_dir(&dir)? {
+            let entry = entry?;
+            let p = entry.path();
+            let mut t = entry.file_type()?;
+            if t.is_symlink() {
+                if contained && !fs::canonicalize(&p).is_ok_and(|c| c.starts_with(&canonical_root))
+                {
+                    return Err(refuse(
+                        &p,
+                        format!(
+                            "a symlink leading outside {}; pass --allow-outside to follow it",
+                            root.display()
+                        ),
+                    ));
+                }
+                t = fs::metadata(&p)
+                    .map_err(|e| refuse(&p, format!("a broken symlink ({e})")))?
+                    .file_type();
+            }
+            if t.is_dir() {
+                stack.push(p);
+            } else if t.is_file() {
+                let rel = p
+                    .strip_prefix(root)
+                    .unwrap_or(&p)
+                    .to_string_lossy()
+                    .replace('\\', "/");
+                out.push((rel, p));
+            } else {
+                return Err(refuse(
+                    &p,
+                    format!(
+                        "{}, not a regular file; refused so that reading it cannot block",
+                        describe_file_type(&t)
+                    ),
+                ));
+            }
         }
     }
-    Ok(())
+    Ok(out)
 }
 
 #[cfg(test)]

@@ -1,10 +1,12 @@
 //! Graph file -> [`Graph`]: parse, apply `--set`, look up kinds, split inputs from params, check
 //! edges, types, cycles, values and files. Every problem found is reported, not just the first.
 
+use std::collections::hash_map::Entry;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
 
 use kodama_nodes::Site;
+use kodama_nodes::io::safe_name::check_file_name;
 use kodama_nodes::stage::Arity;
 use petgraph::algo::tarjan_scc;
 use petgraph::graph::DiGraph;
@@ -21,6 +23,38 @@ pub struct LoadOptions {
     pub data_dir: Option<PathBuf>,
     /// `NODE.PARAM=VALUE` overrides, in order.
     pub sets: Vec<String>,
+    /// Let data paths reach outside the graph file's folder (or `--data`): `..`, absolute paths,
+    /// symlinks that lead elsewhere.
+    pub allow_outside: bool,
+}
+
+/// The largest graph file read: far beyond any real graph, and a bound on memory when the path
+/// names something endless.
+pub const MAX_GRAPH_BYTES: u64 = 64 << 20;
+
+/// Reads a graph or sweep file as text, refusing one larger than [`MAX_GRAPH_BYTES`].
+pub fn read_graph_text(path: &Path) -> Result<String, String> {
+    use std::io::Read;
+    let f = std::fs::File::open(path).map_err(|e| e.to_string())?;
+    if f.metadata().is_ok_and(|m| m.is_dir()) {
+        return Err("it is a folder, not a file".into());
+    }
+    let mut bytes = Vec::new();
+    f.take(MAX_GRAPH_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| e.to_string())?;
+    if bytes.len() as u64 > MAX_GRAPH_BYTES {
+        return Err(format!(
+            "larger than {} MiB; a graph file is text a person writes",
+            MAX_GRAPH_BYTES >> 20
+        ));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        format!(
+            "not UTF-8 text (invalid byte at offset {})",
+            e.utf8_error().valid_up_to()
+        )
+    })
 }
 
 struct RawNode {
@@ -32,7 +66,7 @@ struct RawNode {
 /// Loads and checks the graph at `path`.
 pub fn load(path: &Path, opts: &LoadOptions) -> Result<Graph, GraphError> {
     let display = path.display().to_string();
-    let text = std::fs::read_to_string(path)
+    let text = read_graph_text(path)
         .map_err(|e| GraphError::general(&display, format!("cannot read the graph file: {e}")))?;
     let mut sources = Sources {
         items: vec![(display, text)],
@@ -108,7 +142,7 @@ fn check(
                 diags.push(de_diag(e, a.span, None));
                 None
             }
-            Ok(site) => match site.validate() {
+            Ok(site) => match site.validate().and_then(|()| check_site_cell(&site)) {
                 Err((field, msg)) => {
                     diags.push(Diagnostic::at(
                         field_span(a, field).unwrap_or(a.span),
@@ -145,15 +179,9 @@ fn check(
     } else {
         base
     };
+    let roots = DataRoot::new(base, opts);
     for r in &raw {
-        nodes.push(build_node(
-            r,
-            &raw,
-            &index,
-            &base,
-            opts.data_dir.is_some(),
-            diags,
-        ));
+        nodes.push(build_node(r, &raw, &index, &roots, diags));
     }
 
     let outputs = outputs_ast
@@ -210,6 +238,23 @@ fn check(
         nodes,
         outputs,
     })
+}
+
+/// The finest site cell accepted. Every raster of a graph is on the site's grid, so a cell far
+/// below this (`1e-300`) asks any stage for more cells than memory holds, over any extent.
+pub const MIN_SITE_CELL_M: f64 = 1e-3;
+
+fn check_site_cell(site: &Site) -> Result<(), (&'static str, String)> {
+    if site.cell_m < MIN_SITE_CELL_M {
+        return Err((
+            "cell_m",
+            format!(
+                "a cell of {:e} m is finer than the {MIN_SITE_CELL_M} m a site can take",
+                site.cell_m
+            ),
+        ));
+    }
+    Ok(())
 }
 
 fn unknown<'a>(
@@ -353,6 +398,17 @@ fn apply_sets(raw: &mut [RawNode], opts: &LoadOptions, diags: &mut Vec<Diagnosti
             span: at(node.chars().count() + 2),
         };
         let rest: Vec<&str> = path.collect();
+        if rest.len() >= syntax::MAX_DEPTH {
+            diags.push(Diagnostic::at(
+                at(1),
+                Some(node),
+                format!(
+                    "`{param}` is nested more than {} levels deep",
+                    syntax::MAX_DEPTH
+                ),
+            ));
+            continue;
+        }
         match r.fields.iter_mut().find(|(n, _)| n.name == top) {
             Some(f) => {
                 f.0 = name;
@@ -481,12 +537,116 @@ fn replace_node(
     }
 }
 
+/// Where a graph's data paths resolve, and whether they may leave it.
+struct DataRoot {
+    base: PathBuf,
+    /// `base` with symlinks resolved, when it exists.
+    canonical: Option<PathBuf>,
+    /// What `base` is, for messages.
+    what: &'static str,
+    allow_outside: bool,
+}
+
+impl DataRoot {
+    fn new(base: PathBuf, opts: &LoadOptions) -> DataRoot {
+        DataRoot {
+            canonical: std::fs::canonicalize(&base).ok(),
+            base,
+            what: if opts.data_dir.is_some() {
+                "--data"
+            } else {
+                "the graph file's folder"
+            },
+            allow_outside: opts.allow_outside,
+        }
+    }
+
+    /// Resolves `written` and checks it: inside the root (unless allowed out), existing, and a
+    /// regular file or a folder of them. Never opens a file, so a FIFO cannot hang the load.
+    fn resolve(&self, written: &str, field: &str) -> (PathBuf, Result<(), String>) {
+        let w = Path::new(written);
+        if w.is_absolute() && !self.allow_outside {
+            let msg = format!(
+                "`{field}` is the absolute path {written}; data paths are relative to {} ({}), \
+                 or pass --allow-outside to read it",
+                self.what,
+                self.base.display()
+            );
+            return (w.to_path_buf(), Err(msg));
+        }
+        let path = if w.is_absolute() {
+            w.to_path_buf()
+        } else {
+            self.base.join(w)
+        };
+        if std::fs::symlink_metadata(&path).is_err() {
+            let msg = format!(
+                "file not found: {} (`{field}` resolves against {})",
+                path.display(),
+                self.what
+            );
+            return (path, Err(msg));
+        }
+        if !self.allow_outside {
+            let canonical = std::fs::canonicalize(&path);
+            let inside = match (&canonical, &self.canonical) {
+                (Ok(c), Some(root)) => c.starts_with(root),
+                _ => false,
+            };
+            if !inside {
+                let target = canonical
+                    .map(|c| c.display().to_string())
+                    .unwrap_or_else(|e| format!("nowhere ({e})"));
+                let msg = format!(
+                    "`{field}` = {written:?} leads outside {} ({}) to {target}; pass \
+                     --allow-outside to read it",
+                    self.what,
+                    self.base.display()
+                );
+                return (path, Err(msg));
+            }
+        }
+        let checked = check_input_kind(&path, written, !self.allow_outside)
+            .map_err(|e| format!("`{field}` ({}): {e}", path.display()));
+        (path, checked)
+    }
+}
+
+/// Extensions of formats that are always single files: a folder with one where a data file was
+/// meant is refused when the graph loads, not when a stage trips over it.
+const FILE_EXTENSIONS: &[&str] = &[
+    "las", "laz", "csv", "tif", "tiff", "xyz", "txt", "geojson", "pbf", "osm", "xml", "ply", "glb",
+    "b3dm", "json", "jsonl", "png", "jpg", "jpeg", "exr",
+];
+
+/// A declared input must be a regular file, or a folder holding only regular files and folders.
+/// FIFOs, sockets and devices are refused before anything reads them. With `contained`, a symlink
+/// inside a folder must not lead out of it.
+fn check_input_kind(path: &Path, written: &str, contained: bool) -> Result<(), String> {
+    let meta = std::fs::metadata(path).map_err(|e| e.to_string())?;
+    if meta.is_file() {
+        return Ok(());
+    }
+    if meta.is_dir() {
+        let ext = Path::new(written)
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        if let Some(ext) = ext.filter(|e| FILE_EXTENSIONS.contains(&e.as_str())) {
+            return Err(format!("expected a .{ext} file, found a folder"));
+        }
+        return crate::cache::check_folder(path, contained).map_err(|e| e.to_string());
+    }
+    Err(format!(
+        "expected a regular file or a folder, found {}",
+        crate::cache::describe_file_type(&meta.file_type())
+    ))
+}
+
 fn build_node(
     r: &RawNode,
     raw: &[RawNode],
     index: &HashMap<&str, usize>,
-    base: &Path,
-    data_dir_given: bool,
+    roots: &DataRoot,
     diags: &mut Vec<Diagnostic>,
 ) -> Option<Node> {
     let id = Some(r.id.as_str());
@@ -587,6 +747,24 @@ fn build_node(
             ));
         }
     }
+    let before_values = diags.len();
+    for (name, v) in &params {
+        let mut bad = Vec::new();
+        non_finite(v, &mut bad);
+        for (span, x) in bad {
+            diags.push(Diagnostic::at(
+                span,
+                id,
+                format!(
+                    "`{}`: {x} can never run; expected a finite number",
+                    name.name
+                ),
+            ));
+        }
+    }
+    if diags.len() > before_values {
+        return None;
+    }
     let params_ast = Ast {
         v: Value::Struct {
             name: None,
@@ -615,32 +793,14 @@ fn build_node(
     }
     let mut files = Vec::new();
     for f in parsed.files() {
-        let written = PathBuf::from(&f.path);
-        let path = if written.is_absolute() {
-            written
-        } else {
-            base.join(&f.path)
-        };
-        if !path.exists() {
+        let (path, checked) = roots.resolve(&f.path, f.field);
+        if let Err(msg) = checked {
             let span = params
                 .iter()
                 .find(|(n, _)| n.name == f.field)
                 .map(|(_, v)| v.span)
                 .unwrap_or(r.kind.span);
-            let against = if data_dir_given {
-                "--data"
-            } else {
-                "the graph file's folder"
-            };
-            diags.push(Diagnostic::at(
-                span,
-                id,
-                format!(
-                    "file not found: {} (`{}` resolves against {against})",
-                    path.display(),
-                    f.field
-                ),
-            ));
+            diags.push(Diagnostic::at(span, id, msg));
         }
         files.push(InputFile {
             field: f.field,
@@ -659,6 +819,24 @@ fn build_node(
         params: parsed,
         files,
     })
+}
+
+/// Every non-finite number in `a` (`inf`, `NaN`, or a literal too large for an f64), with where
+/// it is. No stage takes one: an infinite size or count would ask for unbounded memory or time,
+/// and NaN fails every comparison a check would make.
+fn non_finite(a: &Ast, out: &mut Vec<(Span, f64)>) {
+    match &a.v {
+        Value::Float(x) if !x.is_finite() => out.push((a.span, *x)),
+        Value::List(items) | Value::Tuple(items) | Value::Call { args: items, .. } => {
+            items.iter().for_each(|i| non_finite(i, out))
+        }
+        Value::Map(entries) => entries.iter().for_each(|(k, v)| {
+            non_finite(k, out);
+            non_finite(v, out);
+        }),
+        Value::Struct { fields, .. } => fields.iter().for_each(|(_, v)| non_finite(v, out)),
+        _ => {}
+    }
 }
 
 fn check_outputs(
@@ -680,6 +858,7 @@ fn check_outputs(
         return Vec::new();
     };
     let mut out = Vec::new();
+    let mut files: HashMap<String, String> = HashMap::new();
     for (k, v) in entries {
         let (Value::Str(name), Value::Str(node)) = (&k.v, &v.v) else {
             diags.push(Diagnostic::at(
@@ -689,11 +868,16 @@ fn check_outputs(
             ));
             continue;
         };
-        if name.is_empty() || name.contains(['/', '\\']) || name.starts_with('.') {
+        // A leading dot is refused too: hidden names are the engine's (manifest, temp files).
+        let valid = check_file_name(name).and_then(|()| match name.starts_with('.') {
+            true => Err(format!("{name:?} starts with a dot")),
+            false => Ok(()),
+        });
+        if let Err(m) = valid {
             diags.push(Diagnostic::at(
                 k.span,
                 None,
-                format!("invalid output name {name:?}: expected a plain file name"),
+                format!("invalid output name: {m}"),
             ));
             continue;
         }
@@ -706,7 +890,25 @@ fn check_outputs(
                         None,
                         format!("output \"{name}\": {m}"),
                     )),
-                    _ => out.push((name.clone(), i)),
+                    Some(Ok((file, _))) => {
+                        // Compared without case: one file on macOS and Windows.
+                        match files.entry(file.to_lowercase()) {
+                            Entry::Occupied(first) => diags.push(Diagnostic::at(
+                                k.span,
+                                None,
+                                format!(
+                                    "output \"{name}\" writes {file}, as output \"{}\" does; \
+                                     each output needs its own file",
+                                    first.get()
+                                ),
+                            )),
+                            Entry::Vacant(slot) => {
+                                slot.insert(name.clone());
+                                out.push((name.clone(), i));
+                            }
+                        }
+                    }
+                    None => out.push((name.clone(), i)),
                 }
             }
             None => diags.push(Diagnostic::at(

@@ -9,7 +9,7 @@ use kodama_nodes::Site;
 
 use crate::registry::{Kind, Params};
 
-pub use load::{LoadOptions, load};
+pub use load::{LoadOptions, MAX_GRAPH_BYTES, load, read_graph_text};
 pub use render::{to_dot, to_mermaid};
 
 /// A graph that passed every check: every edge exists and has the right type, there is no cycle,

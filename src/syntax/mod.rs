@@ -10,7 +10,7 @@ mod de;
 mod parse;
 
 pub use de::{DeError, from_ast};
-pub use parse::{ParseError, parse};
+pub use parse::{MAX_DEPTH, ParseError, parse};
 
 /// A position in one of the sources a graph is built from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]

@@ -12,6 +12,11 @@ pub struct ParseError {
     pub message: String,
 }
 
+/// How deep lists, maps, tuples and structs may nest. Graphs nest a handful of levels; the limit
+/// keeps the parser, the deserializer and every walk over the tree (all recursive) far from the
+/// end of the stack on any input.
+pub const MAX_DEPTH: usize = 128;
+
 /// Parses one RON value from `text`; `src` tags the spans, `line`/`col` are where `text` starts.
 pub fn parse(text: &str, src: u16, line: u32, col: u32) -> Result<Ast, ParseError> {
     let mut p = Parser {
@@ -20,6 +25,7 @@ pub fn parse(text: &str, src: u16, line: u32, col: u32) -> Result<Ast, ParseErro
         src,
         line,
         col,
+        depth: 0,
     };
     let v = p.value()?;
     p.skip_ws()?;
@@ -35,6 +41,8 @@ struct Parser {
     src: u16,
     line: u32,
     col: u32,
+    /// Values being parsed around the current one.
+    depth: usize,
 }
 
 impl Parser {
@@ -127,6 +135,18 @@ impl Parser {
     }
 
     fn value(&mut self) -> Result<Ast, ParseError> {
+        if self.depth >= MAX_DEPTH {
+            return Err(self.error(format!(
+                "values nested more than {MAX_DEPTH} levels deep; a graph needs far fewer"
+            )));
+        }
+        self.depth += 1;
+        let v = self.value_at_depth();
+        self.depth -= 1;
+        v
+    }
+
+    fn value_at_depth(&mut self) -> Result<Ast, ParseError> {
         self.skip_ws()?;
         let span = self.span();
         let v = match self.peek() {
@@ -273,6 +293,8 @@ impl Parser {
 
     fn map_entries(&mut self) -> Result<Vec<(Ast, Ast)>, ParseError> {
         let mut out: Vec<(Ast, Ast)> = Vec::new();
+        // Keys by their RON text: a hash lookup, so a map of 50,000 nodes is checked in linear time.
+        let mut keys = std::collections::HashSet::new();
         loop {
             self.skip_ws()?;
             if self.peek() == Some('}') {
@@ -280,7 +302,7 @@ impl Parser {
                 return Ok(out);
             }
             let k = self.value()?;
-            if out.iter().any(|(k2, _)| k2.v == k.v) {
+            if !keys.insert(k.to_ron()) {
                 return Err(ParseError {
                     span: k.span,
                     message: format!("map key {} is given twice", k.v.describe()),
@@ -453,6 +475,16 @@ mod tests {
             }
         );
         assert_eq!(fields[1].1.span.col, 34);
+    }
+
+    #[test]
+    fn deep_nesting_is_an_error_not_a_stack_overflow() {
+        let deep = "[".repeat(100_000);
+        let e = parse(&deep, 0, 1, 1).unwrap_err();
+        assert_eq!(e.span.col, MAX_DEPTH as u32 + 1);
+        assert!(e.message.contains("nested more than"), "{}", e.message);
+        let ok = format!("{}{}", "[".repeat(MAX_DEPTH), "]".repeat(MAX_DEPTH));
+        parse(&ok, 0, 1, 1).unwrap();
     }
 
     #[test]

@@ -86,6 +86,20 @@ impl Env {
                 .expect("spawn kodama-dag"),
         )
     }
+    /// `kodama-dag sweep SWEEP --cache <env>/cache --out <env>/out -q EXTRA...`
+    pub fn sweep(&self, sweep: &Path, extra: &[&str]) -> Run {
+        let mut cmd = Command::new(BIN);
+        cmd.arg("sweep")
+            .arg(sweep)
+            .arg("--cache")
+            .arg(self.cache())
+            .arg("--out")
+            .arg(self.out())
+            .arg("-q")
+            .args(extra)
+            .current_dir(self.dir.path());
+        finish(cmd.output().expect("spawn kodama-dag"))
+    }
     /// Every blob file in the cache's store.
     pub fn blobs(&self) -> Vec<PathBuf> {
         let mut out = Vec::new();

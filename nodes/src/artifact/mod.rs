@@ -35,7 +35,7 @@ pub use points::PointSet;
 pub use raster::{Grid, Raster};
 pub use relief::{ReliefInstance, ReliefLayers, ReliefSet, ReliefStats};
 pub use report::ReportFiles;
-pub use scene::{Mesh, ObjectClass, Scene, SceneObject};
+pub use scene::{MAX_COORD_M, Mesh, ObjectClass, Scene, SceneObject};
 pub use terrain_model::{TerrainModel, height_at};
 pub use views::{Instances, Intrinsics, Pose, RMSNET_CLASSES, View, ViewSet};
 

@@ -42,6 +42,35 @@ impl Grid {
         (c >= 0.0 && r >= 0.0 && c < self.width as f64 && r < self.height as f64)
             .then_some((c as u32, r as u32))
     }
+    /// [`Grid::covering`], refused when the box or the cell size is not finite or the grid would
+    /// have more than [`crate::params::MAX_CELLS`] cells: user extents and cell sizes are checked
+    /// here, before a buffer of that size is asked for.
+    pub fn covering_checked(lo: (f64, f64), hi: (f64, f64), cell_m: f64) -> Result<Grid, String> {
+        if !(cell_m > 0.0 && cell_m.is_finite()) {
+            return Err(format!(
+                "expected a positive, finite cell size, found {cell_m}"
+            ));
+        }
+        if ![lo.0, lo.1, hi.0, hi.1].iter().all(|v| v.is_finite()) {
+            return Err(format!(
+                "expected a finite extent, found ({}, {}) to ({}, {})",
+                lo.0, lo.1, hi.0, hi.1
+            ));
+        }
+        let x0 = (lo.0 / cell_m).floor() * cell_m;
+        let y0 = (hi.1 / cell_m).floor() * cell_m + cell_m;
+        let width = (((hi.0 - x0) / cell_m).floor() + 1.0).max(1.0);
+        let height = (((y0 - lo.1) / cell_m).floor() + 1.0).max(1.0);
+        crate::params::check_cells(width, height, 4)
+            .map_err(|m| format!("{m} (cells of {cell_m} m)"))?;
+        Ok(Grid::covering(lo, hi, cell_m))
+    }
+    /// Refuses a grid past [`crate::params::MAX_CELLS`], for grids sized from data (a scene's
+    /// extent) before rasters of them are allocated.
+    pub fn check_size(&self) -> Result<(), String> {
+        crate::params::check_cells(self.width as f64, self.height as f64, 4)
+            .map_err(|m| format!("{m} (cells of {} m)", self.cell_m))
+    }
     /// The smallest grid with cells of `cell_m`, aligned to multiples of `cell_m` from the site
     /// origin, that covers the box `[lo, hi]`.
     pub fn covering(lo: (f64, f64), hi: (f64, f64), cell_m: f64) -> Grid {

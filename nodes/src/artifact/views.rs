@@ -114,6 +114,100 @@ impl View {
     }
 }
 
+impl View {
+    /// Refuses a view the projections cannot use: a size that is zero or past
+    /// [`crate::params::MAX_CELLS`], a focal length that is zero or not finite, a position or
+    /// rotation that is not finite, a rotation that is not one (a zero quaternion), per-pixel
+    /// layers of another size than the image, a material index past the `n_classes` of the table
+    /// (255 is none). The error is the part of the view and what was expected.
+    pub fn check(&self, n_classes: usize) -> Result<(), (&'static str, String)> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        if w == 0 || h == 0 {
+            return Err((
+                "size",
+                format!("a positive width and height, found {w} x {h}"),
+            ));
+        }
+        crate::params::check_cells(w as f64, h as f64, 3).map_err(|m| ("size", m))?;
+        let k = self.intrinsics;
+        if !(k.fx.is_finite() && k.fy.is_finite() && k.fx != 0.0 && k.fy != 0.0) {
+            return Err((
+                "intrinsics",
+                format!(
+                    "finite, non-zero focal lengths, found fx = {}, fy = {}",
+                    k.fx, k.fy
+                ),
+            ));
+        }
+        if !(k.cx.is_finite() && k.cy.is_finite()) {
+            return Err((
+                "intrinsics",
+                format!("a finite principal point, found ({}, {})", k.cx, k.cy),
+            ));
+        }
+        if !self.pose.position.iter().all(|v| v.is_finite()) {
+            return Err((
+                "pose",
+                format!("a finite position, found {:?}", self.pose.position),
+            ));
+        }
+        let r = self.pose.rotation;
+        let orthonormal = (0..3).all(|i| {
+            (0..3).all(|j| {
+                let dot: f64 = (0..3).map(|k| r[k][i] * r[k][j]).sum();
+                (dot - if i == j { 1.0 } else { 0.0 }).abs() < 1e-6
+            })
+        });
+        if !orthonormal {
+            return Err((
+                "orientation",
+                "a rotation (a non-zero quaternion, finite angles)".into(),
+            ));
+        }
+        let n = w * h;
+        let sizes = [
+            ("image", Some(self.image.len())),
+            ("arch", self.arch.as_ref().map(|a| a.ids.len())),
+            ("clutter", self.clutter.as_ref().map(|a| a.ids.len())),
+            ("material", self.material.as_ref().map(|m| m.len())),
+            ("depth", self.depth.as_ref().map(|d| d.len())),
+            ("normal", self.normal.as_ref().map(|d| d.len())),
+        ];
+        for (what, len) in sizes {
+            if let Some(len) = len.filter(|&l| l != n) {
+                return Err((what, format!("{n} pixels ({w} x {h}), found {len}")));
+            }
+        }
+        if let Some(m) = &self.material
+            && let Some((i, &c)) = m
+                .iter()
+                .enumerate()
+                .find(|&(_, &c)| c != 255 && c as usize >= n_classes)
+        {
+            return Err((
+                "material",
+                format!(
+                    "class indices below {n_classes} (the material_classes table) or 255 (none), found {c} at pixel ({}, {})",
+                    i % w,
+                    i / w
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl ViewSet {
+    /// [`View::check`] for every view, the place naming the view by index and id.
+    pub fn check(&self) -> Result<(), (String, String)> {
+        for (i, v) in self.views.iter().enumerate() {
+            v.check(self.material_classes.len())
+                .map_err(|(what, m)| (format!("view {i} ({:?}), {what}", v.id), m))?;
+        }
+        Ok(())
+    }
+}
+
 /// A set of views sharing a material class table.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ViewSet {

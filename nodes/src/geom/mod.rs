@@ -17,3 +17,4 @@ pub mod raycast;
 pub mod relief;
 pub mod terrain_mesh;
 pub mod theil_sen;
+pub mod wide_bvh;

@@ -1,16 +1,16 @@
-//! Ray casting against a scene: every triangle of every object in one compressed wide BVH
-//! (obvhs CWBVH, built single-threaded so its layout, and so every tie between equal hits, is the
-//! same on every run).
+//! Ray casting against a scene: every triangle of every object in one 8-wide BVH
+//! ([`super::wide_bvh`], collapsed from obvhs's BVH2, built single-threaded so its layout is the
+//! same on every run). Equal hits resolve to the lower triangle index, so a hit depends on neither
+//! the layout nor the SIMD path.
 
 use std::time::Duration;
 
 use glam::Vec3A;
 use obvhs::BvhBuildParams;
-use obvhs::bvh2::Bvh2;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
-use obvhs::ray::{Ray, RayHit};
 use obvhs::triangle::Triangle;
 
+use super::wide_bvh::WideBvh;
 use crate::artifact::Scene;
 
 /// The closest intersection of a ray.
@@ -30,7 +30,7 @@ pub struct Hit {
 pub struct SceneRays {
     tris: Vec<Triangle>,
     owner: Vec<(u32, u32)>,
-    bvh: Option<Bvh2>,
+    bvh: WideBvh,
 }
 
 impl SceneRays {
@@ -50,32 +50,48 @@ impl SceneRays {
                 owner.push((o as u32, k as u32));
             }
         }
-        let bvh = (!tris.is_empty()).then(|| {
-            build_bvh2_from_tris(
-                &tris,
-                BvhBuildParams::medium_build(),
-                &mut Duration::default(),
-            )
-        });
+        let bvh = if tris.is_empty() {
+            WideBvh::empty()
+        } else {
+            // Small leaves: eight boxes cost one AVX2 test, a triangle costs a scalar test each.
+            let params = BvhBuildParams {
+                max_prims_per_leaf: 3,
+                ..BvhBuildParams::medium_build()
+            };
+            let bvh2 = build_bvh2_from_tris(&tris, params, &mut Duration::default());
+            WideBvh::new(&bvh2, &tris)
+        };
         SceneRays { tris, owner, bvh }
+    }
+
+    /// Traverses with the scalar box test even where AVX2 is available (tests compare the two).
+    pub fn force_scalar(&mut self) {
+        self.bvh.force_scalar();
+    }
+
+    /// True when casting uses AVX2.
+    pub fn uses_simd(&self) -> bool {
+        self.bvh.uses_simd()
+    }
+
+    /// The number of triangles.
+    pub fn len(&self) -> usize {
+        self.tris.len()
+    }
+
+    /// True for a scene without triangles.
+    pub fn is_empty(&self) -> bool {
+        self.tris.is_empty()
     }
 
     /// The closest hit of the ray from `origin` along the unit vector `dir` within (`tmin`, `tmax`).
     pub fn cast(&self, origin: [f32; 3], dir: [f32; 3], tmin: f32, tmax: f32) -> Option<Hit> {
-        let bvh = self.bvh.as_ref()?;
-        // obvhs picks the traversal octant from the direction's sign bits: a -0.0 component
-        // (common in computed directions) sends it the wrong way and the ray misses everything.
-        // Adding +0.0 turns -0.0 into +0.0 and leaves every other value as it is.
+        // -0.0 and +0.0 must cast alike (computed directions carry either).
         let dir = dir.map(|c| c + 0.0);
-        let ray = Ray::new(Vec3A::from(origin), Vec3A::from(dir), tmin, tmax);
-        let mut hit = RayHit::none();
-        let sheared = ShearedRay::new(ray.origin, ray.direction, tmin);
-        if !bvh.ray_traverse(ray, &mut hit, |r, id| {
-            sheared.intersect(&self.tris[bvh.primitive_indices[id] as usize], r.tmax)
-        }) {
-            return None;
-        }
-        let prim = bvh.primitive_indices[hit.primitive_id as usize] as usize;
+        let hit = self
+            .bvh
+            .closest(Vec3A::from(origin), Vec3A::from(dir), tmin, tmax)?;
+        let prim = hit.prim as usize;
         let tri = &self.tris[prim];
         let n = (tri.v1 - tri.v0).cross(tri.v2 - tri.v0).normalize_or_zero();
         let (object, triangle) = self.owner[prim];
@@ -85,6 +101,14 @@ impl SceneRays {
             triangle: triangle as usize,
             normal: n.into(),
         })
+    }
+
+    /// Whether any surface lies on the ray from `origin` along `dir` within (`tmin`, `tmax`):
+    /// [`SceneRays::cast`] finding something, without looking for the closest.
+    pub fn occluded(&self, origin: [f32; 3], dir: [f32; 3], tmin: f32, tmax: f32) -> bool {
+        let dir = dir.map(|c| c + 0.0);
+        self.bvh
+            .any(Vec3A::from(origin), Vec3A::from(dir), tmin, tmax)
     }
 }
 
@@ -126,6 +150,7 @@ impl ShearedRay {
     /// guarantee. Radio paths aim at such points (reflection points on diagonals, cell centres at
     /// vertices), so misses there would let rays through walls. Returns the distance, or infinity
     /// on a miss.
+    #[inline]
     pub fn intersect(&self, tri: &Triangle, tmax: f32) -> f32 {
         let [kx, ky, kz] = self.k;
         let [sx, sy, sz] = self.s;

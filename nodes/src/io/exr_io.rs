@@ -22,7 +22,12 @@ pub fn write_exr(
     let layer = Layer::new(
         (width, height),
         LayerAttributes::default(),
-        Encoding::FAST_LOSSLESS,
+        // Blocks in file order: with the default unspecified order, the parallel compressor writes
+        // them as they finish, and the same image gives different bytes run to run.
+        Encoding {
+            line_order: exr::meta::attribute::LineOrder::Increasing,
+            ..Encoding::FAST_LOSSLESS
+        },
         AnyChannels::sort(SmallVec::from_vec(list)),
     );
     let mut out = std::io::Cursor::new(Vec::new());
@@ -38,6 +43,24 @@ pub type Channels = Vec<(String, Vec<f32>)>;
 
 /// The first layer of an EXR file: width, height and every channel as f32, by name.
 pub fn read_exr(path: &Path) -> Result<(usize, usize, Channels), StageError> {
+    let bad = |e: exr::error::Error| {
+        StageError::bad_input(
+            path,
+            "EXR",
+            format!("expected a readable OpenEXR image: {e}"),
+        )
+    };
+    // The header's size is checked before the decoder allocates it: a compressed file of a few
+    // bytes can declare any size.
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(bad)?;
+    if let Some(h) = meta.headers.first() {
+        crate::params::check_cells(
+            h.layer_size.width() as f64,
+            h.layer_size.height() as f64,
+            4 * h.channels.list.len().max(1),
+        )
+        .map_err(|m| StageError::bad_input(path, "EXR header", m))?;
+    }
     let img = read_first_flat_layer_from_file(path).map_err(|e| {
         StageError::bad_input(
             path,

@@ -41,6 +41,34 @@ pub struct PixelGrid {
 }
 
 impl PixelGrid {
+    /// Refuses georeferencing no grid can be made of: a corner or pixel size that is not finite,
+    /// pixels that are not positive (north-up), an extent that overflows. The error says which.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.west.is_finite() && self.north.is_finite()) {
+            return Err(format!(
+                "a finite north-west corner, found ({}, {})",
+                self.west, self.north
+            ));
+        }
+        if !(self.dx > 0.0 && self.dy > 0.0 && self.dx.is_finite() && self.dy.is_finite()) {
+            return Err(format!(
+                "positive, finite pixel sizes and a north-up raster, found {} x {}",
+                self.dx, self.dy
+            ));
+        }
+        let (east, south) = (
+            self.west + self.width as f64 * self.dx,
+            self.north - self.height as f64 * self.dy,
+        );
+        if !(east.is_finite() && south.is_finite()) {
+            return Err(format!(
+                "an extent that fits in a double, found {} x {} pixels of {} x {}",
+                self.width, self.height, self.dx, self.dy
+            ));
+        }
+        Ok(())
+    }
+
     /// The same grid in the site frame, if the pixels are square and the CRS is the site's.
     pub fn as_site_grid(&self, origin: (f64, f64)) -> Option<Grid> {
         ((self.dx - self.dy).abs() <= 1e-9 * self.dx.abs()).then_some(Grid {
@@ -87,6 +115,16 @@ impl GeoTiff {
     }
 }
 
+/// The decoder's buffers, bounded by the shared budget rather than left unlimited (a crafted
+/// tag or strip length would otherwise be allocated as stated).
+fn limits() -> Limits {
+    let mut l = Limits::default();
+    l.decoding_buffer_size = crate::params::MAX_BYTES as usize;
+    l.intermediate_buffer_size = 1 << 30;
+    l.ifd_value_size = 256 << 20;
+    l
+}
+
 fn tiff_error(path: &Path, place: &str, e: tiff::TiffError) -> StageError {
     StageError::bad_input(path, place, format!("expected a readable TIFF: {e}"))
 }
@@ -98,7 +136,7 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
         .map_err(|e| StageError::bad_input(path, "open", e.to_string()))?;
     let mut d = Decoder::new(std::io::BufReader::new(file))
         .map_err(|e| tiff_error(path, "header", e))?
-        .with_limits(Limits::unlimited());
+        .with_limits(limits());
     let (width, height) = d
         .dimensions()
         .map_err(|e| tiff_error(path, "dimensions", e))?;
@@ -174,13 +212,9 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
         }
         _ => return Err(no_georef()),
     };
-    if !(pixels.dx > 0.0 && pixels.dy > 0.0) {
-        return Err(StageError::bad_input(
-            path,
-            "georeferencing",
-            "expected positive pixel sizes and a north-up raster",
-        ));
-    }
+    pixels
+        .check()
+        .map_err(|m| StageError::bad_input(path, "georeferencing", format!("expected {m}")))?;
     let crs = match d
         .find_tag_unsigned_vec::<u16>(Tag::Unknown(GEO_KEY_DIRECTORY))
         .ok()
@@ -209,9 +243,40 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
         .flatten()
         .and_then(|v| v.into_string().ok())
         .and_then(|s| s.trim_matches(['\0', ' ']).parse::<f64>().ok());
+    // The header's size, checked before the decoder allocates it: a few bytes of TIFF can claim
+    // 10^10 x 10^10 pixels.
+    let sample_bytes = d
+        .colortype()
+        .map(|c| c.bit_depth().div_ceil(8).max(1) as usize)
+        .unwrap_or(1);
+    crate::params::check_cells(width as f64, height as f64, sample_bytes * bands as usize)
+        .map_err(|m| StageError::bad_input(path, "dimensions", m))?;
     let samples = d
         .read_image()
         .map_err(|e| tiff_error(path, "pixel data", e))?;
+    // The decoder returns what the strips hold, which a file's tags can make fewer than the
+    // pixels times the bands that `sample` indexes.
+    let got = match &samples {
+        DecodingResult::U8(v) => v.len(),
+        DecodingResult::U16(v) => v.len(),
+        DecodingResult::U32(v) => v.len(),
+        DecodingResult::U64(v) => v.len(),
+        DecodingResult::F16(v) => v.len(),
+        DecodingResult::F32(v) => v.len(),
+        DecodingResult::F64(v) => v.len(),
+        DecodingResult::I8(v) => v.len(),
+        DecodingResult::I16(v) => v.len(),
+        DecodingResult::I32(v) => v.len(),
+        DecodingResult::I64(v) => v.len(),
+    };
+    let want = width as usize * height as usize * bands as usize;
+    if got < want {
+        return Err(StageError::bad_input(
+            path,
+            "pixel data",
+            format!("{want} samples ({width} x {height} x {bands} bands), found {got}"),
+        ));
+    }
     Ok(GeoTiff {
         pixels,
         bands,

@@ -13,6 +13,7 @@ pub mod mapillary;
 #[cfg(feature = "onnx")]
 pub mod onnx;
 pub mod panoramax;
+pub mod safe_name;
 pub mod sionna_xml;
 pub mod views_io;
 pub mod warp;

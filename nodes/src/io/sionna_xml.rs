@@ -28,10 +28,21 @@ pub fn read_scene_with_thickness(
     let bad = |place: String, expected: &str| StageError::bad_input(path, place, expected);
     let text = std::fs::read_to_string(path)
         .map_err(|e| bad("file".into(), &format!("a readable XML file ({e})")))?;
+    check_depth(path, &text)?;
     let doc = roxmltree::Document::parse(&text).map_err(|e| {
-        let pos = e.pos();
+        let (row, col) = match e {
+            // roxmltree places this at 1:1; the file ends at its last character.
+            roxmltree::Error::UnexpectedEndOfStream => {
+                let last = text.rfind('\n').map_or(0, |k| k + 1);
+                (
+                    text.matches('\n').count() + 1,
+                    text[last..].chars().count() + 1,
+                )
+            }
+            _ => (e.pos().row as usize, e.pos().col as usize),
+        };
         bad(
-            format!("line {}, column {}", pos.row, pos.col),
+            format!("line {row}, column {col}"),
             &format!("well-formed XML ({e})"),
         )
     })?;
@@ -113,8 +124,11 @@ pub fn read_scene_with_thickness(
                 &format!("a material defined in the file (no bsdf \"{bsdf}\")"),
             )
         })?;
-        let mut mesh = read_ply(&dir.join(file))?;
+        let ply = dir.join(file);
+        let mut mesh = read_ply(&ply)?;
         mesh.materials = PodVec(vec![material as u8; mesh.triangles.len()]);
+        mesh.check()
+            .map_err(|(place, expected)| StageError::bad_input(&ply, place, expected))?;
         objects.push(SceneObject {
             id: id.strip_prefix("mesh-").unwrap_or(id).to_string(),
             class: ObjectClass::Unsegmented,
@@ -122,6 +136,69 @@ pub fn read_scene_with_thickness(
         });
     }
     Ok((Scene { objects }, thickness))
+}
+
+/// The deepest element nesting a scene file may have. Mitsuba scenes nest a few levels; the limit
+/// keeps anything that walks the tree recursively (here or in a later tool) off the stack's end.
+pub const MAX_XML_DEPTH: usize = 256;
+
+/// Refuses a document nested deeper than [`MAX_XML_DEPTH`], naming the line and column where it
+/// gets too deep. A scan of the text before parsing: the XML parser itself recurses per level and
+/// overflows the stack some ten thousand levels down.
+fn check_depth(path: &Path, text: &str) -> Result<(), StageError> {
+    let b = text.as_bytes();
+    let (mut depth, mut i) = (0usize, 0usize);
+    let skip_past = |from: usize, end: &str| {
+        text[from..]
+            .find(end)
+            .map_or(b.len(), |k| from + k + end.len())
+    };
+    while let Some(k) = text[i..].find('<') {
+        let at = i + k;
+        let rest = &text[at..];
+        if rest.starts_with("<!--") {
+            i = skip_past(at, "-->");
+        } else if rest.starts_with("<![CDATA[") {
+            i = skip_past(at, "]]>");
+        } else if rest.starts_with("<?") {
+            i = skip_past(at, "?>");
+        } else if rest.starts_with("<!") {
+            i = skip_past(at, ">");
+        } else if rest.starts_with("</") {
+            depth = depth.saturating_sub(1);
+            i = skip_past(at, ">");
+        } else {
+            // A start tag: to its '>', outside quoted attribute values.
+            let mut j = at + 1;
+            let mut quote = None;
+            while j < b.len() {
+                match (quote, b[j]) {
+                    (None, b'"' | b'\'') => quote = Some(b[j]),
+                    (Some(q), c) if c == q => quote = None,
+                    (None, b'>') => break,
+                    _ => {}
+                }
+                j += 1;
+            }
+            if b.get(j.wrapping_sub(1)) != Some(&b'/') {
+                depth += 1;
+                if depth > MAX_XML_DEPTH {
+                    let line = text[..at].matches('\n').count() + 1;
+                    let col = at - text[..at].rfind('\n').map_or(0, |n| n + 1) + 1;
+                    return Err(StageError::bad_input(
+                        path,
+                        format!("line {line}, column {col}"),
+                        format!("elements nested at most {MAX_XML_DEPTH} deep"),
+                    ));
+                }
+            }
+            i = j + 1;
+        }
+        if i >= b.len() {
+            break;
+        }
+    }
+    Ok(())
 }
 
 /// Reads a binary little-endian PLY: vertex x, y, z (any other vertex properties skipped) and
@@ -241,18 +318,34 @@ fn read_positions<'a>(
         vertex_offset(path, h, "y")?,
         vertex_offset(path, h, "z")?,
     ];
+    if let Some(&(_, t)) = xyz
+        .iter()
+        .find(|(_, t)| !matches!(*t, "float" | "float32" | "double" | "float64"))
+    {
+        return Err(ply_error(
+            path,
+            "vertex properties",
+            &format!("x, y and z of type float or double, found {t}"),
+        ));
+    }
+    // The count comes from the header: checked against the data present before anything is
+    // sized by it, so a header claiming 10^18 vertices is an error, not an abort.
     let n_vertex = h.n_vertex;
-    if body.len() < n_vertex * stride {
+    let need = n_vertex.checked_mul(stride).filter(|&n| n <= body.len());
+    let Some(need) = need else {
         return Err(ply_error(
             path,
             "vertex data",
-            &format!("{n_vertex} vertices of {stride} bytes"),
+            &format!(
+                "{n_vertex} vertices of {stride} bytes as the header says, but the file has {} bytes of data",
+                body.len()
+            ),
         ));
-    }
+    };
     let positions = (0..n_vertex)
         .map(|i| xyz.map(|(off, t)| read_float(&body[i * stride + off..], t)))
         .collect();
-    Ok((positions, &body[n_vertex * stride..]))
+    Ok((positions, &body[need..]))
 }
 
 /// The byte offset within a vertex, and the type, of property `want`.
@@ -303,6 +396,19 @@ fn read_triangles(path: &Path, h: &PlyHeader, body: &[u8]) -> Result<Vec<[u32; 3
         type_size(index_t).ok_or_else(|| bad("face list", "a known index type"))?,
     );
     let n_vertex = h.n_vertex;
+    // Every face takes at least its count's bytes: a header announcing more faces than that
+    // is refused before the triangle list is sized by it.
+    if h.n_face > body.len() / cs {
+        return Err(bad(
+            "face data",
+            &format!(
+                "{} faces as the header says, but the file has {} bytes of face data (at most {} faces)",
+                h.n_face,
+                body.len(),
+                body.len() / cs
+            ),
+        ));
+    }
     let mut triangles = Vec::with_capacity(h.n_face);
     let mut at = 0usize;
     for f in 0..h.n_face {

@@ -44,7 +44,16 @@ pub fn read_viewset(views_json: &Path, site: &Site) -> Result<ViewSet, StageErro
         let view = read_view(views_json, dir, &wgs84, &set.material_classes, i, v)?;
         set.views.push(view);
     }
+    check_viewset(views_json, &set)?;
     Ok(set)
+}
+
+/// [`ViewSet::check`] as an error on `file`, where the view set came from: what every reader of
+/// views (views.json, provider downloads, model outputs) runs before handing a set on.
+pub fn check_viewset(file: &Path, set: &ViewSet) -> Result<(), StageError> {
+    set.check().map_err(|(place, expected)| {
+        StageError::bad_input(file, place, format!("expected {expected}"))
+    })
 }
 
 fn read_views_json(views_json: &Path) -> Result<Value, StageError> {
@@ -101,10 +110,13 @@ fn read_view(
         views_json,
         id: &id,
     };
-    let (width, height) = (
-        num(v, "width").ok_or_else(|| entry.bad("width", "expected a pixel count"))? as u32,
-        num(v, "height").ok_or_else(|| entry.bad("height", "expected a pixel count"))? as u32,
-    );
+    let pixels = |key: &str| {
+        num(v, key)
+            .filter(|n| *n >= 1.0 && n.fract() == 0.0 && *n <= u32::MAX as f64)
+            .map(|n| n as u32)
+            .ok_or_else(|| entry.bad(key, "expected a pixel count (a positive whole number)"))
+    };
+    let (width, height) = (pixels("width")?, pixels("height")?);
     let intrinsics = intrinsics(&entry, v, width, height)?;
     let position = position(&entry, v, wgs84)?;
     let pose = orientation(&entry, v, position)?;
@@ -428,6 +440,21 @@ impl ViewFiles<'_> {
             })?
             .into_luma8();
         self.check_size(&material_png, m.width(), m.height())?;
+        let n = material_classes.len();
+        if let Some((x, y, c)) = m
+            .enumerate_pixels()
+            .find(|(_, _, c)| c.0[0] != 255 && c.0[0] as usize >= n)
+        {
+            return Err(StageError::bad_input(
+                &material_png,
+                format!("pixel ({x}, {y})"),
+                format!(
+                    "a class index below {n} (the material_classes table of {}) or 255 (none), found {}",
+                    views_json.display(),
+                    c.0[0]
+                ),
+            ));
+        }
         Ok(Some(PodVec(m.into_raw())))
     }
 
@@ -470,7 +497,7 @@ impl ViewFiles<'_> {
                 ));
             }
         };
-        let n = (self.width * self.height) as usize;
+        let n = self.width as usize * self.height as usize;
         Ok(Some(PodVec((0..n).map(|i| [x[i], y[i], z[i]]).collect())))
     }
 }

@@ -28,14 +28,7 @@ pub fn covering_grid(src: &PixelGrid, to_site: &ToSite, cell_m: f64) -> Result<G
             hi = (hi.0.max(x), hi.1.max(y));
         }
     }
-    let g = Grid::covering(lo, hi, cell_m);
-    if g.len() > 1_000_000_000 {
-        return Err(format!(
-            "{} x {} cells at {cell_m} m is too many; use a coarser cell",
-            g.width, g.height
-        ));
-    }
-    Ok(g)
+    Grid::covering_checked(lo, hi, cell_m).map_err(|m| format!("{m}; use a coarser cell"))
 }
 
 /// Fractional source pixel coordinates (column, row; pixel centres at +0.5) of every target cell

@@ -24,7 +24,9 @@ pub fn gaussian_blur_with_progress(
     if sigma < 1e-6 || g.is_empty() {
         return r.clone();
     }
-    let radius = (3.0 * sigma).ceil() as i64;
+    // A kernel reaching past the raster's longer side weighs nothing more, so it stops there:
+    // the output is the same, and a huge sigma (or a tiny cell) sizes no huge kernel.
+    let radius = ((3.0 * sigma).ceil()).min(g.width.max(g.height) as f64) as i64;
     let kernel: Vec<f64> = (-radius..=radius)
         .map(|k| (-0.5 * (k as f64 / sigma).powi(2)).exp())
         .collect();

@@ -19,6 +19,19 @@ pub fn read_links(path: &Path) -> Result<Vec<LinkEnds>, StageError> {
         .map_err(|e| bad("header".into(), &format!("a header row ({e})")))?
         .clone();
     let names = ["tx_x", "tx_y", "tx_z", "rx_x", "rx_y", "rx_z"];
+    for n in names {
+        let at: Vec<usize> = (0..headers.len()).filter(|&i| &headers[i] == n).collect();
+        if at.len() > 1 {
+            return Err(bad(
+                "header".into(),
+                &format!(
+                    "each column once; {n} is columns {} and {}",
+                    at[0] + 1,
+                    at[1] + 1
+                ),
+            ));
+        }
+    }
     let cols: Vec<usize> = names
         .iter()
         .map(|n| {

@@ -60,6 +60,12 @@ impl Stage for RenderOrtho {
     fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Ortho, StageError> {
         let scene: &Scene = inputs.one("scene")?;
         let grid = scene_grid(scene, p.cell_m.unwrap_or(ctx.site.cell_m))?;
+        grid.check_size().map_err(|m| {
+            StageError::Param(ParamError::new(
+                "cell_m",
+                format!("{m}; use a coarser cell"),
+            ))
+        })?;
         let rays = SceneRays::new(scene);
         let top = top_z(scene);
         let (el, az) = (

@@ -18,6 +18,9 @@ use crate::rf::materials::Material;
 use crate::rng::{mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
+/// The largest synthetic city, metres each way: 20 km x 20 km is some 10^5 buildings already.
+pub const MAX_SIZE_M: f64 = 20_000.0;
+
 /// Params of [`SynthCity`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -78,6 +81,36 @@ impl Stage for SynthCity {
         if !(p.size_m.0 >= 50.0 && p.size_m.1 >= 50.0) {
             return Err(ParamError::new("size_m", "expected at least 50 x 50 m"));
         }
+        if !(p.size_m.0 <= MAX_SIZE_M && p.size_m.1 <= MAX_SIZE_M) {
+            return Err(ParamError::new(
+                "size_m",
+                format!(
+                    "expected at most {MAX_SIZE_M} x {MAX_SIZE_M} m, found {} x {} (buildings, trees and cars grow with the area)",
+                    p.size_m.0, p.size_m.1
+                ),
+            ));
+        }
+        if !(p.street_m >= 0.0 && p.street_m.is_finite()) {
+            return Err(ParamError::new(
+                "street_m",
+                "expected a non-negative, finite width in metres",
+            ));
+        }
+        if !(p.tree_spacing_m == 0.0 || (p.tree_spacing_m >= 1.0 && p.tree_spacing_m.is_finite())) {
+            return Err(ParamError::new(
+                "tree_spacing_m",
+                format!(
+                    "expected 0 (no trees) or at least 1 m, found {}",
+                    p.tree_spacing_m
+                ),
+            ));
+        }
+        if !(0.0..=50.0).contains(&p.cars_per_100m) {
+            return Err(ParamError::new(
+                "cars_per_100m",
+                format!("expected 0 to 50 cars per 100 m, found {}", p.cars_per_100m),
+            ));
+        }
         if p.blocks.0 == 0 || p.blocks.1 == 0 {
             return Err(ParamError::new(
                 "blocks",
@@ -94,11 +127,14 @@ impl Stage for SynthCity {
                 ),
             ));
         }
-        if !(p.lot_m.0 >= 8.0 && p.lot_m.1 >= p.lot_m.0) {
-            return Err(ParamError::new("lot_m", "expected 8 <= min <= max"));
+        if !(p.lot_m.0 >= 8.0 && p.lot_m.1 >= p.lot_m.0 && p.lot_m.1.is_finite()) {
+            return Err(ParamError::new("lot_m", "expected 8 <= min <= max, finite"));
         }
-        if !(p.height_m.0 >= 3.0 && p.height_m.1 >= p.height_m.0) {
-            return Err(ParamError::new("height_m", "expected 3 <= min <= max"));
+        if !(p.height_m.0 >= 3.0 && p.height_m.1 >= p.height_m.0 && p.height_m.1.is_finite()) {
+            return Err(ParamError::new(
+                "height_m",
+                "expected 3 <= min <= max, finite",
+            ));
         }
         Ok(())
     }

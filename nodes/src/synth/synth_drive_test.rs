@@ -186,6 +186,19 @@ impl Stage for SynthDriveTest {
         let scene: &Scene = inputs.one("scene")?;
         let city: &City = inputs.one("city")?;
         let ground = |x: f64, y: f64| height_at(&city.terrain, x, y);
+        // Receivers and links are sized by spacing_m: a tiny spacing is refused before the lists
+        // are built (a link keeps two endpoints, about 160 bytes).
+        let street_m: f64 = city
+            .streets
+            .iter()
+            .map(|s| (s.b[0] - s.a[0]).hypot(s.b[1] - s.a[1]))
+            .sum();
+        crate::params::check_bytes(
+            "the receivers' links",
+            street_m / p.spacing_m * p.transmitters.len() as f64,
+            160,
+        )
+        .map_err(|m| StageError::Param(ParamError::new("spacing_m", m)))?;
         let mut receivers = Vec::new();
         for s in &city.streets {
             let len = (s.b[0] - s.a[0]).hypot(s.b[1] - s.a[1]);

@@ -1,6 +1,6 @@
 //! A raster as a PNG picture: viridis colours between the 2nd and 98th percentile of its values,
 //! no-data transparent, and a colour bar with the range printed beside it (the 3 x 5 pixel font
-//! of `plot`, scaled), so a radio map reads without GIS software.
+//! of `pixel_font`, scaled), so a radio map reads without GIS software.
 
 use image::{ImageBuffer, Rgba, RgbaImage};
 
@@ -27,7 +27,7 @@ pub(crate) fn viridis(t: f64) -> [u8; 3] {
 }
 
 fn text(img: &mut RgbaImage, x: u32, y: u32, s: &str, scale: u32) {
-    super::plot::text_px(img, x as i64, y as i64, s, scale, Rgba([0, 0, 0, 255]));
+    super::pixel_font::text_px(img, x as i64, y as i64, s, scale, Rgba([0, 0, 0, 255]));
 }
 
 /// The PNG bytes of `r` with a colour bar.

@@ -4,16 +4,18 @@
 mod atlas;
 mod chart_glb;
 pub mod colormap;
+pub mod figures;
 mod glb;
 mod las;
 mod material_atlas;
-pub mod plot;
+mod pixel_font;
 mod relief_json;
 pub mod report_html;
 mod tiles;
 
 use crate::artifact::{Artifact, ArtifactType};
 use crate::io::geotiff::{write_geotiff, write_geotiff_rgb};
+use crate::io::safe_name::{check_file_name, check_folder};
 use crate::site::Site;
 
 pub use chart_glb::write_chart_glb;
@@ -77,8 +79,31 @@ pub fn output_file(name: &str, ty: ArtifactType) -> Result<(String, &'static str
     }
 }
 
-/// Encodes `a` in `format`, one of [`formats`] for its type.
+/// Checks the names in `a` that become file names when it is exported (a view set's ids), so a
+/// bad one is reported as the user's input, naming the element, before anything is written.
+pub fn check_names(a: &Artifact) -> Result<(), String> {
+    if let Artifact::Views(set) = a {
+        for (k, v) in set.views.iter().enumerate() {
+            check_file_name(&v.id)
+                .map_err(|e| format!("view {k} (id {:?}): its id names its files: {e}", v.id))?;
+        }
+    }
+    Ok(())
+}
+
+/// Encodes `a` in `format`, one of [`formats`] for its type. Every file of a folder output passes
+/// [`check_folder`]: nothing lands outside the folder or replaces a sibling.
 pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String> {
+    check_names(a)?;
+    let encoded = encode_unchecked(a, site, format)?;
+    if let Encoded::Folder(files) = &encoded {
+        check_folder(files.iter().map(|(rel, _)| rel.as_str()))
+            .map_err(|e| format!("{} as {format}: {e}", a.ty()))?;
+    }
+    Ok(encoded)
+}
+
+fn encode_unchecked(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String> {
     let file = |bytes: Vec<u8>| Ok(Encoded::File(bytes));
     match (a, format) {
         (Artifact::Raster(r), "tif") => {

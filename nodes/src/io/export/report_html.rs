@@ -75,7 +75,7 @@ fn esc(s: &str) -> String {
 }
 
 /// Standard base64 (RFC 4648) with padding.
-fn base64(bytes: &[u8]) -> String {
+pub(super) fn base64(bytes: &[u8]) -> String {
     const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut out = String::with_capacity(bytes.len().div_ceil(3) * 4);
     for c in bytes.chunks(3) {
@@ -281,8 +281,9 @@ pub fn report_html(p: &Page) -> Result<String, String> {
         .iter()
         .map(|f| {
             format!(
-                "<figure><img src=\"{0}\" alt=\"{0}\"><figcaption>{0}</figcaption></figure>",
-                esc(f)
+                "<figure><a href=\"{1}\" title=\"vector version (SVG)\"><img src=\"{0}\" alt=\"{0}\"></a><figcaption>{0} · <a href=\"{1}\">SVG</a></figcaption></figure>",
+                esc(f),
+                esc(&f.strip_suffix(".png").map_or_else(|| f.to_string(), |s| format!("{s}.svg")))
             )
         })
         .collect();

@@ -11,7 +11,9 @@ use crate::artifact::{
     ArtifactType, Height, Measurements, Metrics, Ortho, Raster, ReportFiles, Scene,
 };
 use crate::artifact::{link_distance, measured_loss};
-use crate::io::export::plot::{Chart, PALETTE, range};
+use crate::io::export::figures::charts::{ErrorCdf, ModelSeries, PathLossDistance, Scatter};
+use crate::io::export::figures::maps::{Layer, MapFigure, Palette, robust_range, view_grid};
+use crate::io::export::figures::{Figure, render};
 use crate::io::export::report_html::{LinkPoint, Page, TableRow, report_html};
 use crate::rf::pathloss_fit::fit_power_distance;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
@@ -53,8 +55,9 @@ pub struct Report;
 
 impl Stage for Report {
     const KIND: &'static str = "Report";
-    // 3: report.html with the 3D view; 4: scenes past the page's budget left out, named.
-    const VERSION: u32 = 4;
+    // 3: report.html with the 3D view; 4: scenes past the page's budget left out, named;
+    // 5: plotters figures as SVG and PNG at print size, per-stage figures.
+    const VERSION: u32 = 5;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -81,6 +84,11 @@ impl Stage for Report {
             "ortho",
             ArtifactType::Ortho,
             "an orthophoto under the radio map",
+        ),
+        InputSpec::many(
+            "figures",
+            ArtifactType::Report,
+            "per-stage figures (MapPlot, ReliefPlot, MaterialPlot) shown after the plots",
         ),
         InputSpec::many(
             "scenes",
@@ -136,16 +144,44 @@ impl Stage for Report {
             .zip(&evals)
             .map(|(pr, ev)| pairs(meas, pr, ev))
             .collect();
-        let mut plots = vec![
-            ("plots/scatter.png", scatter(p, &series).map_err(fail)?),
-            ("plots/error_cdf.png", cdf(p, &series).map_err(fail)?),
+        let models = model_series(p, &series);
+        let mut figures: Vec<(String, Figure)> = vec![
+            ("scatter".into(), render(&Scatter(&models)).map_err(fail)?),
             (
-                "plots/path_loss_distance.png",
-                distance(p, &series).map_err(fail)?,
+                "error_cdf".into(),
+                render(&ErrorCdf(&models)).map_err(fail)?,
+            ),
+            (
+                "path_loss_distance".into(),
+                render(&PathLossDistance(&models)).map_err(fail)?,
             ),
         ];
         if let Some(map) = radio_map {
-            plots.push(("plots/radio_map.png", map_png(map, ortho).map_err(fail)?));
+            figures.push(("radio_map".into(), map_figure(map, ortho).map_err(fail)?));
+        }
+        // Every plot as plots/<name>.png (shown) and .svg (print); the per-stage figures' files
+        // join them under their own names.
+        let mut plots: Vec<(String, Vec<u8>)> = Vec::new();
+        for (name, f) in figures {
+            plots.push((format!("plots/{name}.png"), f.png));
+            plots.push((format!("plots/{name}.svg"), f.svg.into_bytes()));
+        }
+        for (k, fig) in inputs
+            .many::<ReportFiles>("figures")?
+            .into_iter()
+            .enumerate()
+        {
+            for (name, bytes) in &fig.files {
+                crate::io::safe_name::check_file_name(name)
+                    .map_err(|m| fail(format!("figure {} (input `figures` #{k}): {m}", name)))?;
+                let path = format!("plots/{name}");
+                if plots.iter().any(|(p, _)| *p == path) {
+                    return Err(fail(format!(
+                        "two figures write {path}: give each MapPlot/ReliefPlot/MaterialPlot its own `name`"
+                    )));
+                }
+                plots.push((path, bytes.clone()));
+            }
         }
         let intro = format!(
             "{} measured links; every model is scored at the same links (rf.md §6: P2P = \
@@ -154,7 +190,7 @@ impl Stage for Report {
             meas.links.len()
         );
         let mut md = format!("# KODAMA report: {}\n\n{intro}\n\n{md_table}\n", p.site);
-        for (name, _) in &plots {
+        for (name, _) in plots.iter().filter(|(n, _)| n.ends_with(".png")) {
             md.push_str(&format!("![{name}]({name})\n\n"));
         }
         files.push(("report.md".to_string(), md.into_bytes()));
@@ -178,7 +214,11 @@ impl Stage for Report {
             .zip(scenes.iter().copied())
             .collect();
         let points = link_points(meas, &preds, &evals);
-        let plot_names: Vec<&str> = plots.iter().map(|(n, _)| *n).collect();
+        let plot_names: Vec<&str> = plots
+            .iter()
+            .map(|(n, _)| n.as_str())
+            .filter(|n| n.ends_with(".png"))
+            .collect();
         let html = report_html(&Page {
             site: &p.site,
             intro: &intro,
@@ -191,9 +231,7 @@ impl Stage for Report {
         })
         .map_err(fail)?;
         files.push(("report.html".to_string(), html.into_bytes()));
-        for (name, bytes) in plots {
-            files.push((name.to_string(), bytes));
-        }
+        files.extend(plots);
         Ok(ReportFiles { files })
     }
 }
@@ -335,115 +373,42 @@ fn pairs(meas: &Measurements, pred: &Measurements, ev: &Metrics) -> Vec<(f64, f6
         .collect()
 }
 
-fn scatter(p: &ReportParams, series: &[Vec<(f64, f64, f64)>]) -> Result<Vec<u8>, String> {
-    let r = range(series.iter().flatten().flat_map(|s| [s.1, s.2]));
-    let mut c = Chart::new(
-        640,
-        560,
-        r,
-        r,
-        "PREDICTED VS MEASURED PATH LOSS",
-        "MEASURED (DB)",
-        "PREDICTED (DB)",
-    );
-    c.line(&[(r.0, r.0), (r.1, r.1)], [120, 120, 120], "");
-    for (k, s) in series.iter().enumerate() {
-        let pts: Vec<(f64, f64)> = s.iter().map(|x| (x.1, x.2)).collect();
-        c.points(&pts, PALETTE[k % PALETTE.len()], &p.models[k]);
-    }
-    c.png()
-}
-
-fn cdf(p: &ReportParams, series: &[Vec<(f64, f64, f64)>]) -> Result<Vec<u8>, String> {
-    let errs: Vec<Vec<f64>> = series
+/// Each model's links and trend line, for the charts.
+fn model_series<'a>(
+    p: &'a ReportParams,
+    series: &'a [Vec<(f64, f64, f64)>],
+) -> Vec<ModelSeries<'a>> {
+    p.models
         .iter()
-        .map(|s| {
-            let mut e: Vec<f64> = s.iter().map(|x| (x.2 - x.1).abs()).collect();
-            e.sort_by(f64::total_cmp);
-            e
+        .zip(series)
+        .map(|(name, links)| {
+            let trend = (links.len() >= 2).then(|| {
+                let d: Vec<f64> = links.iter().map(|x| x.0).collect();
+                let pl: Vec<f64> = links.iter().map(|x| x.2).collect();
+                fit_power_distance(&d, &pl)
+            });
+            ModelSeries { name, links, trend }
         })
+        .collect()
+}
+
+/// The radio map colour-mapped over the orthophoto at the finer of the two resolutions, with a
+/// colour bar and a scale bar.
+fn map_figure(map: &Raster, ortho: Option<&Ortho>) -> Result<Figure, String> {
+    let cells: Vec<f64> = std::iter::once(map.grid.cell_m)
+        .chain(ortho.map(|o| o.grid.cell_m))
         .collect();
-    let xmax = errs.iter().flatten().fold(1.0f64, |m, &v| m.max(v));
-    let mut c = Chart::new(
-        640,
-        420,
-        (0.0, xmax),
-        (0.0, 1.0),
-        "CDF OF ABS PREDICTION ERROR",
-        "ABS ERROR (DB)",
-        "CDF",
-    );
-    for (k, e) in errs.iter().enumerate() {
-        let n = e.len().max(1) as f64;
-        let pts: Vec<(f64, f64)> = e
-            .iter()
-            .enumerate()
-            .map(|(i, &v)| (v, (i + 1) as f64 / n))
-            .collect();
-        c.line(&pts, PALETTE[k % PALETTE.len()], &p.models[k]);
-    }
-    c.png()
-}
-
-fn distance(p: &ReportParams, series: &[Vec<(f64, f64, f64)>]) -> Result<Vec<u8>, String> {
-    let xr = range(series.iter().flatten().map(|s| s.0.log10()));
-    let yr = range(series.iter().flatten().flat_map(|s| [s.1, s.2]));
-    let mut c = Chart::new(
-        640,
-        420,
-        xr,
-        yr,
-        "PATH LOSS VS DISTANCE, PD TREND LINES",
-        "LOG10 DISTANCE (M)",
-        "PATH LOSS (DB)",
-    );
-    if let Some(first) = series.first() {
-        let pts: Vec<(f64, f64)> = first.iter().map(|s| (s.0.log10(), s.1)).collect();
-        c.points(&pts, [90, 90, 90], "MEASURED");
-    }
-    for (k, s) in series.iter().enumerate() {
-        if s.len() < 2 {
-            continue;
-        }
-        let d: Vec<f64> = s.iter().map(|x| x.0).collect();
-        let pl: Vec<f64> = s.iter().map(|x| x.2).collect();
-        let (a, b) = fit_power_distance(&d, &pl);
-        let line: Vec<(f64, f64)> = (0..=20)
-            .map(|i| {
-                let x = xr.0 + (xr.1 - xr.0) * i as f64 / 20.0;
-                (x, a + 10.0 * b * x)
-            })
-            .collect();
-        c.line(&line, PALETTE[k % PALETTE.len()], &p.models[k]);
-    }
-    c.png()
-}
-
-/// The radio map colour-mapped over the orthophoto (60 % map where a ray arrived).
-fn map_png(map: &Raster, ortho: Option<&Ortho>) -> Result<Vec<u8>, String> {
-    let colored = crate::io::export::colormap::raster_png(map)?;
-    let Some(o) = ortho else { return Ok(colored) };
-    let mut img = image::load_from_memory(&colored)
-        .map_err(|e| e.to_string())?
-        .to_rgba8();
-    let g = map.grid;
-    for row in 0..g.height {
-        for col in 0..g.width {
-            let (x, y) = g.center(col, row);
-            let Some((oc, or)) = o.grid.cell_of(x, y) else {
-                continue;
-            };
-            let under = o.rgb[(or * o.grid.width + oc) as usize];
-            let px = img.get_pixel_mut(col, row);
-            let a = if px[3] > 0 { 0.6 } else { 0.0 };
-            for k in 0..3 {
-                px[k] = (px[k] as f64 * a + under[k] as f64 * (1.0 - a)).round() as u8;
-            }
-            px[3] = 255;
-        }
-    }
-    let mut out = std::io::Cursor::new(Vec::new());
-    img.write_to(&mut out, image::ImageFormat::Png)
-        .map_err(|e| e.to_string())?;
-    Ok(out.into_inner())
+    let layer = Layer {
+        raster: map,
+        palette: Palette::Viridis,
+        range: robust_range(map, Palette::Viridis),
+        alpha: if ortho.is_some() { 0.65 } else { 1.0 },
+        units: "path gain (dB)".into(),
+    };
+    render(&MapFigure::new(
+        "Radio map".into(),
+        view_grid(&map.grid, &cells),
+        ortho,
+        Some(layer),
+    ))
 }

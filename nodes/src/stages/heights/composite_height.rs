@@ -73,11 +73,17 @@ impl Stage for CompositeHeight {
             hi = (hi.0.max(g.x0 + g.width as f64 * g.cell_m), hi.1.max(g.y0));
         }
         // Cell centres strictly inside the union of the sources' extents.
-        let grid = Grid::covering(
+        let grid = Grid::covering_checked(
             (lo.0 + cell * 0.5, lo.1 + cell * 0.5),
             (hi.0 - cell * 0.5, hi.1 - cell * 0.5),
             cell,
-        );
+        )
+        .map_err(|m| {
+            StageError::Param(ParamError::new(
+                "cell_m",
+                format!("{m}; use a coarser cell"),
+            ))
+        })?;
         let w = grid.width as usize;
         let mut data = vec![f32::NAN; grid.len()];
         data.par_chunks_mut(w).enumerate().for_each(|(row, out)| {

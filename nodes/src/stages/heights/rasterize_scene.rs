@@ -40,6 +40,12 @@ impl Stage for RasterizeScene {
     fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Raster, StageError> {
         let scene: &Scene = inputs.one("scene")?;
         let grid = scene_grid(scene, p.cell_m.unwrap_or(ctx.site.cell_m))?;
+        grid.check_size().map_err(|m| {
+            StageError::Param(ParamError::new(
+                "cell_m",
+                format!("{m}; use a coarser cell"),
+            ))
+        })?;
         let rays = SceneRays::new(scene);
         let top = top_z(scene);
         let keep = |c: ObjectClass| p.classes.as_ref().is_none_or(|k| k.contains(&c));

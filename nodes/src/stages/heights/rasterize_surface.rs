@@ -99,20 +99,17 @@ impl Stage for RasterizeSurface {
                 "no points to rasterize (the set is empty, or every point was filtered out by class)".into(),
             )
         })?;
-        let grid = Grid::covering(
+        let grid = Grid::covering_checked(
             (lo[0] as f64, lo[1] as f64),
             (hi[0] as f64, hi[1] as f64),
             cell,
-        );
-        if grid.len() > 400_000_000 {
-            return Err(StageError::Param(ParamError::new(
+        )
+        .map_err(|m| {
+            StageError::Param(ParamError::new(
                 "cell_m",
-                format!(
-                    "{} x {} cells at {cell} m is too many; use a coarser cell",
-                    grid.width, grid.height
-                ),
-            )));
-        }
+                format!("{m}; use a coarser cell"),
+            ))
+        })?;
         let mut r = rasterize(points, grid, p.mode);
         let steps = (p.max_gap_m / cell).floor() as u32;
         if steps > 0 && p.mode != CellMode::Count {

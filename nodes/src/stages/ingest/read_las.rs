@@ -98,9 +98,278 @@ pub fn header_crs(path: &Path, header: &las::Header) -> Result<Option<Crs>, Stag
     Ok(None)
 }
 
+/// What the las crate takes on trust from the header, checked against the file first: scales
+/// and offsets (a zero or non-finite one makes every coordinate garbage), extended VLR lengths
+/// (the crate allocates what they say) and, uncompressed, the points the data can hold (so a
+/// truncated file is named at the point where its data stops).
+pub fn check_las_header(path: &Path) -> Result<(), StageError> {
+    use std::io::{Read, Seek, SeekFrom};
+    let bad = |place: String, expected: String| StageError::bad_input(path, place, expected);
+    let mut f = std::fs::File::open(path).map_err(|e| bad("open".into(), e.to_string()))?;
+    let len = f
+        .metadata()
+        .map_err(|e| bad("open".into(), e.to_string()))?
+        .len();
+    let h = las::raw::Header::read_from(&mut f).map_err(|e| las_error(path, "header", e))?;
+    for (axis, scale, offset) in [
+        ("x", h.x_scale_factor, h.x_offset),
+        ("y", h.y_scale_factor, h.y_offset),
+        ("z", h.z_scale_factor, h.z_offset),
+    ] {
+        if !(scale.is_finite() && scale != 0.0) {
+            return Err(bad(
+                "header".into(),
+                format!("a finite, non-zero {axis} scale factor, found {scale}"),
+            ));
+        }
+        if !offset.is_finite() {
+            return Err(bad(
+                "header".into(),
+                format!("a finite {axis} offset, found {offset}"),
+            ));
+        }
+    }
+    if let Some(evlr) = &h.evlr {
+        let mut at = evlr.start_of_first_evlr;
+        for k in 0..evlr.number_of_evlrs {
+            let place = || format!("extended VLR {} at byte {at}", k + 1);
+            let mut head = [0u8; 60];
+            f.seek(SeekFrom::Start(at))
+                .and_then(|_| f.read_exact(&mut head))
+                .map_err(|_| {
+                    bad(
+                        place(),
+                        format!("a 60-byte record header within the file's {len} bytes"),
+                    )
+                })?;
+            let n = u64::from_le_bytes(head[20..28].try_into().expect("8 bytes"));
+            let end = at.checked_add(60).and_then(|a| a.checked_add(n));
+            match end {
+                Some(e) if e <= len => at = e,
+                _ => {
+                    return Err(bad(
+                        place(),
+                        format!("a record within the file's {len} bytes, not one of {n} bytes"),
+                    ));
+                }
+            }
+        }
+    }
+    let compressed = h.point_data_record_format & 0xC0 != 0;
+    let n = h
+        .large_file
+        .as_ref()
+        .map(|l| l.number_of_point_records)
+        .filter(|&n| n > 0)
+        .unwrap_or(h.number_of_point_records as u64);
+    let record = h.point_data_record_length as u64;
+    if compressed && n > 0 {
+        check_laz_chunk_table(path, &mut f, &h, len, n)?;
+    }
+    if !compressed && n > 0 {
+        let data_end = match &h.evlr {
+            Some(e)
+                if e.number_of_evlrs > 0
+                    && e.start_of_first_evlr >= h.offset_to_point_data as u64 =>
+            {
+                e.start_of_first_evlr.min(len)
+            }
+            _ => len,
+        };
+        let held = data_end.saturating_sub(h.offset_to_point_data as u64) / record.max(1);
+        if held < n {
+            return Err(bad(
+                format!("point {}", held + 1),
+                format!(
+                    "the header announces {n} points of {record} bytes but the data stops after point {held}"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A LAZ file's chunk table (its offset is the first 8 bytes of the point data, and the las
+/// crate reads it when opening the file): past the end of the file, the data was cut short and
+/// the points are decoded one by one to name the first one missing; its chunk count bounds the
+/// table the crate allocates, so one larger than the point count is refused.
+fn check_laz_chunk_table(
+    path: &Path,
+    f: &mut std::fs::File,
+    h: &las::raw::Header,
+    len: u64,
+    n: u64,
+) -> Result<(), StageError> {
+    use std::io::{Read, Seek, SeekFrom};
+    let start = h.offset_to_point_data as u64;
+    let mut read_u64_at = |at: u64| -> Option<u64> {
+        let mut b = [0u8; 8];
+        f.seek(SeekFrom::Start(at)).ok()?;
+        f.read_exact(&mut b).ok()?;
+        Some(u64::from_le_bytes(b))
+    };
+    let table = read_u64_at(start)
+        .filter(|&t| t > start)
+        .or_else(|| len.checked_sub(8).and_then(&mut read_u64_at));
+    match table {
+        Some(t) if t > start && t.checked_add(8).is_some_and(|e| e <= len) => {
+            let place = format!("LAZ chunk table at byte {t}");
+            let bad = |m: String| StageError::bad_input(path, place.clone(), m);
+            let chunks = read_u64_at(t).map_or(0, |v| v >> 32);
+            // Every chunk holds a point and its compressed bytes: more chunks than points, or
+            // than bytes in the file, is a table the decoder must not size a list by.
+            if chunks > n.min(len) + 1 {
+                return Err(bad(format!(
+                    "at most one chunk per point ({n}) and per byte of the file ({len}), found {chunks} chunks"
+                )));
+            }
+            // The decoder sizes its buffers by the table's counts and asserts they agree with the
+            // header's: checked here so a contradiction is an error, not an abort.
+            let vlr = laz_vlr(path, h).ok_or_else(|| {
+                StageError::bad_input(path, "LAZ VLR", "a readable laszip record")
+            })?;
+            if vlr.items_size() != h.point_data_record_length as u64 {
+                return Err(StageError::bad_input(
+                    path,
+                    "LAZ VLR",
+                    format!(
+                        "points of {} bytes as the header says, found {}",
+                        h.point_data_record_length,
+                        vlr.items_size()
+                    ),
+                ));
+            }
+            f.seek(SeekFrom::Start(start))
+                .map_err(|e| bad(e.to_string()))?;
+            let table = decoding(path, &place, || {
+                laz::laszip::ChunkTable::read_from(&mut *f, &vlr)
+            })?
+            .map_err(|e| bad(format!("a readable chunk table ({e})")))?;
+            // Fixed-size chunks all count the chunk size, the last one too. The decoder
+            // allocates a decoded chunk at a time: writers use some 50,000 points a chunk, so
+            // a chunk decoding to more than 1 GiB is refused.
+            let most = if vlr.uses_variable_size_chunks() {
+                n
+            } else {
+                n.max(vlr.chunk_size() as u64)
+            };
+            let record = h.point_data_record_length as u64;
+            const MAX_CHUNK_BYTES: u64 = 1 << 30;
+            let (mut points, mut bytes) = (0u64, 0u64);
+            for e in table.as_ref() {
+                points = points.saturating_add(e.point_count);
+                bytes = bytes.saturating_add(e.byte_count);
+                if e.point_count.saturating_mul(record) > MAX_CHUNK_BYTES {
+                    return Err(bad(format!(
+                        "chunks of at most {MAX_CHUNK_BYTES} bytes decoded, found one of {} points of {record} bytes",
+                        e.point_count
+                    )));
+                }
+                if e.point_count > most || bytes > len {
+                    return Err(bad(format!(
+                        "chunks within the header's {n} points and the file's {len} bytes"
+                    )));
+                }
+            }
+            if points < n {
+                return Err(bad(format!(
+                    "chunks holding the header's {n} points, found {points}"
+                )));
+            }
+            Ok(())
+        }
+        _ => {
+            let held = laz_points_held(path, h, n);
+            Err(StageError::bad_input(
+                path,
+                format!("point {}", held + 1),
+                format!(
+                    "the header announces {n} points but the compressed data stops after point {held} (the file is cut short: its chunk table is missing)"
+                ),
+            ))
+        }
+    }
+}
+
+/// The laszip record among the VLRs after the header.
+fn laz_vlr(path: &Path, h: &las::raw::Header) -> Option<laz::LazVlr> {
+    use std::io::{BufReader, Seek, SeekFrom};
+    let mut f = BufReader::new(std::fs::File::open(path).ok()?);
+    f.seek(SeekFrom::Start(h.header_size as u64)).ok()?;
+    for _ in 0..h.number_of_variable_length_records {
+        let v = las::raw::Vlr::read_from(&mut f, false).ok()?;
+        if v.user_id.starts_with(laz::LazVlr::USER_ID.as_bytes())
+            && v.record_id == laz::LazVlr::RECORD_ID
+        {
+            return laz::LazVlr::from_buffer(&v.data).ok();
+        }
+    }
+    None
+}
+
+/// How many points of a LAZ file decode, reading sequentially without the chunk table.
+fn laz_points_held(path: &Path, h: &las::raw::Header, n: u64) -> u64 {
+    use std::io::{BufReader, Read, Seek, SeekFrom};
+    // A source that cannot seek: the decoder then skips the chunk table and reads chunk after
+    // chunk, which is all a cut-short file allows.
+    struct NoSeek<R>(R);
+    impl<R: Read> Read for NoSeek<R> {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            self.0.read(buf)
+        }
+    }
+    impl<R> Seek for NoSeek<R> {
+        fn seek(&mut self, _: SeekFrom) -> std::io::Result<u64> {
+            Err(std::io::Error::new(
+                std::io::ErrorKind::Unsupported,
+                "sequential",
+            ))
+        }
+    }
+    let count = || -> Option<u64> {
+        let vlr = laz_vlr(path, h)?;
+        if vlr.items_size() != h.point_data_record_length as u64 {
+            return None;
+        }
+        let mut f = BufReader::new(std::fs::File::open(path).ok()?);
+        f.seek(SeekFrom::Start(h.offset_to_point_data as u64))
+            .ok()?;
+        let mut d = laz::LasZipDecompressor::new(NoSeek(f), vlr).ok()?;
+        let mut buf = vec![0u8; h.point_data_record_length as usize];
+        Some(
+            (0..n)
+                .position(|_| d.decompress_one(&mut buf).is_err())
+                .map_or(n, |k| k as u64),
+        )
+    };
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(count))
+        .ok()
+        .flatten()
+        .unwrap_or(0)
+}
+
+/// Runs a step of the LAZ decoder, whose arithmetic decoder asserts on corrupt data (in builds
+/// with debug assertions): such a panic is the file's fault, reported at `place`.
+fn decoding<T>(path: &Path, place: &str, f: impl FnOnce() -> T) -> Result<T, StageError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| {
+        let why = p
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| p.downcast_ref::<&str>().copied())
+            .unwrap_or("a panic");
+        StageError::bad_input(
+            path,
+            place,
+            format!("decodable LAZ data (the decoder failed: {why})"),
+        )
+    })
+}
+
 /// Reads `path` into the site frame of `ctx`, in batches so progress can be reported.
 pub fn read_las(path: &Path, crs: Option<&str>, ctx: &Ctx) -> Result<PointSet, StageError> {
-    let mut reader = Reader::from_path(path).map_err(|e| las_error(path, "header", e))?;
+    check_las_header(path)?;
+    let mut reader = decoding(path, "header", || Reader::from_path(path))?
+        .map_err(|e| las_error(path, "header", e))?;
     let header = reader.header().clone();
     let crs = match crs {
         Some(c) => Crs::from_user(c).map_err(|m| StageError::Param(ParamError::new("crs", m)))?,
@@ -110,23 +379,20 @@ pub fn read_las(path: &Path, crs: Option<&str>, ctx: &Ctx) -> Result<PointSet, S
     };
     let to_site = ToSite::new(&crs, ctx.site).map_err(|m| StageError::bad_input(path, "CRS", m))?;
     let n = header.number_of_points();
-    if n > 2_000_000_000 {
-        return Err(StageError::bad_input(
-            path,
-            "header",
-            format!("{n} points is more than one node can hold; tile the data"),
-        ));
-    }
+    // Position, class, intensity, return numbers and colour: 23 bytes a point.
+    crate::params::check_bytes("the points", n as f64, 23)
+        .map_err(|m| StageError::bad_input(path, "header", format!("{m}; tile the data")))?;
     let format = header.point_format();
     let mut out = PointSet::default();
-    out.xyz.reserve(n as usize);
+    // Grown as points arrive: a compressed file's count is not checked against its length.
+    out.xyz.reserve(n.min(1 << 22) as usize);
     ctx.progress.set_total(n);
     const BATCH: u64 = 1 << 20;
     let mut done = 0u64;
     while done < n {
-        let pd = reader
-            .read_points(BATCH.min(n - done))
-            .map_err(|e| las_error(path, &format!("point {}", done + 1), e))?;
+        let place = format!("point {}", done + 1);
+        let pd = decoding(path, &place, || reader.read_points(BATCH.min(n - done)))?
+            .map_err(|e| las_error(path, &place, e))?;
         if pd.is_empty() {
             return Err(StageError::bad_input(
                 path,

@@ -88,7 +88,9 @@ impl Stage for ReadMapillary {
             p.max_yaw_disagreement_deg,
         )?;
         let folder = ctx.file(0)?;
-        read_mapillary(folder, ctx.site, &opts)?.finish(folder, &opts, ctx.progress)
+        let set = read_mapillary(folder, ctx.site, &opts)?.finish(folder, &opts, ctx.progress)?;
+        crate::io::views_io::check_viewset(folder, &set)?;
+        Ok(set)
     }
 }
 

@@ -76,9 +76,15 @@ impl Stage for ReadMeasurements {
             rx_height_m,
             ..
         } = p.layout
-            && !(tx_height_m >= 0.0 && rx_height_m >= 0.0)
+            && !(tx_height_m >= 0.0
+                && rx_height_m >= 0.0
+                && tx_height_m.is_finite()
+                && rx_height_m.is_finite())
         {
-            return Err(ParamError::new("layout", "expected non-negative heights"));
+            return Err(ParamError::new(
+                "layout",
+                "expected non-negative, finite heights",
+            ));
         }
         Ok(())
     }
@@ -131,11 +137,21 @@ impl<'a> Table<'a> {
             .iter()
             .map(str::to_owned)
             .collect();
-        let columns = names
-            .iter()
-            .enumerate()
-            .map(|(i, n)| (n.clone(), i))
-            .collect();
+        let mut columns = HashMap::new();
+        for (i, n) in names.iter().enumerate() {
+            if let Some(first) = columns.insert(n.clone(), i) {
+                // Which of the two a later lookup would get is arbitrary: refuse rather than guess.
+                return Err(StageError::bad_input(
+                    path,
+                    "header",
+                    format!(
+                        "expected each column once; `{n}` is columns {} and {}",
+                        first + 1,
+                        i + 1
+                    ),
+                ));
+            }
+        }
         Ok((
             Table {
                 path,
@@ -286,6 +302,8 @@ fn endpoint(
         }
         Place::Geo { lat, lon, h } => {
             let (lat, lon) = (t.number(rec, line, lat)?, t.number(rec, line, lon)?);
+            check_lat_lon(lat, lon)
+                .map_err(|m| StageError::bad_input(t.path, format!("line {line}"), m))?;
             let (x, y, _) = wgs84
                 .apply(lon, lat, 0.0)
                 .map_err(|m| StageError::bad_input(t.path, format!("line {line}"), m))?;
@@ -342,7 +360,7 @@ fn read_links(path: &Path, wgs84: &ToSite) -> Result<Measurements, StageError> {
         let link = Link {
             tx: tx_end,
             rx: endpoint(&t, &rec, line, &rx, id(&rec, "rx_id"), wgs84)?,
-            freq_hz: t.number(&rec, line, freq)?,
+            freq_hz: positive_freq(&t, &rec, line, freq)?,
             path_loss_db: t.optional_number(&rec, line, pl)?,
             rx_power_dbm: t.optional_number(&rec, line, prx)?,
             tx_eirp_dbm: t.optional_number(&rec, line, eirp)?,
@@ -358,6 +376,36 @@ fn read_links(path: &Path, wgs84: &ToSite) -> Result<Measurements, StageError> {
         out.links.push(link);
     }
     Ok(out)
+}
+
+/// A latitude and longitude a projection can take (proj gives garbage, not errors, past them).
+fn check_lat_lon(lat: f64, lon: f64) -> Result<(), String> {
+    if (-90.0..=90.0).contains(&lat) && (-180.0..=360.0).contains(&lon) {
+        Ok(())
+    } else {
+        Err(format!(
+            "expected a latitude in [-90, 90] and a longitude in [-180, 360] degrees, found {lat}, {lon}"
+        ))
+    }
+}
+
+/// The carrier of a row: every propagation law divides by the wavelength or takes its log.
+fn positive_freq(
+    t: &Table,
+    rec: &csv::StringRecord,
+    line: u64,
+    col: usize,
+) -> Result<f64, StageError> {
+    let f = t.number(rec, line, col)?;
+    if f > 0.0 {
+        Ok(f)
+    } else {
+        Err(StageError::bad_input(
+            t.path,
+            format!("line {line}, column `{}`", t.names[col]),
+            format!("expected a positive frequency in Hz, found {f}"),
+        ))
+    }
 }
 
 #[derive(Deserialize)]
@@ -386,7 +434,16 @@ fn read_duke(
     let cells: DukeCells = serde_json::from_str(&text)
         .map_err(|e| StageError::bad_input(cells_path, format!("line {}, column {}", e.line(), e.column()), format!("expected {{\"cells\": [{{\"pci\", \"lat\", \"lon\", \"azimuth_deg\", \"freq_hz\"}}]}}: {e}")))?;
     let mut by_pci = HashMap::new();
-    for c in &cells.cells {
+    for (i, c) in cells.cells.iter().enumerate() {
+        let place = || format!("cell {i} (pci {:?})", c.pci);
+        check_lat_lon(c.lat, c.lon).map_err(|m| StageError::bad_input(cells_path, place(), m))?;
+        if !(c.freq_hz > 0.0 && c.freq_hz.is_finite()) {
+            return Err(StageError::bad_input(
+                cells_path,
+                place(),
+                format!("expected a positive frequency in Hz, found {}", c.freq_hz),
+            ));
+        }
         let (x, y, _) = wgs84
             .apply(c.lon, c.lat, 0.0)
             .map_err(|m| StageError::bad_input(cells_path, format!("cell {}", c.pci), m))?;
@@ -418,6 +475,8 @@ fn read_duke(
             )
         })?;
         let (lat, lon) = (t.number(&rec, line, lat)?, t.number(&rec, line, lon)?);
+        check_lat_lon(lat, lon)
+            .map_err(|m| StageError::bad_input(path, format!("line {line}"), m))?;
         let (x, y, _) = wgs84
             .apply(lon, lat, 0.0)
             .map_err(|m| StageError::bad_input(path, format!("line {line}"), m))?;

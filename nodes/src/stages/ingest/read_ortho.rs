@@ -196,13 +196,16 @@ fn read_image_with_world_file(path: &Path, world: &Path) -> Result<Decoded, Stag
         .split_whitespace()
         .enumerate()
         .map(|(i, t)| {
-            t.parse::<f64>().map_err(|_| {
-                StageError::bad_input(
-                    world,
-                    format!("value {}", i + 1),
-                    format!("expected a number, found {t:?}"),
-                )
-            })
+            t.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    StageError::bad_input(
+                        world,
+                        format!("value {}", i + 1),
+                        format!("expected a finite number, found {t:?}"),
+                    )
+                })
         })
         .collect::<Result<_, _>>()?;
     let [a, d, b, e, c, f] = v[..] else {
@@ -244,6 +247,9 @@ fn read_image_with_world_file(path: &Path, world: &Path) -> Result<Decoded, Stag
         width,
         height,
     };
+    pixels
+        .check()
+        .map_err(|m| StageError::bad_input(world, "georeferencing", format!("expected {m}")))?;
     let rgb = img.pixels().map(|p| p.0).collect();
     Ok((pixels, rgb, None))
 }

@@ -67,7 +67,9 @@ impl Stage for ReadPanoramax {
         let terrain = inputs.optional::<Raster>("terrain")?;
         let opts = ReadOptions::new(terrain, p.trust_altitude, p.camera_height_m, cut(p), 180.0)?;
         let folder = ctx.file(0)?;
-        read_panoramax(folder, ctx.site, &opts)?.finish(folder, &opts, ctx.progress)
+        let set = read_panoramax(folder, ctx.site, &opts)?.finish(folder, &opts, ctx.progress)?;
+        crate::io::views_io::check_viewset(folder, &set)?;
+        Ok(set)
     }
 }
 

@@ -249,7 +249,22 @@ fn read_content_file(
     } else {
         (bytes.as_slice(), [0.0; 3])
     };
-    let gltf = gltf::Gltf::from_slice(glb)
+    check_glb_container(file, glb)?;
+    // gltf-json's validation indexes some lists unchecked (a POSITION accessor past the
+    // accessors panics, gltf-json 1.4.1): a panic there is this file's fault, reported as such.
+    let parsed = std::panic::catch_unwind(|| gltf::Gltf::from_slice(glb)).map_err(|p| {
+        let why = p
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| p.downcast_ref::<&str>().copied())
+            .unwrap_or("a panic");
+        StageError::bad_input(
+            file,
+            "glTF",
+            format!("expected a well-formed glTF binary (its parser failed: {why})"),
+        )
+    })?;
+    let gltf = parsed
         .map_err(|e| StageError::bad_input(file, "glTF", format!("expected a glTF binary: {e}")))?;
     let buffers: Vec<Vec<u8>> = gltf
         .buffers()
@@ -293,6 +308,12 @@ fn read_content_file(
                 let Some(accessor) = prim.get(&gltf::Semantic::Positions) else {
                     continue;
                 };
+                if !check_accessor(file, "POSITION", &accessor, &buffers)? {
+                    continue;
+                }
+                if let Some(ix) = prim.indices() {
+                    check_accessor(file, "indices", &ix, &buffers)?;
+                }
                 let (base, n) = match bases.get(&accessor.index()) {
                     Some(&b) => b,
                     None => {
@@ -331,6 +352,11 @@ fn read_content_file(
                 .name()
                 .map(str::to_owned)
                 .unwrap_or_else(|| node.index().to_string());
+            // Non-finite or far-off vertices (NaN in the file, an overflowing transform) are named
+            // here, before any ray tracer builds a BVH over them.
+            out.check().map_err(|(place, expected)| {
+                StageError::bad_input(file, format!("node {name:?}, {place}"), expected)
+            })?;
             scene.objects.push(SceneObject {
                 id: format!("{uri}#{name}"),
                 class: ObjectClass::Unsegmented,
@@ -340,6 +366,115 @@ fn read_content_file(
         stack.extend(node.children().map(|c| (c, world)));
     }
     Ok(())
+}
+
+/// The GLB container's lengths, checked before the gltf crate subtracts and slices by them
+/// unchecked: the header's total, then each chunk's, within the bytes there are.
+fn check_glb_container(file: &Path, b: &[u8]) -> Result<(), StageError> {
+    if !b.starts_with(b"glTF") {
+        return Ok(()); // glTF JSON: parsed as such.
+    }
+    let u32_at = |o: usize| {
+        b.get(o..o + 4)
+            .map(|s| u32::from_le_bytes(s.try_into().expect("4 bytes")) as usize)
+    };
+    let bad = |place: &str, m: String| StageError::bad_input(file, format!("GLB {place}"), m);
+    let total = u32_at(8).ok_or_else(|| bad("header", "a 12-byte header".into()))?;
+    if !(20..=b.len()).contains(&total) {
+        return Err(bad(
+            "header",
+            format!(
+                "a length from 20 to the file's {} bytes, found {total}",
+                b.len()
+            ),
+        ));
+    }
+    let mut at = 12;
+    while at < total {
+        let len = u32_at(at).filter(|_| at + 8 <= total).ok_or_else(|| {
+            bad(
+                &format!("chunk at byte {at}"),
+                "an 8-byte chunk header".into(),
+            )
+        })?;
+        if len > total - at - 8 {
+            return Err(bad(
+                &format!("chunk at byte {at}"),
+                format!("a length within the file's {total} bytes, found {len}"),
+            ));
+        }
+        at += 8 + len;
+    }
+    Ok(())
+}
+
+/// Checks that an accessor reads only bytes its buffer has, with a type the reader takes, so the
+/// gltf crate's readers (which compute the extent unchecked, and panic on unexpected index types)
+/// never see one that does not: false when it is empty.
+fn check_accessor(
+    file: &Path,
+    what: &str,
+    a: &gltf::Accessor,
+    buffers: &[Vec<u8>],
+) -> Result<bool, StageError> {
+    use gltf::accessor::{DataType, Dimensions};
+    let bad =
+        |m: String| StageError::bad_input(file, format!("accessor {} ({what})", a.index()), m);
+    if a.sparse().is_some() {
+        return Err(bad(
+            "a plain accessor (sparse accessors are not supported)".into()
+        ));
+    }
+    let ok_type = match what {
+        "POSITION" => a.data_type() == DataType::F32 && a.dimensions() == Dimensions::Vec3,
+        _ => {
+            matches!(a.data_type(), DataType::U8 | DataType::U16 | DataType::U32)
+                && a.dimensions() == Dimensions::Scalar
+        }
+    };
+    if !ok_type {
+        return Err(bad(format!(
+            "{} (found {:?} {:?})",
+            if what == "POSITION" {
+                "float VEC3 positions"
+            } else {
+                "unsigned SCALAR indices"
+            },
+            a.data_type(),
+            a.dimensions()
+        )));
+    }
+    if a.count() == 0 {
+        return Ok(false);
+    }
+    let view = a
+        .view()
+        .ok_or_else(|| bad("a buffer view (accessors without one are not supported)".into()))?;
+    let buffer_len = buffers.get(view.buffer().index()).map_or(0, Vec::len);
+    let elem = a.size();
+    let stride = view.stride().unwrap_or(elem);
+    let view_end = view.offset().checked_add(view.length());
+    if view_end.is_none_or(|e| e > buffer_len) {
+        return Err(bad(format!(
+            "buffer view {} within its buffer's {buffer_len} bytes (offset {}, length {})",
+            view.index(),
+            view.offset(),
+            view.length()
+        )));
+    }
+    let end = stride
+        .checked_mul(a.count() - 1)
+        .and_then(|n| n.checked_add(a.offset()))
+        .and_then(|n| n.checked_add(elem));
+    if end.is_none_or(|e| e > view.length()) {
+        return Err(bad(format!(
+            "{} elements of {elem} bytes (stride {stride}) within buffer view {}'s {} bytes",
+            a.count(),
+            view.index(),
+            view.length()
+        )));
+    }
+    Ok(true)
 }
 
 /// The glTF inside a b3dm, and its feature table's RTC_CENTER.

@@ -124,6 +124,7 @@ impl Stage for ReadViewOutputs {
             }
             out.material_classes = p.material_classes.clone();
         }
+        crate::io::views_io::check_viewset(dir, &out)?;
         Ok(out)
     }
 }

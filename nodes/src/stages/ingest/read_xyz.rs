@@ -54,6 +54,9 @@ pub fn parse_xyz(path: &Path, text: &str, origin: (f64, f64)) -> Result<PointSet
     let mut xyz = Vec::new();
     let mut class = Vec::new();
     let mut saw_class = None;
+    // Only the first line that is not a comment may be a header: a file of text is an error on
+    // its second line, not an empty point set.
+    let mut header_seen = false;
     for (i, line) in text.lines().enumerate() {
         let line_no = i + 1;
         let trimmed = line.trim();
@@ -64,9 +67,11 @@ pub fn parse_xyz(path: &Path, text: &str, origin: (f64, f64)) -> Result<PointSet
         let first_is_number = fields
             .first()
             .is_some_and(|(_, f)| f.parse::<f64>().is_ok());
-        if xyz.is_empty() && saw_class.is_none() && !first_is_number {
-            continue; // a header line
+        if !header_seen && xyz.is_empty() && !first_is_number {
+            header_seen = true;
+            continue;
         }
+        header_seen = true;
         if fields.len() < 3 || fields.len() > 4 {
             return Err(StageError::bad_input(
                 path,
@@ -115,11 +120,29 @@ pub fn parse_xyz(path: &Path, text: &str, origin: (f64, f64)) -> Result<PointSet
                 })?;
             class.push(c as u8);
         }
-        xyz.push([
-            (v[0] - origin.0) as f32,
-            (v[1] - origin.1) as f32,
-            v[2] as f32,
-        ]);
+        let site = [v[0] - origin.0, v[1] - origin.1, v[2]];
+        if let Some(k) = site
+            .iter()
+            .position(|c| !(c.abs() <= crate::artifact::MAX_COORD_M as f64))
+        {
+            return Err(StageError::bad_input(
+                path,
+                format!("line {line_no}, column {}", fields[k].0 + 1),
+                format!(
+                    "expected a coordinate within {:e} m of the site origin, found {}",
+                    crate::artifact::MAX_COORD_M,
+                    fields[k].1
+                ),
+            ));
+        }
+        xyz.push(site.map(|c| c as f32));
+    }
+    if xyz.is_empty() {
+        return Err(StageError::bad_input(
+            path,
+            format!("line {}", text.lines().count().max(1)),
+            "expected at least one point (x y z [class]); the file ended without any",
+        ));
     }
     Ok(PointSet {
         xyz: PodVec(xyz),

@@ -146,6 +146,7 @@ impl Stage for RadioMap {
                 "expected a finite height in metres",
             ));
         }
+        crate::params::check_antenna("antenna", &p.antenna)?;
         crate::params::check_cell(Some(p.cell_m))?;
         if !p.cell_m.is_finite() {
             return Err(ParamError::new(
@@ -160,6 +161,25 @@ impl Stage for RadioMap {
         let scene: &Scene = inputs.one("scene")?;
         let terrain: Option<&Raster> = inputs.optional("terrain")?;
         let rf = RfScene::new(scene, p.freq_hz, p.extrapolate).map_err(StageError::Failed)?;
+        // The map's cells, from the extent it covers and cell_m, are checked before the map
+        // (and the tracer's per-cell accumulators) are allocated.
+        let (w, h) = match terrain {
+            Some(t) => (
+                (t.grid.width as f64 * t.grid.cell_m / p.cell_m).ceil(),
+                (t.grid.height as f64 * t.grid.cell_m / p.cell_m).ceil(),
+            ),
+            None => (
+                ((rf.bounds.1.x - rf.bounds.0.x) / p.cell_m).ceil().max(1.0),
+                ((rf.bounds.1.y - rf.bounds.0.y) / p.cell_m).ceil().max(1.0),
+            ),
+        };
+        // Path gain and hit counts per cell, as f64: 16 bytes each.
+        crate::params::check_cells(w, h, 16).map_err(|m| {
+            StageError::Param(ParamError::new(
+                "cell_m",
+                format!("{m}; use a coarser cell"),
+            ))
+        })?;
         let (plane, tx) = match terrain {
             Some(t) => {
                 let tg = t.grid;

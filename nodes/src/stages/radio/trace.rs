@@ -118,6 +118,8 @@ impl Stage for Trace {
     type Output = Measurements;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        crate::params::check_antenna("tx_antenna", &p.tx_antenna)?;
+        crate::params::check_antenna("rx_antenna", &p.rx_antenna)?;
         p.options
             .trace_options()
             .check()

@@ -1,0 +1,267 @@
+//! Ray casting and radio-map throughput: closest-hit and any-hit rays/s per core on munich and on
+//! a 1 km² synthetic city, and the munich radio map at 10^6 / 10^7 rays, depth 3 / 5, on 1 and 2
+//! threads. Every figure is the best of `--n` runs (default 5): the machine is shared.
+//!
+//! `cargo bench --bench raycast -- [cast] [map] [--n N] [--threads 1,2] [--rays 1e6,1e7]
+//! [--depth 3,5]` (both parts by default). Needs ../shared/data (munich). Figures go in
+//! BENCHMARKS.md.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use glam::DVec3;
+use kodama_nodes::artifact::Scene;
+use kodama_nodes::artifact::TerrainModel;
+use kodama_nodes::geom::raycast::SceneRays;
+use kodama_nodes::io::sionna_xml::read_scene_with_thickness;
+use kodama_nodes::rf::antenna::Antenna;
+use kodama_nodes::rf::fibonacci::fibonacci_sphere;
+use kodama_nodes::rf::paths::TraceOptions;
+use kodama_nodes::rf::radiomap::{default_plane, radio_map};
+use kodama_nodes::rf::scene::RfScene;
+use kodama_nodes::stage::Slot;
+use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
+use kodama_nodes::synth::truth_scene::{TruthScene, TruthSceneParams};
+use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
+use rayon::prelude::*;
+
+const TX: [f64; 3] = [8.5, 21.0, 27.0];
+
+struct Args {
+    cast: bool,
+    map: bool,
+    n: usize,
+    threads: Vec<usize>,
+    rays: Vec<u32>,
+    depth: Vec<u32>,
+}
+
+fn list<T: std::str::FromStr>(s: &str) -> Vec<T> {
+    s.split(',')
+        .filter_map(|v| v.parse::<f64>().ok())
+        .filter_map(|v| format!("{}", v as u64).parse().ok())
+        .collect()
+}
+
+fn args() -> Args {
+    let mut a = Args {
+        cast: false,
+        map: false,
+        n: 5,
+        threads: vec![1, 2],
+        rays: vec![1_000_000, 10_000_000],
+        depth: vec![3, 5],
+    };
+    let v: Vec<String> = std::env::args().skip(1).collect();
+    let mut i = 0;
+    while i < v.len() {
+        let next = v.get(i + 1).cloned().unwrap_or_default();
+        match v[i].as_str() {
+            "cast" => a.cast = true,
+            "map" => a.map = true,
+            "--n" => (a.n, i) = (next.parse().unwrap_or(5), i + 1),
+            "--threads" => (a.threads, i) = (list(&next), i + 1),
+            "--rays" => (a.rays, i) = (list(&next), i + 1),
+            "--depth" => (a.depth, i) = (list(&next), i + 1),
+            _ => {}
+        }
+        i += 1;
+    }
+    if !a.cast && !a.map {
+        (a.cast, a.map) = (true, true);
+    }
+    a
+}
+
+fn munich() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/sionna-scenes/munich/munich.xml")
+}
+
+fn best_of(n: usize, threads: usize, mut f: impl FnMut() + Send) -> f64 {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("thread pool");
+    (0..n)
+        .map(|_| {
+            let t = Instant::now();
+            pool.install(&mut f);
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// A ray to cast: origin, unit direction, tmin.
+type Ray = ([f32; 3], [f32; 3], f32);
+
+/// The radio map's kind of rays: a Fibonacci sphere from `tx` and its specular continuations
+/// to `depth` bounces (about half the primary rays go to the sky), and shadow rays from every
+/// first hit to a street-level point.
+fn bounce_rays(rays: &SceneRays, tx: [f32; 3], n: u32, depth: u32) -> (Vec<Ray>, Vec<Ray>) {
+    let mut all = Vec::new();
+    let mut live: Vec<Ray> = fibonacci_sphere(n)
+        .map(|d| (tx, d.as_vec3().to_array(), 0.0))
+        .collect();
+    let mut shadow = Vec::new();
+    for level in 0..depth {
+        all.extend_from_slice(&live);
+        let next: Vec<(Ray, Option<Ray>)> = live
+            .par_iter()
+            .filter_map(|&(o, d, tmin)| {
+                let h = rays.cast(o, d, tmin, f32::INFINITY)?;
+                let p = [0, 1, 2].map(|k| o[k] + d[k] * h.t);
+                let n = h.normal;
+                let dn = d[0] * n[0] + d[1] * n[1] + d[2] * n[2];
+                let r = [0, 1, 2].map(|k| d[k] - 2.0 * dn * n[k]);
+                let s = (level == 0).then(|| {
+                    let to = [tx[0] + 60.0, tx[1] - 40.0, 1.5];
+                    let v = [0, 1, 2].map(|k| to[k] - p[k]);
+                    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                    (p, v.map(|c| c / l), l)
+                });
+                Some(((p, r, 1e-3), s))
+            })
+            .collect();
+        live = next.iter().map(|r| r.0).collect();
+        shadow.extend(next.iter().filter_map(|r| r.1));
+    }
+    (all, shadow)
+}
+
+fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
+    let t = Instant::now();
+    let rays = SceneRays::new(scene);
+    let build = t.elapsed().as_secs_f64();
+    let (closest, shadow) = bounce_rays(&rays, tx, 1_000_000, 3);
+    println!(
+        "{name}: {} triangles, wide BVH built in {:.0} ms ({}), {} closest-hit rays (10^6 \
+         from the tx + specular to depth 3), {} shadow rays",
+        rays.len(),
+        build * 1e3,
+        if rays.uses_simd() { "AVX2" } else { "scalar" },
+        closest.len(),
+        shadow.len()
+    );
+    for &threads in &a.threads {
+        let secs = best_of(a.n, threads, || {
+            let hits: usize = closest
+                .par_chunks(4096)
+                .map(|c| {
+                    c.iter()
+                        .filter(|(o, d, tmin)| rays.cast(*o, *d, *tmin, f32::INFINITY).is_some())
+                        .count()
+                })
+                .sum();
+            std::hint::black_box(hits);
+        });
+        let any = best_of(a.n, threads, || {
+            let hits: usize = shadow
+                .par_chunks(4096)
+                .map(|c| {
+                    c.iter()
+                        .filter(|(o, d, l)| rays.occluded(*o, *d, 1e-3, *l - 1e-3))
+                        .count()
+                })
+                .sum();
+            std::hint::black_box(hits);
+        });
+        let per_core = |n: usize, s: f64| n as f64 / s / 1e6 / threads as f64;
+        println!(
+            "  {threads} thread(s): closest-hit {:.3} s = {:.1} M rays/s per core; any-hit {:.3} s \
+             = {:.1} M rays/s per core",
+            secs,
+            per_core(closest.len(), secs),
+            any,
+            per_core(shadow.len(), any)
+        );
+    }
+}
+
+fn synthetic_city() -> Scene {
+    let site = Site {
+        crs: "EPSG:32618".into(),
+        origin: (583200.0, 4506600.0),
+        cell_m: 0.5,
+    };
+    let ctx = Ctx::new(&site, &[]);
+    let size = (1000.0, 1000.0);
+    let city = generate(&SynthCityParams {
+        size_m: size,
+        blocks: (10, 10),
+        terrain: TerrainModel {
+            seed: 7,
+            size_m: size,
+            ..Default::default()
+        },
+        ..Default::default()
+    });
+    let out = TruthScene::run(
+        &TruthSceneParams::default(),
+        &Inputs::new().with("city", Slot::One(std::sync::Arc::new(Artifact::City(city)))),
+        &ctx,
+    )
+    .expect("truth scene");
+    out
+}
+
+fn main() {
+    let a = args();
+    let xml = munich();
+    let (scene, thickness) = read_scene_with_thickness(&xml).expect("munich (../shared/data)");
+    let tx = TX.map(|c| c as f32);
+    if a.cast {
+        cast_case("munich", &scene, tx, &a);
+        let city = synthetic_city();
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for o in &city.objects {
+            for p in o.mesh.positions.iter() {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(p[k]);
+                    hi[k] = hi[k].max(p[k]);
+                }
+            }
+        }
+        let tx = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0, lo[2] + 45.0];
+        cast_case("synthetic city 1 km x 1 km", &city, tx, &a);
+    }
+    if a.map {
+        let rf = thickness.into_iter().fold(
+            RfScene::new(&scene, 3.5e9, false).expect("munich materials"),
+            |rf, (m, d)| rf.with_thickness(m, d),
+        );
+        let plane = default_plane(&rf, 5.0, 1.5);
+        println!(
+            "munich radio map: tx {TX:?}, 3.5 GHz, {} x {} cells of 5 m at 1.5 m, LOS + specular + \
+             transmission",
+            plane.grid.width, plane.grid.height
+        );
+        for &rays in &a.rays {
+            for &depth in &a.depth {
+                let opt = TraceOptions {
+                    max_depth: depth,
+                    rays,
+                    ..Default::default()
+                };
+                let mut line = format!("  {rays:>9} rays, depth {depth}:");
+                for &threads in &a.threads {
+                    let secs = best_of(a.n, threads, || {
+                        let map = radio_map(
+                            &rf,
+                            DVec3::from(TX),
+                            &Antenna::default(),
+                            &plane,
+                            &opt,
+                            3.5e9,
+                        );
+                        std::hint::black_box(map);
+                    });
+                    line += &format!(
+                        "  {threads} thread(s) {secs:.3} s ({:.2} M rays/s)",
+                        rays as f64 / secs / 1e6
+                    );
+                }
+                println!("{line}");
+            }
+        }
+    }
+}

@@ -1,0 +1,219 @@
+//! The report's scoring charts: predicted vs measured, the CDF of the absolute error, and path
+//! loss vs distance with each model's power-distance trend line (rf.md §6).
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use super::{Draw, FONT, PALETTE, padded_range, plot_err, rgb};
+
+/// One model's links: (distance m, measured loss dB with the offset taken out, predicted dB).
+pub struct ModelSeries<'a> {
+    /// Legend name.
+    pub name: &'a str,
+    /// Its links.
+    pub links: &'a [(f64, f64, f64)],
+    /// Its power-distance fit PL = a + 10 b log10(d), when it has one.
+    pub trend: Option<(f64, f64)>,
+}
+
+fn colour(k: usize) -> RGBColor {
+    rgb(PALETTE[k % PALETTE.len()])
+}
+
+const TITLE: u32 = 40;
+const LABEL: u32 = 28;
+const TICK: u32 = 22;
+
+fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    at: SeriesLabelPosition,
+) -> Result<(), String> {
+    chart
+        .configure_series_labels()
+        .position(at)
+        .label_font((FONT, LABEL))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK.mix(0.5))
+        .margin(12)
+        .draw()
+        .map_err(plot_err)
+}
+
+/// Predicted against measured path loss, one colour per model, the 1:1 line.
+pub struct Scatter<'a>(pub &'a [ModelSeries<'a>]);
+
+impl Draw for Scatter<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        let r = padded_range(
+            self.0
+                .iter()
+                .flat_map(|m| m.links.iter().flat_map(|l| [l.1, l.2])),
+        );
+        let mut chart = ChartBuilder::on(root)
+            .caption("Predicted vs measured path loss", (FONT, TITLE))
+            .margin(30)
+            .x_label_area_size(80)
+            .y_label_area_size(100)
+            .build_cartesian_2d(r.0..r.1, r.0..r.1)
+            .map_err(plot_err)?;
+        chart
+            .configure_mesh()
+            .x_desc("measured path loss (dB)")
+            .y_desc("predicted path loss (dB)")
+            .axis_desc_style((FONT, LABEL))
+            .label_style((FONT, TICK))
+            .light_line_style(BLACK.mix(0.05))
+            .draw()
+            .map_err(plot_err)?;
+        chart
+            .draw_series(LineSeries::new(
+                [(r.0, r.0), (r.1, r.1)],
+                BLACK.mix(0.4).stroke_width(2),
+            ))
+            .map_err(plot_err)?
+            .label("1:1")
+            .legend(|(x, y)| {
+                PathElement::new([(x, y), (x + 30, y)], BLACK.mix(0.4).stroke_width(2))
+            });
+        for (k, m) in self.0.iter().enumerate() {
+            let c = colour(k);
+            chart
+                .draw_series(
+                    m.links
+                        .iter()
+                        .map(|l| Circle::new((l.1, l.2), 4, c.mix(0.7).filled())),
+                )
+                .map_err(plot_err)?
+                .label(m.name)
+                .legend(move |(x, y)| Circle::new((x + 15, y), 7, c.filled()));
+        }
+        legend(&mut chart, SeriesLabelPosition::UpperLeft)
+    }
+}
+
+/// The CDF of |predicted − measured| per model.
+pub struct ErrorCdf<'a>(pub &'a [ModelSeries<'a>]);
+
+impl Draw for ErrorCdf<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        let errs: Vec<Vec<f64>> = self
+            .0
+            .iter()
+            .map(|m| {
+                let mut e: Vec<f64> = m.links.iter().map(|l| (l.2 - l.1).abs()).collect();
+                e.sort_by(f64::total_cmp);
+                e
+            })
+            .collect();
+        let xmax = errs.iter().flatten().fold(1.0f64, |a, &v| a.max(v)) * 1.02;
+        let mut chart = ChartBuilder::on(root)
+            .caption("CDF of the absolute prediction error", (FONT, TITLE))
+            .margin(30)
+            .x_label_area_size(80)
+            .y_label_area_size(100)
+            .build_cartesian_2d(0.0..xmax, 0.0..1.0)
+            .map_err(plot_err)?;
+        chart
+            .configure_mesh()
+            .x_desc("|predicted − measured| (dB)")
+            .y_desc("share of links")
+            .axis_desc_style((FONT, LABEL))
+            .label_style((FONT, TICK))
+            .light_line_style(BLACK.mix(0.05))
+            .draw()
+            .map_err(plot_err)?;
+        for (k, (m, e)) in self.0.iter().zip(&errs).enumerate() {
+            let c = colour(k);
+            let n = e.len().max(1) as f64;
+            // A step function: each link raises the curve by 1/n at its error.
+            let mut pts = vec![(0.0, 0.0)];
+            for (i, &v) in e.iter().enumerate() {
+                pts.push((v, i as f64 / n));
+                pts.push((v, (i + 1) as f64 / n));
+            }
+            chart
+                .draw_series(LineSeries::new(pts, c.stroke_width(3)))
+                .map_err(plot_err)?
+                .label(m.name)
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 30, y)], c.stroke_width(3)));
+        }
+        legend(&mut chart, SeriesLabelPosition::LowerRight)
+    }
+}
+
+/// Path loss against distance (log axis): the measurements and each model's trend line.
+pub struct PathLossDistance<'a>(pub &'a [ModelSeries<'a>]);
+
+impl Draw for PathLossDistance<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        let ds = || {
+            self.0
+                .iter()
+                .flat_map(|m| m.links.iter().map(|l| l.0))
+                .filter(|d| *d > 0.0)
+        };
+        let (dmin, dmax) = ds().fold((f64::INFINITY, 0.0f64), |(a, b), d| (a.min(d), b.max(d)));
+        let (dmin, dmax) = if dmin < dmax {
+            (dmin * 0.9, dmax * 1.1)
+        } else {
+            (1.0, 1000.0)
+        };
+        let yr = padded_range(
+            self.0
+                .iter()
+                .flat_map(|m| m.links.iter().flat_map(|l| [l.1, l.2])),
+        );
+        let mut chart = ChartBuilder::on(root)
+            .caption(
+                "Path loss vs distance, power-distance trend lines",
+                (FONT, TITLE),
+            )
+            .margin(30)
+            .x_label_area_size(80)
+            .y_label_area_size(100)
+            .build_cartesian_2d((dmin..dmax).log_scale(), yr.0..yr.1)
+            .map_err(plot_err)?;
+        chart
+            .configure_mesh()
+            .x_desc("link distance (m, log scale)")
+            .x_labels(12)
+            .x_label_formatter(&|d| format!("{d:.0}"))
+            .y_desc("path loss (dB)")
+            .axis_desc_style((FONT, LABEL))
+            .label_style((FONT, TICK))
+            .light_line_style(BLACK.mix(0.05))
+            .draw()
+            .map_err(plot_err)?;
+        if let Some(first) = self.0.first() {
+            let grey = RGBColor(90, 90, 90);
+            chart
+                .draw_series(
+                    first
+                        .links
+                        .iter()
+                        .filter(|l| l.0 > 0.0)
+                        .map(|l| Circle::new((l.0, l.1), 3, grey.mix(0.5).filled())),
+                )
+                .map_err(plot_err)?
+                .label("measured")
+                .legend(move |(x, y)| Circle::new((x + 15, y), 6, grey.filled()));
+        }
+        for (k, m) in self.0.iter().enumerate() {
+            let Some((a, b)) = m.trend else { continue };
+            let c = colour(k);
+            // Only inside the axes: plotters would flatten the part outside onto the frame.
+            let line = (0..=200)
+                .map(|i| {
+                    let d = dmin * (dmax / dmin).powf(i as f64 / 200.0);
+                    (d, a + 10.0 * b * d.log10())
+                })
+                .filter(|p| (yr.0..=yr.1).contains(&p.1));
+            chart
+                .draw_series(LineSeries::new(line, c.stroke_width(3)))
+                .map_err(plot_err)?
+                .label(format!("{} (n = {b:.2})", m.name))
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 30, y)], c.stroke_width(3)));
+        }
+        legend(&mut chart, SeriesLabelPosition::LowerRight)
+    }
+}
