@@ -18,9 +18,8 @@ use serde_json::{Value, json};
 /// the user's fault).
 fn fails<S: Stage>(params: Value, inputs: &Inputs, files: &[PathBuf]) -> String {
     let p: S::Params = serde_json::from_value(params).expect("params parse");
-    match S::validate(&p) {
-        Err(e) => return format!("param `{}`: {}", e.field, e.message),
-        Ok(()) => {}
+    if let Err(e) = S::validate(&p) {
+        return format!("param `{}`: {}", e.field, e.message);
     }
     let site = site();
     match S::run(&p, inputs, &Ctx::new(&site, files)) {
