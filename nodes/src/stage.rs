@@ -128,6 +128,24 @@ impl StageError {
             expected: expected.into(),
         }
     }
+    /// Runs `f`, a third-party decoder step that panics on some corrupt files (gltf-json, laz):
+    /// such a panic is the file's fault, reported as bad input at `place`, `expected` followed by
+    /// the panic's message.
+    pub fn catch_decoder_panic<T>(
+        file: &Path,
+        place: &str,
+        expected: &str,
+        f: impl FnOnce() -> T,
+    ) -> Result<T, StageError> {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| {
+            let why = p
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| p.downcast_ref::<&str>().copied())
+                .unwrap_or("a panic");
+            StageError::bad_input(file, place, format!("{expected}: {why})"))
+        })
+    }
     /// True when the user's input (data or params) is at fault, which the CLI reports as exit 2.
     pub fn is_user_error(&self) -> bool {
         !matches!(self, StageError::Failed(_))

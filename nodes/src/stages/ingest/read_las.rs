@@ -351,18 +351,7 @@ fn laz_points_held(path: &Path, h: &las::raw::Header, n: u64) -> u64 {
 /// Runs a step of the LAZ decoder, whose arithmetic decoder asserts on corrupt data (in builds
 /// with debug assertions): such a panic is the file's fault, reported at `place`.
 fn decoding<T>(path: &Path, place: &str, f: impl FnOnce() -> T) -> Result<T, StageError> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).map_err(|p| {
-        let why = p
-            .downcast_ref::<String>()
-            .map(String::as_str)
-            .or_else(|| p.downcast_ref::<&str>().copied())
-            .unwrap_or("a panic");
-        StageError::bad_input(
-            path,
-            place,
-            format!("decodable LAZ data (the decoder failed: {why})"),
-        )
-    })
+    StageError::catch_decoder_panic(path, place, "decodable LAZ data (the decoder failed", f)
 }
 
 /// Reads `path` into the site frame of `ctx`, in batches so progress can be reported.

@@ -252,18 +252,12 @@ fn read_content_file(
     check_glb_container(file, glb)?;
     // gltf-json's validation indexes some lists unchecked (a POSITION accessor past the
     // accessors panics, gltf-json 1.4.1): a panic there is this file's fault, reported as such.
-    let parsed = std::panic::catch_unwind(|| gltf::Gltf::from_slice(glb)).map_err(|p| {
-        let why = p
-            .downcast_ref::<String>()
-            .map(String::as_str)
-            .or_else(|| p.downcast_ref::<&str>().copied())
-            .unwrap_or("a panic");
-        StageError::bad_input(
-            file,
-            "glTF",
-            format!("expected a well-formed glTF binary (its parser failed: {why})"),
-        )
-    })?;
+    let parsed = StageError::catch_decoder_panic(
+        file,
+        "glTF",
+        "expected a well-formed glTF binary (its parser failed",
+        || gltf::Gltf::from_slice(glb),
+    )?;
     let gltf = parsed
         .map_err(|e| StageError::bad_input(file, "glTF", format!("expected a glTF binary: {e}")))?;
     let buffers: Vec<Vec<u8>> = gltf
