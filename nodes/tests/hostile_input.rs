@@ -523,6 +523,81 @@ fn views_with_no_focal_length_no_rotation_or_unknown_materials_are_refused() {
 }
 
 // ------------------------------------------------------------------------------------------------
+// Paths in data files: a file a data file names is read only from inside the folder the node
+// declared (the one the cache digests)
+
+#[test]
+fn a_scene_xml_naming_a_ply_outside_its_folder_is_refused_before_reading_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, t) = tetra();
+    // A readable PLY sits outside the scene's folder: it must not be read.
+    write(dir.path(), "outside.ply", write_ply(&p, &t));
+    for (path, why) in [
+        ("../outside.ply", "leads outside"),
+        ("meshes/../../outside.ply", "leads outside"),
+        ("/etc/passwd", "absolute path"),
+    ] {
+        let xml = SCENE_XML.replace("meshes/buildings.ply", path);
+        let xml = write(dir.path(), "scene/scene.xml", xml);
+        let e = read_scene(&xml).unwrap_err();
+        assert!(e.is_user_error(), "{e}");
+        expect_all(&e.to_string(), &["scene.xml", "shape \"mesh-b\", filename", why]);
+    }
+}
+
+#[test]
+fn a_view_image_outside_the_view_folder_or_an_id_that_is_a_path_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    image::RgbImage::new(8, 4)
+        .save(dir.path().join("secret.png"))
+        .unwrap();
+    std::fs::create_dir_all(dir.path().join("v")).unwrap();
+    let view = |id: &str, image: &str| {
+        json!({"views": [{"id": id, "image": image, "width": 8, "height": 4,
+                          "intrinsics": {"fx": 4, "fy": 4, "cx": 4, "cy": 2},
+                          "pose": {"x": 0, "y": 0, "z": 2},
+                          "orientation": {"heading_deg": 0}}]})
+        .to_string()
+    };
+    let read = |doc: String| {
+        write(dir.path(), "v/views.json", doc);
+        let p = serde_json::from_value(json!({"path": "v/views.json"})).unwrap();
+        let files = [dir.path().join("v")];
+        kodama_nodes::stages::ingest::read_views::ReadViews::run(
+            &p,
+            &Inputs::new(),
+            &Ctx::new(&site(), &files),
+        )
+        .expect_err("hostile views accepted")
+    };
+    for (image, why) in [("../secret.png", "leads outside"), ("/tmp/x.png", "absolute path")] {
+        let e = read(view("a", image));
+        assert!(e.is_user_error(), "{e}");
+        expect_all(&e.to_string(), &["views.json", "image", why]);
+    }
+    let e = read(view("../../x", "img.png"));
+    expect_all(&e.to_string(), &["views.json", "view 0, id", "path separator"]);
+}
+
+#[test]
+fn a_tileset_uri_outside_its_folder_or_remote_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), "a.glb", glb_with_x(1.0));
+    for (uri, why) in [
+        ("../a.glb", "leads outside"),
+        ("https://example.com/a.glb", "download remote content first"),
+    ] {
+        write(dir.path(), "tiles/tileset.json", TILESET.replace("a.glb", uri));
+        let e = fails::<kodama_nodes::stages::ingest::read_tiles::ReadTileset>(
+            json!({"path": "tiles/tileset.json", "crs": "EPSG:32618"}),
+            &Inputs::new(),
+            &[dir.path().join("tiles")],
+        );
+        expect_all(&e, &["tileset.json", "root.content.uri", why]);
+    }
+}
+
+// ------------------------------------------------------------------------------------------------
 // Errors at the right place
 
 #[test]

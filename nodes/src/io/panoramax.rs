@@ -21,7 +21,7 @@
 //! the geometry's height with `trust_altitude`. Panoramax serves images upright. Panoramas are cut
 //! into level pinhole views `<id>-<k>` from the panorama's heading.
 
-use std::path::{Component, Path, PathBuf};
+use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
@@ -229,14 +229,8 @@ fn image_path(id: &str, rec: &Record, images: &ImageIndex) -> Result<PathBuf, St
         if href.contains("://") {
             continue;
         }
-        let rel = Path::new(href);
-        if !rel
-            .components()
-            .all(|c| matches!(c, Component::Normal(_) | Component::CurDir))
-        {
-            return Err(rec.bad(&field, format!("a path inside the folder, found {href:?}")));
-        }
-        let p = dir.join(rel);
+        let p = crate::io::safe_name::resolve_inside(dir, dir, href)
+            .map_err(|m| rec.bad(&field, m))?;
         if p.is_file() {
             return Ok(p);
         }

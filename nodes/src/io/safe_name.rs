@@ -1,7 +1,10 @@
 //! The one check every name that becomes a file name passes: output names, view ids, tile and
-//! atlas entries. Names come from graph files and from data (a view set's ids), so a hostile or
+//! atlas entries; and the one check every path a data file gives for another file passes
+//! ([`resolve_inside`]). Names come from graph files and from data (a view set's ids), so a hostile or
 //! careless one must not reach outside the output folder, clobber a sibling, or produce a name
 //! that only some systems can open.
+
+use std::path::{Component, Path, PathBuf};
 
 /// The longest file-name component most filesystems take (bytes).
 pub const MAX_NAME_BYTES: usize = 255;
@@ -85,6 +88,59 @@ pub fn check_folder<'a>(paths: impl IntoIterator<Item = &'a str>) -> Result<(), 
     Ok(())
 }
 
+/// Resolves `rel`, a path that a data file gives for another file (a scene's PLY, a view's image,
+/// a tile's content), against `base`, the folder of the file that names it, and checks that the
+/// result stays inside `root`, the folder the node declared (and the cache digests): an absolute
+/// path, or one that climbs out with `..`, is refused, since reading it would read a file the node
+/// never declared and the cache never digested. The error says which. The check is lexical:
+/// symbolic links inside the folder are the engine's to police (it refuses one leading outside
+/// unless the user passes `--allow-outside`, and then digests what it leads to).
+pub fn resolve_inside(root: &Path, base: &Path, rel: &str) -> Result<PathBuf, String> {
+    if rel.is_empty() {
+        return Err("an empty path; expected a file inside the folder".into());
+    }
+    if rel.contains('\0') {
+        return Err(format!("{rel:?} contains a NUL byte"));
+    }
+    let r = Path::new(rel);
+    if r.has_root() || r.components().any(|c| matches!(c, Component::Prefix(_))) {
+        return Err(format!(
+            "{rel:?} is an absolute path; expected a path relative to {}, inside it",
+            root.display()
+        ));
+    }
+    let root_n = normalise(root);
+    let joined = normalise(&base.join(r));
+    if !joined.starts_with(&root_n) {
+        return Err(format!(
+            "{rel:?} leads outside {} (to {}); expected a file inside that folder",
+            root.display(),
+            joined.display()
+        ));
+    }
+    Ok(joined)
+}
+
+/// `p` with `.` dropped and each `..` taking off the component before it, without touching the
+/// filesystem. A `..` above the start is kept, so the result then fails any `starts_with` check.
+fn normalise(p: &Path) -> PathBuf {
+    let mut out: Vec<Component> = Vec::new();
+    for c in p.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => match out.last() {
+                Some(Component::Normal(_)) => {
+                    out.pop();
+                }
+                Some(Component::RootDir | Component::Prefix(_)) => {}
+                _ => out.push(c),
+            },
+            c => out.push(c),
+        }
+    }
+    out.iter().collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -124,5 +180,26 @@ mod tests {
         assert!(check_folder(["a.png", "b.png"]).is_ok());
         let e = check_folder(["img/A.png", "img/a.png"]).unwrap_err();
         assert!(e.contains("same file"), "{e}");
+    }
+
+    #[test]
+    fn paths_in_data_files_stay_inside_the_declared_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path();
+        std::fs::create_dir_all(root.join("meshes/sub")).unwrap();
+        std::fs::write(root.join("meshes/a.ply"), b"x").unwrap();
+        assert_eq!(
+            resolve_inside(root, root, "meshes/a.ply").unwrap(),
+            normalise(&root.join("meshes/a.ply"))
+        );
+        // Climbing within the folder is fine.
+        assert!(resolve_inside(root, &root.join("meshes/sub"), "../a.ply").is_ok());
+        for bad in ["../x.ply", "meshes/../../x.ply", "/etc/passwd", ""] {
+            let e = resolve_inside(root, root, bad).unwrap_err();
+            assert!(
+                e.contains("outside") || e.contains("absolute") || e.contains("empty"),
+                "{bad:?}: {e}"
+            );
+        }
     }
 }

@@ -124,7 +124,9 @@ pub fn read_scene_with_thickness(
                 &format!("a material defined in the file (no bsdf \"{bsdf}\")"),
             )
         })?;
-        let ply = dir.join(file);
+        // The node declared (and the cache digested) the XML's folder: nothing outside it is read.
+        let ply = crate::io::safe_name::resolve_inside(dir, dir, file)
+            .map_err(|m| bad(format!("{}, filename", place()), &m))?;
         let mut mesh = read_ply(&ply)?;
         mesh.materials = PodVec(vec![material as u8; mesh.triangles.len()]);
         mesh.check()

@@ -177,7 +177,13 @@ fn view_id(views_json: &Path, i: usize, v: &Value) -> Result<String, StageError>
             .map(str::to_owned)
             .or_else(|| x.as_u64().map(|n| n.to_string()))
     });
-    id.ok_or_else(|| StageError::bad_input(views_json, format!("view {i}"), "expected an `id`"))
+    let id =
+        id.ok_or_else(|| StageError::bad_input(views_json, format!("view {i}"), "expected an `id`"))?;
+    // The id names the view's output files (`depth/<id>.exr`): it must be a plain file name.
+    crate::io::safe_name::check_file_name(&id).map_err(|m| {
+        StageError::bad_input(views_json, format!("view {i}, id"), format!("an id usable as a file name: {m}"))
+    })?;
+    Ok(id)
 }
 
 /// The model outputs of one view, as found on disk.
@@ -366,7 +372,8 @@ impl ViewFiles<'_> {
             .get("image")
             .and_then(Value::as_str)
             .ok_or_else(|| entry.bad("image", "expected the image's path"))?;
-        let image_path = self.dir.join(image_rel);
+        let image_path = crate::io::safe_name::resolve_inside(self.dir, self.dir, image_rel)
+            .map_err(|m| entry.bad("image", &m))?;
         if !image_path.is_file() {
             return Err(StageError::bad_input(
                 entry.views_json,

@@ -75,7 +75,11 @@ impl Stage for ReadTileset {
             }
         };
         let mut scene = Scene::default();
-        read_tileset_file(&json, IDENTITY, None, &place, &mut scene, 0)?;
+        let tiles = Tiles {
+            root: folder,
+            place: &*place,
+        };
+        read_tileset_file(&json, IDENTITY, None, &tiles, &mut scene, 0)?;
         if scene.objects.is_empty() {
             return Err(StageError::bad_input(
                 &json,
@@ -114,11 +118,34 @@ const Y_UP_TO_Z_UP: Mat4 = [
 
 type Placer = dyn Fn([f64; 3]) -> Result<[f64; 3], String> + Sync;
 
+/// What every file of a tileset is read with: the folder the node declared, which every URI must
+/// stay inside, and the transform from the tileset's frame to the site's.
+struct Tiles<'a> {
+    root: &'a Path,
+    place: &'a Placer,
+}
+
+impl Tiles<'_> {
+    /// The file `uri` names, relative to `base` (the folder of the file naming it); refused when
+    /// it is remote or leads outside the declared folder.
+    fn resolve(&self, json: &Path, field: &str, base: &Path, uri: &str) -> Result<PathBuf, StageError> {
+        if uri.contains("://") || uri.starts_with("data:") {
+            return Err(StageError::bad_input(
+                json,
+                field,
+                format!("a file inside the tileset's folder, found the URI {uri:?} (download remote content first)"),
+            ));
+        }
+        crate::io::safe_name::resolve_inside(self.root, base, uri)
+            .map_err(|m| StageError::bad_input(json, field, m))
+    }
+}
+
 fn read_tileset_file(
     json: &Path,
     parent: Mat4,
     refine: Option<&str>,
-    place: &Placer,
+    tiles: &Tiles,
     scene: &mut Scene,
     depth: u32,
 ) -> Result<(), StageError> {
@@ -148,7 +175,7 @@ fn read_tileset_file(
         json,
         parent,
         refine.unwrap_or("REPLACE"),
-        place,
+        tiles,
         scene,
         depth,
         "root".into(),
@@ -162,7 +189,7 @@ fn visit_tile(
     json: &Path,
     parent: Mat4,
     refine: &str,
-    place: &Placer,
+    tiles: &Tiles,
     scene: &mut Scene,
     depth: u32,
     path: String,
@@ -211,11 +238,11 @@ fn visit_tile(
             else {
                 continue;
             };
-            let file: PathBuf = base.join(uri);
+            let file = tiles.resolve(json, &format!("{path}.content.uri"), base, uri)?;
             if uri.ends_with(".json") {
-                read_tileset_file(&file, transform, Some(refine), place, scene, depth + 1)?;
+                read_tileset_file(&file, transform, Some(refine), tiles, scene, depth + 1)?;
             } else {
-                read_content_file(&file, uri, &transform, place, scene)?;
+                read_content_file(&file, uri, &transform, tiles, scene)?;
             }
         }
     }
@@ -226,7 +253,7 @@ fn visit_tile(
             json,
             transform,
             refine,
-            place,
+            tiles,
             scene,
             depth,
             format!("{path}.children[{i}]"),
@@ -239,7 +266,7 @@ fn read_content_file(
     file: &Path,
     uri: &str,
     tile: &Mat4,
-    place: &Placer,
+    tiles: &Tiles,
     scene: &mut Scene,
 ) -> Result<(), StageError> {
     let bytes =
@@ -268,7 +295,9 @@ fn read_content_file(
                 .clone()
                 .ok_or_else(|| StageError::bad_input(file, "glTF", "the BIN chunk is missing")),
             gltf::buffer::Source::Uri(u) => {
-                std::fs::read(file.parent().unwrap_or(Path::new(".")).join(u))
+                let base = file.parent().unwrap_or(Path::new("."));
+                let buffer = tiles.resolve(file, &format!("buffer {u}"), base, u)?;
+                std::fs::read(&buffer)
                     .map_err(|e| StageError::bad_input(file, format!("buffer {u}"), e.to_string()))
             }
         })
@@ -318,7 +347,7 @@ fn read_content_file(
                         for p in positions {
                             let e = apply(&world, [p[0] as f64, p[1] as f64, p[2] as f64]);
                             let q =
-                                place(e).map_err(|m| StageError::bad_input(file, "vertex", m))?;
+                                (tiles.place)(e).map_err(|m| StageError::bad_input(file, "vertex", m))?;
                             out.positions.push([q[0] as f32, q[1] as f32, q[2] as f32]);
                         }
                         let b = (base, out.positions.len() as u32 - base);
