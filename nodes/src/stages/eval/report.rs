@@ -15,7 +15,8 @@ use crate::io::export::figures::charts::{ErrorCdf, ModelSeries, PathLossDistance
 use crate::io::export::figures::maps::{Layer, MapFigure, Palette, robust_range, view_grid};
 use crate::io::export::figures::{Figure, render};
 use crate::io::export::report_html::{LinkPoint, Page, TableRow, report_html};
-use crate::rf::pathloss_fit::fit_power_distance;
+use crate::rf::em::fspl_db;
+use crate::rf::pathloss_fit::{fit_close_in, fit_power_distance};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`Report`].
@@ -57,7 +58,7 @@ impl Stage for Report {
     const KIND: &'static str = "Report";
     // 3: report.html with the 3D view; 4: scenes past the page's budget left out, named;
     // 5: plotters figures as SVG and PNG at print size, per-stage figures.
-    const VERSION: u32 = 5;
+    const VERSION: u32 = 6;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -138,13 +139,14 @@ impl Stage for Report {
         for (name, e) in p.models.iter().zip(&evals) {
             json.insert(name, &e.values);
         }
-        // Per model: (distance, measured with its offset taken out, predicted).
-        let series: Vec<Vec<(f64, f64, f64)>> = preds
+        // Per model: (distance, measured with its offset taken out, predicted), and each link's
+        // frequency.
+        let (series, freqs): (Vec<Vec<(f64, f64, f64)>>, Vec<Vec<f64>>) = preds
             .iter()
             .zip(&evals)
-            .map(|(pr, ev)| pairs(meas, pr, ev))
-            .collect();
-        let models = model_series(p, &series);
+            .map(|(pr, ev)| pairs(meas, pr, ev).into_iter().unzip())
+            .unzip();
+        let models = model_series(p, &series, &freqs);
         let mut figures: Vec<(String, Figure)> = vec![
             ("scatter".into(), render(&Scatter(&models)).map_err(fail)?),
             (
@@ -352,42 +354,62 @@ fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
     (md, csv)
 }
 
-fn pairs(meas: &Measurements, pred: &Measurements, ev: &Metrics) -> Vec<(f64, f64, f64)> {
+/// Each scored link as ((distance, measured with the offset taken out, predicted), frequency).
+fn pairs(
+    meas: &Measurements,
+    pred: &Measurements,
+    ev: &Metrics,
+) -> Vec<((f64, f64, f64), f64)> {
     meas.links
         .iter()
         .zip(&pred.links)
         .filter_map(|(m, p)| {
             let offset = ev.get(&format!("offset_db/{}", m.tx.id)).unwrap_or(0.0);
             Some((
-                link_distance(m, None),
-                measured_loss(m)? - offset,
-                // Beyond the floor (or no path): scored as Evaluate scores it.
-                p.path_loss_db
-                    .filter(|v| !v.is_nan())
-                    .and_then(|v| match ev.get("floor_db") {
-                        Some(f) => Some(v.min(f)),
-                        None => v.is_finite().then_some(v),
-                    })?,
+                (
+                    link_distance(m, None),
+                    measured_loss(m)? - offset,
+                    // Beyond the floor (or no path): scored as Evaluate scores it.
+                    p.path_loss_db
+                        .filter(|v| !v.is_nan())
+                        .and_then(|v| match ev.get("floor_db") {
+                            Some(f) => Some(v.min(f)),
+                            None => v.is_finite().then_some(v),
+                        })?,
+                ),
+                m.freq_hz,
             ))
         })
         .collect()
 }
 
-/// Each model's links and trend line, for the charts.
+/// Each model's links and trend lines fitted to its predictions (as Evaluate fits them), for the
+/// charts. The close-in line is drawn at the links' median frequency.
 fn model_series<'a>(
     p: &'a ReportParams,
     series: &'a [Vec<(f64, f64, f64)>],
+    freqs: &[Vec<f64>],
 ) -> Vec<ModelSeries<'a>> {
     p.models
         .iter()
         .zip(series)
-        .map(|(name, links)| {
-            let trend = (links.len() >= 2).then(|| {
-                let d: Vec<f64> = links.iter().map(|x| x.0).collect();
-                let pl: Vec<f64> = links.iter().map(|x| x.2).collect();
-                fit_power_distance(&d, &pl)
+        .zip(freqs)
+        .map(|((name, links), f)| {
+            let d: Vec<f64> = links.iter().map(|x| x.0).collect();
+            let pl: Vec<f64> = links.iter().map(|x| x.2).collect();
+            let trend = (links.len() >= 2).then(|| fit_power_distance(&d, &pl));
+            let close_in = (!links.is_empty()).then(|| {
+                let mut sorted = f.clone();
+                sorted.sort_by(f64::total_cmp);
+                let f_mid = sorted[sorted.len() / 2];
+                (fspl_db(1.0, f_mid), fit_close_in(&d, &pl, f))
             });
-            ModelSeries { name, links, trend }
+            ModelSeries {
+                name,
+                links,
+                trend,
+                close_in,
+            }
         })
         .collect()
 }

@@ -1,7 +1,8 @@
 //! The report's scoring charts: predicted vs measured, the CDF of the absolute error, and path
-//! loss vs distance with each model's power-distance trend line (rf.md §6).
+//! loss vs distance with each model's power-distance and close-in trend lines (rf.md §6).
 
 use plotters::coord::Shift;
+use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
 use super::{Draw, FONT, PALETTE, padded_range, plot_err, rgb};
@@ -14,6 +15,9 @@ pub struct ModelSeries<'a> {
     pub links: &'a [(f64, f64, f64)],
     /// Its power-distance fit PL = a + 10 b log10(d), when it has one.
     pub trend: Option<(f64, f64)>,
+    /// Its close-in fit PL = FSPL(f, 1 m) + 10 n log10(d) as (FSPL(f, 1 m) dB, n), drawn at one
+    /// frequency (the links' median), when it has one.
+    pub close_in: Option<(f64, f64)>,
 }
 
 fn colour(k: usize) -> RGBColor {
@@ -165,7 +169,7 @@ impl Draw for PathLossDistance<'_> {
         );
         let mut chart = ChartBuilder::on(root)
             .caption(
-                "Path loss vs distance, power-distance trend lines",
+                "Path loss vs distance: power-distance (solid) and close-in (dashed) lines",
                 (FONT, TITLE),
             )
             .margin(30)
@@ -198,22 +202,83 @@ impl Draw for PathLossDistance<'_> {
                 .label("measured")
                 .legend(move |(x, y)| Circle::new((x + 15, y), 6, grey.filled()));
         }
-        for (k, m) in self.0.iter().enumerate() {
-            let Some((a, b)) = m.trend else { continue };
-            let c = colour(k);
-            // Only inside the axes: plotters would flatten the part outside onto the frame.
-            let line = (0..=200)
-                .map(|i| {
+        // Only inside the axes: plotters would flatten the part outside onto the frame.
+        let line = |a: f64, b: f64| {
+            (0..=200)
+                .map(move |i| {
                     let d = dmin * (dmax / dmin).powf(i as f64 / 200.0);
                     (d, a + 10.0 * b * d.log10())
                 })
-                .filter(|p| (yr.0..=yr.1).contains(&p.1));
-            chart
-                .draw_series(LineSeries::new(line, c.stroke_width(3)))
-                .map_err(plot_err)?
-                .label(format!("{} (n = {b:.2})", m.name))
-                .legend(move |(x, y)| PathElement::new([(x, y), (x + 30, y)], c.stroke_width(3)));
+                .filter(move |p| (yr.0..=yr.1).contains(&p.1))
+        };
+        for (k, m) in self.0.iter().enumerate() {
+            let c = colour(k);
+            if let Some((a, b)) = m.trend {
+                chart
+                    .draw_series(LineSeries::new(line(a, b), c.stroke_width(3)))
+                    .map_err(plot_err)?
+                    .label(format!("{} PD (n = {b:.2})", m.name))
+                    .legend(move |(x, y)| {
+                        PathElement::new([(x, y), (x + 30, y)], c.stroke_width(3))
+                    });
+            }
+            if let Some((fspl_1m, n)) = m.close_in {
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        line(fspl_1m, n),
+                        12,
+                        8,
+                        c.stroke_width(2),
+                    ))
+                    .map_err(plot_err)?
+                    .label(format!("{} CI (n = {n:.2})", m.name))
+                    .legend(move |(x, y)| {
+                        DashedPathElement::new([(x, y), (x + 30, y)], 8, 5, c.stroke_width(2))
+                    });
+            }
         }
         legend(&mut chart, SeriesLabelPosition::LowerRight)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::export::figures::render;
+    use crate::rf::em::fspl_db;
+    use crate::rf::pathloss_fit::{fit_close_in, fit_power_distance};
+
+    /// Predictions exactly on a close-in line of exponent 3: both fits find n = 3, and the chart
+    /// draws the power-distance line solid and the close-in line dashed, each named with its n.
+    #[test]
+    fn the_path_loss_chart_draws_both_trend_lines_with_their_exponents() {
+        let f = 3.5e9;
+        let fspl_1m = fspl_db(1.0, f);
+        let links: Vec<(f64, f64, f64)> = (1..60)
+            .map(|k| {
+                let d = 8.0 * k as f64;
+                let pl = fspl_1m + 30.0 * d.log10();
+                (d, pl + if k % 2 == 0 { 4.0 } else { -4.0 }, pl)
+            })
+            .collect();
+        let d: Vec<f64> = links.iter().map(|l| l.0).collect();
+        let pl: Vec<f64> = links.iter().map(|l| l.2).collect();
+        let n = fit_close_in(&d, &pl, &vec![f; d.len()]);
+        let (a, b) = fit_power_distance(&d, &pl);
+        assert!((n - 3.0).abs() < 1e-9 && (b - 3.0).abs() < 1e-9 && (a - fspl_1m).abs() < 1e-6);
+        let model = ModelSeries {
+            name: "twin",
+            links: &links,
+            trend: Some((a, b)),
+            close_in: Some((fspl_1m, n)),
+        };
+        let fig = render(&PathLossDistance(&[model])).unwrap();
+        for label in ["twin PD (n = 3.00)", "twin CI (n = 3.00)", "measured"] {
+            assert!(fig.svg.contains(label), "no {label:?} in the SVG");
+        }
+        // The dashed line is drawn as many short segments, the solid one as one polyline.
+        let solid = fig.svg.matches("<polyline").count();
+        let segments = fig.svg.matches("<line").count() + solid;
+        assert!(segments > solid + 20, "{segments} segments, {solid} polylines");
     }
 }
