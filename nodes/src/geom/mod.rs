@@ -17,4 +17,5 @@ pub mod raycast;
 pub mod relief;
 pub mod terrain_mesh;
 pub mod theil_sen;
+pub mod tri_packet;
 pub mod wide_bvh;

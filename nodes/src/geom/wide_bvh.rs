@@ -1,7 +1,7 @@
 //! An 8-wide BVH collapsed from obvhs's BVH2, traversed one ray at a time with the eight child
 //! boxes tested together: AVX2 where the CPU has it (detected at run time), a scalar loop doing the
 //! same IEEE operations in the same order elsewhere, so both paths visit the same nodes and return
-//! the same bits.
+//! the same bits. Leaves hold packets of four triangles tested together ([`TriPacket`]).
 //!
 //! Hits are the smallest (t, triangle index) over every triangle the ray meets: ties between equal
 //! distances go to the lower index whatever the tree's layout or the traversal order, so a hit
@@ -14,6 +14,7 @@ use obvhs::bvh2::Bvh2;
 use obvhs::triangle::Triangle;
 
 use super::raycast::ShearedRay;
+use super::tri_packet::{LANES, TriPacket};
 
 /// Relative slack on a box's exit distance: the slab test and the triangle test round
 /// differently, and a box must never be culled for a triangle it holds.
@@ -23,8 +24,8 @@ const PAD: f32 = 4.0 / (1 << 20) as f32;
 const WIDTH: usize = 8;
 
 /// A node: its children's boxes as structure of arrays, so one load fetches an axis bound of all
-/// eight. A child is a node (`count` 0, `index` the node) or a leaf (`count` triangles from
-/// `index`).
+/// eight. A child is a node (`count` 0, `index` the node) or a leaf (`count` triangle packets
+/// from `index`).
 #[repr(C, align(32))]
 #[derive(Clone, Copy)]
 struct Node {
@@ -39,10 +40,8 @@ struct Node {
 /// The wide BVH over a triangle list.
 pub struct WideBvh {
     nodes: Vec<Node>,
-    /// Triangles in leaf order.
-    tris: Vec<Triangle>,
-    /// For each triangle in leaf order, its index in the input.
-    prims: Vec<u32>,
+    /// The leaves' triangles, in leaf order.
+    packets: Vec<TriPacket>,
     /// Stack entries a traversal can need.
     stack_need: usize,
     simd: bool,
@@ -173,8 +172,7 @@ impl WideBvh {
     pub fn empty() -> WideBvh {
         WideBvh {
             nodes: Vec::new(),
-            tris: Vec::new(),
-            prims: Vec::new(),
+            packets: Vec::new(),
             stack_need: 1,
             simd: simd_available(),
         }
@@ -241,15 +239,19 @@ impl WideBvh {
         for (slot, &c) in open.iter().enumerate() {
             let n = &bvh.nodes[c];
             let (lo, hi) = (n.aabb().min, n.aabb().max);
-            // obvhs keeps leaves to 255 primitives (max_prims_per_leaf is far below).
+            // obvhs keeps leaves to 255 primitives, so at most 64 packets.
             let (index, count) = if n.is_leaf() {
-                let first = self.tris.len() as u32;
-                for k in 0..n.prim_count {
-                    let p = bvh.primitive_indices[(n.first_index + k) as usize];
-                    self.tris.push(tris[p as usize]);
-                    self.prims.push(p);
+                let first = self.packets.len() as u32;
+                let leaf: Vec<(Triangle, u32)> = (0..n.prim_count)
+                    .map(|k| {
+                        let p = bvh.primitive_indices[(n.first_index + k) as usize];
+                        (tris[p as usize], p)
+                    })
+                    .collect();
+                for packet in leaf.chunks(LANES) {
+                    self.packets.push(TriPacket::new(packet));
                 }
-                (first, n.prim_count.min(255) as u8)
+                (first, (self.packets.len() as u32 - first).min(255) as u8)
             } else {
                 let child = self.nodes.len() as u32;
                 depth = depth.max(self.collapse(bvh, tris, c, level + 1));
@@ -375,11 +377,9 @@ fn closest<L: Lanes>(
         if cur.near <= best_t + best_t.abs() * PAD {
             if cur.count != 0 {
                 let first = cur.index as usize;
-                for k in first..first + cur.count as usize {
-                    let t = ray.intersect(&bvh.tris[k], tmax);
-                    if t < tmax && t <= best_t {
-                        let p = bvh.prims[k];
-                        if t < best_t || p < best_p {
+                for packet in &bvh.packets[first..first + cur.count as usize] {
+                    for (t, p) in packet.intersect(ray, tmax).into_iter().zip(packet.prim) {
+                        if t < tmax && t <= best_t && (t < best_t || p < best_p) {
                             (best_t, best_p) = (t, p);
                         }
                     }
@@ -388,17 +388,42 @@ fn closest<L: Lanes>(
                 let node = &bvh.nodes[cur.index as usize];
                 let (mut mask, near) = L::boxes(node, slabs, tmin, best_t);
                 if mask != 0 {
+                    let entry = |i: usize| Entry {
+                        index: node.index[i],
+                        count: node.count[i] as u32,
+                        near: near[i],
+                    };
+                    let first = entry(mask.trailing_zeros() as usize);
+                    mask &= mask - 1;
+                    // One or two children (the usual case) need no sort.
+                    if mask == 0 {
+                        cur = first;
+                        continue;
+                    }
+                    let second = entry(mask.trailing_zeros() as usize);
+                    mask &= mask - 1;
+                    if mask == 0 {
+                        let (near, far) = if second.near < first.near {
+                            (second, first)
+                        } else {
+                            (first, second)
+                        };
+                        stack[top].write(far);
+                        top += 1;
+                        cur = near;
+                        continue;
+                    }
                     // Nearest child next, the others on the stack farthest first.
                     let mut order = [Entry::default(); WIDTH];
-                    let mut n = 0;
-                    while mask != 0 {
-                        let i = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        let e = Entry {
-                            index: node.index[i],
-                            count: node.count[i] as u32,
-                            near: near[i],
-                        };
+                    order[0] = first;
+                    let mut n = 1;
+                    for e in std::iter::once(second).chain(std::iter::from_fn(|| {
+                        (mask != 0).then(|| {
+                            let i = mask.trailing_zeros() as usize;
+                            mask &= mask - 1;
+                            entry(i)
+                        })
+                    })) {
                         let mut j = n;
                         while j > 0 && order[j - 1].near < e.near {
                             order[j] = order[j - 1];
@@ -443,8 +468,8 @@ fn any<L: Lanes>(
     loop {
         if count != 0 {
             let first = cur as usize;
-            for k in first..first + count as usize {
-                if ray.intersect(&bvh.tris[k], tmax).is_finite() {
+            for packet in &bvh.packets[first..first + count as usize] {
+                if packet.intersect(ray, tmax).iter().any(|t| t.is_finite()) {
                     return true;
                 }
             }
