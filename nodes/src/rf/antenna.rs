@@ -103,7 +103,8 @@ impl Antenna {
 
 /// (θ̂, φ̂) at direction `k`; at the poles φ̂ is taken as +y and θ̂ = φ̂ × k.
 pub fn spherical_basis(k: [f64; 3]) -> ([f64; 3], [f64; 3]) {
-    let rho = k[0].hypot(k[1]);
+    // `k` is a unit vector: no overflow for hypot's slower care to guard against.
+    let rho = (k[0] * k[0] + k[1] * k[1]).sqrt();
     if rho < 1e-12 {
         let ph = [0.0, 1.0, 0.0];
         let th = [ph[1] * k[2], -ph[0] * k[2], 0.0];

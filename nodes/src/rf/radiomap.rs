@@ -148,10 +148,22 @@ pub fn radio_map(
         .enumerate()
         .chunks(8192)
         .map(|rays| {
-            let mut hits = Vec::new();
+            let (mut hits, mut crossings) = (Vec::new(), Vec::new());
             for (i, d) in rays {
+                let ray = Ray {
+                    d0: d,
+                    index: i as u64,
+                };
                 shoot(
-                    scene, tx, d, i as u64, antenna, plane, opt, omega, &foliage, &mut hits,
+                    scene,
+                    tx,
+                    ray,
+                    antenna,
+                    plane,
+                    opt,
+                    omega,
+                    &foliage,
+                    (&mut hits, &mut crossings),
                 );
             }
             hits
@@ -168,6 +180,14 @@ pub fn radio_map(
     }
 }
 
+/// A ray leaving the transmitter: its direction and its index on the Fibonacci sphere (the seed of
+/// its event draws).
+#[derive(Clone, Copy)]
+struct Ray {
+    d0: DVec3,
+    index: u64,
+}
+
 /// The foliage a map's rays start in, and its loss.
 struct Foliage {
     at_tx: FoliageDepth,
@@ -176,24 +196,24 @@ struct Foliage {
 
 /// One ray from `tx` along `d0` to the end of its bounces: every crossing of the plane adds the
 /// power it carries to its cell (rf.md §7.2); foliage passed through attenuates it (§5.1).
+/// `out` takes (cell, power) per crossing; the second buffer is scratch, kept between rays so a
+/// ray allocates nothing.
 #[allow(clippy::too_many_arguments)]
 fn shoot(
     scene: &RfScene,
     tx: DVec3,
-    d0: DVec3,
-    ray: u64,
+    Ray { d0, index: ray }: Ray,
     antenna: &Antenna,
     plane: &MapPlane,
     opt: &TraceOptions,
     omega: f64,
     foliage: &Foliage,
-    out: &mut Vec<(u32, f64)>,
+    (out, crossings): (&mut Vec<(u32, f64)>, &mut Vec<(f64, u32, f64)>),
 ) {
     let mut omega = omega;
     let mut e: CVec = field::real(DVec3::from(antenna.field(d0.to_array())));
     let (mut o, mut d) = (tx, d0);
     let (mut depth, mut foliage_depth) = (0u32, foliage.at_tx);
-    let mut crossings = Vec::new();
     loop {
         let hit = scene.cast(o, d, EPS, f64::INFINITY);
         let t_end = hit.map_or(f64::INFINITY, |h| h.t);
@@ -206,8 +226,8 @@ fn shoot(
         };
         if depth > 0 || opt.los {
             crossings.clear();
-            plane.crossings(o, d, t_end, &mut crossings);
-            for &(t, cell, weight) in &crossings {
+            plane.crossings(o, d, t_end, crossings);
+            for &(t, cell, weight) in crossings.iter() {
                 let a = foliage_amp(t);
                 out.push((cell, field::norm_sqr(&e) * a * a * omega * weight));
             }

@@ -28,8 +28,8 @@ pub struct SurfaceHit {
 
 /// The traceable scene.
 pub struct RfScene {
+    /// The BVH; its triangle indices are ours (both count every object's triangles in order).
     rays: SceneRays,
-    offsets: Vec<u32>,
     /// Triangle vertices.
     pub tris: Vec<[DVec3; 3]>,
     /// Unit normals (zero for degenerate triangles).
@@ -52,12 +52,10 @@ impl RfScene {
         if !(freq_hz > 0.0 && freq_hz.is_finite()) {
             return Err(format!("frequency {freq_hz} Hz is not a positive number"));
         }
-        let mut offsets = Vec::new();
         let (mut tris, mut normals, mut material) = (Vec::new(), Vec::new(), Vec::new());
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
         for obj in &scene.objects {
-            offsets.push(tris.len() as u32);
             let p = &obj.mesh.positions;
             for (k, t) in obj.mesh.triangles.iter().enumerate() {
                 let v = t.map(|i| DVec3::from(p[i as usize].map(f64::from)));
@@ -88,7 +86,6 @@ impl RfScene {
         }
         Ok(RfScene {
             rays: SceneRays::new(scene),
-            offsets,
             tris,
             normals,
             material,
@@ -114,20 +111,19 @@ impl RfScene {
 
     /// The closest surface along `o + t d` for t in (`tmin`, `tmax`).
     pub fn cast(&self, o: DVec3, d: DVec3, tmin: f64, tmax: f64) -> Option<SurfaceHit> {
-        let h = self.rays.cast(
+        let (t32, triangle) = self.rays.cast_index(
             o.as_vec3().into(),
             d.as_vec3().into(),
             tmin as f32,
             tmax.min(f32::MAX as f64) as f32,
         )?;
-        let triangle = self.offsets[h.object] + h.triangle as u32;
         // Recompute t in f64 against the triangle's plane: the BVH works in f32.
         let n = self.normals[triangle as usize];
         let denom = n.dot(d);
         let t = if denom.abs() > 1e-12 {
             n.dot(self.tris[triangle as usize][0] - o) / denom
         } else {
-            h.t as f64
+            t32 as f64
         };
         Some(SurfaceHit { t, triangle })
     }
