@@ -3,7 +3,7 @@
 //! threads. Every figure is the best of `--n` runs (default 5): the machine is shared.
 //!
 //! `cargo bench --bench raycast -- [cast] [map] [--n N] [--threads 1,2] [--rays 1e6,1e7]
-//! [--depth 3,5]` (both parts by default). Needs ../shared/data (munich). Figures go in
+//! [--depth 3,5] [--no-city]` (both parts by default; `--no-city` casts on munich only). Needs ../shared/data (munich). Figures go in
 //! BENCHMARKS.md.
 
 use std::path::PathBuf;
@@ -34,6 +34,7 @@ struct Args {
     threads: Vec<usize>,
     rays: Vec<u32>,
     depth: Vec<u32>,
+    city: bool,
 }
 
 fn list<T: std::str::FromStr>(s: &str) -> Vec<T> {
@@ -51,6 +52,7 @@ fn args() -> Args {
         threads: vec![1, 2],
         rays: vec![1_000_000, 10_000_000],
         depth: vec![3, 5],
+        city: true,
     };
     let v: Vec<String> = std::env::args().skip(1).collect();
     let mut i = 0;
@@ -63,6 +65,7 @@ fn args() -> Args {
             "--threads" => (a.threads, i) = (list(&next), i + 1),
             "--rays" => (a.rays, i) = (list(&next), i + 1),
             "--depth" => (a.depth, i) = (list(&next), i + 1),
+            "--no-city" => a.city = false,
             _ => {}
         }
         i += 1;
@@ -211,6 +214,8 @@ fn main() {
     let tx = TX.map(|c| c as f32);
     if a.cast {
         cast_case("munich", &scene, tx, &a);
+    }
+    if a.cast && a.city {
         let city = synthetic_city();
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
         for o in &city.objects {

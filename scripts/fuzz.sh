@@ -14,11 +14,17 @@ if [ ${#targets[@]} -eq 0 ]; then
     targets=(ply sionna_xml glb views_json measurements_csv las_header laz_header geotiff_tags)
 fi
 # The test profile keeps overflow checks on, so an unchecked size shows up as a panic.
-cargo test -p kodama-nodes --test fuzz_parsers --no-run
+# The test binary runs from a private copy, so cargo's lock and later builds in target/ do not
+# stall or replace it during an hour-long soak.
+bin=$(cargo test -p kodama-nodes --test fuzz_parsers --no-run --message-format=json 2>/dev/null |
+    grep -o '"executable":"[^"]*fuzz_parsers[^"]*"' | tail -1 | cut -d'"' -f4)
+[ -x "$bin" ] || { echo "fuzz.sh: could not build the fuzz_parsers test binary" >&2; exit 1; }
+copy=$(mktemp -d)/fuzz_parsers
+cp "$bin" "$copy"
 status=0
 for t in "${targets[@]}"; do
-    FUZZ_TARGET="$t" FUZZ_SECONDS="$seconds" \
-        cargo test -q -p kodama-nodes --test fuzz_parsers soak -- --ignored --exact --nocapture \
+    (cd nodes && FUZZ_TARGET="$t" FUZZ_SECONDS="$seconds" "$copy" soak --ignored --exact --nocapture) \
         | grep -E "cases in|first panicking" || status=1
 done
+rm -rf "$(dirname "$copy")"
 exit $status
