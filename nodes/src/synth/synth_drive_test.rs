@@ -1,6 +1,7 @@
 //! A synthetic drive test: receivers along the synthetic city's streets, path loss traced through
-//! the ground-truth scene with richer settings than the twins get (deeper, with diffraction and
-//! diffuse scattering), plus log-normal shadowing. What every twin and baseline is scored against.
+//! the ground-truth scene (by default to the twins' depth, with diffraction and rough surfaces whose
+//! specular reflections keep √(1 − S²) of the field; diffuse scattering is an option), plus
+//! log-normal shadowing. What every twin and baseline is scored against.
 
 use serde::{Deserialize, Serialize};
 
@@ -42,8 +43,8 @@ pub struct SynthDriveTestParams {
 }
 
 /// `options` of [`SynthDriveTestParams`]: how far the truth trace goes. It always follows line of
-/// sight, specular reflection and transmission; richer than the twins' traces by default (deeper
-/// in effect, with diffraction and rough surfaces).
+/// sight, specular reflection and transmission; by default it goes as deep as the twins' traces
+/// (3) and adds diffraction and rough surfaces (S = 0.3), but not diffuse scattering.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct TruthOptions {

@@ -1,8 +1,13 @@
 //! Scoring predicted path loss against measurements (rf.md §6): point-to-point error (mean, RMSE,
 //! standard deviation), and the power-distance (floating intercept) and close-in trend lines fitted
-//! to a model's predictions, with the RMSE of the measurements about each line. When the
-//! transmitters' EIRP is unknown one offset per transmitter is fitted first. LOS and NLOS links
-//! are also scored apart when the predictions say which is which.
+//! to a model's predictions, with the RMSE of the measurements about each line; and the same lines
+//! fitted to the measurements, with the RMSE between the model's line and the measured one. When
+//! the transmitters' EIRP is unknown one offset per transmitter is fitted first.
+//!
+//! LOS and NLOS rows group the links the same way for every model: by the measurement's own LOS
+//! flag where it has one, else by a stated reference trace (`los_reference`), never by the model
+//! being scored. Predictions clamped at the floor count in P2P (as the floor) but not in the trend
+//! fits, where they would drag the line towards the floor; they are counted.
 
 use std::collections::BTreeMap;
 
@@ -59,7 +64,9 @@ pub struct Evaluate;
 
 impl Stage for Evaluate {
     const KIND: &'static str = "Evaluate";
-    const VERSION: u32 = 2;
+    // 3: LOS/NLOS from the measurements or a reference, never the model; floor-clamped links out
+    // of the trend fits; lines fitted to the measurements too.
+    const VERSION: u32 = 3;
     const DOC: &'static str = "P2P error, power-distance and close-in trend RMSE of predictions against measurements (per-tx offsets when EIRP is unknown; LOS/NLOS)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -77,6 +84,12 @@ impl Stage for Evaluate {
             ArtifactType::Raster,
             "the terrain, for heights above ground in distances",
         ),
+        InputSpec::optional(
+            "los_reference",
+            ArtifactType::Measurements,
+            "a trace of the same links through one stated reference scene: its LOS flags group \
+             the links whose measurement has none (give every model's Evaluate the same one)",
+        ),
     ];
     type Params = EvaluateParams;
     type Output = Metrics;
@@ -85,21 +98,27 @@ impl Stage for Evaluate {
         let pred: &Measurements = inputs.one("predictions")?;
         let meas: &Measurements = inputs.one("measurements")?;
         let terrain: Option<&Raster> = inputs.optional("terrain")?;
-        if pred.links.len() != meas.links.len() {
-            return Err(StageError::Failed(format!(
-                "{} predictions for {} measured links: predict the measurements' own links",
-                pred.links.len(),
-                meas.links.len()
-            )));
+        let reference: Option<&Measurements> = inputs.optional("los_reference")?;
+        for (what, m) in [("predictions", Some(pred)), ("los_reference", reference)] {
+            if let Some(m) = m
+                && m.links.len() != meas.links.len()
+            {
+                return Err(StageError::Failed(format!(
+                    "{} {what} links for {} measured links: trace the measurements' own links",
+                    m.links.len(),
+                    meas.links.len()
+                )));
+            }
         }
         let fit_offsets = p.fit_offsets.unwrap_or_else(|| {
             meas.links
                 .iter()
                 .any(|l| l.path_loss_db.is_none() && l.tx_eirp_dbm.is_none())
         });
-        let mut links = scored_links(p, pred, meas, terrain);
+        let mut links = scored_links(p, pred, meas, reference, terrain);
         let mut m = Metrics::default();
         set_link_counts(&mut m, p, pred, meas, links.len());
+        set_los_sources(&mut m, meas, reference);
         if links.is_empty() {
             return Ok(m);
         }
@@ -107,7 +126,7 @@ impl Stage for Evaluate {
             take_out_tx_offsets(&mut m, &mut links);
         }
         set_per_tx_p2p(&mut m, &links);
-        // All links, then those the predictions call LOS, then NLOS.
+        // All links, then LOS, then NLOS.
         for (prefix, want) in [("", None), ("los/", Some(true)), ("nlos/", Some(false))] {
             let group: Vec<&ScoredLink> = links
                 .iter()
@@ -131,9 +150,11 @@ struct ScoredLink {
     freq_hz: f64,
     /// Predicted path loss, dB (no more than the floor, when there is one).
     predicted_db: f64,
+    /// The prediction was beyond the floor (or no path) and is scored as the floor.
+    at_floor: bool,
     /// Measured path loss, dB: up to the transmitter's offset while the EIRP is unknown.
     measured_db: f64,
-    /// Line of sight, by the prediction, else by the measurement.
+    /// Line of sight, by the measurement, else by the reference trace.
     los: Option<bool>,
 }
 
@@ -143,10 +164,11 @@ fn scored_links(
     p: &EvaluateParams,
     pred: &Measurements,
     meas: &Measurements,
+    reference: Option<&Measurements>,
     terrain: Option<&Raster>,
 ) -> Vec<ScoredLink> {
     let mut links = Vec::new();
-    for (pl, ml) in pred.links.iter().zip(&meas.links) {
+    for (i, (pl, ml)) in pred.links.iter().zip(&meas.links).enumerate() {
         let Some(predicted) =
             pl.path_loss_db
                 .filter(|v| !v.is_nan())
@@ -160,13 +182,17 @@ fn scored_links(
         let Some(measured) = measured_loss(ml) else {
             continue;
         };
+        let at_floor = p
+            .floor_db
+            .is_some_and(|f| pl.path_loss_db.is_some_and(|v| v >= f));
         links.push(ScoredLink {
             tx: ml.tx.id.clone(),
             distance_m: link_distance(ml, terrain),
             freq_hz: ml.freq_hz,
             predicted_db: predicted,
+            at_floor,
             measured_db: measured,
-            los: pl.los.or(ml.los),
+            los: ml.los.or_else(|| reference.and_then(|r| r.links[i].los)),
         });
     }
     links
@@ -191,6 +217,25 @@ fn set_link_counts(
     }
     m.set("links", meas.links.len() as f64);
     m.set("links_scored", scored as f64);
+}
+
+/// Where the LOS/NLOS grouping came from: how many links the measurements label, how many the
+/// reference trace, how many neither (those count only in the all-links rows).
+fn set_los_sources(m: &mut Metrics, meas: &Measurements, reference: Option<&Measurements>) {
+    let (mut own, mut by_reference) = (0usize, 0usize);
+    for (i, l) in meas.links.iter().enumerate() {
+        if l.los.is_some() {
+            own += 1;
+        } else if reference.is_some_and(|r| r.links[i].los.is_some()) {
+            by_reference += 1;
+        }
+    }
+    m.set("los_source/measurements", own as f64);
+    m.set("los_source/reference", by_reference as f64);
+    m.set(
+        "los_source/unknown",
+        (meas.links.len() - own - by_reference) as f64,
+    );
 }
 
 /// Per-transmitter offsets: the mean of measured − predicted, taken out of the measurements.
@@ -241,30 +286,66 @@ fn set_group_metrics(m: &mut Metrics, p: &EvaluateParams, prefix: &str, group: &
     m.set(format!("{prefix}p2p_me_db"), s.me);
     m.set(format!("{prefix}p2p_rmse_db"), s.rmse);
     m.set(format!("{prefix}p2p_std_db"), s.std);
-    if p.model_is_trend {
-        m.set(format!("{prefix}pd_rmse_db"), s.rmse);
-        m.set(format!("{prefix}ci_rmse_db"), s.rmse);
-    } else {
-        set_fitted_trends(m, prefix, &d, &f, &pr, &ms);
+    // Trend lines from the links whose prediction is a prediction, not the floor.
+    let fit: Vec<usize> = (0..group.len()).filter(|&i| !group[i].at_floor).collect();
+    m.set(
+        format!("{prefix}floor_clamped"),
+        (group.len() - fit.len()) as f64,
+    );
+    let pick = |v: &[f64]| -> Vec<f64> { fit.iter().map(|&i| v[i]).collect() };
+    let (d, f, pr, ms) = (pick(&d), pick(&f), pick(&pr), pick(&ms));
+    let distinct = d
+        .iter()
+        .any(|x| (x - d[0]).abs() > 1e-9 * d[0].abs().max(1.0));
+    if d.len() < 2 || !distinct {
+        return;
     }
+    m.set(format!("{prefix}trend_links"), d.len() as f64);
+    set_trends(m, prefix, &d, &f, &pr, &ms, p.model_is_trend);
 }
 
-/// The power-distance and close-in lines fitted to the predictions `pr`, and the RMSE of the
-/// measurements `ms` about each.
-fn set_fitted_trends(m: &mut Metrics, prefix: &str, d: &[f64], f: &[f64], pr: &[f64], ms: &[f64]) {
-    let (alpha, beta) = fit_power_distance(d, pr);
-    m.set(format!("{prefix}pd_alpha_db"), alpha);
-    m.set(format!("{prefix}pd_beta"), beta);
-    m.set(
-        format!("{prefix}pd_rmse_db"),
-        rms_about(ms, |i| alpha + 10.0 * beta * d[i].log10()),
-    );
-    let n = fit_close_in(d, pr, f);
-    m.set(format!("{prefix}ci_n"), n);
-    m.set(
-        format!("{prefix}ci_rmse_db"),
-        rms_about(ms, |i| fspl_db(1.0, f[i]) + 10.0 * n * d[i].log10()),
-    );
+/// The two trend lines of rf.md §6 for one group, both ways the literature compares them:
+/// `*_rmse_db`, the RMS of the measurements about the line fitted to the predictions `pr` (the
+/// paper's PD and CI RMSE); `*_lines_rmse_db`, the RMS difference, over the links' distances,
+/// between that line and the same line fitted to the measurements `ms`. A model that is its own
+/// trend line (3GPP) is that line: its predictions stand in for the fitted one.
+///
+/// PD: PL = α + 10 β log10 d, least squares in (α, β). CI: PL = FSPL(f, 1 m) + 10 n log10 d,
+/// least squares in n.
+fn set_trends(
+    m: &mut Metrics,
+    prefix: &str,
+    d: &[f64],
+    f: &[f64],
+    pr: &[f64],
+    ms: &[f64],
+    model_is_trend: bool,
+) {
+    let pd = |(a, b): (f64, f64)| move |i: usize| a + 10.0 * b * d[i].log10();
+    let ci = |n: f64| move |i: usize| fspl_db(1.0, f[i]) + 10.0 * n * d[i].log10();
+    let (pd_meas, ci_meas) = (fit_power_distance(d, ms), fit_close_in(d, ms, f));
+    m.set(format!("{prefix}pd_beta_measured"), pd_meas.1);
+    m.set(format!("{prefix}ci_n_measured"), ci_meas);
+    let (model_pd, model_ci): (Box<dyn Fn(usize) -> f64>, Box<dyn Fn(usize) -> f64>) =
+        if model_is_trend {
+            (Box::new(|i| pr[i]), Box::new(|i| pr[i]))
+        } else {
+            let (alpha, beta) = fit_power_distance(d, pr);
+            let n = fit_close_in(d, pr, f);
+            m.set(format!("{prefix}pd_alpha_db"), alpha);
+            m.set(format!("{prefix}pd_beta"), beta);
+            m.set(format!("{prefix}ci_n"), n);
+            (Box::new(pd((alpha, beta))), Box::new(ci(n)))
+        };
+    let (pd_m, ci_m) = (pd(pd_meas), ci(ci_meas));
+    m.set(format!("{prefix}pd_rmse_db"), rms_about(ms, &model_pd));
+    m.set(format!("{prefix}ci_rmse_db"), rms_about(ms, &model_ci));
+    let lines = |a: &dyn Fn(usize) -> f64, b: &dyn Fn(usize) -> f64| {
+        let diff: Vec<f64> = (0..d.len()).map(|i| a(i) - b(i)).collect();
+        rms_about(&diff, |_| 0.0)
+    };
+    m.set(format!("{prefix}pd_lines_rmse_db"), lines(&model_pd, &pd_m));
+    m.set(format!("{prefix}ci_lines_rmse_db"), lines(&model_ci, &ci_m));
 }
 
 /// The RMS of `values` about `line`, which gives the value at each index.
@@ -308,5 +389,136 @@ mod tests {
         // By hand: A = (1, 3), D = (10, 20) -> n = (10 + 60) / (100 + 400) = 0.14.
         let pl2 = [fspl_db(1.0, 3.5e9) + 1.0, fspl_db(1.0, 3.5e9) + 3.0];
         assert!((fit_close_in(&[10.0, 100.0], &pl2, &[3.5e9; 2]) - 0.14).abs() < 1e-12);
+    }
+
+    use crate::artifact::{Artifact, Endpoint, Height, Link};
+    use crate::stage::Slot;
+    use crate::{Ctx, Site};
+    use std::sync::Arc;
+
+    /// Links along x at the given distances (tx at 0, both ends at z = 0), with the given path
+    /// losses and LOS flags.
+    fn links(d: &[f64], pl: &[Option<f64>], los: &[Option<bool>]) -> Measurements {
+        let end = |id: &str, x: f64| Endpoint {
+            id: id.into(),
+            x,
+            y: 0.0,
+            z: Height::Absolute(0.0),
+            azimuth_deg: None,
+        };
+        Measurements {
+            links: (0..d.len())
+                .map(|i| Link {
+                    tx: end("tx", 0.0),
+                    rx: end("", d[i]),
+                    freq_hz: 3.5e9,
+                    path_loss_db: pl[i],
+                    rx_power_dbm: None,
+                    tx_eirp_dbm: None,
+                    los: los[i],
+                })
+                .collect(),
+        }
+    }
+
+    fn evaluate(
+        p: &EvaluateParams,
+        pred: Measurements,
+        meas: Measurements,
+        reference: Option<Measurements>,
+    ) -> Metrics {
+        let mut inputs = Inputs::new()
+            .with(
+                "predictions",
+                Slot::One(Arc::new(Artifact::Measurements(pred))),
+            )
+            .with(
+                "measurements",
+                Slot::One(Arc::new(Artifact::Measurements(meas))),
+            );
+        if let Some(r) = reference {
+            inputs = inputs.with(
+                "los_reference",
+                Slot::Optional(Some(Arc::new(Artifact::Measurements(r)))),
+            );
+        }
+        let site = Site {
+            crs: "EPSG:32618".into(),
+            origin: (0.0, 0.0),
+            cell_m: 1.0,
+        };
+        Evaluate::run(p, &inputs, &Ctx::new(&site, &[])).unwrap()
+    }
+
+    /// The rows group links by the measurement's flag, then the reference's; the model's own
+    /// flags (here all wrong) are never used.
+    #[test]
+    fn los_rows_follow_the_measurements_then_the_reference() {
+        let d = [10.0, 20.0, 40.0, 80.0];
+        let meas = links(
+            &d,
+            &[Some(80.0), Some(90.0), Some(100.0), Some(110.0)],
+            &[Some(true), None, Some(false), None],
+        );
+        let pred = links(
+            &d,
+            &[Some(81.0), Some(91.0), Some(101.0), Some(111.0)],
+            &[Some(false), Some(false), Some(true), Some(true)],
+        );
+        let reference = links(&d, &[None; 4], &[Some(false), Some(true), Some(true), None]);
+        let m = evaluate(
+            &EvaluateParams::default(),
+            pred.clone(),
+            meas.clone(),
+            Some(reference),
+        );
+        // LOS: link 0 (measured), link 1 (reference); NLOS: link 2 (measured); link 3 unknown.
+        assert_eq!(
+            (m.get("los/n"), m.get("nlos/n"), m.get("n")),
+            (Some(2.0), Some(1.0), Some(4.0))
+        );
+        assert_eq!(m.get("los_source/measurements"), Some(2.0));
+        assert_eq!(m.get("los_source/reference"), Some(1.0));
+        assert_eq!(m.get("los_source/unknown"), Some(1.0));
+        let m = evaluate(&EvaluateParams::default(), pred, meas, None);
+        assert_eq!((m.get("los/n"), m.get("nlos/n")), (Some(1.0), Some(1.0)));
+    }
+
+    /// Predictions at the floor count in P2P as the floor, but the trend lines are fitted to the
+    /// others: a model exactly 3 dB above the measurements keeps both lines 3 dB apart.
+    #[test]
+    fn floor_clamped_links_stay_out_of_the_trend_fits() {
+        let d = [10.0, 20.0, 40.0, 80.0, 160.0, 320.0];
+        let truth: Vec<f64> = d.iter().map(|d: &f64| 50.0 + 32.0 * d.log10()).collect();
+        let meas = links(
+            &d,
+            &truth.iter().map(|v| Some(*v)).collect::<Vec<_>>(),
+            &[None; 6],
+        );
+        // The last two links: no path (infinite loss) and a loss past the floor.
+        let mut pl: Vec<Option<f64>> = truth.iter().map(|v| Some(v + 3.0)).collect();
+        pl[4] = Some(f64::INFINITY);
+        pl[5] = Some(200.0);
+        let p = EvaluateParams {
+            floor_db: Some(140.0),
+            ..Default::default()
+        };
+        let m = evaluate(&p, links(&d, &pl, &[None; 6]), meas, None);
+        assert_eq!(m.get("links_scored"), Some(6.0));
+        assert_eq!(m.get("floor_clamped"), Some(2.0));
+        assert_eq!(m.get("trend_links"), Some(4.0));
+        let close = |k: &str, want: f64| {
+            let v = m.get(k).unwrap();
+            assert!((v - want).abs() < 1e-9, "{k} = {v}, want {want}");
+        };
+        close("pd_beta", 3.2);
+        close("pd_beta_measured", 3.2);
+        close("pd_rmse_db", 3.0);
+        close("pd_lines_rmse_db", 3.0);
+        // P2P takes the clamped links at the floor: 140 against the truth there.
+        let e: Vec<f64> = (0..6)
+            .map(|i| if i < 4 { 3.0 } else { 140.0 - truth[i] })
+            .collect();
+        close("p2p_rmse_db", p2p(&e).rmse);
     }
 }

@@ -38,17 +38,24 @@ fn site() -> String {
 }
 
 /// The table's rows: (metric key in the evaluations, label).
-const ROWS: [(&str, &str); 9] = [
+const ROWS: [(&str, &str); 13] = [
     ("p2p_rmse_db", "P2P RMSE (dB)"),
     ("p2p_me_db", "P2P mean error (dB)"),
     ("p2p_std_db", "P2P std (dB)"),
     ("pd_rmse_db", "PD RMSE (dB)"),
     ("ci_rmse_db", "CI RMSE (dB)"),
+    ("pd_lines_rmse_db", "PD line vs measured PD line, RMS (dB)"),
+    ("ci_lines_rmse_db", "CI line vs measured CI line, RMS (dB)"),
     ("ci_n", "CI exponent n"),
+    ("ci_n_measured", "CI exponent n of the measurements"),
     ("los/p2p_rmse_db", "LOS P2P RMSE (dB)"),
     ("nlos/p2p_rmse_db", "NLOS P2P RMSE (dB)"),
     ("links_scored", "links scored"),
+    ("floor_clamped", "links at the floor (left out of PD/CI fits)"),
 ];
+
+/// Rows that count links, printed without decimals.
+const COUNT_ROWS: [&str; 2] = ["links_scored", "floor_clamped"];
 
 /// Table 1 and its plots as a folder: `report.md`, `table.csv`, `metrics.json`, `plots/*.png`,
 /// and `report.html` with all of it and the scenes in 3D.
@@ -57,8 +64,9 @@ pub struct Report;
 impl Stage for Report {
     const KIND: &'static str = "Report";
     // 3: report.html with the 3D view; 4: scenes past the page's budget left out, named;
-    // 5: plotters figures as SVG and PNG at print size, per-stage figures.
-    const VERSION: u32 = 6;
+    // 5: plotters figures as SVG and PNG at print size, per-stage figures; 6: close-in lines in
+    // the path-loss chart; 7: both trend-line variants, the floor count, the definitions.
+    const VERSION: u32 = 7;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -186,9 +194,15 @@ impl Stage for Report {
             }
         }
         let intro = format!(
-            "{} measured links; every model is scored at the same links (rf.md §6: P2P = \
-             predicted − measured; PD and CI = RMSE of the measurements about the trend line \
-             fitted to the model's predictions; 3GPP's trend is its own formula).",
+            "{} measured links; every model is scored at the same links (paper Sec. 5, rf.md §6). \
+             P2P: e_i = PL_pred,i − PL_meas,i. PD (power-distance): PL = α + 10 β log10 d; CI \
+             (close-in, 1 m): PL = FSPL(f, 1 m) + 10 n log10 d; each fitted by least squares to \
+             the model's predictions, and PD/CI RMSE = RMS of the measurements about that line \
+             (3GPP's line is its own formula). The other variant fits the same line to the \
+             measurements too and gives the RMS between the two lines at the links' distances. \
+             Links predicted at the floor count in P2P as the floor and are left out of the fits. \
+             LOS/NLOS rows group the links by the measurements' LOS where known, else by one \
+             stated reference trace, the same for every model.",
             meas.links.len()
         );
         let mut md = format!("# KODAMA report: {}\n\n{intro}\n\n{md_table}\n", p.site);
@@ -258,7 +272,7 @@ fn table_rows(evals: &[&Metrics]) -> Vec<TableRow> {
                 values: vals
                     .iter()
                     .map(|v| match v {
-                        Some(v) if key == "links_scored" => format!("{v:.0}"),
+                        Some(v) if COUNT_ROWS.contains(&key) => format!("{v:.0}"),
                         Some(v) => format!("{v:.2}"),
                         None => "–".into(),
                     })
@@ -301,6 +315,7 @@ fn link_points(meas: &Measurements, preds: &[&Measurements], evals: &[&Metrics])
         .collect()
 }
 
+/// Table 1 as Markdown (the best RMSE of each row in bold) and CSV.
 fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
     let mut md = format!(
         "| site | metric | {} |\n|---|---|{}\n",
@@ -308,36 +323,13 @@ fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
         "---|".repeat(p.models.len())
     );
     let mut csv = format!("site,metric,{}\n", p.models.join(","));
-    for (key, label) in ROWS {
-        let vals: Vec<String> = evals
-            .iter()
-            .map(|e| {
-                e.get(key).map_or("–".into(), |v| {
-                    if key == "links_scored" {
-                        format!("{v:.0}")
-                    } else {
-                        format!("{v:.2}")
-                    }
-                })
-            })
-            .collect();
-        if vals.iter().all(|v| v == "–") {
-            continue;
-        }
-        // Bold the best P2P/trend RMSE of the row.
-        let best = key.ends_with("rmse_db").then(|| {
-            evals
-                .iter()
-                .enumerate()
-                .filter_map(|(i, e)| e.get(key).map(|v| (i, v)))
-                .min_by(|a, b| a.1.total_cmp(&b.1))
-                .map(|x| x.0)
-        });
-        let shown: Vec<String> = vals
+    for row in table_rows(evals) {
+        let shown: Vec<String> = row
+            .values
             .iter()
             .enumerate()
             .map(|(i, v)| {
-                if best.flatten() == Some(i) {
+                if row.best == Some(i) {
                     format!("**{v}**")
                 } else {
                     v.clone()
@@ -345,21 +337,23 @@ fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
             })
             .collect();
         md.push_str(&format!(
-            "| {} | {label} | {} |\n",
+            "| {} | {} | {} |\n",
             p.site,
+            row.label,
             shown.join(" | ")
         ));
-        csv.push_str(&format!("{},{label},{}\n", p.site, vals.join(",")));
+        csv.push_str(&format!(
+            "{},{},{}\n",
+            p.site,
+            row.label,
+            row.values.join(",")
+        ));
     }
     (md, csv)
 }
 
 /// Each scored link as ((distance, measured with the offset taken out, predicted), frequency).
-fn pairs(
-    meas: &Measurements,
-    pred: &Measurements,
-    ev: &Metrics,
-) -> Vec<((f64, f64, f64), f64)> {
+fn pairs(meas: &Measurements, pred: &Measurements, ev: &Metrics) -> Vec<((f64, f64, f64), f64)> {
     meas.links
         .iter()
         .zip(&pred.links)
@@ -370,12 +364,12 @@ fn pairs(
                     link_distance(m, None),
                     measured_loss(m)? - offset,
                     // Beyond the floor (or no path): scored as Evaluate scores it.
-                    p.path_loss_db
-                        .filter(|v| !v.is_nan())
-                        .and_then(|v| match ev.get("floor_db") {
+                    p.path_loss_db.filter(|v| !v.is_nan()).and_then(|v| {
+                        match ev.get("floor_db") {
                             Some(f) => Some(v.min(f)),
                             None => v.is_finite().then_some(v),
-                        })?,
+                        }
+                    })?,
                 ),
                 m.freq_hz,
             ))
