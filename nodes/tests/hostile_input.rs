@@ -541,7 +541,10 @@ fn a_scene_xml_naming_a_ply_outside_its_folder_is_refused_before_reading_it() {
         let xml = write(dir.path(), "scene/scene.xml", xml);
         let e = read_scene(&xml).unwrap_err();
         assert!(e.is_user_error(), "{e}");
-        expect_all(&e.to_string(), &["scene.xml", "shape \"mesh-b\", filename", why]);
+        expect_all(
+            &e.to_string(),
+            &["scene.xml", "shape \"mesh-b\", filename", why],
+        );
     }
 }
 
@@ -570,13 +573,19 @@ fn a_view_image_outside_the_view_folder_or_an_id_that_is_a_path_is_refused() {
         )
         .expect_err("hostile views accepted")
     };
-    for (image, why) in [("../secret.png", "leads outside"), ("/tmp/x.png", "absolute path")] {
+    for (image, why) in [
+        ("../secret.png", "leads outside"),
+        ("/tmp/x.png", "absolute path"),
+    ] {
         let e = read(view("a", image));
         assert!(e.is_user_error(), "{e}");
         expect_all(&e.to_string(), &["views.json", "image", why]);
     }
     let e = read(view("../../x", "img.png"));
-    expect_all(&e.to_string(), &["views.json", "view 0, id", "path separator"]);
+    expect_all(
+        &e.to_string(),
+        &["views.json", "view 0, id", "path separator"],
+    );
 }
 
 #[test]
@@ -587,7 +596,11 @@ fn a_tileset_uri_outside_its_folder_or_remote_is_refused() {
         ("../a.glb", "leads outside"),
         ("https://example.com/a.glb", "download remote content first"),
     ] {
-        write(dir.path(), "tiles/tileset.json", TILESET.replace("a.glb", uri));
+        write(
+            dir.path(),
+            "tiles/tileset.json",
+            TILESET.replace("a.glb", uri),
+        );
         let e = fails::<kodama_nodes::stages::ingest::read_tiles::ReadTileset>(
             json!({"path": "tiles/tileset.json", "crs": "EPSG:32618"}),
             &Inputs::new(),

@@ -46,13 +46,8 @@ impl TriPacket {
 
     /// The triangle in `lane`.
     pub fn triangle(&self, lane: usize) -> Triangle {
-        let vertex = |k: usize| {
-            Vec3A::new(
-                self.v[k][0][lane],
-                self.v[k][1][lane],
-                self.v[k][2][lane],
-            )
-        };
+        let vertex =
+            |k: usize| Vec3A::new(self.v[k][0][lane], self.v[k][1][lane], self.v[k][2][lane]);
         Triangle {
             v0: vertex(0),
             v1: vertex(1),
@@ -238,7 +233,11 @@ impl F4 {
     }
     fn select(self, a: F4, b: F4) -> F4 {
         F4(std::array::from_fn(|i| {
-            if self.0[i].to_bits() != 0 { a.0[i] } else { b.0[i] }
+            if self.0[i].to_bits() != 0 {
+                a.0[i]
+            } else {
+                b.0[i]
+            }
         }))
     }
     fn bits(self) -> u32 {
@@ -289,7 +288,11 @@ mod tests {
                 for lane in 0..LANES {
                     let (tri, prim) = tris.get(lane).unwrap_or(&tris[0]);
                     let want = ray.intersect(tri, tmax);
-                    assert_eq!(got[lane].to_bits(), want.to_bits(), "case {case} lane {lane}");
+                    assert_eq!(
+                        got[lane].to_bits(),
+                        want.to_bits(),
+                        "case {case} lane {lane}"
+                    );
                     assert_eq!(packet.prim[lane], *prim);
                 }
             }
@@ -299,6 +302,9 @@ mod tests {
                 .filter(|t| t.is_finite())
                 .count();
         }
-        assert!(hits > 1_000, "only {hits} hits: the rays miss too often to test much");
+        assert!(
+            hits > 1_000,
+            "only {hits} hits: the rays miss too often to test much"
+        );
     }
 }

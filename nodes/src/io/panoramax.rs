@@ -229,8 +229,8 @@ fn image_path(id: &str, rec: &Record, images: &ImageIndex) -> Result<PathBuf, St
         if href.contains("://") {
             continue;
         }
-        let p = crate::io::safe_name::resolve_inside(dir, dir, href)
-            .map_err(|m| rec.bad(&field, m))?;
+        let p =
+            crate::io::safe_name::resolve_inside(dir, dir, href).map_err(|m| rec.bad(&field, m))?;
         if p.is_file() {
             return Ok(p);
         }

@@ -177,11 +177,16 @@ fn view_id(views_json: &Path, i: usize, v: &Value) -> Result<String, StageError>
             .map(str::to_owned)
             .or_else(|| x.as_u64().map(|n| n.to_string()))
     });
-    let id =
-        id.ok_or_else(|| StageError::bad_input(views_json, format!("view {i}"), "expected an `id`"))?;
+    let id = id.ok_or_else(|| {
+        StageError::bad_input(views_json, format!("view {i}"), "expected an `id`")
+    })?;
     // The id names the view's output files (`depth/<id>.exr`): it must be a plain file name.
     crate::io::safe_name::check_file_name(&id).map_err(|m| {
-        StageError::bad_input(views_json, format!("view {i}, id"), format!("an id usable as a file name: {m}"))
+        StageError::bad_input(
+            views_json,
+            format!("view {i}, id"),
+            format!("an id usable as a file name: {m}"),
+        )
     })?;
     Ok(id)
 }

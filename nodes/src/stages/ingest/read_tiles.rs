@@ -128,12 +128,20 @@ struct Tiles<'a> {
 impl Tiles<'_> {
     /// The file `uri` names, relative to `base` (the folder of the file naming it); refused when
     /// it is remote or leads outside the declared folder.
-    fn resolve(&self, json: &Path, field: &str, base: &Path, uri: &str) -> Result<PathBuf, StageError> {
+    fn resolve(
+        &self,
+        json: &Path,
+        field: &str,
+        base: &Path,
+        uri: &str,
+    ) -> Result<PathBuf, StageError> {
         if uri.contains("://") || uri.starts_with("data:") {
             return Err(StageError::bad_input(
                 json,
                 field,
-                format!("a file inside the tileset's folder, found the URI {uri:?} (download remote content first)"),
+                format!(
+                    "a file inside the tileset's folder, found the URI {uri:?} (download remote content first)"
+                ),
             ));
         }
         crate::io::safe_name::resolve_inside(self.root, base, uri)
@@ -346,8 +354,8 @@ fn read_content_file(
                         let base = out.positions.len() as u32;
                         for p in positions {
                             let e = apply(&world, [p[0] as f64, p[1] as f64, p[2] as f64]);
-                            let q =
-                                (tiles.place)(e).map_err(|m| StageError::bad_input(file, "vertex", m))?;
+                            let q = (tiles.place)(e)
+                                .map_err(|m| StageError::bad_input(file, "vertex", m))?;
                             out.positions.push([q[0] as f32, q[1] as f32, q[2] as f32]);
                         }
                         let b = (base, out.positions.len() as u32 - base);

@@ -279,6 +279,9 @@ mod tests {
         // The dashed line is drawn as many short segments, the solid one as one polyline.
         let solid = fig.svg.matches("<polyline").count();
         let segments = fig.svg.matches("<line").count() + solid;
-        assert!(segments > solid + 20, "{segments} segments, {solid} polylines");
+        assert!(
+            segments > solid + 20,
+            "{segments} segments, {solid} polylines"
+        );
     }
 }
