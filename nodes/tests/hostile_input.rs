@@ -144,6 +144,28 @@ fn a_truncated_laz_names_a_point() {
     );
 }
 
+/// Found by a 10-minute fuzz run: a LAZ header announcing no points, whose chunk table claims
+/// 3.85 billion chunks. The las crate reads that table when it opens the file and sized a 61 GB
+/// list by it (an abort); the table is checked first, whatever the point count.
+#[test]
+fn a_laz_chunk_table_is_checked_even_with_no_points_announced() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = las_file(dir.path(), "z.laz", 200, true);
+    let mut b = std::fs::read(&path).unwrap();
+    let u32_at = |b: &[u8], at: usize| u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+    // Legacy point count (LAS 1.0-1.4), and the 64-bit one of LAS 1.4 headers.
+    b[107..111].copy_from_slice(&0u32.to_le_bytes());
+    if u16::from_le_bytes([b[94], b[95]]) >= 375 {
+        b[247..255].copy_from_slice(&0u64.to_le_bytes());
+    }
+    let data = u32_at(&b, 96) as usize;
+    let table = u64::from_le_bytes(b[data..data + 8].try_into().unwrap()) as usize;
+    b[table + 4..table + 8].copy_from_slice(&3_850_000_000u32.to_le_bytes());
+    std::fs::write(&path, &b).unwrap();
+    let e = read_las_fails(&path);
+    expect_all(&e, &["z.laz", "LAZ chunk table", "3850000000 chunks"]);
+}
+
 fn read_raster_fails(dir: &Path, bytes: Vec<u8>) -> String {
     let path = write(dir, "dsm.tif", bytes);
     fails::<kodama_nodes::stages::ingest::read_raster::ReadRaster>(
