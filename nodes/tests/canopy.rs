@@ -111,12 +111,16 @@ fn canopy_envelopes_match_the_true_crowns() {
             }
         }
         let m = |v: &Vec<f64>| v.iter().sum::<f64>() / v.len() as f64;
+        let rms = |v: &Vec<f64>| (v.iter().map(|e| e * e).sum::<f64>() / v.len() as f64).sqrt();
         println!(
-            "matched {}: top error mean {:.2}, bottom error mean {:.2}, x half-extent error mean {:.2}",
+            "matched {}: top error mean {:.2} (rms {:.2}), bottom error mean {:.2} (rms {:.2}), x half-extent error mean {:.2} (rms {:.2})",
             dt.len(),
             m(&dt),
+            rms(&dt),
             m(&db),
-            m(&dr)
+            rms(&db),
+            m(&dr),
+            rms(&dr)
         );
     }
     let rays = SceneRays::new(&scene);
@@ -194,8 +198,9 @@ fn canopy_envelopes_match_the_true_crowns() {
         city.trees.len()
     );
     assert_eq!(in_building, 0, "canopy inside a building");
-    // The target is 0.7; measured 0.53 (mean top, bottom and radius errors near zero:
-    // what is left is per-crown scatter of the outline and of the widest level, and the slices'
-    // staircase). Held here as a regression floor, not as the target met.
-    assert!(iou >= 0.5, "canopy IoU {iou:.3}");
+    // The target is 0.7; measured 0.637 with the upper surface read from the field (0.53
+    // with an ellipse profile in the distance from the outline). What is left is the widest
+    // level's scatter per crown (bottom error rms 1.0 m) and crowns merged with a neighbour's
+    // returns. Held here as a regression floor, not as the target met.
+    assert!(iou >= 0.62, "canopy IoU {iou:.3}");
 }

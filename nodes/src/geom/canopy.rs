@@ -1,8 +1,9 @@
 //! Canopy envelopes from the unassigned above-ground field (paper Sec. 4.2.4): connected regions
 //! that are large, elevated and irregular (height roughness, or the share of multiple LiDAR
-//! returns) become closed foliage volumes. The crown's upper surface is the field itself; its
-//! lower surface mirrors it about the crown's widest level, read where the crown outline is (an
-//! ellipsoidal crown is widest at its centre height, so the field on the outline is that height).
+//! returns) become closed foliage volumes. The crown's upper surface is the field itself (its
+//! local maximum, which reads through the gaps a few pulses find); its lower surface mirrors it
+//! about the crown's widest level, read where the crown outline is (an ellipsoidal crown is widest
+//! at its centre height, so the field on the outline is that height).
 //! The envelope is a stack of prisms: per height slice, the outline of the cells the crown covers
 //! there, simplified. Foliage volumes are `Material::Foliage` solids of class `Vegetation`: what
 //! the tracer attenuates through (rf/foliage.rs).
@@ -35,8 +36,6 @@ pub struct CanopyConfig {
     pub simplify_m: f64,
     /// The lowest the crown's bottom may come, above ground, metres.
     pub min_clearance_m: f64,
-    /// The outline is moved this far in (the field marks a cell any return falls in), metres.
-    pub inset_m: f64,
     /// Quantile of the field on the outline taken as the crown's widest level.
     pub edge_quantile: f64,
 }
@@ -52,7 +51,6 @@ impl Default for CanopyConfig {
             slices: 8,
             simplify_m: 0.3,
             min_clearance_m: 1.0,
-            inset_m: 0.25,
             edge_quantile: 0.4,
         }
     }
@@ -245,17 +243,6 @@ fn envelope(
             visit(j + sw);
         }
     }
-    let dist = crate::geom::clutter::distance_transform(&outside, sw, sh, g.cell_m);
-    // Distance from the outline, less the inset: a cell is in the field when any return falls in
-    // it, so the region overstates the crown by about a cell.
-    let depth = |i: usize| {
-        (dist[(i / w - r0) * sw + (i % w - c0)] as f64 - g.cell_m / 2.0 - cfg.inset_m).max(0.0)
-    };
-    let d_max = idx
-        .iter()
-        .map(|&i| depth(i))
-        .fold(0.0, f64::max)
-        .max(g.cell_m / 2.0);
     // The crown's top: the 98.5th percentile of the field (returns inside the crown make it
     // rough below the top; a pole or sign standing in the crown pokes above it). Its widest level:
     // a lower quantile (`edge_quantile`) of the field on the outline (an outline cell's highest return comes
@@ -287,19 +274,44 @@ fn envelope(
     if !(half > 0.25) {
         return None;
     }
-    // The profile: an ellipse in the distance from the outline, rho = 1 - d / d_max (0 at the
-    // deepest cell, 1 on the outline), so the envelope at a cell spans mid -/+ half
-    // sqrt(1 - rho^2), mirrored about the widest level; the outline is the region's own.
-    let span = |i: usize| {
-        let rho = 1.0 - depth(i) / d_max;
-        let e = if rho >= 1.0 {
-            0.0
-        } else {
-            half * (1.0 - rho * rho).max(0.0).sqrt()
-        };
-        ((mid - e).max(cfg.min_clearance_m), mid + e)
+    // The crown's upper surface per cell: the highest return in the cell and its eight
+    // neighbours of the region. One cell alone is too rough (a cell whose few pulses went through a
+    // gap reads low); the 3 x 3 maximum reads the surface, and fills the crown's gaps, at the cost
+    // of a quarter-cell of width at the rim (a closing, max then min, lost a fifth of the volume).
+    let value = |j: usize| {
+        let i = (r0 + j / sw) * w + c0 + j % sw;
+        (labels[i] == l).then(|| a.data[i] as f64)
     };
-    let bottom = idx.iter().map(|&i| span(i).0).fold(f64::MAX, f64::min);
+    let upper: Vec<f64> = (0..sw * sh)
+        .map(|j| {
+            if outside[j] {
+                return f64::NAN;
+            }
+            let (c, r) = (j % sw, j / sw);
+            let mut best = f64::NAN;
+            for rr in r.saturating_sub(1)..(r + 2).min(sh) {
+                for cc in c.saturating_sub(1)..(c + 2).min(sw) {
+                    if let Some(v) = value(rr * sw + cc) {
+                        best = best.max(v);
+                    }
+                }
+            }
+            best.min(top)
+        })
+        .collect();
+    // The lower surface mirrors the upper about the widest level; a cell whose upper surface is
+    // not above that level holds no crown.
+    let span = |j: usize| {
+        let t = upper[j];
+        (t > mid).then(|| ((2.0 * mid - t).max(cfg.min_clearance_m), t))
+    };
+    let bottom = (0..sw * sh)
+        .filter_map(span)
+        .map(|(b, _)| b)
+        .fold(f64::MAX, f64::min);
+    if bottom >= top {
+        return None;
+    }
     let n = cfg.slices.max(1);
     let dz = (top - bottom) / n as f64;
     let mut shells = Vec::new();
@@ -308,17 +320,10 @@ fn envelope(
         let zm = (z0 + z1) / 2.0;
         let mut data = vec![0f32; sub.len()];
         let mut any = false;
-        for r in r0..=r1 {
-            for c in c0..=c1 {
-                let i = r * w + c;
-                if outside[(r - r0) * sw + (c - c0)] {
-                    continue;
-                }
-                let (b, t) = span(i);
-                if b <= zm && zm <= t {
-                    data[(r - r0) * sub.width as usize + (c - c0)] = 1.0;
-                    any = true;
-                }
+        for (j, cell) in data.iter_mut().enumerate() {
+            if span(j).is_some_and(|(b, t)| b <= zm && zm <= t) {
+                *cell = 1.0;
+                any = true;
             }
         }
         if !any {

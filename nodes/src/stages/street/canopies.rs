@@ -29,9 +29,6 @@ pub struct CanopiesParams {
     pub simplify_m: f64,
     /// Lowest crown bottom above ground, metres. Default 1.
     pub min_clearance_m: f64,
-    /// The outline is moved this far in (the field marks any cell a return falls in), metres.
-    /// Default 0.5.
-    pub inset_m: f64,
     /// Quantile of the field on a region's outline taken as the crown's widest level. Default
     /// 0.4.
     pub edge_quantile: f64,
@@ -49,7 +46,6 @@ impl Default for CanopiesParams {
             slices: c.slices,
             simplify_m: c.simplify_m,
             min_clearance_m: c.min_clearance_m,
-            inset_m: c.inset_m,
             edge_quantile: c.edge_quantile,
         }
     }
@@ -67,7 +63,6 @@ impl CanopiesParams {
             slices: self.slices,
             simplify_m: self.simplify_m,
             min_clearance_m: self.min_clearance_m,
-            inset_m: self.inset_m,
             edge_quantile: self.edge_quantile,
         }
     }
@@ -78,7 +73,7 @@ pub struct Canopies;
 
 impl Stage for Canopies {
     const KIND: &'static str = "Canopies";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const DOC: &'static str = "canopy envelopes (closed foliage volumes) from large, elevated, irregular unassigned above-ground regions, Sec. 4.2.4";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -105,7 +100,6 @@ impl Stage for Canopies {
             ("min_multi_share", p.min_multi_share, 0.0, 1.0),
             ("simplify_m", p.simplify_m, 0.0, 10.0),
             ("min_clearance_m", p.min_clearance_m, 0.0, 100.0),
-            ("inset_m", p.inset_m, 0.0, 10.0),
             ("edge_quantile", p.edge_quantile, 0.0, 1.0),
         ] {
             if !(v >= lo && v <= hi) {
