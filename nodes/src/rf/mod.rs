@@ -22,6 +22,7 @@ pub mod radiomap;
 pub mod scattering;
 pub mod scene;
 pub mod sequences;
+pub mod slab_table;
 pub mod utd;
 
 /// Speed of light in vacuum, m/s (Sionna's constant).

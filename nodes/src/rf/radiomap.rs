@@ -14,12 +14,13 @@ use crate::rng::{mix, unit};
 
 use super::antenna::Antenna;
 use super::antenna::spherical_basis;
-use super::fibonacci::fibonacci_sphere;
+use super::fibonacci::fibonacci_run;
 use super::field::{self, CVec};
 use super::foliage::{FoliageDepth, loss_amplitude};
 use super::paths::TraceOptions;
 use super::scattering::pattern;
 use super::scene::{EPS, RfScene};
+use super::slab_table::SlabTable;
 
 /// Where a map is measured: the cells of `grid` on the horizontal plane at height `z`, or on a
 /// surface following the terrain (`lifted`, e.g. 1.5 m above it), which rays cross transparently.
@@ -143,28 +144,29 @@ pub fn radio_map(
         at_tx: FoliageDepth::at(scene, tx),
         db_per_m: opt.foliage_loss_db_per_m(freq_hz),
     };
+    let shooter = Shooter {
+        scene,
+        tx,
+        antenna,
+        plane,
+        opt,
+        omega,
+        foliage,
+        slabs: SlabTable::new(scene),
+    };
     // Fixed chunks, summed in chunk order: the same bytes at any thread count.
-    let chunks: Vec<Vec<(u32, f64)>> = fibonacci_sphere(opt.rays)
-        .enumerate()
-        .chunks(8192)
-        .map(|rays| {
+    const CHUNK: u32 = 8192;
+    let chunks: Vec<Vec<CellPower>> = (0..opt.rays.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|k| {
             let (mut hits, mut crossings) = (Vec::new(), Vec::new());
-            for (i, d) in rays {
+            let start = k * CHUNK;
+            for (i, d) in (start..).zip(fibonacci_run(opt.rays, start, CHUNK)) {
                 let ray = Ray {
                     d0: d,
                     index: i as u64,
                 };
-                shoot(
-                    scene,
-                    tx,
-                    ray,
-                    antenna,
-                    plane,
-                    opt,
-                    omega,
-                    &foliage,
-                    (&mut hits, &mut crossings),
-                );
+                shooter.shoot(ray, (&mut hits, &mut crossings));
             }
             hits
         })
@@ -194,100 +196,121 @@ struct Foliage {
     db_per_m: f64,
 }
 
-/// One ray from `tx` along `d0` to the end of its bounces: every crossing of the plane adds the
-/// power it carries to its cell (rf.md §7.2); foliage passed through attenuates it (§5.1).
-/// `out` takes (cell, power) per crossing; the second buffer is scratch, kept between rays so a
-/// ray allocates nothing.
-#[allow(clippy::too_many_arguments)]
-fn shoot(
-    scene: &RfScene,
+/// A crossing's cell and the power it adds there.
+type CellPower = (u32, f64);
+
+/// What every ray of one map shares.
+struct Shooter<'a> {
+    scene: &'a RfScene,
     tx: DVec3,
-    Ray { d0, index: ray }: Ray,
-    antenna: &Antenna,
-    plane: &MapPlane,
-    opt: &TraceOptions,
+    antenna: &'a Antenna,
+    plane: &'a MapPlane,
+    opt: &'a TraceOptions,
+    /// The solid angle each ray stands for, sr.
     omega: f64,
-    foliage: &Foliage,
-    (out, crossings): (&mut Vec<(u32, f64)>, &mut Vec<(f64, u32, f64)>),
-) {
-    let mut omega = omega;
-    let mut e: CVec = field::real(DVec3::from(antenna.field(d0.to_array())));
-    let (mut o, mut d) = (tx, d0);
-    let (mut depth, mut foliage_depth) = (0u32, foliage.at_tx);
-    loop {
-        let hit = scene.cast(o, d, EPS, f64::INFINITY);
-        let t_end = hit.map_or(f64::INFINITY, |h| h.t);
-        let foliage_amp = |len: f64| {
-            if foliage_depth.inside() {
-                loss_amplitude(foliage.db_per_m, len)
-            } else {
-                1.0
+    foliage: Foliage,
+    slabs: SlabTable,
+}
+
+impl Shooter<'_> {
+    /// One ray from `tx` along `d0` to the end of its bounces: every crossing of the plane adds
+    /// the power it carries to its cell (rf.md §7.2); foliage passed through attenuates it
+    /// (§5.1). `out` takes (cell, power) per crossing; the second buffer is scratch, kept
+    /// between rays so a ray allocates nothing.
+    fn shoot(
+        &self,
+        Ray { d0, index: ray }: Ray,
+        (out, crossings): (&mut Vec<CellPower>, &mut Vec<(f64, u32, f64)>),
+    ) {
+        let Shooter {
+            scene,
+            tx,
+            antenna,
+            plane,
+            opt,
+            omega,
+            ref foliage,
+            ref slabs,
+        } = *self;
+        let mut omega = omega;
+        let mut e: CVec = field::real(DVec3::from(antenna.field(d0.to_array())));
+        let (mut o, mut d) = (tx, d0);
+        let (mut depth, mut foliage_depth) = (0u32, foliage.at_tx);
+        loop {
+            let hit = scene.cast(o, d, EPS, f64::INFINITY);
+            let t_end = hit.map_or(f64::INFINITY, |h| h.t);
+            let foliage_amp = |len: f64| {
+                if foliage_depth.inside() {
+                    loss_amplitude(foliage.db_per_m, len)
+                } else {
+                    1.0
+                }
+            };
+            if depth > 0 || opt.los {
+                crossings.clear();
+                plane.crossings(o, d, t_end, crossings);
+                for &(t, cell, weight) in crossings.iter() {
+                    let a = foliage_amp(t);
+                    out.push((cell, field::norm_sqr(&e) * a * a * omega * weight));
+                }
             }
-        };
-        if depth > 0 || opt.los {
-            crossings.clear();
-            plane.crossings(o, d, t_end, crossings);
-            for &(t, cell, weight) in crossings.iter() {
-                let a = foliage_amp(t);
-                out.push((cell, field::norm_sqr(&e) * a * a * omega * weight));
+            let Some(h) = hit else { return };
+            let a = foliage_amp(h.t);
+            e = e.map(|c| c * a);
+            let p = o + d * h.t;
+            if foliage_depth.cross(scene, h.triangle, d) {
+                o = p;
+                continue;
             }
-        }
-        let Some(h) = hit else { return };
-        let a = foliage_amp(h.t);
-        e = e.map(|c| c * a);
-        let p = o + d * h.t;
-        if foliage_depth.cross(scene, h.triangle, d) {
-            o = p;
-            continue;
-        }
-        let n = scene.normals[h.triangle as usize];
-        depth += 1;
-        if depth > opt.max_depth {
-            return;
-        }
-        let (r, t) = scene.slab(h.triangle, d.dot(n));
-        // Sionna's event probabilities: specular r (1 - S²), diffuse r S², transmission t.
-        let (pr, pt) = (
-            r.0.norm_sqr() + r.1.norm_sqr(),
-            t.0.norm_sqr() + t.1.norm_sqr(),
-        );
-        let s2 = opt.scattering_coefficient.powi(2);
-        let p_spec = if opt.reflection { pr * (1.0 - s2) } else { 0.0 };
-        let p_diff = if opt.diffuse { pr * s2 } else { 0.0 };
-        let p_tran = if opt.transmission { pt } else { 0.0 };
-        let total = p_spec + p_diff + p_tran;
-        if total <= 0.0 {
-            return;
-        }
-        let seed = mix(ray.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ depth as u64);
-        let u = unit(seed) * total;
-        if u < p_spec {
-            let (e2, k) = field::reflect(&e, d, n, r);
-            let w = ((1.0 - s2) * total / p_spec).sqrt();
-            e = e2.map(|c| c * w);
-            d = k;
-        } else if u < p_spec + p_diff {
-            // Uniform on the hemisphere the wave came from; the new tube spans 2π.
-            let side = if d.dot(n) < 0.0 { n } else { -n };
-            let (u1, u2) = (unit(mix(seed ^ 1)), unit(mix(seed ^ 2)));
-            let ko = hemisphere(side, u1, u2);
-            let (e_spec, _) = field::reflect(&e, d, n, r);
-            let gamma = (field::norm_sqr(&e_spec) / field::norm_sqr(&e).max(1e-300)).sqrt();
-            let f = pattern(opt.scattering_pattern, d, ko, side);
-            let (th_i, ph_i) = spherical_basis(d.to_array());
-            let (th_o, ph_o) = spherical_basis(ko.to_array());
-            let (e_th, e_ph) = (
-                field::dot(&e, DVec3::from(th_i)),
-                field::dot(&e, DVec3::from(ph_i)),
+            let n = scene.normals[h.triangle as usize];
+            depth += 1;
+            if depth > opt.max_depth {
+                return;
+            }
+            let (r, t) = slabs.get(scene, h.triangle, d.dot(n));
+            // Sionna's event probabilities: specular r (1 - S²), diffuse r S², transmission t.
+            let (pr, pt) = (
+                r.0.norm_sqr() + r.1.norm_sqr(),
+                t.0.norm_sqr() + t.1.norm_sqr(),
             );
-            let w = opt.scattering_coefficient * gamma * (f * omega * total / p_diff).sqrt();
-            e = [0, 1, 2].map(|c| (e_th * th_o[c] + e_ph * ph_o[c]) * w);
-            d = ko;
-            omega = 2.0 * std::f64::consts::PI;
-        } else {
-            e = field::transmit(&e, d, n, t).map(|c| c * (total / p_tran).sqrt());
+            let s2 = opt.scattering_coefficient.powi(2);
+            let p_spec = if opt.reflection { pr * (1.0 - s2) } else { 0.0 };
+            let p_diff = if opt.diffuse { pr * s2 } else { 0.0 };
+            let p_tran = if opt.transmission { pt } else { 0.0 };
+            let total = p_spec + p_diff + p_tran;
+            if total <= 0.0 {
+                return;
+            }
+            let seed = mix(ray.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ depth as u64);
+            let u = unit(seed) * total;
+            if u < p_spec {
+                let (e2, k) = field::reflect(&e, d, n, r);
+                let w = ((1.0 - s2) * total / p_spec).sqrt();
+                e = e2.map(|c| c * w);
+                d = k;
+            } else if u < p_spec + p_diff {
+                // Uniform on the hemisphere the wave came from; the new tube spans 2π.
+                let side = if d.dot(n) < 0.0 { n } else { -n };
+                let (u1, u2) = (unit(mix(seed ^ 1)), unit(mix(seed ^ 2)));
+                let ko = hemisphere(side, u1, u2);
+                let (e_spec, _) = field::reflect(&e, d, n, r);
+                let gamma = (field::norm_sqr(&e_spec) / field::norm_sqr(&e).max(1e-300)).sqrt();
+                let f = pattern(opt.scattering_pattern, d, ko, side);
+                let (th_i, ph_i) = spherical_basis(d.to_array());
+                let (th_o, ph_o) = spherical_basis(ko.to_array());
+                let (e_th, e_ph) = (
+                    field::dot(&e, DVec3::from(th_i)),
+                    field::dot(&e, DVec3::from(ph_i)),
+                );
+                let w = opt.scattering_coefficient * gamma * (f * omega * total / p_diff).sqrt();
+                e = [0, 1, 2].map(|c| (e_th * th_o[c] + e_ph * ph_o[c]) * w);
+                d = ko;
+                omega = 2.0 * std::f64::consts::PI;
+            } else {
+                e = field::transmit(&e, d, n, t).map(|c| c * (total / p_tran).sqrt());
+            }
+            o = p;
         }
-        o = p;
     }
 }
 

@@ -166,6 +166,17 @@ impl RfScene {
         }
     }
 
+    /// How many materials the per-material tables hold (indexed by discriminant).
+    pub fn material_count(&self) -> usize {
+        self.eta.len()
+    }
+
+    /// Relative permittivity and slab thickness of material `m` (a discriminant); `None` for a
+    /// transparent material (foliage) or one no triangle uses.
+    pub fn slab_params(&self, m: usize) -> Option<(C64, f64)> {
+        Some((self.eta.get(m).copied().flatten()?, self.thickness[m]))
+    }
+
     /// True for foliage triangles: volume boundaries, not surfaces.
     pub fn is_foliage(&self, tri: u32) -> bool {
         self.material[tri as usize] == Material::Foliage

@@ -51,7 +51,10 @@ const ROWS: [(&str, &str); 13] = [
     ("los/p2p_rmse_db", "LOS P2P RMSE (dB)"),
     ("nlos/p2p_rmse_db", "NLOS P2P RMSE (dB)"),
     ("links_scored", "links scored"),
-    ("floor_clamped", "links at the floor (left out of PD/CI fits)"),
+    (
+        "floor_clamped",
+        "links at the floor (left out of PD/CI fits)",
+    ),
 ];
 
 /// Rows that count links, printed without decimals.
