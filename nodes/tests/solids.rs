@@ -25,6 +25,11 @@ use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
 /// What the chain made of one site, scored.
 struct Score {
     iou: f64,
+    /// Per building with one solid: its floor's corners less the true footprint's.
+    corner_errors: Vec<i64>,
+    /// Cells inside our solids only, and inside the true footprints only.
+    extra: usize,
+    missed: usize,
     roof_rmse: f64,
     terrain_rmse: f64,
     buildings: usize,
@@ -78,7 +83,8 @@ fn run_chain(params: &SynthCityParams, use_classes: bool) -> Score {
         &Inputs::new()
             .with("labels", slot(Artifact::Raster(labels.clone())))
             .with("roofs", slot(Artifact::Raster(roofs)))
-            .with("terrain", slot(Artifact::Raster(terrain.clone()))),
+            .with("terrain", slot(Artifact::Raster(terrain.clone())))
+            .with("points", optional(Artifact::Points(lidar.clone()))),
         &ctx,
     )
     .unwrap();
@@ -89,6 +95,55 @@ fn run_chain(params: &SynthCityParams, use_classes: bool) -> Score {
         check_solid(&o.mesh).unwrap_or_else(|e| panic!("{}: {e}", o.id));
         triangles += o.mesh.len();
     }
+    // Corners: a solid's floor vertices (its outline's, courtyards included) against the true
+    // footprint's, for each true building that exactly one solid stands on.
+    let mut on: Vec<Vec<usize>> = vec![Vec::new(); city.buildings.len()];
+    let floors: Vec<Vec<[f64; 2]>> = solids
+        .objects
+        .iter()
+        .map(|o| {
+            let zmin = o
+                .mesh
+                .positions
+                .iter()
+                .map(|p| p[2])
+                .fold(f32::INFINITY, f32::min);
+            let mut v: Vec<[f64; 2]> = o
+                .mesh
+                .positions
+                .iter()
+                .filter(|p| p[2] == zmin)
+                .map(|p| [p[0] as f64, p[1] as f64])
+                .collect();
+            v.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+            v.dedup();
+            v
+        })
+        .collect();
+    for (k, f) in floors.iter().enumerate() {
+        let n = f.len() as f64;
+        let c = [
+            f.iter().map(|p| p[0]).sum::<f64>() / n,
+            f.iter().map(|p| p[1]).sum::<f64>() / n,
+        ];
+        if let Some(b) = city
+            .buildings
+            .iter()
+            .position(|b| point_in_ring(c, &b.footprint.exterior))
+        {
+            on[b].push(k);
+        }
+    }
+    let corner_errors: Vec<i64> = on
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| s.len() == 1)
+        .map(|(b, s)| {
+            let fp = &city.buildings[b].footprint;
+            let truth = fp.exterior.len() + fp.holes.iter().map(Vec::len).sum::<usize>();
+            floors[s[0]].len() as i64 - truth as i64
+        })
+        .collect();
     let per_building = |labels: &Raster| {
         let outlines = TraceFootprints::run(
             &TraceFootprintsParams {
@@ -118,14 +173,17 @@ fn run_chain(params: &SynthCityParams, use_classes: bool) -> Score {
         .unwrap()
     };
     let (whole, split) = (per_building(&unsplit), per_building(&labels));
-    score(
-        &city,
-        &truth,
-        &solids,
-        &terrain,
-        triangles,
-        [&whole, &split],
-    )
+    Score {
+        corner_errors,
+        ..score(
+            &city,
+            &truth,
+            &solids,
+            &terrain,
+            triangles,
+            [&whole, &split],
+        )
+    }
 }
 
 fn clean(
@@ -180,6 +238,7 @@ fn score(
     let g = terrain.grid;
     let (mut inter, mut union, mut roof_se, mut roof_n, mut t_se, mut t_n) =
         (0usize, 0usize, 0.0, 0usize, 0.0, 0usize);
+    let (mut extra, mut missed) = (0usize, 0usize);
     let mut covered = vec![(0usize, 0usize); city.buildings.len()];
     for i in 0..g.len() {
         let (x, y) = g.center(i as u32 % g.width, i as u32 / g.width);
@@ -204,7 +263,14 @@ fn score(
                     roof_n += 1;
                 }
             }
-            (true, None) | (false, Some(_)) => union += 1,
+            (true, None) => {
+                union += 1;
+                missed += 1;
+            }
+            (false, Some(_)) => {
+                union += 1;
+                extra += 1;
+            }
             (false, None) => {}
         }
         if let Some(t) = top(&truth_ground, x, y) {
@@ -214,6 +280,9 @@ fn score(
     }
     Score {
         iou: inter as f64 / union as f64,
+        corner_errors: Vec::new(),
+        extra,
+        missed,
         roof_rmse: (roof_se / roof_n as f64).sqrt(),
         terrain_rmse: (t_se / t_n as f64).sqrt(),
         buildings: city.buildings.len(),
@@ -226,10 +295,12 @@ fn score(
 
 fn report(name: &str, s: &Score) {
     println!(
-        "{name}: footprint IoU {:.3}, per-building IoU {:.3} ({:.3} unsplit), roof height RMSE \
+        "{name}: footprint IoU {:.3} ({} cells ours only, {} truth only), per-building IoU {:.3} ({:.3} unsplit), roof height RMSE \
          {:.3} m, terrain RMSE {:.3} m; {} solids for {} buildings, {} triangles ({:.0} per \
          solid), {} buildings swallowed",
         s.iou,
+        s.extra,
+        s.missed,
         s.building_iou[1],
         s.building_iou[0],
         s.roof_rmse,
@@ -239,6 +310,19 @@ fn report(name: &str, s: &Score) {
         s.triangles,
         s.triangles as f64 / s.solids as f64,
         s.swallowed
+    );
+    let e = &s.corner_errors;
+    let mut abs: Vec<i64> = e.iter().map(|v| v.abs()).collect();
+    abs.sort();
+    println!(
+        "{name}: corners per building against the truth ({} buildings with one solid): exact {}, \
+         mean |error| {:.2}, median {}, max {}, mean signed {:+.2}",
+        e.len(),
+        e.iter().filter(|&&v| v == 0).count(),
+        abs.iter().sum::<i64>() as f64 / e.len().max(1) as f64,
+        abs.get(abs.len() / 2).copied().unwrap_or(0),
+        abs.last().copied().unwrap_or(0),
+        e.iter().sum::<i64>() as f64 / e.len().max(1) as f64
     );
     assert!(s.iou >= 0.9, "{name}: IoU {}", s.iou);
     assert!(
@@ -259,6 +343,15 @@ fn report(name: &str, s: &Score) {
 fn demo_site_solids_match_the_truth() {
     let s = run_chain(&SynthCityParams::default(), true);
     report("demo site, LiDAR classes", &s);
+    // Regularized outlines snapped to the roof returns: 0.977 (0.951 with outlines simplified
+    // from the cells, which bulge beyond the walls); the issue's target is 0.97.
+    assert!(s.iou >= 0.97, "footprint IoU {:.3}", s.iou);
+    let exact = s.corner_errors.iter().filter(|&&e| e == 0).count();
+    assert!(
+        exact * 4 >= s.corner_errors.len(),
+        "only {exact} of {} buildings with their true corner count",
+        s.corner_errors.len()
+    );
 }
 
 #[test]
@@ -275,4 +368,5 @@ fn steep_site_solids_match_the_truth() {
     };
     let s = run_chain(&params, true);
     report("steep site, LiDAR classes", &s);
+    assert!(s.iou >= 0.97, "footprint IoU {:.3}", s.iou);
 }

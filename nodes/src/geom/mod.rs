@@ -14,6 +14,7 @@ pub mod mesh_build;
 pub mod mesh_check;
 pub mod polygon;
 pub mod raycast;
+pub mod regularize;
 pub mod relief;
 pub mod terrain_mesh;
 pub mod theil_sen;

@@ -160,6 +160,64 @@ fn merge_collinear(ring: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
         .collect()
 }
 
+/// Indices of the vertices Douglas-Peucker keeps on a closed ring, in ring order (at least three
+/// when the ring has them).
+pub fn douglas_peucker(r: &[[f64; 2]], tol: f64) -> Vec<usize> {
+    let n = r.len();
+    if n <= 3 || tol <= 0.0 {
+        return (0..n).collect();
+    }
+    let closed: Vec<[f64; 2]> = r.iter().copied().chain(std::iter::once(r[0])).collect();
+    // A closed ring's chord from its first point to itself has no direction: start from the point
+    // furthest from the first.
+    let far = (1..n)
+        .max_by(|&i, &j| {
+            let d = |k: usize| (r[k][0] - r[0][0]).hypot(r[k][1] - r[0][1]);
+            d(i).total_cmp(&d(j)).then(j.cmp(&i))
+        })
+        .expect("more than three points");
+    let mut keep = vec![false; n + 1];
+    keep[0] = true;
+    keep[far] = true;
+    let mut stack = vec![(0usize, far), (far, n)];
+    while let Some((i, j)) = stack.pop() {
+        let (a, b) = (closed[i], closed[j]);
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len = dx.hypot(dy).max(1e-12);
+        let (k, d) = (i + 1..j)
+            .map(|k| {
+                (
+                    k,
+                    ((closed[k][0] - a[0]) * dy - (closed[k][1] - a[1]) * dx).abs() / len,
+                )
+            })
+            .fold((0, -1.0), |m, x| if x.1 > m.1 { x } else { m });
+        if d > tol {
+            keep[k] = true;
+            stack.push((i, k));
+            stack.push((k, j));
+        }
+    }
+    let out: Vec<usize> = (0..n).filter(|&k| keep[k]).collect();
+    if out.len() >= 3 {
+        out
+    } else {
+        (0..n).collect()
+    }
+}
+
+/// Distance from `p` to the segment `a`-`b`.
+pub fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let l2 = dx * dx + dy * dy;
+    let t = if l2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+}
+
 /// Douglas-Peucker on each ring (closed), keeping at least a triangle.
 pub fn simplify_polygon(p: Polygon, tol: f64) -> Polygon {
     if tol <= 0.0 {
@@ -169,40 +227,7 @@ pub fn simplify_polygon(p: Polygon, tol: f64) -> Polygon {
         if r.len() <= 4 {
             return r;
         }
-        let mut keep = vec![false; r.len() + 1];
-        let closed: Vec<[f64; 2]> = r.iter().copied().chain(std::iter::once(r[0])).collect();
-        // The chord of a closed ring from its first point to itself has no direction: start from
-        // the point furthest from the first.
-        let far = (1..r.len())
-            .max_by(|&i, &j| {
-                let d = |k: usize| (r[k][0] - r[0][0]).hypot(r[k][1] - r[0][1]);
-                d(i).total_cmp(&d(j)).then(j.cmp(&i))
-            })
-            .expect("more than four points");
-        keep[0] = true;
-        keep[far] = true;
-        keep[r.len()] = true;
-        let mut stack = vec![(0usize, far), (far, r.len())];
-        while let Some((i, j)) = stack.pop() {
-            let (a, b) = (closed[i], closed[j]);
-            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-            let len = dx.hypot(dy).max(1e-12);
-            let (k, d) = (i + 1..j)
-                .map(|k| {
-                    (
-                        k,
-                        ((closed[k][0] - a[0]) * dy - (closed[k][1] - a[1]) * dx).abs() / len,
-                    )
-                })
-                .fold((0, -1.0), |m, x| if x.1 > m.1 { x } else { m });
-            if d > tol {
-                keep[k] = true;
-                stack.push((i, k));
-                stack.push((k, j));
-            }
-        }
-        let out: Vec<[f64; 2]> = (0..r.len()).filter(|&k| keep[k]).map(|k| r[k]).collect();
-        if out.len() >= 3 { out } else { r }
+        douglas_peucker(&r, tol).into_iter().map(|k| r[k]).collect()
     };
     Polygon {
         exterior: simplify(p.exterior),

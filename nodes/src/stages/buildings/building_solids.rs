@@ -18,12 +18,12 @@ use spade::{
 };
 
 use crate::artifact::{
-    ArtifactType, Grid, ObjectClass, PodVec, Polygon, Raster, Scene, SceneObject,
+    ArtifactType, Grid, ObjectClass, PodVec, PointSet, Polygon, Raster, Scene, SceneObject,
 };
 use crate::geom::mesh_build::{Builder, insert_rings, triangulate};
 use crate::geom::mesh_check::check_solid;
-use crate::geom::polygon::point_in_ring;
-use crate::geom::polygon::{simplify_polygon, trace};
+use crate::geom::polygon::{point_in_ring, segment_distance, simplify_polygon, trace};
+use crate::geom::regularize::{RegularizeConfig, regularize_polygon};
 use crate::raster::label::label_ids;
 use crate::rf::materials::{Material, default_material};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
@@ -38,6 +38,11 @@ pub struct BuildingSolidsParams {
     /// walls that run diagonally to the grid. Default 0.5. Where simplifying would make the solid
     /// invalid, the exact cell outline is used.
     pub outline_tolerance_m: f64,
+    /// Outline regularization (`geom::regularize`): walls within this angle of the building's
+    /// dominant orientation or its right angle are turned to it, straight runs become one wall,
+    /// corners meet square, degrees; 0 turns it off. Default 12. Where the regularized outline
+    /// fails its checks or makes an invalid solid, the simplified one is used.
+    pub regularize_angle_deg: f64,
     /// How far the floor goes below the lowest terrain under the building, metres: walls then
     /// meet the terrain mesh everywhere. Default 0.5.
     pub embed_m: f64,
@@ -51,6 +56,7 @@ impl Default for BuildingSolidsParams {
         BuildingSolidsParams {
             tolerance_m: 0.1,
             outline_tolerance_m: 0.5,
+            regularize_angle_deg: 12.0,
             embed_m: 0.5,
             material: default_material(ObjectClass::Building),
         }
@@ -62,7 +68,7 @@ pub struct BuildingSolids;
 
 impl Stage for BuildingSolids {
     const KIND: &'static str = "BuildingSolids";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const DOC: &'static str = "watertight building solids: cleaned roofs extruded to the terrain, remeshed to a tolerance and checked, Sec. 4.1";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -76,6 +82,11 @@ impl Stage for BuildingSolids {
             "cleaned roof heights Z̃_b above the terrain, on the labels' grid",
         ),
         InputSpec::one("terrain", ArtifactType::Raster, "the terrain T"),
+        InputSpec::optional(
+            "points",
+            ArtifactType::Points,
+            "the LiDAR returns: regularized walls move to the edge of the roof returns",
+        ),
     ];
     type Params = BuildingSolidsParams;
     type Output = Scene;
@@ -98,6 +109,12 @@ impl Stage for BuildingSolids {
                 ));
             }
         }
+        if !(0.0..=30.0).contains(&p.regularize_angle_deg) {
+            return Err(ParamError::new(
+                "regularize_angle_deg",
+                "expected an angle from 0 (off) to 30 degrees",
+            ));
+        }
         if p.embed_m < 0.01 {
             return Err(ParamError::new(
                 "embed_m",
@@ -117,7 +134,10 @@ impl Stage for BuildingSolids {
             ));
         }
         let g = labels.grid;
-        let cells = CellHeights::new(labels, roofs, terrain)?;
+        let mut cells = CellHeights::new(labels, roofs, terrain)?;
+        if let Some(points) = inputs.optional::<PointSet>("points")? {
+            cells.collect_roof_returns(points);
+        }
         let outlines = trace(&Raster {
             grid: g,
             data: PodVec(cells.label.iter().map(|&l| l as f32).collect()),
@@ -152,7 +172,15 @@ struct CellHeights {
     ground: Vec<f64>,
     /// The cells of each label.
     members: BTreeMap<u32, Vec<u32>>,
+    /// Plan positions of each label's roof returns (within [`ROOF_BAND_M`] of its roof).
+    roof_returns: BTreeMap<u32, Vec<[f64; 2]>>,
 }
+
+/// A return this close below a cell's roof height, or above it, is a roof return, metres: wall
+/// and balcony returns lie further down.
+const ROOF_BAND_M: f64 = 1.0;
+/// The fewest roof returns along a wall that place it.
+const MIN_WALL_RETURNS: usize = 8;
 
 impl CellHeights {
     fn new(labels: &Raster, roofs: &Raster, terrain: &Raster) -> Result<CellHeights, StageError> {
@@ -187,25 +215,80 @@ impl CellHeights {
             roof,
             ground,
             members,
+            roof_returns: BTreeMap::new(),
         })
     }
 
-    /// The roof height at a cell corner: the mean over the cells of `label` that touch it.
+    /// Sorts the returns that fall in a building's cells near its roof height by building.
+    fn collect_roof_returns(&mut self, points: &PointSet) {
+        let g = self.grid;
+        for p in points.xyz.iter() {
+            let (x, y) = (p[0] as f64, p[1] as f64);
+            let Some((c, r)) = g.cell_of(x, y) else {
+                continue;
+            };
+            let i = (r * g.width + c) as usize;
+            let l = self.label[i];
+            if l > 0 && p[2] as f64 >= self.roof[i] - ROOF_BAND_M {
+                self.roof_returns.entry(l).or_default().push([x, y]);
+            }
+        }
+    }
+
+    /// Where the wall along a regularized line is: the outermost roof returns of `label` within
+    /// the line's extent (less half a metre at each end, where the other wall's returns are)
+    /// and 2 m of it, at their 2nd percentile of distance out (a few noisy returns beyond the
+    /// roof's edge do not move it).
+    fn wall_offset(&self, label: u32, d: [f64; 2], o: f64, extent: [f64; 2]) -> Option<f64> {
+        let pts = self.roof_returns.get(&label)?;
+        let n = [-d[1], d[0]];
+        let mut v: Vec<f64> = pts
+            .iter()
+            .filter(|p| {
+                let s = d[0] * p[0] + d[1] * p[1];
+                s >= extent[0] + 0.5 && s <= extent[1] - 0.5
+            })
+            .map(|p| n[0] * p[0] + n[1] * p[1] - o)
+            .filter(|v| v.abs() <= 2.0)
+            .collect();
+        if v.len() < MIN_WALL_RETURNS {
+            return None;
+        }
+        v.sort_by(f64::total_cmp);
+        Some(o + v[(v.len() - 1) * 2 / 100])
+    }
+
+    /// The roof height at an outline vertex: the mean over the cells of `label` that touch the
+    /// nearest cell corner; a regularized vertex off the cell boundary (a squared corner) takes
+    /// the nearest cells of `label` within two cells.
     fn corner_height(&self, label: u32, p: [f64; 2]) -> Option<f64> {
         let g = self.grid;
         let c = ((p[0] - g.x0) / g.cell_m).round() as i64;
         let r = ((g.y0 - p[1]) / g.cell_m).round() as i64;
-        let (mut sum, mut n) = (0.0, 0);
-        for (cc, rr) in [(c - 1, r - 1), (c, r - 1), (c - 1, r), (c, r)] {
-            if cc >= 0 && rr >= 0 && cc < g.width as i64 && rr < g.height as i64 {
-                let i = (rr * g.width as i64 + cc) as usize;
-                if self.label[i] == label {
-                    sum += self.roof[i];
-                    n += 1;
-                }
+        let at = |cc: i64, rr: i64| {
+            (cc >= 0 && rr >= 0 && cc < g.width as i64 && rr < g.height as i64)
+                .then(|| (rr * g.width as i64 + cc) as usize)
+                .filter(|&i| self.label[i] == label)
+        };
+        let mean = |cells: &mut dyn Iterator<Item = usize>| {
+            let (mut sum, mut n) = (0.0, 0);
+            for i in cells {
+                sum += self.roof[i];
+                n += 1;
+            }
+            (n > 0).then(|| sum / n as f64)
+        };
+        let touching = [(c - 1, r - 1), (c, r - 1), (c - 1, r), (c, r)];
+        if let Some(z) = mean(&mut touching.iter().filter_map(|&(cc, rr)| at(cc, rr))) {
+            return Some(z);
+        }
+        for ring in 1..=2i64 {
+            let near = (-ring - 1..=ring).flat_map(|dr| (-ring - 1..=ring).map(move |dc| (dc, dr)));
+            if let Some(z) = mean(&mut near.filter_map(|(dc, dr)| at(c + dc, r + dr))) {
+                return Some(z);
             }
         }
-        (n > 0).then(|| sum / n as f64)
+        None
     }
 }
 
@@ -271,16 +354,39 @@ fn solid(
         .fold(f64::INFINITY, f64::min)
         - p.embed_m;
     let mut last_error = String::new();
-    let tolerances = if p.outline_tolerance_m > 0.0 {
-        vec![p.outline_tolerance_m, 0.0]
-    } else {
-        vec![0.0]
-    };
-    for outline_tolerance in tolerances {
+    // Outlines to try, best first: regularized, simplified, the exact cell boundary.
+    let mut candidates: Vec<Vec<Polygon>> = Vec::new();
+    if p.regularize_angle_deg > 0.0 {
+        let cfg = RegularizeConfig {
+            simplify_m: p.outline_tolerance_m.max(1.5 * cells.grid.cell_m),
+            angle_tol_deg: p.regularize_angle_deg,
+            ..RegularizeConfig::default()
+        };
+        let regular = polygons
+            .iter()
+            .map(|poly| {
+                let snap =
+                    |d: [f64; 2], o: f64, extent: [f64; 2]| cells.wall_offset(label, d, o, extent);
+                regularize_polygon(poly, &cfg, Some(&snap))
+            })
+            .collect::<Option<Vec<_>>>();
+        if let Some(r) = regular {
+            candidates.push(r);
+        }
+    }
+    if p.outline_tolerance_m > 0.0 {
+        candidates.push(
+            polygons
+                .iter()
+                .map(|poly| simplify_polygon(poly.clone(), p.outline_tolerance_m))
+                .collect(),
+        );
+    }
+    candidates.push(polygons.to_vec());
+    for outline in candidates {
         let mut mesh = crate::artifact::Mesh::default();
-        let built: Result<(), String> = polygons.iter().try_for_each(|poly| {
-            let poly = simplify_polygon(poly.clone(), outline_tolerance);
-            mesh.append(&shell(cells, label, members, &poly, floor, p)?);
+        let built: Result<(), String> = outline.iter().try_for_each(|poly| {
+            mesh.append(&shell(cells, label, members, poly, floor, p)?);
             Ok(())
         });
         match built.and_then(|()| check_solid(&mesh).map(|_| ())) {
@@ -473,17 +579,6 @@ fn interpolate(v: [RoofVertex; 3], q: Point2<f64>) -> f64 {
 }
 
 /// Distance from `q` to the segment `a b`.
-fn segment_distance(q: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 {
-        (((q[0] - a[0]) * dx + (q[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (q[0] - a[0] - t * dx).hypot(q[1] - a[1] - t * dy)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -588,8 +683,10 @@ mod tests {
         });
         let roofs = raster(6, 5, |_, _| 6.0);
         let terrain = raster(6, 5, |_, _| 0.0);
+        // The exact cell outline: neither simplified nor regularized.
         let exact = BuildingSolidsParams {
             outline_tolerance_m: 0.0,
+            regularize_angle_deg: 0.0,
             ..Default::default()
         };
         let scene = solids(&labels, &roofs, &terrain, &exact);

@@ -7,6 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Footprint, Footprints, Polygon, Raster};
 use crate::geom::polygon::{simplify_polygon, trace};
+use crate::geom::regularize::{RegularizeConfig, regularize_polygon};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`TraceFootprints`].
@@ -16,6 +17,12 @@ pub struct TraceFootprintsParams {
     /// Douglas-Peucker tolerance for the traced outlines, metres; 0 keeps the exact cell
     /// boundaries (collinear vertices are always merged). Default 0.
     pub simplify_m: f64,
+    /// Outline regularization (`geom::regularize`, after simplification at `simplify_m`, or one
+    /// and a half cells when that is smaller): walls within this angle of the building's dominant orientation
+    /// or its right angle are turned to it and meet square, degrees; 0 turns it off. The traced
+    /// outline is kept where regularizing fails its checks. Default 0 (the traced outline, as
+    /// evidence); BuildingSolids regularizes its own, against the roof returns.
+    pub regularize_angle_deg: f64,
     /// The percentile of A within a building reported as its height. Default 90.
     pub height_percentile: f64,
 }
@@ -24,6 +31,7 @@ impl Default for TraceFootprintsParams {
     fn default() -> Self {
         TraceFootprintsParams {
             simplify_m: 0.0,
+            regularize_angle_deg: 0.0,
             height_percentile: 90.0,
         }
     }
@@ -58,6 +66,12 @@ impl Stage for TraceFootprints {
                 "expected a non-negative tolerance in metres",
             ));
         }
+        if !(0.0..=30.0).contains(&p.regularize_angle_deg) {
+            return Err(ParamError::new(
+                "regularize_angle_deg",
+                "expected an angle from 0 (off) to 30 degrees",
+            ));
+        }
         if !(0.0..=100.0).contains(&p.height_percentile) {
             return Err(ParamError::new(
                 "height_percentile",
@@ -71,11 +85,21 @@ impl Stage for TraceFootprints {
         let labels: &Raster = inputs.one("labels")?;
         let above: Option<&Raster> = inputs.optional("above")?;
         let heights = above.map(|a| label_heights(labels, a));
+        let cfg = RegularizeConfig {
+            simplify_m: p.simplify_m.max(1.5 * labels.grid.cell_m),
+            angle_tol_deg: p.regularize_angle_deg,
+            ..RegularizeConfig::default()
+        };
         let mut items = Vec::new();
         for (label, polygons) in trace(labels) {
             let polygons: Vec<Polygon> = polygons
                 .into_iter()
-                .map(|poly| simplify_polygon(poly, p.simplify_m))
+                .map(|poly| {
+                    let regular = (p.regularize_angle_deg > 0.0)
+                        .then(|| regularize_polygon(&poly, &cfg, None))
+                        .flatten();
+                    regular.unwrap_or_else(|| simplify_polygon(poly, p.simplify_m))
+                })
                 .collect();
             let height_m = heights
                 .as_ref()
