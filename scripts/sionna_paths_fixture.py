@@ -2,11 +2,19 @@
 simple_street_canyon): the reference our tracer is checked against (tests/sionna_crosscheck.rs).
 
     python3 scripts/sionna_paths_fixture.py ../shared/data/sionna-scenes tests/fixtures/sionna_paths.csv
+    python3 scripts/sionna_paths_fixture.py ../shared/data/sionna-scenes \
+        tests/fixtures/sionna_paths_refraction.csv --refraction
+    python3 scripts/sionna_paths_fixture.py ../shared/data/sionna-scenes \
+        tests/fixtures/sionna_paths_depth5.csv --depth 5
+    python3 scripts/sionna_paths_fixture.py ../shared/data/sionna-scenes \
+        tests/fixtures/sionna_paths_diffraction.csv --diffraction
 
 One isotropic, vertically polarised transmitter per scene; receivers at 1.5 m drawn at random
 (seeded) within 150 m (munich) or 120 m (street canyon) of it, kept only outdoors (nothing above them). Interactions: line of sight
 and specular reflection to depth 3, no transmission, no diffuse reflection, no diffraction; 10^6
-rays. Path gain = 10 log10 sum |a|^2 (incoherent), as in Sionna's tutorials. Needs sionna-rt 2.2
+rays. With --refraction, the same receivers with transmission (refraction) through every surface
+as well; with --depth N, specular reflection to depth N instead of 3; with --diffraction, wedge
+diffraction too (Sionna's `diffraction=True`, its lit region included, no free edges). Path gain = 10 log10 sum |a|^2 (incoherent), as in Sionna's tutorials. Needs sionna-rt 2.2
 and libLLVM 19 (scripts/sionna_env.py)."""
 import csv
 import sys
@@ -31,7 +39,7 @@ def outdoor(scene, p):
     return not bool(scene.mi_scene.ray_intersect(ray).is_valid()[0])
 
 
-def main(root, out):
+def main(root, out, refraction=False, depth=DEPTH, diffraction=False):
     rng = np.random.default_rng(2026)
     rows = []
     for name, (rel, tx, n_rx, reach) in SCENES.items():
@@ -49,16 +57,17 @@ def main(root, out):
                 rxs.append(p)
         for i, p in enumerate(rxs):
             scene.add(Receiver(name=f"rx{i}", position=p))
-        paths = PathSolver()(scene, max_depth=DEPTH, samples_per_src=10**6, los=True,
+        paths = PathSolver()(scene, max_depth=depth, samples_per_src=10**6, los=True,
                              specular_reflection=True, diffuse_reflection=False,
-                             refraction=False, synthetic_array=True)
+                             refraction=refraction, diffraction=diffraction,
+                             synthetic_array=True)
         a_re, a_im = paths.a
         a = a_re.numpy() + 1j * a_im.numpy()  # [rx, rx_ant, tx, tx_ant, paths]
         valid = paths.valid.numpy()
         for i, p in enumerate(rxs):
             ai = a[i, 0, 0, 0][valid[i, 0]] if valid.ndim == 3 else a[i, 0, 0, 0]
             g = np.sum(np.abs(ai) ** 2)
-            rows.append([name, *tx, *p, FREQ, DEPTH,
+            rows.append([name, *tx, *p, FREQ, depth,
                          f"{10 * np.log10(g):.4f}" if g > 0 else "-inf",
                          int(np.count_nonzero(np.abs(ai) > 0))])
         print(f"{name}: {len(rxs)} links")
@@ -70,4 +79,7 @@ def main(root, out):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
+    flags = sys.argv[3:]
+    depth = int(flags[flags.index("--depth") + 1]) if "--depth" in flags else DEPTH
+    main(sys.argv[1], sys.argv[2], refraction="--refraction" in flags, depth=depth,
+         diffraction="--diffraction" in flags)

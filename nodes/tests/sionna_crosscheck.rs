@@ -1,6 +1,7 @@
 //! Our tracer against Sionna RT 2.2 on Sionna's own scenes: path gains of the links in
-//! tests/fixtures/sionna_paths.csv (made by scripts/sionna_paths_fixture.py), same interactions
-//! (line of sight and specular reflection to depth 3), same antennas (isotropic, V), 10^6 rays.
+//! tests/fixtures/sionna_paths.csv (line of sight and specular reflection to depth 3) and
+//! sionna_paths_refraction.csv (the same links with transmission through every surface too),
+//! both made by scripts/sionna_paths_fixture.py; same antennas (isotropic, V), 10^6 rays.
 
 mod common;
 use common::*;
@@ -21,9 +22,9 @@ struct Row {
     sionna_paths: usize,
 }
 
-fn fixture_rows() -> BTreeMap<String, Vec<Row>> {
+fn fixture_rows(file: &str) -> BTreeMap<String, Vec<Row>> {
     let mut out: BTreeMap<String, Vec<Row>> = BTreeMap::new();
-    let mut r = csv::Reader::from_path(fixture("sionna_paths.csv")).unwrap();
+    let mut r = csv::Reader::from_path(fixture(file)).unwrap();
     for rec in r.records() {
         let rec = rec.unwrap();
         let f = |i: usize| -> f64 { rec[i].parse().unwrap() };
@@ -48,10 +49,14 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
     v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
-#[test]
-fn path_gains_match_sionna_rt() {
-    let mut all_diffs = Vec::new();
-    for (name, rows) in fixture_rows() {
+/// |difference| per link with paths on both sides, and the links with paths on one side only.
+fn compare(file: &str, transmission: bool) -> (Vec<f64>, usize) {
+    compare_with(file, transmission, false)
+}
+
+fn compare_with(file: &str, transmission: bool, diffraction: bool) -> (Vec<f64>, usize) {
+    let (mut all_diffs, mut all_one_side) = (Vec::new(), 0);
+    for (name, rows) in fixture_rows(file) {
         let xml = shared(&format!("sionna-scenes/{name}/{name}.xml"));
         let scene = read_scene(&xml).unwrap();
         let freq = rows[0].freq;
@@ -63,8 +68,8 @@ fn path_gains_match_sionna_rt() {
             max_depth: rows[0].depth,
             los: true,
             reflection: true,
-            transmission: false,
-            diffraction: false,
+            transmission,
+            diffraction,
             rays: 1_000_000,
             foliage_db_per_m: None,
             ..Default::default()
@@ -118,7 +123,14 @@ fn path_gains_match_sionna_rt() {
             percentile(&mut diffs.clone(), 0.9)
         );
         all_diffs.extend(diffs);
+        all_one_side += only_one;
     }
+    (all_diffs, all_one_side)
+}
+
+#[test]
+fn path_gains_match_sionna_rt() {
+    let (mut all_diffs, one_side) = compare("sionna_paths.csv", false);
     let n = all_diffs.len();
     let (median, p90) = (
         percentile(&mut all_diffs.clone(), 0.5),
@@ -127,6 +139,94 @@ fn path_gains_match_sionna_rt() {
     println!(
         "all: {n} links compared, |difference| median {median:.3} dB, 90th percentile {p90:.3} dB"
     );
+    // Measured: median 0.000 dB, 90th percentile 0.005 dB, no link one-sided.
     assert!(n >= 50, "{n}");
-    assert!(median <= 1.0, "median {median}");
+    assert!(median <= 0.1, "median {median}");
+    assert!(p90 <= 0.5, "90th percentile {p90}");
+    assert_eq!(one_side, 0, "links with paths on one side only");
+}
+
+#[test]
+fn path_gains_with_transmission_match_sionna_rt() {
+    let (mut all_diffs, one_side) = compare("sionna_paths_refraction.csv", true);
+    let n = all_diffs.len();
+    let (median, p90) = (
+        percentile(&mut all_diffs.clone(), 0.5),
+        percentile(&mut all_diffs, 0.9),
+    );
+    println!(
+        "all, with transmission: {n} links compared, {one_side} with paths on one side only; \
+         |difference| median {median:.3} dB, 90th percentile {p90:.3} dB"
+    );
+    // Measured: median 0.000 dB, 90th percentile 0.093 dB over 100 links. One munich link
+    // (rx (33.1, -97.5)) has one path of ours at -112.9 dB through walls where Sionna finds none:
+    // allowed, and no more.
+    assert!(n >= 80, "{n}");
+    assert!(median <= 0.1, "median {median}");
+    assert!(p90 <= 0.5, "90th percentile {p90}");
+    assert!(one_side <= 1, "{one_side} links with paths on one side only");
+}
+
+#[test]
+fn path_gains_at_depth_five_match_sionna_rt() {
+    let (mut all_diffs, one_side) = compare("sionna_paths_depth5.csv", false);
+    let n = all_diffs.len();
+    let (median, p90) = (
+        percentile(&mut all_diffs.clone(), 0.5),
+        percentile(&mut all_diffs, 0.9),
+    );
+    println!(
+        "all, depth 5: {n} links compared, {one_side} with paths on one side only; |difference| \
+         median {median:.3} dB, 90th percentile {p90:.3} dB"
+    );
+    // Measured: median 0.000 dB, 90th percentile 0.116 dB over 85 links, none one-sided.
+    assert!(n >= 80, "{n}");
+    assert!(median <= 0.1, "median {median}");
+    assert!(p90 <= 0.5, "90th percentile {p90}");
+    assert_eq!(one_side, 0, "links with paths on one side only");
+}
+
+#[test]
+fn path_gains_at_depth_eight_match_sionna_rt() {
+    let (mut all_diffs, one_side) = compare("sionna_paths_depth8.csv", false);
+    let n = all_diffs.len();
+    let (median, p90) = (
+        percentile(&mut all_diffs.clone(), 0.5),
+        percentile(&mut all_diffs, 0.9),
+    );
+    println!(
+        "all, depth 8: {n} links compared, {one_side} with paths on one side only; |difference| \
+         median {median:.3} dB, 90th percentile {p90:.3} dB"
+    );
+    // Measured: median 0.001 dB, 90th percentile 0.179 dB over 92 links. At depth 8 a link's
+    // only path can be one eight-bounce sequence that one shooter's 10^6 rays find and the
+    // other's miss: two munich links have one such path of ours (-147.3 and -106.7 dB) and none
+    // of Sionna's. Allowed, and no more.
+    assert!(n >= 80, "{n}");
+    assert!(median <= 0.1, "median {median}");
+    assert!(p90 <= 0.5, "90th percentile {p90}");
+    assert!(one_side <= 2, "{one_side} links with paths on one side only");
+}
+
+#[test]
+fn path_gains_with_diffraction_against_sionna_rt() {
+    let (mut all_diffs, one_side) = compare_with("sionna_paths_diffraction.csv", false, true);
+    let n = all_diffs.len();
+    let (median, p90) = (
+        percentile(&mut all_diffs.clone(), 0.5),
+        percentile(&mut all_diffs, 0.9),
+    );
+    println!(
+        "all, with diffraction: {n} links compared, {one_side} with paths on one side only; \
+         |difference| median {median:.3} dB, 90th percentile {p90:.3} dB"
+    );
+    // Not a match yet (issue 17). Measured: median 0.178 dB and 90th percentile 6.2 dB over 91
+    // links, 34 of 130 one-sided. Sionna RT 2.2 chains diffraction with reflections (8-41 paths
+    // per street-canyon link where our first-order wedges give 0-2), and finds nothing on 16
+    // munich links where we diffract at 110-120 dB. These bounds hold today's figures, so that a
+    // regression shows; they are not the target (median and 90th percentile <= 0.5 dB).
+    assert!(n >= 80, "{n}");
+    assert!(median <= 0.5, "median {median}");
+    assert!(p90 <= 8.0, "90th percentile {p90}");
+    assert!(one_side <= 40, "{one_side} links with paths on one side only");
 }
