@@ -164,7 +164,10 @@ fn path_gains_with_transmission_match_sionna_rt() {
     assert!(n >= 80, "{n}");
     assert!(median <= 0.1, "median {median}");
     assert!(p90 <= 0.5, "90th percentile {p90}");
-    assert!(one_side <= 1, "{one_side} links with paths on one side only");
+    assert!(
+        one_side <= 1,
+        "{one_side} links with paths on one side only"
+    );
 }
 
 #[test]
@@ -205,7 +208,10 @@ fn path_gains_at_depth_eight_match_sionna_rt() {
     assert!(n >= 80, "{n}");
     assert!(median <= 0.1, "median {median}");
     assert!(p90 <= 0.5, "90th percentile {p90}");
-    assert!(one_side <= 2, "{one_side} links with paths on one side only");
+    assert!(
+        one_side <= 2,
+        "{one_side} links with paths on one side only"
+    );
 }
 
 #[test]
@@ -228,5 +234,8 @@ fn path_gains_with_diffraction_against_sionna_rt() {
     assert!(n >= 80, "{n}");
     assert!(median <= 0.5, "median {median}");
     assert!(p90 <= 8.0, "90th percentile {p90}");
-    assert!(one_side <= 40, "{one_side} links with paths on one side only");
+    assert!(
+        one_side <= 40,
+        "{one_side} links with paths on one side only"
+    );
 }

@@ -326,13 +326,22 @@ fn report(name: &str, s: &Score) {
     );
     assert!(s.iou >= 0.9, "{name}: IoU {}", s.iou);
     assert!(
-        s.building_iou[1] >= 0.85,
+        s.building_iou[1] >= 0.87,
         "{name}: per-building IoU {}",
         s.building_iou[1]
     );
-    assert!(s.roof_rmse <= 0.5, "{name}: roof RMSE {}", s.roof_rmse);
+    // SplitBuildings must earn its place: measured 0.890 against 0.858 unsplit (demo), 0.893
+    // against 0.768 (geometric cues), 0.902 against 0.858 (steep).
     assert!(
-        s.terrain_rmse <= 0.3,
+        s.building_iou[1] >= s.building_iou[0] + 0.02,
+        "{name}: per-building IoU {} split, {} unsplit",
+        s.building_iou[1],
+        s.building_iou[0]
+    );
+    // Measured 0.169-0.182 m with regularized outlines (0.28-0.35 m before).
+    assert!(s.roof_rmse <= 0.25, "{name}: roof RMSE {}", s.roof_rmse);
+    assert!(
+        s.terrain_rmse <= 0.25,
         "{name}: terrain RMSE {}",
         s.terrain_rmse
     );

@@ -98,6 +98,8 @@ pub struct Reconstruction {
     pub dsm: Raster,
     /// T: the two passes of eq. (1) in graphs/demo.ron (DESIGN's example values).
     pub terrain: Raster,
+    /// The first (coarse) pass alone.
+    pub first_pass: Raster,
     /// A = max(H - T, 0).
     pub above: Raster,
 }
@@ -164,6 +166,7 @@ pub fn reconstruct(scene: &Scene) -> Reconstruction {
         lidar,
         dsm,
         terrain,
+        first_pass: t1,
         above,
     }
 }
