@@ -40,7 +40,8 @@ pub struct Interactions {
     /// No transmission through surfaces.
     #[arg(long)]
     no_transmission: bool,
-    /// First-order UTD edge diffraction (links only; off by default, as in Sionna RT).
+    /// First-order UTD edge diffraction (links only: `radiomap` refuses it; off by default, as
+    /// in Sionna RT).
     #[arg(long)]
     diffraction: bool,
     /// No diffraction (the default; accepted for Sionna-style command lines).
@@ -196,12 +197,9 @@ fn write_file(dest: &Path, bytes: &[u8]) -> Result<(), Fail> {
         })
 }
 
-fn note_unmodelled(i: &Interactions, radio_map: bool) {
+fn note_unmodelled(i: &Interactions) {
     if i.diffuse && i.scattering_coefficient <= 0.0 {
         eprintln!("note: --diffuse with a scattering coefficient of 0 scatters nothing");
-    }
-    if radio_map && i.diffraction {
-        eprintln!("note: radio maps do not model diffraction yet");
     }
 }
 
@@ -216,7 +214,7 @@ pub fn trace(a: TraceArgs) -> Result<u8, Fail> {
     regular_file("--links", &a.links)?;
     let links = read_links(&a.links).map_err(stage_fail)?;
     drop(task);
-    note_unmodelled(&a.interactions, false);
+    note_unmodelled(&a.interactions);
     let t = Instant::now();
     let ant = Antenna::default();
     // Links sharing a transmitter share its ray search, so the steps split by transmitter.
@@ -290,9 +288,19 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
             format!("error: --cell-m {} is not a positive size", a.cell_m),
         ));
     }
+    // Refused rather than ignored: a map that silently left diffraction out would be read as one
+    // that has it.
+    if a.interactions.diffraction && !a.interactions.no_diffraction {
+        return Err((
+            2,
+            "error: --diffraction: radio maps do not model diffraction yet (links do: `kodama-dag \
+             trace --diffraction`); leave the flag out"
+                .into(),
+        ));
+    }
     let task = Task::new(Mode::detect(false), "reading the scene", None);
     let scene = load(&a.scene, &a.interactions)?;
-    note_unmodelled(&a.interactions, true);
+    note_unmodelled(&a.interactions);
     let plane = default_plane(&scene, a.cell_m, a.height_m);
     task.step(&format!(
         "radio map: {} rays over {} x {} cells",

@@ -125,6 +125,23 @@ fn radiomap_writes_each_format_and_rejects_others() {
         "{}",
         r.stderr
     );
+    // Radio maps have no diffraction: asking for it is refused, not ignored.
+    let out = env.path("diffracted.tif");
+    let r = env.cli(&[
+        "radiomap",
+        "--scene",
+        canyon().to_str().unwrap(),
+        "--tx",
+        "-33,0,32",
+        "--freq-hz",
+        "3.5e9",
+        "--diffraction",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("--diffraction"), "{}", r.stderr);
+    assert!(!out.exists());
 }
 
 #[test]
