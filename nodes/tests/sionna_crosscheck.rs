@@ -49,12 +49,18 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
     v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
-/// |difference| per link with paths on both sides, and the links with paths on one side only.
-fn compare(file: &str, transmission: bool) -> (Vec<f64>, usize) {
-    compare_with(file, transmission, false)
+/// Over every link of a fixture: how many have paths on both sides, the median and 90th
+/// percentile of their |difference|, and how many have paths on one side only.
+struct Summary {
+    n: usize,
+    median: f64,
+    p90: f64,
+    one_side: usize,
 }
 
-fn compare_with(file: &str, transmission: bool, diffraction: bool) -> (Vec<f64>, usize) {
+/// Traces the links of `file` with the interactions given and compares them with Sionna's,
+/// printing the figures under `label`.
+fn compare(file: &str, label: &str, transmission: bool, diffraction: bool) -> Summary {
     let (mut all_diffs, mut all_one_side) = (Vec::new(), 0);
     for (name, rows) in fixture_rows(file) {
         let xml = shared(&format!("sionna-scenes/{name}/{name}.xml"));
@@ -125,20 +131,28 @@ fn compare_with(file: &str, transmission: bool, diffraction: bool) -> (Vec<f64>,
         all_diffs.extend(diffs);
         all_one_side += only_one;
     }
-    (all_diffs, all_one_side)
+    let s = Summary {
+        n: all_diffs.len(),
+        median: percentile(&mut all_diffs.clone(), 0.5),
+        p90: percentile(&mut all_diffs, 0.9),
+        one_side: all_one_side,
+    };
+    println!(
+        "all, {label}: {} links compared, {} with paths on one side only; |difference| median \
+         {:.3} dB, 90th percentile {:.3} dB",
+        s.n, s.one_side, s.median, s.p90
+    );
+    s
 }
 
 #[test]
 fn path_gains_match_sionna_rt() {
-    let (mut all_diffs, one_side) = compare("sionna_paths.csv", false);
-    let n = all_diffs.len();
-    let (median, p90) = (
-        percentile(&mut all_diffs.clone(), 0.5),
-        percentile(&mut all_diffs, 0.9),
-    );
-    println!(
-        "all: {n} links compared, |difference| median {median:.3} dB, 90th percentile {p90:.3} dB"
-    );
+    let Summary {
+        n,
+        median,
+        p90,
+        one_side,
+    } = compare("sionna_paths.csv", "LOS + specular", false, false);
     // Measured: median 0.000 dB, 90th percentile 0.005 dB, no link one-sided.
     assert!(n >= 50, "{n}");
     assert!(median <= 0.1, "median {median}");
@@ -148,15 +162,16 @@ fn path_gains_match_sionna_rt() {
 
 #[test]
 fn path_gains_with_transmission_match_sionna_rt() {
-    let (mut all_diffs, one_side) = compare("sionna_paths_refraction.csv", true);
-    let n = all_diffs.len();
-    let (median, p90) = (
-        percentile(&mut all_diffs.clone(), 0.5),
-        percentile(&mut all_diffs, 0.9),
-    );
-    println!(
-        "all, with transmission: {n} links compared, {one_side} with paths on one side only; \
-         |difference| median {median:.3} dB, 90th percentile {p90:.3} dB"
+    let Summary {
+        n,
+        median,
+        p90,
+        one_side,
+    } = compare(
+        "sionna_paths_refraction.csv",
+        "with transmission",
+        true,
+        false,
     );
     // Measured: median 0.000 dB, 90th percentile 0.093 dB over 100 links. One munich link
     // (rx (33.1, -97.5)) has one path of ours at -112.9 dB through walls where Sionna finds none:
@@ -172,16 +187,12 @@ fn path_gains_with_transmission_match_sionna_rt() {
 
 #[test]
 fn path_gains_at_depth_five_match_sionna_rt() {
-    let (mut all_diffs, one_side) = compare("sionna_paths_depth5.csv", false);
-    let n = all_diffs.len();
-    let (median, p90) = (
-        percentile(&mut all_diffs.clone(), 0.5),
-        percentile(&mut all_diffs, 0.9),
-    );
-    println!(
-        "all, depth 5: {n} links compared, {one_side} with paths on one side only; |difference| \
-         median {median:.3} dB, 90th percentile {p90:.3} dB"
-    );
+    let Summary {
+        n,
+        median,
+        p90,
+        one_side,
+    } = compare("sionna_paths_depth5.csv", "depth 5", false, false);
     // Measured: median 0.000 dB, 90th percentile 0.116 dB over 85 links, none one-sided.
     assert!(n >= 80, "{n}");
     assert!(median <= 0.1, "median {median}");
@@ -191,16 +202,12 @@ fn path_gains_at_depth_five_match_sionna_rt() {
 
 #[test]
 fn path_gains_at_depth_eight_match_sionna_rt() {
-    let (mut all_diffs, one_side) = compare("sionna_paths_depth8.csv", false);
-    let n = all_diffs.len();
-    let (median, p90) = (
-        percentile(&mut all_diffs.clone(), 0.5),
-        percentile(&mut all_diffs, 0.9),
-    );
-    println!(
-        "all, depth 8: {n} links compared, {one_side} with paths on one side only; |difference| \
-         median {median:.3} dB, 90th percentile {p90:.3} dB"
-    );
+    let Summary {
+        n,
+        median,
+        p90,
+        one_side,
+    } = compare("sionna_paths_depth8.csv", "depth 8", false, false);
     // Measured: median 0.001 dB, 90th percentile 0.179 dB over 92 links. At depth 8 a link's
     // only path can be one eight-bounce sequence that one shooter's 10^6 rays find and the
     // other's miss: two munich links have one such path of ours (-147.3 and -106.7 dB) and none
@@ -216,15 +223,16 @@ fn path_gains_at_depth_eight_match_sionna_rt() {
 
 #[test]
 fn path_gains_with_diffraction_against_sionna_rt() {
-    let (mut all_diffs, one_side) = compare_with("sionna_paths_diffraction.csv", false, true);
-    let n = all_diffs.len();
-    let (median, p90) = (
-        percentile(&mut all_diffs.clone(), 0.5),
-        percentile(&mut all_diffs, 0.9),
-    );
-    println!(
-        "all, with diffraction: {n} links compared, {one_side} with paths on one side only; \
-         |difference| median {median:.3} dB, 90th percentile {p90:.3} dB"
+    let Summary {
+        n,
+        median,
+        p90,
+        one_side,
+    } = compare(
+        "sionna_paths_diffraction.csv",
+        "with diffraction",
+        false,
+        true,
     );
     // Not a match yet (issue 17). Measured: median 0.178 dB and 90th percentile 6.2 dB over 91
     // links, 34 of 130 one-sided. Sionna RT 2.2 chains diffraction with reflections (8-41 paths
