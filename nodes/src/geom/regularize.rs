@@ -216,14 +216,11 @@ fn regularize_ring(
         // after merging, so take the ring's points within a cell of the line.
         for l in merged.iter_mut().filter(|l| l.snapped) {
             let n = l.normal();
-            let along: Vec<f64> = ring
+            let (s0, s1) = ring
                 .iter()
                 .filter(|p| (n[0] * p[0] + n[1] * p[1] - l.o).abs() <= cfg.simplify_m)
                 .map(|p| l.d[0] * p[0] + l.d[1] * p[1])
-                .collect();
-            let (s0, s1) = along
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
                     (a.min(v), b.max(v))
                 });
             if s1 > s0
