@@ -699,4 +699,26 @@ mod tests {
             report.volume_m3
         );
     }
+
+    #[test]
+    fn a_regularize_angle_outside_0_to_30_degrees_is_refused() {
+        for bad in [f64::NAN, f64::INFINITY, -1.0, 45.0] {
+            let p = BuildingSolidsParams {
+                regularize_angle_deg: bad,
+                ..Default::default()
+            };
+            let e = BuildingSolids::validate(&p).unwrap_err();
+            assert!(
+                format!("{e:?}").contains("regularize_angle_deg"),
+                "{bad}: {e:?}"
+            );
+        }
+        for ok in [0.0, 12.0, 30.0] {
+            let p = BuildingSolidsParams {
+                regularize_angle_deg: ok,
+                ..Default::default()
+            };
+            assert!(BuildingSolids::validate(&p).is_ok(), "{ok}");
+        }
+    }
 }

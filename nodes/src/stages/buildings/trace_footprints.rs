@@ -215,4 +215,26 @@ mod tests {
         let areas: Vec<f64> = t[&1].iter().map(Polygon::area).collect();
         assert_eq!(areas, vec![4.0, 1.0]);
     }
+
+    #[test]
+    fn a_regularize_angle_outside_0_to_30_degrees_is_refused() {
+        for bad in [f64::NAN, f64::INFINITY, -1.0, 45.0] {
+            let p = TraceFootprintsParams {
+                regularize_angle_deg: bad,
+                ..Default::default()
+            };
+            let e = TraceFootprints::validate(&p).unwrap_err();
+            assert!(
+                format!("{e:?}").contains("regularize_angle_deg"),
+                "{bad}: {e:?}"
+            );
+        }
+        for ok in [0.0, 12.0, 30.0] {
+            let p = TraceFootprintsParams {
+                regularize_angle_deg: ok,
+                ..Default::default()
+            };
+            assert!(TraceFootprints::validate(&p).is_ok(), "{ok}");
+        }
+    }
 }
