@@ -80,6 +80,7 @@ macro_rules! for_each_stage {
             $crate::stages::buildings::assemble_scene::AssembleScene,
             $crate::stages::street::surface_charts::SurfaceCharts,
             $crate::stages::street::fuse_views::FuseViews,
+            $crate::stages::street::register_views::RegisterViews,
             $crate::stages::street::relief::Relief,
             $crate::stages::street::carve_relief::CarveRelief,
             $crate::stages::street::fuse_materials::FuseMaterials,

@@ -19,4 +19,5 @@ pub mod relief;
 pub mod terrain_mesh;
 pub mod theil_sen;
 pub mod tri_packet;
+pub mod view_registration;
 pub mod wide_bvh;

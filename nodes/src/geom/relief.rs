@@ -1291,6 +1291,11 @@ fn instances(
                     / m
             };
             let posterior = mean(mine);
+            // Closing can join a few texels over the threshold with more under it: what comes
+            // out must still clear the threshold on average, or it is noise the morphology grew.
+            if posterior < p.threshold {
+                continue;
+            }
             let exposure = mean(&lay.exposure);
             let delta_agreement = with_mesh.then(|| {
                 let d = if sign < 0 { 0 } else { 2 };

@@ -8,5 +8,6 @@ pub mod carve_relief;
 pub mod fuse_materials;
 pub mod fuse_views;
 pub mod place_clutter;
+pub mod register_views;
 pub mod relief;
 pub mod surface_charts;

@@ -1,0 +1,65 @@
+//! RegisterViews: each street view's reported position and heading refined against the twin's
+//! building silhouettes (an addition to the paper's metadata-only registration of Sec. 4.2; see
+//! `geom::view_registration` for why and how). Every view keeps its images; only its pose moves,
+//! and its `pose_source` says by how much and on what evidence.
+
+use crate::artifact::{ArtifactType, Scene, ViewSet};
+use crate::geom::view_registration::{RegistrationParams, register_views};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+
+/// Street views with their poses refined against the twin.
+pub struct RegisterViews;
+
+impl Stage for RegisterViews {
+    const KIND: &'static str = "RegisterViews";
+    const VERSION: u32 = 1;
+    const DOC: &'static str = "street views with position and heading refined against the twin's building silhouettes (bounded search; a view is left alone when nothing beats its metadata)";
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::one(
+            "views",
+            ArtifactType::Views,
+            "the street views, placed from their metadata",
+        ),
+        InputSpec::one(
+            "scene",
+            ArtifactType::Scene,
+            "the twin whose Building and Terrain objects the views are matched to",
+        ),
+    ];
+    type Params = RegistrationParams;
+    type Output = ViewSet;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        p.validate().map_err(|(f, m)| ParamError::new(f, m))
+    }
+
+    fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<ViewSet, StageError> {
+        let views: &ViewSet = inputs.one("views")?;
+        let scene: &Scene = inputs.one("scene")?;
+        let refined = register_views(scene, &views.views, p, ctx.progress);
+        let mut out = views.clone();
+        for (v, (pose, r)) in out.views.iter_mut().zip(refined) {
+            let was = v.pose_source.clone().unwrap_or_else(|| "metadata".into());
+            v.pose_source = Some(if r.accepted {
+                v.pose = pose;
+                let by = if r.by_facades {
+                    "the twin's silhouettes and the façades the other views agree on"
+                } else {
+                    "the twin's silhouettes"
+                };
+                format!(
+                    "{was}; refined against {by}: moved ({:+.2}, {:+.2}) m, turned {:+.2} deg, agreement {:.3} -> {:.3}",
+                    r.shift_m[0], r.shift_m[1], r.yaw_deg, r.before, r.after
+                )
+            } else if r.before.is_finite() {
+                format!(
+                    "{was}; kept: nothing within {} m and {} deg beat it (agreement {:.3})",
+                    p.search_m, p.search_deg, r.before
+                )
+            } else {
+                format!("{was}; kept: no building labelled in the view to match the twin with")
+            });
+        }
+        Ok(out)
+    }
+}
