@@ -144,3 +144,17 @@ mod limit_tests {
         assert!(check_bytes("faces", 1e12, 12).unwrap_err().contains("TiB"));
     }
 }
+
+/// A finite value within [`lo`, `hi`]: Ok, or (field, message) naming the range and the value.
+pub fn check_in(
+    name: &'static str,
+    v: f64,
+    lo: f64,
+    hi: f64,
+) -> Result<(), (&'static str, String)> {
+    if v.is_finite() && v >= lo && v <= hi {
+        Ok(())
+    } else {
+        Err((name, format!("expected a value in [{lo}, {hi}], got {v}")))
+    }
+}

@@ -449,13 +449,7 @@ impl Default for ReliefParams {
 impl ReliefParams {
     /// Checks every knob: (field, message) of the first bad one.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
-        let range = |name: &'static str, v: f64, lo: f64, hi: f64| {
-            if v.is_finite() && v >= lo && v <= hi {
-                Ok(())
-            } else {
-                Err((name, format!("expected a value in [{lo}, {hi}], got {v}")))
-            }
-        };
+        let range = crate::params::check_in;
         range("gamma", self.gamma, 0.0, 8.0)?;
         range("theta_max_deg", self.theta_max_deg, 1.0, 90.0)?;
         range("sigma_texels", self.sigma_texels, 0.0, 8.0)?;
