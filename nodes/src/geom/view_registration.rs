@@ -81,13 +81,7 @@ impl Default for RegistrationParams {
 impl RegistrationParams {
     /// Checks every knob: (field, message) of the first bad one.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
-        let range = |name: &'static str, v: f64, lo: f64, hi: f64| {
-            if v.is_finite() && v >= lo && v <= hi {
-                Ok(())
-            } else {
-                Err((name, format!("expected a value in [{lo}, {hi}], got {v}")))
-            }
-        };
+        let range = crate::params::check_in;
         range("search_m", self.search_m, 0.0, 20.0)?;
         range("search_deg", self.search_deg, 0.0, 30.0)?;
         if !(100..=1_000_000).contains(&self.samples) {
