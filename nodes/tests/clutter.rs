@@ -19,6 +19,8 @@ use kodama_nodes::rng::{gaussian, mix, unit};
 use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::street::place_clutter::{PlaceClutter, PlaceClutterParams};
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
+use kodama_nodes::geom::view_registration::RegistrationParams;
+use kodama_nodes::stages::street::register_views::RegisterViews;
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
 use kodama_nodes::synth::truth_scene::wall_prisms;
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
@@ -91,8 +93,17 @@ fn demo_site() -> (City, Scene, ViewSet, Scene, Raster) {
     let inputs = Inputs::new()
         .with("scene", slot(Artifact::Scene(truth.clone())))
         .with("city", slot(Artifact::City(city.clone())));
-    let views = SynthViews::run(&p, &inputs, &Ctx::new(&site(), &[])).unwrap();
+    let raw = SynthViews::run(&p, &inputs, &Ctx::new(&site(), &[])).unwrap();
     let twin = wall_prisms(&city, &truth).unwrap();
+    // Registered against the twin, as the demo graph does before PlaceClutter.
+    let views = RegisterViews::run(
+        &RegistrationParams::default(),
+        &Inputs::new()
+            .with("views", slot(Artifact::Views(raw)))
+            .with("scene", slot(Artifact::Scene(twin.clone()))),
+        &Ctx::new(&site(), &[]),
+    )
+    .unwrap();
     let grid = Grid::covering(
         (0.25, 0.25),
         (city.size_m.0 - 0.25, city.size_m.1 - 0.25),
@@ -282,9 +293,11 @@ fn clutter_recall_and_precision_on_the_demo_site() {
     }
     // Scored with the intersection rule off: the synthetic city parks cars in intersections
     // (SynthCity places them at any x along a street), so the rule drops true cars there.
-    // The target is 0.8 for both; measured (see the printout) car recall falls short
-    // (about 0.76: cars reported by only one view and missed there by SynthViews'
-    // instance_miss, and cars seen end-on placed 1.5-3 m off), so recall is held at 0.75 here.
+    // The target is 0.8 for both; measured (see the printout) car and tree recall fall
+    // just short (0.794 and 0.795: cars reported by only one view and missed there by
+    // SynthViews' instance_miss, cars seen end-on placed 1.5-3 m off), so recall is held at
+    // 0.75 here. Registration took car recall from 0.76 to 0.79 and the median position
+    // error over all classes from 0.59 m to 0.28 m.
     let s = &results[1];
     let mut all_errors = Vec::new();
     for (class, c) in s {
@@ -299,7 +312,7 @@ fn clutter_recall_and_precision_on_the_demo_site() {
     }
     let med = median(all_errors);
     println!("median position error over all classes: {med:.2} m");
-    assert!(med <= 1.0, "median position error {med:.2} m");
+    assert!(med <= 0.4, "median position error {med:.2} m");
 }
 
 /// The stage's scene: checked solids, distinct ids, the same at one and at two threads.
