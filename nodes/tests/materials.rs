@@ -18,13 +18,13 @@ use kodama_nodes::artifact::{
     ChartKind, ChartSet, City, FeatureKind, MaterialLayers, MaterialSource, Scene, ViewSet,
 };
 use kodama_nodes::geom::mesh_check::check_solid;
+use kodama_nodes::geom::view_registration::RegistrationParams;
 use kodama_nodes::rf::materials::Material;
 use kodama_nodes::stages::street::apply_materials::{ApplyMaterials, ApplyMaterialsParams};
 use kodama_nodes::stages::street::fuse_materials::{FuseMaterials, FuseMaterialsParams};
+use kodama_nodes::stages::street::register_views::RegisterViews;
 use kodama_nodes::stages::street::surface_charts::{SurfaceCharts, SurfaceChartsParams};
 use kodama_nodes::synth::synth_city::generate;
-use kodama_nodes::geom::view_registration::RegistrationParams;
-use kodama_nodes::stages::street::register_views::RegisterViews;
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
 use kodama_nodes::synth::truth_scene::wall_prisms;
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};

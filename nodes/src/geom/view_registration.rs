@@ -79,6 +79,11 @@ impl Default for RegistrationParams {
 }
 
 impl RegistrationParams {
+    /// A window of zero in position and heading: the metadata stands, as in the paper.
+    pub fn is_off(&self) -> bool {
+        self.search_m == 0.0 && self.search_deg == 0.0
+    }
+
     /// Checks every knob: (field, message) of the first bad one.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
         let range = crate::params::check_in;
@@ -677,13 +682,11 @@ fn refine_view(
     }
     // A best pose on the window's edge means the truth lies beyond it, or that nothing within
     // it explains the view: either way not a pose to trust.
-    let on_edge = best[0].abs() >= 0.99 * p.search_m
-        || best[1].abs() >= 0.99 * p.search_m
-        || best[2].abs() >= 0.99 * search_rad;
-    let accepted = after.is_finite()
-        && after - before >= p.min_gain
-        && after >= p.min_agreement
-        && (!on_edge || p.search_m == 0.0 || p.search_deg == 0.0);
+    let on_edge = (p.search_m > 0.0
+        && (best[0].abs() >= 0.99 * p.search_m || best[1].abs() >= 0.99 * p.search_m))
+        || (search_rad > 0.0 && best[2].abs() >= 0.99 * search_rad);
+    let accepted =
+        after.is_finite() && after - before >= p.min_gain && after >= p.min_agreement && !on_edge;
     let refinement = Refinement {
         shift_m: if accepted {
             [best[0], best[1]]
@@ -751,6 +754,22 @@ pub fn register_views(
     p: &RegistrationParams,
     progress: &dyn Progress,
 ) -> Vec<(Pose, Refinement)> {
+    if p.is_off() {
+        return views
+            .iter()
+            .map(|v| {
+                let kept = Refinement {
+                    shift_m: [0.0; 2],
+                    yaw_deg: 0.0,
+                    before: f64::NAN,
+                    after: f64::NAN,
+                    accepted: false,
+                    by_facades: false,
+                };
+                (v.pose, kept)
+            })
+            .collect();
+    }
     let rays = SceneRays::new(scene);
     let by_triangle = shown_by_triangle(scene);
     let twin = Twin {
@@ -990,6 +1009,35 @@ mod tests {
         let (pose, r) = out[0];
         assert!(!r.accepted, "{r:?}");
         assert_eq!(pose, reported);
+    }
+
+    #[test]
+    fn a_window_of_zero_keeps_the_metadata() {
+        let s = scene(&[
+            ([-6.0, 12.0], [8.0, 6.0, 7.0]),
+            ([6.0, 12.0], [9.0, 6.0, 9.0]),
+        ]);
+        let truth = look([0.0, 0.0, 2.0], 90f64.to_radians());
+        let reported = moved(truth, 0.6, -0.4, 1.0);
+        let v = view(&s, truth, reported);
+        let off = RegistrationParams {
+            search_m: 0.0,
+            search_deg: 0.0,
+            ..Default::default()
+        };
+        let out = register_views(&s, std::slice::from_ref(&v), &off, &NoProgress);
+        assert_eq!(out[0].0, reported);
+        assert!(!out[0].1.accepted);
+        // Heading alone: the position stays, the heading comes back.
+        let yaw_only = RegistrationParams {
+            search_m: 0.0,
+            ..Default::default()
+        };
+        let v = view(&s, truth, moved(truth, 0.0, 0.0, 1.5));
+        let (pose, r) = register_views(&s, std::slice::from_ref(&v), &yaw_only, &NoProgress)[0];
+        assert!(r.accepted, "{r:?}");
+        assert_eq!(pose.position, truth.position);
+        assert!((heading(&pose) - heading(&truth)).to_degrees().abs() <= 0.4);
     }
 
     #[test]

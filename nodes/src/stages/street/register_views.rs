@@ -36,6 +36,9 @@ impl Stage for RegisterViews {
     fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<ViewSet, StageError> {
         let views: &ViewSet = inputs.one("views")?;
         let scene: &Scene = inputs.one("scene")?;
+        if p.is_off() {
+            return Ok(views.clone());
+        }
         let refined = register_views(scene, &views.views, p, ctx.progress);
         let mut out = views.clone();
         for (v, (pose, r)) in out.views.iter_mut().zip(refined) {
