@@ -9,11 +9,15 @@
 //! half a metre of metadata error moves every window a view deposits by half a metre, which at
 //! IoU 0.5 on a 1.4 m window loses most of them (BENCHMARKS.md, issue 13).
 //!
-//! The search is a grid over (dx, dy, dyaw) on a coarse pixel lattice, then three rounds of a
-//! 3 x 3 x 3 neighbourhood at half the step on a finer lattice. Camera height, pitch and roll are
-//! kept from the metadata. A view is left where its metadata put it when the best pose does not
-//! beat the reported one by `min_gain` of the counted pixels: a flat wall seen head-on cannot
-//! say where along it the camera stood, and a pose found in noise is worse than the metadata.
+//! The search, per view: a 7 x 7 x 5 grid over (dx, dy, dyaw) scored on a coarse pixel lattice,
+//! then pattern searches from its best few poses on finer lattices kept near the label edges
+//! (the only pixels a small move changes), with the metadata as a weak prior. A second pass runs
+//! every view again with the window and door labels the placed views pooled (less its own) as a
+//! further cue, which places the views that face one wall from edge to edge. Camera height,
+//! pitch and roll are kept from the metadata. A view stays where its metadata put it when the
+//! best pose does not beat the reported one by `min_gain`, lies on the edge of the search window,
+//! or agrees on less than `min_agreement`: a flat wall seen head-on cannot say where along it
+//! the camera stood, and a pose found in noise is worse than the metadata.
 
 use std::collections::HashMap;
 
@@ -558,26 +562,24 @@ fn refine_view(
     let edge = edges(view, consensus.is_some(), p);
     let near = |band: u32| dilate_square(&edge, view.width, view.height, band as i64);
     let fine = samples(view, fine_stride, Some(&near(coarse_stride)), p);
-    let by_level = [
-        samples(
-            view,
-            (coarse_stride / 2).max(1),
-            Some(&near(coarse_stride)),
-            p,
-        ),
-        samples(
-            view,
-            fine_stride,
-            Some(&near((coarse_stride / 2).max(1))),
-            p,
-        ),
-        samples(view, fine_stride, Some(&near(coarse_stride)), p),
-    ];
     // A view with no building in it has nothing to be placed by (nor anything for the façade
     // stages to take from it).
     if fine.is_empty() || !coarse.iter().any(|s| s.seen == Seen::Building) {
         return (view.pose, unchanged);
     }
+    let mid = samples(
+        view,
+        (coarse_stride / 2).max(1),
+        Some(&near(coarse_stride)),
+        p,
+    );
+    let close = samples(
+        view,
+        fine_stride,
+        Some(&near((coarse_stride / 2).max(1))),
+        p,
+    );
+    let by_level: [&[Sample]; 3] = [&mid, &close, &fine];
     let at = |smp: &[Sample], c: Candidate| {
         let pos = [
             view.pose.position[0] + c[0],
@@ -656,7 +658,7 @@ fn refine_view(
                         (here[2] + k * sr).clamp(-search_rad, search_rad),
                     ]);
                 }
-                let smp = &by_level[(level as usize).min(by_level.len() - 1)];
+                let smp = by_level[(level as usize).min(by_level.len() - 1)];
                 let next = best_of(
                     &around,
                     &|c| at(smp, c),
