@@ -1155,7 +1155,6 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
                 pr_protruding: PodVec(vec![f32::NAN; n]),
             };
             let mut observed = 0u64;
-            let mut pd_all = vec![[0.0f64; 4]; n];
             for k in 0..n {
                 if c.triangle_at[k] == u32::MAX {
                     continue;
@@ -1176,7 +1175,6 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
                 let dq = delta.map_or(f64::NAN, |d| d[k] as f64);
                 lay.delta[k] = dq as f32;
                 let pd = mesh_state_probabilities(dq, &p.delta);
-                pd_all[k] = pd;
                 if let Some(y) = relief_posterior(&cpt, levels, pd) {
                     lay.pr_recessed[k] = y[0] as f32;
                     lay.pr_protruding[k] = y[2] as f32;
@@ -1186,7 +1184,7 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
                 .get(&(ci as u32))
                 .map(Vec::as_slice)
                 .unwrap_or(&[]);
-            let inst = instances(ci as u32, c, &lay, &pd_all, regions, with_mesh, p);
+            let inst = instances(ci as u32, c, &lay, regions, with_mesh, p);
             (lay, inst, observed)
         })
         .collect();
@@ -1210,7 +1208,6 @@ fn instances(
     ci: u32,
     c: &crate::artifact::Chart,
     lay: &ReliefLayers,
-    pd: &[[f64; 4]],
     regions: &[&RegionVote],
     with_mesh: bool,
     p: &ReliefParams,
@@ -1293,7 +1290,13 @@ fn instances(
             let exposure = mean(&lay.exposure);
             let delta_agreement = with_mesh.then(|| {
                 let d = if sign < 0 { 0 } else { 2 };
-                texels.iter().filter(|&&k| pd[k][d] > 0.5).count() as f64 / m
+                // Pr(d | Delta) again from the stored Delta (f32 both times: the same values the
+                // posterior used), rather than kept for every texel of every chart.
+                texels
+                    .iter()
+                    .filter(|&&k| mesh_state_probabilities(lay.delta[k] as f64, &p.delta)[d] > 0.5)
+                    .count() as f64
+                    / m
             });
             // The regions that voted for it: class by pixel-weighted majority (named classes
             // first), depth by pixel-weighted median of the measured steps.
