@@ -1,0 +1,93 @@
+//! The second pass's evidence: the façade labels of the views already placed, pooled in cells
+//! on the twin's walls, and read by each view without its own.
+
+use std::collections::HashMap;
+
+use crate::artifact::{Pose, View};
+
+use super::RegistrationParams;
+use super::labels::{Facade, Rendered, samples, strides};
+use super::twin::Twin;
+
+/// The façade labels of the views already placed, pooled in cells on the twin's walls: the
+/// second pass places a view whose silhouettes could not (a street front seen whole, one wall
+/// from edge to edge) by the windows and doors the placed views agree on.
+pub(super) struct Consensus {
+    pub(super) cell_m: f64,
+    /// Cell -> (feature, wall) sample counts over every placed view.
+    pub(super) cells: HashMap<[i64; 3], [u32; 2]>,
+}
+
+/// One view's façade samples pooled in cells.
+pub(super) type Pool = HashMap<[i64; 3], [u32; 2]>;
+
+impl Consensus {
+    pub(super) fn key(cell_m: f64, at: [f64; 3]) -> [i64; 3] {
+        at.map(|v| (v / cell_m).floor() as i64)
+    }
+
+    /// `view`'s façade samples as seen from `pose`, pooled in cells.
+    pub(super) fn pool(
+        cell_m: f64,
+        view: &View,
+        pose: &Pose,
+        twin: &Twin,
+        p: &RegistrationParams,
+    ) -> Pool {
+        let placed = View {
+            pose: *pose,
+            ..view.clone()
+        };
+        let origin = pose.position.map(|v| v as f32);
+        let mut cells = Pool::new();
+        let (_, fine_stride) = strides(view, p);
+        for smp in samples(&placed, fine_stride, None, p) {
+            if smp.facade == Facade::None {
+                continue;
+            }
+            let dir = smp.dir.map(|c| c as f32);
+            let Some((t, prim)) = twin.rays.cast_index(origin, dir, 1e-3, twin.max_range) else {
+                continue;
+            };
+            if twin.shown_by_triangle[prim as usize].rendered != Rendered::Building {
+                continue;
+            }
+            let at = std::array::from_fn(|k| pose.position[k] + smp.dir[k] * t as f64);
+            let cell = cells.entry(Self::key(cell_m, at)).or_default();
+            cell[(smp.facade == Facade::Wall) as usize] += 1;
+        }
+        cells
+    }
+
+    pub(super) fn add(&mut self, pool: &Pool) {
+        for (k, v) in pool {
+            let c = self.cells.entry(*k).or_default();
+            c[0] += v[0];
+            c[1] += v[1];
+        }
+    }
+}
+
+/// The consensus as one view may use it: without what that view itself put in.
+pub(super) struct OthersSay<'a> {
+    pub(super) all: &'a Consensus,
+    pub(super) own: Option<&'a Pool>,
+}
+
+impl OthersSay<'_> {
+    /// The majority label of the other views in the cell at `at`, if any saw it and they did not
+    /// tie.
+    pub(super) fn label_at(&self, at: [f64; 3]) -> Option<Facade> {
+        let key = Consensus::key(self.all.cell_m, at);
+        let [mut f, mut w] = *self.all.cells.get(&key)?;
+        if let Some(own) = self.own.and_then(|o| o.get(&key)) {
+            f -= own[0];
+            w -= own[1];
+        }
+        match f.cmp(&w) {
+            std::cmp::Ordering::Greater => Some(Facade::Feature),
+            std::cmp::Ordering::Less => Some(Facade::Wall),
+            std::cmp::Ordering::Equal => None,
+        }
+    }
+}

@@ -1,0 +1,469 @@
+//! Pose refinement of street views against the twin's silhouettes.
+//!
+//! The paper registers views from their metadata alone (Sec. 4.2) and argues that classical
+//! pose refinement has nothing to anchor to, since the landmarks it would use are the façade
+//! features still missing from the scene. The building outlines are not missing: the twin of
+//! Sec. 4.1 has them. So each view's reported position (east, north) and heading are moved
+//! within a bounded window to where the twin, rendered from the view, best agrees with what the
+//! view's own segmentation says is building, sky and ground. Relief is the stage that needs it:
+//! half a metre of metadata error moves every window a view deposits by half a metre, which at
+//! IoU 0.5 on a 1.4 m window loses most of them (BENCHMARKS.md, issue 13).
+//!
+//! The search, per view: a 7 x 7 x 5 grid over (dx, dy, dyaw) scored on a coarse pixel lattice,
+//! then pattern searches from its best few poses on finer lattices kept near the label edges
+//! (the only pixels a small move changes), with the metadata as a weak prior. A second pass runs
+//! every view again with the window and door labels the placed views pooled (less its own) as a
+//! further cue, which places the views that face one wall from edge to edge. Camera height,
+//! pitch and roll are kept from the metadata. A view stays where its metadata put it when the
+//! best pose does not beat the reported one by `min_gain`, lies on the edge of the search window,
+//! or agrees on less than `min_agreement`: a flat wall seen head-on cannot say where along it
+//! the camera stood, and a pose found in noise is worse than the metadata.
+
+mod consensus;
+mod labels;
+mod twin;
+
+use std::collections::HashMap;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::{Pose, Scene, View};
+use crate::geom::raycast::SceneRays;
+use crate::raster::morph::dilate_square;
+use crate::stage::Progress;
+
+use consensus::{Consensus, OthersSay, Pool};
+use labels::{Sample, Seen, edges, samples, strides};
+use twin::{Twin, score, shown_by_triangle};
+
+/// Knobs of the refinement.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RegistrationParams {
+    /// Largest horizontal move searched, each axis, metres. Default 1.5 (three standard
+    /// deviations of phone-grade metadata after a provider's own structure from motion).
+    pub search_m: f64,
+    /// Largest heading change searched, degrees. Default 3.
+    pub search_deg: f64,
+    /// About this many pixels, on a regular lattice, score the coarse grid of poses; the
+    /// refinement rounds use a lattice four times finer each way, kept to the pixels near a
+    /// change of label. Default 1200 (every 8th pixel of a 320 x 240 view).
+    pub samples: u32,
+    /// The refined pose must beat the reported one by this share of the counted pixels.
+    /// Default 0.005.
+    pub min_gain: f64,
+    /// The metadata as a prior: a candidate's agreement is lowered by this times its squared
+    /// move in units of the search window (dx² / search_m² + dy² / search_m² + dyaw² /
+    /// search_deg²), so that among poses the silhouettes barely tell apart the one nearer the
+    /// metadata wins (heading and sideways move trade off for a distant wall). Default 0.005.
+    pub prior_weight: f64,
+    /// A view whose best pose still agrees on less than this share is left alone: the twin
+    /// does not explain it (a missed wall, a view into a courtyard the twin lacks). Default 0.5.
+    pub min_agreement: f64,
+    /// Rays longer than this count as sky, metres. Default 2000.
+    pub max_range_m: f64,
+    /// The architectural class of walls, whose instances tell one building from the next.
+    /// Default "wall".
+    pub wall_class: String,
+    /// The architectural class of roofs (neither wall nor façade feature). Default "roof".
+    pub roof_class: String,
+    /// Edge of the cells in which the placed views' façade labels are pooled for the second
+    /// pass, metres. Default 0.25.
+    pub consensus_cell_m: f64,
+}
+
+impl Default for RegistrationParams {
+    fn default() -> Self {
+        RegistrationParams {
+            search_m: 1.5,
+            search_deg: 3.0,
+            samples: 1200,
+            min_gain: 0.005,
+            prior_weight: 0.005,
+            min_agreement: 0.5,
+            max_range_m: 2000.0,
+            wall_class: "wall".into(),
+            roof_class: "roof".into(),
+            consensus_cell_m: 0.25,
+        }
+    }
+}
+
+impl RegistrationParams {
+    /// A window of zero in position and heading: the metadata stands, as in the paper.
+    pub fn is_off(&self) -> bool {
+        self.search_m == 0.0 && self.search_deg == 0.0
+    }
+
+    /// Checks every knob: (field, message) of the first bad one.
+    pub fn validate(&self) -> Result<(), (&'static str, String)> {
+        let range = crate::params::check_in;
+        range("search_m", self.search_m, 0.0, 20.0)?;
+        range("search_deg", self.search_deg, 0.0, 30.0)?;
+        if !(100..=1_000_000).contains(&self.samples) {
+            return Err((
+                "samples",
+                format!("expected 100 to 10^6 pixels, got {}", self.samples),
+            ));
+        }
+        range("min_gain", self.min_gain, 0.0, 1.0)?;
+        range("prior_weight", self.prior_weight, 0.0, 10.0)?;
+        range("min_agreement", self.min_agreement, -1.0, 1.0)?;
+        range("max_range_m", self.max_range_m, 1.0, 100_000.0)?;
+        range("consensus_cell_m", self.consensus_cell_m, 0.01, 10.0)?;
+        Ok(())
+    }
+}
+
+/// The outcome for one view.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Refinement {
+    /// Move applied east, north, metres (0 when not accepted).
+    pub shift_m: [f64; 2],
+    /// Heading change applied, degrees, counter-clockwise seen from above.
+    pub yaw_deg: f64,
+    /// Agreement (share of counted pixels, -1 to 1) at the reported and the best pose, on the
+    /// fine lattice.
+    pub before: f64,
+    /// See `before`.
+    pub after: f64,
+    /// Whether the pose was moved.
+    pub accepted: bool,
+    /// Whether the move used the façade labels the other views agreed on (the second pass) as
+    /// well as the silhouettes.
+    pub by_facades: bool,
+}
+
+/// How many of the coarse grid's best poses start a fine search.
+const STARTS: usize = 2;
+
+/// The pattern search's moves: (right, forward, heading) in steps. Along each axis, and the
+/// sideways moves paired with turns either way, the valley along which a distant wall lets
+/// heading and position trade off.
+const MOVES_AROUND: [(f64, f64, f64); 10] = [
+    (1.0, 0.0, 0.0),
+    (-1.0, 0.0, 0.0),
+    (0.0, 1.0, 0.0),
+    (0.0, -1.0, 0.0),
+    (0.0, 0.0, 1.0),
+    (0.0, 0.0, -1.0),
+    (1.0, 0.0, 1.0),
+    (1.0, 0.0, -1.0),
+    (-1.0, 0.0, 1.0),
+    (-1.0, 0.0, -1.0),
+];
+
+/// How many moves a level of the pattern search may make before its step is halved.
+const MOVES: usize = 3;
+
+/// One candidate: (dx, dy, yaw radians).
+type Candidate = [f64; 3];
+
+/// The best of `candidates` by agreement, ties to the smallest move (then the first listed), so
+/// a flat score leaves the pose alone.
+fn best_of(
+    candidates: &[Candidate],
+    eval: &dyn Fn(Candidate) -> f64,
+    search_m: f64,
+    search_rad: f64,
+    prior_weight: f64,
+) -> (Candidate, f64) {
+    let size = |c: &Candidate| {
+        let m = if search_m > 0.0 { search_m } else { 1.0 };
+        let r = if search_rad > 0.0 { search_rad } else { 1.0 };
+        (c[0] / m).powi(2) + (c[1] / m).powi(2) + (c[2] / r).powi(2)
+    };
+    let mut best = (candidates[0], f64::NEG_INFINITY);
+    for &cand in candidates {
+        let s = eval(cand) - prior_weight * size(&cand);
+        if !s.is_finite() {
+            continue;
+        }
+        if s > best.1 || (s == best.1 && size(&cand) < size(&best.0)) {
+            best = (cand, s);
+        }
+    }
+    best
+}
+
+/// Refines one view's pose against the twin. Returns the pose to use and what was done.
+fn refine_view(
+    view: &View,
+    twin: &Twin,
+    consensus: Option<&OthersSay>,
+    start: Option<Candidate>,
+    p: &RegistrationParams,
+) -> (Pose, Refinement) {
+    let unchanged = Refinement {
+        shift_m: [0.0, 0.0],
+        yaw_deg: 0.0,
+        before: f64::NAN,
+        after: f64::NAN,
+        accepted: false,
+        by_facades: consensus.is_some(),
+    };
+    // Samples per level of the search: the whole view on the coarse lattice for the grid; then
+    // ever finer lattices kept ever closer to the edges, as the pose left to find shrinks. The
+    // moves are judged, and the pose accepted, on the finest lattice within a coarse stride of
+    // an edge.
+    let (coarse_stride, fine_stride) = strides(view, p);
+    let coarse = samples(view, coarse_stride, None, p);
+    let edge = edges(view, consensus.is_some(), p);
+    let near = |band: u32| dilate_square(&edge, view.width, view.height, band as i64);
+    let fine = samples(view, fine_stride, Some(&near(coarse_stride)), p);
+    // A view with no building in it has nothing to be placed by (nor anything for the façade
+    // stages to take from it).
+    if fine.is_empty() || !coarse.iter().any(|s| s.seen == Seen::Building) {
+        return (view.pose, unchanged);
+    }
+    let mid = samples(
+        view,
+        (coarse_stride / 2).max(1),
+        Some(&near(coarse_stride)),
+        p,
+    );
+    let close = samples(
+        view,
+        fine_stride,
+        Some(&near((coarse_stride / 2).max(1))),
+        p,
+    );
+    let by_level: [&[Sample]; 3] = [&mid, &close, &fine];
+    let at = |smp: &[Sample], c: Candidate| {
+        let pos = [
+            view.pose.position[0] + c[0],
+            view.pose.position[1] + c[1],
+            view.pose.position[2],
+        ];
+        score(smp, twin, consensus, pos, c[2])
+    };
+    let search_rad = p.search_deg.to_radians();
+    // Coarse: 7 x 7 positions, 5 headings.
+    let (step_m, step_rad) = (p.search_m / 3.0, search_rad / 2.0);
+    let mut grid = Vec::with_capacity(245);
+    for i in -3..=3 {
+        for j in -3..=3 {
+            for k in -2..=2 {
+                grid.push([i as f64 * step_m, j as f64 * step_m, k as f64 * step_rad]);
+            }
+        }
+    }
+    // The best few of the coarse grid each start a pattern search on the fine lattice: the
+    // `MOVES_AROUND` neighbours, moving while a neighbour is better (at most `MOVES` a level),
+    // then half the step; at least three levels, more for a wide window, until the step is
+    // under 7 cm (below the 10 cm texel of the façade charts). Heading and a sideways move
+    // trade off along a narrow valley for a distant wall: one start can stop short in it.
+    let prior = |c: &Candidate| {
+        p.prior_weight
+            * ((c[0] / p.search_m.max(1e-9)).powi(2)
+                + (c[1] / p.search_m.max(1e-9)).powi(2)
+                + (c[2] / search_rad.max(1e-9)).powi(2))
+    };
+    // A start given (the first pass's pose) skips the grid and searches from a quarter step.
+    let starts: Vec<(Candidate, u32)> = match start {
+        Some(c) => vec![(c, 2)],
+        None => {
+            let mut ranked: Vec<(f64, usize)> = grid
+                .iter()
+                .enumerate()
+                .map(|(k, c)| (at(&coarse, *c) - prior(c), k))
+                .filter(|(s, _)| s.is_finite())
+                .collect();
+            ranked.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+            ranked
+                .iter()
+                .take(STARTS)
+                .map(|&(_, k)| (grid[k], 0))
+                .collect()
+        }
+    };
+    // The camera's right and forward axes in plan (rotation columns 0 and 2).
+    let plan = |col: usize| {
+        let r = view.pose.rotation;
+        let (x, y) = (r[0][col], r[1][col]);
+        let n = x.hypot(y);
+        if n > 1e-9 { [x / n, y / n] } else { [1.0, 0.0] }
+    };
+    let (right, fwd) = (plan(0), plan(2));
+    let mut best = [0.0; 3];
+    let mut best_score = at(&fine, best) - prior(&best);
+    for (first, from_level) in starts {
+        let scale = (1u32 << from_level) as f64;
+        let (mut here, mut sm, mut sr) = (first, step_m / scale, step_rad / scale);
+        for level in from_level..8 {
+            if level >= 3 && sm <= 0.07 {
+                break;
+            }
+            sm /= 2.0;
+            sr /= 2.0;
+            for _ in 0..MOVES {
+                let mut around = Vec::with_capacity(1 + MOVES_AROUND.len());
+                around.push(here);
+                for (a, b, k) in MOVES_AROUND {
+                    // a and b along the camera's right and forward axes in plan.
+                    around.push([
+                        (here[0] + (a * right[0] + b * fwd[0]) * sm).clamp(-p.search_m, p.search_m),
+                        (here[1] + (a * right[1] + b * fwd[1]) * sm).clamp(-p.search_m, p.search_m),
+                        (here[2] + k * sr).clamp(-search_rad, search_rad),
+                    ]);
+                }
+                let smp = by_level[(level as usize).min(by_level.len() - 1)];
+                let next = best_of(
+                    &around,
+                    &|c| at(smp, c),
+                    p.search_m,
+                    search_rad,
+                    p.prior_weight,
+                )
+                .0;
+                if next == here {
+                    break;
+                }
+                here = next;
+            }
+        }
+        let s = at(&fine, here) - prior(&here);
+        if s > best_score {
+            (best, best_score) = (here, s);
+        }
+    }
+    let (before, after) = (at(&fine, [0.0; 3]), at(&fine, best));
+    if !before.is_finite() {
+        return (view.pose, unchanged);
+    }
+    // A best pose on the window's edge means the truth lies beyond it, or that nothing within
+    // it explains the view: either way not a pose to trust.
+    let on_edge = (p.search_m > 0.0
+        && (best[0].abs() >= 0.99 * p.search_m || best[1].abs() >= 0.99 * p.search_m))
+        || (search_rad > 0.0 && best[2].abs() >= 0.99 * search_rad);
+    let accepted =
+        after.is_finite() && after - before >= p.min_gain && after >= p.min_agreement && !on_edge;
+    let refinement = Refinement {
+        shift_m: if accepted {
+            [best[0], best[1]]
+        } else {
+            [0.0; 2]
+        },
+        yaw_deg: if accepted { best[2].to_degrees() } else { 0.0 },
+        before,
+        after: if accepted { after } else { before },
+        accepted,
+        by_facades: consensus.is_some(),
+    };
+    if !accepted {
+        return (view.pose, refinement);
+    }
+    (turned(&view.pose, best), refinement)
+}
+
+/// `pose` moved by (dx, dy) and turned by yaw about the vertical through the camera.
+fn turned(pose: &Pose, c: Candidate) -> Pose {
+    let (s, co) = c[2].sin_cos();
+    let r = pose.rotation;
+    // Rows are the site axes: turning the camera about site z mixes the x and y rows.
+    let rotation = [
+        std::array::from_fn(|k| co * r[0][k] - s * r[1][k]),
+        std::array::from_fn(|k| s * r[0][k] + co * r[1][k]),
+        r[2],
+    ];
+    Pose {
+        position: [
+            pose.position[0] + c[0],
+            pose.position[1] + c[1],
+            pose.position[2],
+        ],
+        rotation,
+    }
+}
+
+/// Refines every view's pose against `scene`; per view in order, its new pose and what was
+/// done. Deterministic at any thread count (each view on its own).
+pub fn register_views(
+    scene: &Scene,
+    views: &[View],
+    p: &RegistrationParams,
+    progress: &dyn Progress,
+) -> Vec<(Pose, Refinement)> {
+    if p.is_off() {
+        return views
+            .iter()
+            .map(|v| {
+                let kept = Refinement {
+                    shift_m: [0.0; 2],
+                    yaw_deg: 0.0,
+                    before: f64::NAN,
+                    after: f64::NAN,
+                    accepted: false,
+                    by_facades: false,
+                };
+                (v.pose, kept)
+            })
+            .collect();
+    }
+    let rays = SceneRays::new(scene);
+    let by_triangle = shown_by_triangle(scene);
+    let twin = Twin {
+        rays: &rays,
+        shown_by_triangle: &by_triangle,
+        max_range: p.max_range_m as f32,
+    };
+    progress.set_total(views.len() as u64);
+    let mut out: Vec<(Pose, Refinement)> = views
+        .par_iter()
+        .map(|v| {
+            let r = refine_view(v, &twin, None, None, p);
+            progress.advance(1);
+            r
+        })
+        .collect();
+    // Second pass: every view again, now also against the façade labels the views placed by
+    // their silhouettes pooled (less its own), which places the views the silhouettes could not
+    // and sharpens the rest. Pools are summed in view order: the same at any thread count.
+    let pools: Vec<Option<Pool>> = views
+        .par_iter()
+        .zip(&out)
+        .map(|(v, (pose, r))| {
+            r.accepted
+                .then(|| Consensus::pool(p.consensus_cell_m, v, pose, &twin, p))
+        })
+        .collect();
+    let mut consensus = Consensus {
+        cell_m: p.consensus_cell_m,
+        cells: HashMap::new(),
+    };
+    for pool in pools.iter().flatten() {
+        consensus.add(pool);
+    }
+    if consensus.cells.is_empty() {
+        return out;
+    }
+    let second: Vec<(Pose, Refinement)> = views
+        .par_iter()
+        .zip(&pools)
+        .zip(&out)
+        .map(|((v, own), (_, first))| {
+            let others = OthersSay {
+                all: &consensus,
+                own: own.as_ref(),
+            };
+            let start = first.accepted.then(|| {
+                [
+                    first.shift_m[0],
+                    first.shift_m[1],
+                    first.yaw_deg.to_radians(),
+                ]
+            });
+            refine_view(v, &twin, Some(&others), start, p)
+        })
+        .collect();
+    for (slot, s) in out.iter_mut().zip(second) {
+        if s.1.accepted {
+            *slot = s;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests;

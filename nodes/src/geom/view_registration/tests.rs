@@ -1,0 +1,256 @@
+//! The registration on small scenes with known answers.
+
+use super::labels::{Rendered, Seen, agreement};
+use super::*;
+use crate::artifact::ObjectClass;
+use crate::artifact::{Instances, Intrinsics, PodVec, SceneObject};
+use crate::geom::mesh_build::cuboid;
+use crate::rf::materials::Material;
+use crate::stage::NoProgress;
+
+/// A camera at `position` looking level along `heading` (radians from east).
+fn look(position: [f64; 3], heading: f64) -> Pose {
+    let (s, c) = heading.sin_cos();
+    let (right, down, fwd) = ([s, -c, 0.0], [0.0, 0.0, -1.0], [c, s, 0.0]);
+    Pose {
+        position,
+        rotation: std::array::from_fn(|i| [right[i], down[i], fwd[i]]),
+    }
+}
+
+fn object(id: &str, class: ObjectClass, mesh: crate::artifact::Mesh) -> SceneObject {
+    SceneObject {
+        id: id.into(),
+        class,
+        mesh,
+    }
+}
+
+/// Ground, and buildings given as (centre, size).
+fn scene(buildings: &[([f64; 2], [f64; 3])]) -> Scene {
+    let mut objects = vec![object(
+        "terrain",
+        ObjectClass::Terrain,
+        cuboid(
+            [0.0, 0.0],
+            [600.0, 600.0, 1.0],
+            0.0,
+            -1.0,
+            Material::Concrete,
+        ),
+    )];
+    for (k, (c, s)) in buildings.iter().enumerate() {
+        objects.push(object(
+            &format!("building-{k}"),
+            ObjectClass::Building,
+            cuboid(*c, *s, 0.0, 0.0, Material::Brick),
+        ));
+    }
+    Scene { objects }
+}
+
+/// What a segmentation and a depth model would give from `pose`: one wall instance per
+/// building, roofs, sky at infinite depth; reported at `reported`.
+fn view(scene: &Scene, pose: Pose, reported: Pose) -> View {
+    let (w, h) = (320u32, 240u32);
+    let f = 160.0;
+    let mut v = View {
+        id: "v".into(),
+        width: w,
+        height: h,
+        intrinsics: Intrinsics {
+            fx: f,
+            fy: f,
+            cx: 160.0,
+            cy: 120.0,
+        },
+        pose,
+        captured_at: None,
+        pose_source: None,
+        distortion: None,
+        image: PodVec(vec![[0; 3]; (w * h) as usize]),
+        arch: None,
+        clutter: None,
+        material: None,
+        depth: None,
+        normal: None,
+    };
+    let rays = SceneRays::new(scene);
+    let mut ids = vec![0u16; (w * h) as usize];
+    let mut depth = vec![f32::INFINITY; (w * h) as usize];
+    let mut classes = std::collections::BTreeMap::new();
+    for y in 0..h {
+        for x in 0..w {
+            let (dir, norm) = v.pixel_ray(x as f64 + 0.5, y as f64 + 0.5);
+            let o = pose.position.map(|c| c as f32);
+            let Some(hit) = rays.cast(o, dir.map(|c| c as f32), 1e-3, 2000.0) else {
+                continue;
+            };
+            let px = (y * w + x) as usize;
+            depth[px] = (hit.t as f64 / norm) as f32;
+            if scene.objects[hit.object].class == ObjectClass::Building {
+                let roof = hit.normal[2] > 0.7;
+                let id = (2 * hit.object + roof as usize) as u16;
+                ids[px] = id;
+                classes.insert(id, if roof { "roof" } else { "wall" }.to_string());
+            }
+        }
+    }
+    v.arch = Some(Instances {
+        ids: PodVec(ids),
+        classes,
+    });
+    v.depth = Some(PodVec(depth));
+    v.pose = reported;
+    v
+}
+
+fn moved(p: Pose, dx: f64, dy: f64, yaw_deg: f64) -> Pose {
+    turned(&p, [dx, dy, yaw_deg.to_radians()])
+}
+
+fn heading(p: &Pose) -> f64 {
+    p.rotation[1][2].atan2(p.rotation[0][2])
+}
+
+#[test]
+fn the_agreement_table_is_symmetric_where_it_should_be() {
+    use Rendered as R;
+    assert_eq!(agreement(Seen::Building, R::Building), 1);
+    assert_eq!(agreement(Seen::Building, R::Sky), -1);
+    assert_eq!(agreement(Seen::Ground, R::Building), -1);
+    assert_eq!(agreement(Seen::Sky, R::Building), -1);
+    // Beyond the terrain's edge the twin shows sky where the view sees far ground.
+    assert_eq!(agreement(Seen::Sky, R::Ground), 0);
+    assert_eq!(agreement(Seen::Ground, R::Sky), 0);
+    // Clutter in the twin says nothing.
+    assert_eq!(agreement(Seen::Building, R::Other), 0);
+}
+
+/// Two detached houses across the street: their ends and the gap between them pin the
+/// camera along the street, their eaves and bases across it.
+#[test]
+fn a_view_of_two_houses_is_moved_back_to_where_it_was() {
+    let s = scene(&[
+        ([-6.0, 12.0], [8.0, 6.0, 7.0]),
+        ([6.0, 12.0], [9.0, 6.0, 9.0]),
+    ]);
+    let truth = look([0.0, 0.0, 2.0], 90f64.to_radians());
+    let p = RegistrationParams::default();
+    for (dx, dy, dyaw) in [(0.6, -0.4, 1.0), (-0.9, 0.3, -1.5), (0.2, 0.8, 0.5)] {
+        let v = view(&s, truth, moved(truth, dx, dy, dyaw));
+        let out = register_views(&s, std::slice::from_ref(&v), &p, &NoProgress);
+        let (pose, r) = out[0];
+        assert!(r.accepted, "{r:?}");
+        let err = ((pose.position[0] - truth.position[0]).powi(2)
+            + (pose.position[1] - truth.position[1]).powi(2))
+        .sqrt();
+        let yaw_err = (heading(&pose) - heading(&truth)).to_degrees();
+        assert!(
+            err <= 0.15,
+            "moved ({dx}, {dy}): left {err:.3} m off, {r:?}"
+        );
+        assert!(
+            yaw_err.abs() <= 0.4,
+            "turned {dyaw}: left {yaw_err:.2} deg off"
+        );
+        assert!(r.after > r.before);
+    }
+}
+
+/// One long wall filling the frame from edge to edge: nothing says where along it the
+/// camera stood, so the metadata stands.
+#[test]
+fn a_view_of_one_endless_wall_keeps_its_metadata() {
+    let s = scene(&[([0.0, 10.0], [400.0, 6.0, 40.0])]);
+    let truth = look([0.0, 0.0, 2.0], 90f64.to_radians());
+    let reported = moved(truth, 0.8, 0.0, 0.0);
+    let v = view(&s, truth, reported);
+    let out = register_views(
+        &s,
+        std::slice::from_ref(&v),
+        &RegistrationParams::default(),
+        &NoProgress,
+    );
+    let (pose, r) = out[0];
+    assert!(!r.accepted, "{r:?}");
+    assert_eq!(pose, reported);
+}
+
+#[test]
+fn a_window_of_zero_keeps_the_metadata() {
+    let s = scene(&[
+        ([-6.0, 12.0], [8.0, 6.0, 7.0]),
+        ([6.0, 12.0], [9.0, 6.0, 9.0]),
+    ]);
+    let truth = look([0.0, 0.0, 2.0], 90f64.to_radians());
+    let reported = moved(truth, 0.6, -0.4, 1.0);
+    let v = view(&s, truth, reported);
+    let off = RegistrationParams {
+        search_m: 0.0,
+        search_deg: 0.0,
+        ..Default::default()
+    };
+    let out = register_views(&s, std::slice::from_ref(&v), &off, &NoProgress);
+    assert_eq!(out[0].0, reported);
+    assert!(!out[0].1.accepted);
+    // Heading alone: the position stays, the heading comes back.
+    let yaw_only = RegistrationParams {
+        search_m: 0.0,
+        ..Default::default()
+    };
+    let v = view(&s, truth, moved(truth, 0.0, 0.0, 1.5));
+    let (pose, r) = register_views(&s, std::slice::from_ref(&v), &yaw_only, &NoProgress)[0];
+    assert!(r.accepted, "{r:?}");
+    assert_eq!(pose.position, truth.position);
+    assert!((heading(&pose) - heading(&truth)).to_degrees().abs() <= 0.4);
+}
+
+#[test]
+fn a_view_without_labels_is_left_alone_and_bad_knobs_are_refused() {
+    let s = scene(&[([0.0, 12.0], [8.0, 6.0, 7.0])]);
+    let truth = look([0.0, 0.0, 2.0], 90f64.to_radians());
+    let mut v = view(&s, truth, moved(truth, 0.5, 0.0, 0.0));
+    v.arch = None;
+    let out = register_views(
+        &s,
+        std::slice::from_ref(&v),
+        &RegistrationParams::default(),
+        &NoProgress,
+    );
+    assert!(!out[0].1.accepted);
+    assert_eq!(out[0].0, v.pose);
+    for bad in [
+        RegistrationParams {
+            search_m: f64::NAN,
+            ..Default::default()
+        },
+        RegistrationParams {
+            search_m: 50.0,
+            ..Default::default()
+        },
+        RegistrationParams {
+            search_deg: -1.0,
+            ..Default::default()
+        },
+        RegistrationParams {
+            samples: 0,
+            ..Default::default()
+        },
+        RegistrationParams {
+            samples: 100_000_000,
+            ..Default::default()
+        },
+        RegistrationParams {
+            prior_weight: f64::INFINITY,
+            ..Default::default()
+        },
+        RegistrationParams {
+            consensus_cell_m: 0.0,
+            ..Default::default()
+        },
+    ] {
+        assert!(bad.validate().is_err(), "{bad:?}");
+    }
+    assert!(RegistrationParams::default().validate().is_ok());
+}

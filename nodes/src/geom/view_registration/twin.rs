@@ -1,0 +1,117 @@
+//! The twin as the registration sees it: what each triangle is, and the agreement between a
+//! view's labels and the twin rendered from a candidate pose.
+
+use crate::artifact::{ObjectClass, Scene};
+use crate::geom::raycast::SceneRays;
+
+use super::consensus::OthersSay;
+use super::labels::{Facade, Rendered, Sample, agreement};
+
+/// What the twin shows along a ray: the class and, for a building, its object.
+#[derive(Clone, Copy)]
+pub(super) struct Shown {
+    pub(super) rendered: Rendered,
+    pub(super) object: u32,
+}
+
+/// The twin: its rays, what each triangle is (in the order [`SceneRays`] numbers them), and
+/// how far a ray may go before it counts as sky.
+pub(super) struct Twin<'a> {
+    pub(super) rays: &'a SceneRays,
+    pub(super) shown_by_triangle: &'a [Shown],
+    pub(super) max_range: f32,
+}
+
+/// The agreement share (-1 to 1) with the camera at `position` turned by `yaw` radians about
+/// the vertical: the silhouettes (building, sky, ground) per sample, plus, for neighbouring
+/// samples that show a wall in the view and a building in the twin, whether both say the same
+/// about the two being one building or two (a party wall between row houses is where a flat
+/// street front tells where along it the camera stood).
+pub(super) fn score(
+    samples: &[Sample],
+    twin: &Twin,
+    consensus: Option<&OthersSay>,
+    position: [f64; 3],
+    yaw: f64,
+) -> f64 {
+    let (s, c) = yaw.sin_cos();
+    let origin = position.map(|v| v as f32);
+    let (mut total, mut counted) = (0i64, 0i64);
+    let shown: Vec<Shown> = samples
+        .iter()
+        .map(|smp| {
+            let d = smp.dir;
+            let dir = [
+                (c * d[0] - s * d[1]) as f32,
+                (s * d[0] + c * d[1]) as f32,
+                d[2] as f32,
+            ];
+            let hit = twin.rays.cast_index(origin, dir, 1e-3, twin.max_range);
+            let sh = match hit {
+                None => Shown {
+                    rendered: Rendered::Sky,
+                    object: u32::MAX,
+                },
+                Some((_, prim)) => twin.shown_by_triangle[prim as usize],
+            };
+            let a = agreement(smp.seen, sh.rendered);
+            total += a as i64;
+            counted += (a != 0) as i64;
+            if let (Some(cons), Some((t, _))) = (consensus, hit)
+                && sh.rendered == Rendered::Building
+                && smp.facade != Facade::None
+            {
+                let at = std::array::from_fn(|k| position[k] + dir[k] as f64 * t as f64);
+                if let Some(f) = cons.label_at(at) {
+                    total += if f == smp.facade { 1 } else { -1 };
+                    counted += 1;
+                }
+            }
+            sh
+        })
+        .collect();
+    for (k, smp) in samples.iter().enumerate() {
+        if smp.wall == 0 || shown[k].rendered != Rendered::Building {
+            continue;
+        }
+        for nb in [smp.right, smp.down] {
+            let Some(o) = samples.get(nb as usize) else {
+                continue;
+            };
+            let other = shown[nb as usize];
+            if o.wall == 0 || other.rendered != Rendered::Building {
+                continue;
+            }
+            let seen_split = o.wall != smp.wall;
+            let shown_split = other.object != shown[k].object;
+            total += if seen_split == shown_split { 1 } else { -1 };
+            counted += 1;
+        }
+    }
+    if counted == 0 {
+        f64::NAN
+    } else {
+        total as f64 / counted as f64
+    }
+}
+
+/// What each of the scene's triangles is, in the order [`SceneRays`] numbers them.
+pub(super) fn shown_by_triangle(scene: &Scene) -> Vec<Shown> {
+    scene
+        .objects
+        .iter()
+        .enumerate()
+        .flat_map(|(k, o)| {
+            let rendered = match o.class {
+                ObjectClass::Building => Rendered::Building,
+                ObjectClass::Terrain => Rendered::Ground,
+                _ => Rendered::Other,
+            };
+            let shown = Shown {
+                rendered,
+                object: k as u32,
+            };
+            std::iter::repeat_n(shown, o.mesh.triangles.len())
+        })
+        .collect()
+}
