@@ -15,11 +15,9 @@ use kodama_nodes::geom::clutter::{ClutterConfig, calibrate, place_clutter};
 use kodama_nodes::geom::mesh_check::check_solid;
 use kodama_nodes::geom::raycast::SceneRays;
 use kodama_nodes::geom::theil_sen::{least_squares, theil_sen};
-use kodama_nodes::geom::view_registration::RegistrationParams;
 use kodama_nodes::rng::{gaussian, mix, unit};
 use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::street::place_clutter::{PlaceClutter, PlaceClutterParams};
-use kodama_nodes::stages::street::register_views::RegisterViews;
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
 use kodama_nodes::synth::truth_scene::wall_prisms;
@@ -96,14 +94,7 @@ fn demo_site() -> (City, Scene, ViewSet, Scene, Raster) {
     let raw = SynthViews::run(&p, &inputs, &Ctx::new(&site(), &[])).unwrap();
     let twin = wall_prisms(&city, &truth).unwrap();
     // Registered against the twin, as the demo graph does before PlaceClutter.
-    let views = RegisterViews::run(
-        &RegistrationParams::default(),
-        &Inputs::new()
-            .with("views", slot(Artifact::Views(raw)))
-            .with("scene", slot(Artifact::Scene(twin.clone()))),
-        &Ctx::new(&site(), &[]),
-    )
-    .unwrap();
+    let views = register_views(&raw, &twin);
     let grid = Grid::covering(
         (0.25, 0.25),
         (city.size_m.0 - 0.25, city.size_m.1 - 0.25),

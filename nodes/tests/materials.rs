@@ -18,11 +18,9 @@ use kodama_nodes::artifact::{
     ChartKind, ChartSet, City, FeatureKind, MaterialLayers, MaterialSource, Scene, ViewSet,
 };
 use kodama_nodes::geom::mesh_check::check_solid;
-use kodama_nodes::geom::view_registration::RegistrationParams;
 use kodama_nodes::rf::materials::Material;
 use kodama_nodes::stages::street::apply_materials::{ApplyMaterials, ApplyMaterialsParams};
 use kodama_nodes::stages::street::fuse_materials::{FuseMaterials, FuseMaterialsParams};
-use kodama_nodes::stages::street::register_views::RegisterViews;
 use kodama_nodes::stages::street::surface_charts::{SurfaceCharts, SurfaceChartsParams};
 use kodama_nodes::synth::synth_city::generate;
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
@@ -284,15 +282,7 @@ fn pose_errors_cost_material_accuracy_and_are_measured() {
         sc.all()
     );
     // The same views registered against the walls first, as the demo graph does.
-    let site_frame = common::site();
-    let views = RegisterViews::run(
-        &RegistrationParams::default(),
-        &Inputs::new()
-            .with("views", slot(Artifact::Views(raw.views.clone())))
-            .with("scene", slot(Artifact::Scene(raw.walls.clone()))),
-        &Ctx::new(&site_frame, &[]),
-    )
-    .unwrap();
+    let views = register_views(&raw.views, &raw.walls);
     let reg = Site { views, ..raw };
     let sr = score(&reg, &fuse(&reg, &FuseMaterialsParams::default()));
     println!(

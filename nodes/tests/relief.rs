@@ -24,9 +24,7 @@ use kodama_nodes::geom::relief::{
     Cpt, CptRow, DeltaParams, MeshState, ReliefParams, level, mesh_state_probabilities,
     relief_posterior,
 };
-use kodama_nodes::geom::view_registration::RegistrationParams;
 use kodama_nodes::io::export::write_glb;
-use kodama_nodes::stages::street::register_views::RegisterViews;
 use kodama_nodes::stages::street::relief::Relief;
 use kodama_nodes::stages::street::surface_charts::{SurfaceCharts, SurfaceChartsParams};
 use kodama_nodes::synth::synth_city::generate;
@@ -223,28 +221,13 @@ fn demo_site() -> &'static Site {
     S.get_or_init(|| make_site(demo_views()))
 }
 
-/// `views` registered against the site's walls by RegisterViews with its defaults, as the demo
-/// graph does.
-fn register(s: &Site, views: &ViewSet) -> ViewSet {
-    let st = site();
-    let ctx = Ctx::new(&st, &[]);
-    RegisterViews::run(
-        &RegistrationParams::default(),
-        &Inputs::new()
-            .with("views", slot(Artifact::Views(views.clone())))
-            .with("scene", slot(Artifact::Scene(s.walls.clone()))),
-        &ctx,
-    )
-    .unwrap()
-}
-
 /// The demo site's views after registration, and how long it took.
 fn demo_registered_timed() -> &'static (ViewSet, f64) {
     static V: OnceLock<(ViewSet, f64)> = OnceLock::new();
     V.get_or_init(|| {
         let s = demo_site();
         let t = Instant::now();
-        let v = register(s, &s.views);
+        let v = register_views(&s.views, &s.walls);
         (v, t.elapsed().as_secs_f64())
     })
 }
@@ -571,7 +554,7 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
         let rk = if keep == 10 {
             r.clone()
         } else {
-            run_relief(s, &register(s, &sub), None, &p)
+            run_relief(s, &register_views(&sub, &s.walls), None, &p)
         };
         let sk = score_against(s, &rk, r, &p);
         println!(
@@ -677,12 +660,12 @@ fn registration_is_the_same_at_any_thread_count() {
         .num_threads(1)
         .build()
         .unwrap()
-        .install(|| register(s, &sub));
+        .install(|| register_views(&sub, &s.walls));
     let two = rayon::ThreadPoolBuilder::new()
         .num_threads(2)
         .build()
         .unwrap()
-        .install(|| register(s, &sub));
+        .install(|| register_views(&sub, &s.walls));
     assert_eq!(one, two);
 }
 

@@ -6,13 +6,15 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use kodama_nodes::artifact::TerrainModel;
-use kodama_nodes::artifact::{City, PointSet, Raster, Scene};
+use kodama_nodes::artifact::{City, PointSet, Raster, Scene, ViewSet};
+use kodama_nodes::geom::view_registration::RegistrationParams;
 use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::buildings::above_ground::{AboveGround, AboveGroundParams};
 use kodama_nodes::stages::buildings::terrain_pass::{TerrainPass, TerrainPassParams};
 use kodama_nodes::stages::heights::rasterize_surface::{
     CellMode, RasterizeSurface, RasterizeSurfaceParams,
 };
+use kodama_nodes::stages::street::register_views::RegisterViews;
 use kodama_nodes::synth::synth_city::SynthCityParams;
 use kodama_nodes::synth::synth_lidar::{SynthLidar, SynthLidarParams};
 use kodama_nodes::synth::truth_scene::{TruthScene, TruthSceneParams};
@@ -45,6 +47,19 @@ pub fn site() -> Site {
         origin: (583200.0, 4506600.0),
         cell_m: 0.5,
     }
+}
+
+/// `views` registered against `scene` by RegisterViews with its defaults, as the demo graph
+/// does before every street-level stage.
+pub fn register_views(views: &ViewSet, scene: &Scene) -> ViewSet {
+    RegisterViews::run(
+        &RegistrationParams::default(),
+        &Inputs::new()
+            .with("views", slot(Artifact::Views(views.clone())))
+            .with("scene", slot(Artifact::Scene(scene.clone()))),
+        &Ctx::new(&site(), &[]),
+    )
+    .unwrap()
 }
 
 /// An input slot holding one artifact.

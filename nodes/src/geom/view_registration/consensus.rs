@@ -3,11 +3,11 @@
 
 use std::collections::HashMap;
 
-use crate::artifact::{Pose, View};
+use crate::artifact::View;
 
 use super::RegistrationParams;
 use super::labels::{Facade, Rendered, samples, strides};
-use super::twin::Twin;
+use super::twin::{Twin, turned_dir};
 
 /// The façade labels of the views already placed, pooled in cells on the twin's walls: the
 /// second pass places a view whose silhouettes could not (a street front seen whole, one wall
@@ -26,33 +26,33 @@ impl Consensus {
         at.map(|v| (v / cell_m).floor() as i64)
     }
 
-    /// `view`'s façade samples as seen from `pose`, pooled in cells.
+    /// `view`'s façade samples as seen from `position`, turned by `yaw` radians about the
+    /// vertical from its reported heading, pooled in cells.
     pub(super) fn pool(
         cell_m: f64,
         view: &View,
-        pose: &Pose,
+        position: [f64; 3],
+        yaw: f64,
         twin: &Twin,
         p: &RegistrationParams,
     ) -> Pool {
-        let placed = View {
-            pose: *pose,
-            ..view.clone()
-        };
-        let origin = pose.position.map(|v| v as f32);
+        let origin = position.map(|v| v as f32);
+        let turn = yaw.sin_cos();
         let mut cells = Pool::new();
         let (_, fine_stride) = strides(view, p);
-        for smp in samples(&placed, fine_stride, None, p) {
+        for smp in samples(view, fine_stride, None, p) {
             if smp.facade == Facade::None {
                 continue;
             }
-            let dir = smp.dir.map(|c| c as f32);
+            let d = turned_dir(smp.dir, turn);
+            let dir = d.map(|c| c as f32);
             let Some((t, prim)) = twin.rays.cast_index(origin, dir, 1e-3, twin.max_range) else {
                 continue;
             };
             if twin.shown_by_triangle[prim as usize].rendered != Rendered::Building {
                 continue;
             }
-            let at = std::array::from_fn(|k| pose.position[k] + smp.dir[k] * t as f64);
+            let at = std::array::from_fn(|k| position[k] + d[k] * t as f64);
             let cell = cells.entry(Self::key(cell_m, at)).or_default();
             cell[(smp.facade == Facade::Wall) as usize] += 1;
         }

@@ -96,6 +96,26 @@ impl RegistrationParams {
         self.search_m == 0.0 && self.search_deg == 0.0
     }
 
+    /// A candidate's move in units of the search window, squared: dx² / search_m² + dy² /
+    /// search_m² + dyaw² / search_deg² (a dimension with no window adds nothing: its move is 0).
+    fn move_size(&self, c: &Candidate) -> f64 {
+        let per = |v: f64, window: f64| {
+            if window > 0.0 {
+                (v / window).powi(2)
+            } else {
+                0.0
+            }
+        };
+        per(c[0], self.search_m)
+            + per(c[1], self.search_m)
+            + per(c[2], self.search_deg.to_radians())
+    }
+
+    /// What the metadata as a prior takes off a candidate's agreement.
+    fn prior(&self, c: &Candidate) -> f64 {
+        self.prior_weight * self.move_size(c)
+    }
+
     /// Checks every knob: (field, message) of the first bad one.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
         let range = crate::params::check_in;
@@ -165,22 +185,15 @@ type Candidate = [f64; 3];
 fn best_of(
     candidates: &[Candidate],
     eval: &dyn Fn(Candidate) -> f64,
-    search_m: f64,
-    search_rad: f64,
-    prior_weight: f64,
+    p: &RegistrationParams,
 ) -> (Candidate, f64) {
-    let size = |c: &Candidate| {
-        let m = if search_m > 0.0 { search_m } else { 1.0 };
-        let r = if search_rad > 0.0 { search_rad } else { 1.0 };
-        (c[0] / m).powi(2) + (c[1] / m).powi(2) + (c[2] / r).powi(2)
-    };
     let mut best = (candidates[0], f64::NEG_INFINITY);
     for &cand in candidates {
-        let s = eval(cand) - prior_weight * size(&cand);
+        let s = eval(cand) - p.prior(&cand);
         if !s.is_finite() {
             continue;
         }
-        if s > best.1 || (s == best.1 && size(&cand) < size(&best.0)) {
+        if s > best.1 || (s == best.1 && p.move_size(&cand) < p.move_size(&best.0)) {
             best = (cand, s);
         }
     }
@@ -254,12 +267,6 @@ fn refine_view(
     // then half the step; at least three levels, more for a wide window, until the step is
     // under 7 cm (below the 10 cm texel of the façade charts). Heading and a sideways move
     // trade off along a narrow valley for a distant wall: one start can stop short in it.
-    let prior = |c: &Candidate| {
-        p.prior_weight
-            * ((c[0] / p.search_m.max(1e-9)).powi(2)
-                + (c[1] / p.search_m.max(1e-9)).powi(2)
-                + (c[2] / search_rad.max(1e-9)).powi(2))
-    };
     // A start given (the first pass's pose) skips the grid and searches from a quarter step.
     let starts: Vec<(Candidate, u32)> = match start {
         Some(c) => vec![(c, 2)],
@@ -267,7 +274,7 @@ fn refine_view(
             let mut ranked: Vec<(f64, usize)> = grid
                 .iter()
                 .enumerate()
-                .map(|(k, c)| (at(&coarse, *c) - prior(c), k))
+                .map(|(k, c)| (at(&coarse, *c) - p.prior(c), k))
                 .filter(|(s, _)| s.is_finite())
                 .collect();
             ranked.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
@@ -287,7 +294,7 @@ fn refine_view(
     };
     let (right, fwd) = (plan(0), plan(2));
     let mut best = [0.0; 3];
-    let mut best_score = at(&fine, best) - prior(&best);
+    let mut best_score = at(&fine, best) - p.prior(&best);
     for (first, from_level) in starts {
         let scale = (1u32 << from_level) as f64;
         let (mut here, mut sm, mut sr) = (first, step_m / scale, step_rad / scale);
@@ -309,21 +316,14 @@ fn refine_view(
                     ]);
                 }
                 let smp = by_level[(level as usize).min(by_level.len() - 1)];
-                let next = best_of(
-                    &around,
-                    &|c| at(smp, c),
-                    p.search_m,
-                    search_rad,
-                    p.prior_weight,
-                )
-                .0;
+                let next = best_of(&around, &|c| at(smp, c), p).0;
                 if next == here {
                     break;
                 }
                 here = next;
             }
         }
-        let s = at(&fine, here) - prior(&here);
+        let s = at(&fine, here) - p.prior(&here);
         if s > best_score {
             (best, best_score) = (here, s);
         }
@@ -423,9 +423,15 @@ pub fn register_views(
     let pools: Vec<Option<Pool>> = views
         .par_iter()
         .zip(&out)
-        .map(|(v, (pose, r))| {
-            r.accepted
-                .then(|| Consensus::pool(p.consensus_cell_m, v, pose, &twin, p))
+        .map(|(v, (_, r))| {
+            r.accepted.then(|| {
+                let at = [
+                    v.pose.position[0] + r.shift_m[0],
+                    v.pose.position[1] + r.shift_m[1],
+                    v.pose.position[2],
+                ];
+                Consensus::pool(p.consensus_cell_m, v, at, r.yaw_deg.to_radians(), &twin, p)
+            })
         })
         .collect();
     let mut consensus = Consensus {

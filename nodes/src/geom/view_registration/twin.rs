@@ -41,11 +41,7 @@ pub(super) fn score(
         .iter()
         .map(|smp| {
             let d = smp.dir;
-            let dir = [
-                (c * d[0] - s * d[1]) as f32,
-                (s * d[0] + c * d[1]) as f32,
-                d[2] as f32,
-            ];
+            let dir = turned_dir(d, (s, c)).map(|v| v as f32);
             let hit = twin.rays.cast_index(origin, dir, 1e-3, twin.max_range);
             let sh = match hit {
                 None => Shown {
@@ -114,4 +110,9 @@ pub(super) fn shown_by_triangle(scene: &Scene) -> Vec<Shown> {
             std::iter::repeat_n(shown, o.mesh.triangles.len())
         })
         .collect()
+}
+
+/// Direction `d` turned about the vertical by the angle whose (sine, cosine) is `turn`.
+pub(super) fn turned_dir(d: [f64; 3], (s, c): (f64, f64)) -> [f64; 3] {
+    [c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]]
 }
