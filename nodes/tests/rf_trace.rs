@@ -212,6 +212,68 @@ fn diffraction_round_a_blade_matches_the_knife_edge() {
     }
 }
 
+/// Ends in a plane square to an edge meet it at β0 = 90°, where |k × e| rounds to just above 1:
+/// the diffracted path must stay finite there (it once gave NaN path loss on every drive-test
+/// point of a street square to a balcony's edge). The box and the ends are where the demo met it.
+#[test]
+fn diffraction_square_to_an_edge_stays_finite() {
+    let scene = Scene {
+        objects: vec![SceneObject {
+            id: "balcony".into(),
+            class: ObjectClass::Unsegmented,
+            mesh: cuboid(
+                [199.73, 93.84],
+                [0.9, 1.0, 0.3],
+                0.0,
+                17.630_52,
+                Material::Concrete,
+            ),
+        }],
+    };
+    let rf = RfScene::new(&scene, F, false).unwrap();
+    let opt = TraceOptions {
+        max_depth: 1,
+        reflection: false,
+        transmission: false,
+        diffraction: true,
+        rays: 200_000,
+        ..Default::default()
+    };
+    let tx = [200.0, 103.0, 40.523_170_232_772_83];
+    let links: Vec<LinkEnds> = (0..200)
+        .map(|i| {
+            (
+                tx,
+                [
+                    200.0,
+                    9.0 + 0.37 * i as f64,
+                    14.245_482_921_600_342 + 0.011 * i as f64,
+                ],
+            )
+        })
+        .collect();
+    let got = trace_links(
+        &rf,
+        &links,
+        &Antenna::default(),
+        &Antenna::default(),
+        &opt,
+        F,
+    );
+    let mut diffracted = 0;
+    for (l, r) in links.iter().zip(&got) {
+        assert!(!r.gain_db.is_nan(), "rx {:?}: {:?}", l.1, r.paths);
+        for p in &r.paths {
+            assert!(p.a.iter().all(|c| c.is_finite()), "rx {:?}: {p:?}", l.1);
+            diffracted += p
+                .interactions
+                .iter()
+                .any(|i| i.kind == InteractionKind::Diffraction) as usize;
+        }
+    }
+    assert!(diffracted > 50, "only {diffracted} diffracted paths");
+}
+
 /// P = (λ/4π)² ∫ |R_TM|² (cos θ_s / π) cos θ_i / (r_i² r_s²) dA over a ground plane, by
 /// quadrature, for a vertically polarised wave from (0, 0, 20) scattered to (60, 0, 5) (it meets
 /// horizontal ground as TM); `layer` = (γ dB/m, thickness m) of a horizontal foliage layer below

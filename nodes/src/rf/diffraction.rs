@@ -159,7 +159,8 @@ pub fn diffracted_field(
     if sin_b < 1e-6 {
         return None;
     }
-    let beta0 = sin_b.asin();
+    // Square to the edge |k × e| can round to just above 1, and asin would give NaN.
+    let beta0 = sin_b.min(1.0).asin();
     let k = 2.0 * PI / scene.wavelength;
     let l = si * so * sin_b * sin_b / (si + so);
     let d = wedge_coefficients(w.n, phi, phi_i, beta0, k, l);

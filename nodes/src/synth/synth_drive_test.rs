@@ -120,7 +120,8 @@ pub struct SynthDriveTest;
 impl Stage for SynthDriveTest {
     const KIND: &'static str = "SynthDriveTest";
     // 4: slabs take their thickness per material (rf::materials).
-    const VERSION: u32 = 4;
+    // 5: diffraction square to an edge no longer gives NaN (rf::diffraction).
+    const VERSION: u32 = 5;
     const DOC: &'static str = "drive-test measurements traced through the ground truth (richer settings) plus log-normal shadowing";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),

@@ -99,7 +99,8 @@ pub struct Trace;
 
 impl Stage for Trace {
     const KIND: &'static str = "Trace";
-    const VERSION: u32 = 4;
+    // 5: diffraction square to an edge no longer gives NaN (rf::diffraction).
+    const VERSION: u32 = 5;
     const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
