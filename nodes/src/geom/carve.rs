@@ -1,21 +1,18 @@
 //! Booleans for façade relief (paper Sec. 4.2.2): every relief instance becomes a prism on its
-//! wall; recesses are subtracted from the building solid and protrusions added, with
-//! `manifold-rust`'s exact engine (Manifold's algorithm: symbolic perturbation, so coplanar and
-//! touching faces are decided consistently). Per-triangle materials ride through the Boolean as
-//! Manifold face IDs: every input triangle carries its material as its face ID, and every output
-//! triangle reports the face ID of the input triangle it is a piece of.
+//! wall; recesses are subtracted from the building solid and protrusions added (exact Booleans,
+//! materials kept per face: `geom::boolean`).
 //!
-//! Every carved solid must pass [`check_solid`]; where the batch result does not, the building's
-//! instances are applied one at a time and each one whose result fails is dropped, its reason
-//! kept.
+//! Every carved solid must pass [`check_solid`](crate::geom::mesh_check::check_solid); where the
+//! batch result does not, the building's instances are applied one at a time and each one whose
+//! result fails is dropped, its reason kept.
 
 use manifold_rust::manifold::Manifold;
-use manifold_rust::types::{BooleanEngine, Error, MeshGL64, OpType};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ChartSet, Mesh, ObjectClass, PodVec, ReliefInstance, ReliefSet, Scene};
-use crate::geom::mesh_check::check_solid;
+use crate::artifact::{ChartSet, Mesh, ObjectClass, ReliefInstance, ReliefSet, Scene};
+use crate::geom::boolean::{subtract_then_add as apply, to_manifold};
+use crate::geom::mesh_build::quad_prism;
 use crate::rf::materials::Material;
 
 /// The material a carved face of a class takes.
@@ -155,123 +152,12 @@ pub fn instance_prism(
     } else {
         (face, face, face)
     };
-    let at = |c: [f64; 3], s: f64| -> [f32; 3] {
-        std::array::from_fn(|k| (c[k] + normal[k] * s) as f32)
-    };
-    let mut positions = Vec::with_capacity(8);
-    for c in inst.corners {
-        positions.push(at(c, back));
-    }
-    for c in inst.corners {
-        positions.push(at(c, front));
-    }
-    // Corners run counter-clockwise seen from outside (along the normal): the front keeps that
-    // order, the back reverses it, each side (b_i, b_i+1, f_i+1, f_i) faces away.
-    let mut triangles = vec![[4, 5, 6], [4, 6, 7], [0, 2, 1], [0, 3, 2]];
-    let mut materials = vec![front_m as u8, front_m as u8, back_m as u8, back_m as u8];
-    for i in 0..4u32 {
-        let j = (i + 1) % 4;
-        triangles.push([i, j, j + 4]);
-        triangles.push([i, j + 4, i + 4]);
-        materials.extend([side_m as u8, side_m as u8]);
-    }
-    Mesh {
-        positions: PodVec(positions),
-        triangles: PodVec(triangles),
-        materials: PodVec(materials),
-    }
-}
-
-fn to_manifold(m: &Mesh) -> Result<Manifold, String> {
-    let mut gl = MeshGL64 {
-        num_prop: 3,
-        vert_properties: m
-            .positions
-            .iter()
-            .flat_map(|p| p.map(|c| c as f64))
-            .collect(),
-        tri_verts: m
-            .triangles
-            .iter()
-            .flat_map(|t| t.map(|i| i as u64))
-            .collect(),
-        face_id: m.materials.iter().map(|&x| x as u64).collect(),
-        ..Default::default()
-    };
-    gl.merge();
-    let out = Manifold::from_mesh_gl64(&gl);
-    match out.status() {
-        Error::NoError => Ok(out),
-        e => Err(format!("Manifold rejected the mesh: {e:?}")),
-    }
-}
-
-fn from_manifold(m: &Manifold, fallback: Material) -> Mesh {
-    let gl = m.get_mesh_gl64(-1);
-    let np = gl.num_prop as usize;
-    let positions: Vec<[f32; 3]> = gl
-        .vert_properties
-        .chunks_exact(np.max(3))
-        .map(|v| [v[0] as f32, v[1] as f32, v[2] as f32])
-        .collect();
-    let triangles: Vec<[u32; 3]> = gl
-        .tri_verts
-        .chunks_exact(3)
-        .map(|t| [t[0] as u32, t[1] as u32, t[2] as u32])
-        .collect();
-    let materials: Vec<u8> = (0..triangles.len())
-        .map(|k| {
-            gl.face_id
-                .get(k)
-                .and_then(|&f| u8::try_from(f).ok())
-                .filter(|&f| Material::from_u8(f).is_some())
-                .unwrap_or(fallback as u8)
-        })
-        .collect();
-    Mesh {
-        positions: PodVec(positions),
-        triangles: PodVec(triangles),
-        materials: PodVec(materials),
-    }
-}
-
-fn op(a: &Manifold, b: &Manifold, o: OpType) -> Result<Manifold, String> {
-    let r = a.boolean_with_engine(b, o, BooleanEngine::Exact);
-    match r.status() {
-        Error::NoError => Ok(r),
-        e => Err(format!("Boolean failed: {e:?}")),
-    }
-}
-
-/// Applies `recesses` then `protrusions` (prisms) to `base`: subtract the union of the first,
-/// add the union of the second. The result, checked.
-fn apply(
-    base: &Manifold,
-    recesses: &[&Manifold],
-    protrusions: &[&Manifold],
-    fallback: Material,
-) -> Result<Mesh, String> {
-    let union = |ms: &[&Manifold]| -> Result<Option<Manifold>, String> {
-        let mut it = ms.iter();
-        let Some(first) = it.next() else {
-            return Ok(None);
-        };
-        let mut u = (*first).clone();
-        for m in it {
-            u = op(&u, m, OpType::Add)?;
-        }
-        Ok(Some(u))
-    };
-    let mut out = base.clone();
-    if let Some(r) = union(recesses)? {
-        out = op(&out, &r, OpType::Subtract)?;
-    }
-    if let Some(pr) = union(protrusions)? {
-        out = op(&out, &pr, OpType::Add)?;
-    }
-    let mesh = from_manifold(&out, fallback);
-    check_solid(&mesh).map_err(|e| format!("the carved solid fails the solid check: {e}"))?;
-    Ok(mesh)
+    quad_prism(
+        inst.corners,
+        normal,
+        (back, front),
+        [back_m, side_m, front_m],
+    )
 }
 
 /// Why an instance cannot become a prism on its wall, if it cannot.

@@ -177,6 +177,39 @@ pub fn cuboid(center: [f64; 2], size: [f64; 3], heading: f64, z0: f64, m: Materi
     b.finish()
 }
 
+/// A closed box over a planar quadrilateral: `corners` (counter-clockwise seen from the side
+/// `normal`, a unit vector, points to) swept from `from` to `to` metres along `normal`
+/// (`from` < `to`). Faces: the one at `from` takes `back`, the four sides `side`, the one at `to`
+/// `front`. A recess or a protrusion on a wall, in that wall's frame.
+pub fn quad_prism(
+    corners: [[f64; 3]; 4],
+    normal: [f64; 3],
+    (from, to): (f64, f64),
+    [back, side, front]: [Material; 3],
+) -> Mesh {
+    let at = |c: [f64; 3], s: f64| -> [f32; 3] {
+        std::array::from_fn(|k| (c[k] + normal[k] * s) as f32)
+    };
+    let mut positions = Vec::with_capacity(8);
+    positions.extend(corners.iter().map(|&c| at(c, from)));
+    positions.extend(corners.iter().map(|&c| at(c, to)));
+    // The front keeps the corners' order, the back reverses it, each side (b_i, b_i+1, f_i+1,
+    // f_i) faces away.
+    let mut triangles = vec![[4, 5, 6], [4, 6, 7], [0, 2, 1], [0, 3, 2]];
+    let mut materials = vec![front as u8, front as u8, back as u8, back as u8];
+    for i in 0..4u32 {
+        let j = (i + 1) % 4;
+        triangles.push([i, j, j + 4]);
+        triangles.push([i, j + 4, i + 4]);
+        materials.extend([side as u8, side as u8]);
+    }
+    Mesh {
+        positions: PodVec(positions),
+        triangles: PodVec(triangles),
+        materials: PodVec(materials),
+    }
+}
+
 /// The floor and four walls of an oriented rectangle up to `eave`; returns the eave corners
 /// (counter-clockwise), where the roof closes the solid.
 fn walls_to_eave(

@@ -2,6 +2,7 @@
 //! ray casting over a BVH. Never imports a stage.
 
 pub mod assets;
+pub mod boolean;
 pub mod canopy;
 pub mod carve;
 pub mod charts;
