@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use kodama_nodes::artifact::height_at;
 use kodama_nodes::artifact::{ObjectClass, PointSet, Roof, Scene};
-use kodama_nodes::geom::mesh_check::check_closed_solid;
+use kodama_nodes::geom::mesh_check::{check_closed_solid, check_solid};
 use kodama_nodes::geom::polygon::point_in_ring;
 use kodama_nodes::io::export::{write_glb, write_las};
 use kodama_nodes::stage::Slot;
@@ -57,7 +57,13 @@ fn the_demo_city_has_every_roof_type_and_closed_buildings() {
         .iter()
         .filter(|o| o.class != ObjectClass::Terrain)
     {
-        check_closed_solid(&obj.mesh).unwrap_or_else(|e| panic!("{}: {e}", obj.id));
+        // A building is one solid (no intersecting shells: a wave crossing a wall crosses one
+        // slab); trees and clutter only need to be closed.
+        if obj.class == ObjectClass::Building {
+            check_solid(&obj.mesh).unwrap_or_else(|e| panic!("{}: {e}", obj.id));
+        } else {
+            check_closed_solid(&obj.mesh).unwrap_or_else(|e| panic!("{}: {e}", obj.id));
+        }
     }
     // Every building stands on the ground however the terrain slopes: its base is below the
     // lowest terrain point under it.

@@ -1,15 +1,20 @@
-//! The synthetic city's ground truth as a scene: closed building solids with their roof shapes,
-//! tree crowns as foliage volumes, clutter, on a terrain surface.
+//! The synthetic city's ground truth as a scene: one closed solid per building (roof shape, roof
+//! furniture and façade relief merged by Booleans), tree crowns as foliage volumes, clutter, on a
+//! terrain surface.
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::RECESS_M;
 use crate::artifact::height_at;
 use crate::artifact::{
-    ArtifactType, BuildingSpec, City, FacadeFeature, FeatureKind, Mesh, ObjectClass, Polygon, Rect,
-    Roof, Scene, SceneObject,
+    ArtifactType, BuildingSpec, City, FeatureKind, Mesh, ObjectClass, Rect, Roof, Scene,
+    SceneObject,
 };
-use crate::geom::mesh_build::{cuboid, dome, ellipsoid, gabled, height_surface, hipped, prism};
+use crate::geom::boolean::{subtract_then_add, to_manifold};
+use crate::geom::mesh_build::{
+    cuboid, dome, ellipsoid, gabled, height_surface, hipped, prism, quad_prism,
+};
 use crate::rf::materials::Material;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -37,7 +42,8 @@ pub struct TruthScene;
 
 impl Stage for TruthScene {
     const KIND: &'static str = "TruthScene";
-    const VERSION: u32 = 1;
+    // 2: one solid per building, merged by Booleans (no stacked shells).
+    const VERSION: u32 = 2;
     const DOC: &'static str =
         "ground-truth scene of a synthetic city: terrain, closed buildings, foliage, clutter";
     const INPUTS: &'static [InputSpec] = &[InputSpec::one(
@@ -78,15 +84,23 @@ impl Stage for TruthScene {
             mesh: terrain,
         });
         ctx.progress.advance(1);
-        for b in &city.buildings {
-            let mesh =
-                building_mesh(b).map_err(|m| StageError::Failed(format!("{}: {m}", b.id)))?;
+        // Each building's Booleans are its own: in parallel, collected in the city's order.
+        let meshes: Vec<Mesh> = city
+            .buildings
+            .par_iter()
+            .map(|b| {
+                let mesh =
+                    building_mesh(b).map_err(|m| StageError::Failed(format!("{}: {m}", b.id)));
+                ctx.progress.advance(1);
+                mesh
+            })
+            .collect::<Result<_, _>>()?;
+        for (b, mesh) in city.buildings.iter().zip(meshes) {
             scene.objects.push(SceneObject {
                 id: b.id.clone(),
                 class: ObjectClass::Building,
                 mesh,
             });
-            ctx.progress.advance(1);
         }
         for t in &city.trees {
             let mut mesh = cuboid(
@@ -154,52 +168,36 @@ pub fn wall_prisms(city: &City, truth: &Scene) -> Result<Scene, String> {
     Ok(Scene { objects })
 }
 
-/// The closed shells of one building: the main body with its roof, a stepped tier or dome, roof
-/// furniture and façade relief. Parts that touch start 0.05 m inside each other so no two shells
-/// share a face.
+/// One building as one closed solid: the body with its roof, a stepped tier or dome, roof
+/// furniture and façade relief, merged by exact Booleans (`geom::boolean`). One envelope, as a
+/// real building has: a wave crossing a wall crosses one slab, and a flat façade has no edge
+/// where two parts happen to meet. Parts that touch start 0.05 m inside each other so the
+/// Booleans cut cleanly.
 pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
     let eave = b.ground_z + b.eave_m;
     const EMBED: f64 = 0.05;
-    let relief = !b.features.is_empty();
-    // With façade relief the body is a core set back by the recess depth, glazed: windows and
-    // doors are the core showing through openings in the outer wall layer built around it.
-    let d = if relief { RECESS_M } else { 0.0 };
-    let walls = if relief { Material::Glass } else { b.facade };
-    let mut mesh = match &b.roof {
+    let mut parts: Vec<Mesh> = Vec::new();
+    match &b.roof {
         Roof::Gabled { rect, ridge_m } | Roof::Hipped { rect, ridge_m } => {
+            // With façade relief the roof sits back by the recess depth: the walls' outer layer
+            // (the depth of the openings) stops at the eave around it.
+            let d = if b.features.is_empty() { 0.0 } else { RECESS_M };
             let r = inset_rect(rect, d);
             let roof = if matches!(b.roof, Roof::Gabled { .. }) {
                 gabled
             } else {
                 hipped
             };
-            let mut m = roof(
+            parts.push(roof(
                 &r,
                 eave - EMBED,
                 eave,
                 eave + ridge_m,
                 b.facade,
                 b.roof_material,
-            );
-            m.append(&prism(
-                &Polygon::normalized(r.corners(), vec![]).ok_or("degenerate roof rectangle")?,
-                b.base_z,
-                eave,
-                walls,
-                b.roof_material,
-            )?);
-            m
+            ));
         }
-        _ => prism(
-            &inset(&b.footprint, d)?,
-            b.base_z,
-            eave,
-            walls,
-            b.roof_material,
-        )?,
-    };
-    match &b.roof {
-        Roof::Stepped { upper, upper_m } => mesh.append(&prism(
+        Roof::Stepped { upper, upper_m } => parts.push(prism(
             upper,
             eave - EMBED,
             eave + upper_m,
@@ -210,7 +208,7 @@ pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
             center,
             radius_m,
             height_m,
-        } => mesh.append(&dome(
+        } => parts.push(dome(
             *center,
             *radius_m,
             height_m + EMBED,
@@ -218,10 +216,10 @@ pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
             32,
             Material::Metal,
         )),
-        _ => {}
+        Roof::Flat => {}
     }
     for f in &b.furniture {
-        mesh.append(&cuboid(
+        parts.push(cuboid(
             f.center,
             [f.size[0], f.size[1], f.size[2] + EMBED],
             0.0,
@@ -229,133 +227,95 @@ pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
             Material::Metal,
         ));
     }
-    if relief {
-        facade_relief(b, eave, &mut mesh);
+    let body = prism(&b.footprint, b.base_z, eave, b.facade, b.roof_material)?;
+    let (recesses, protrusions) = facade_relief(b);
+    parts.extend(protrusions);
+    if parts.is_empty() && recesses.is_empty() {
+        return Ok(body);
     }
-    Ok(mesh)
-}
-
-/// A closed box on edge (`a`, `t`, `nl` = unit direction and inward normal): `along` metres from
-/// `a`, `inward` metres from the outline into the building (negative: outside), `z` in height.
-fn edge_box(
-    a: [f64; 2],
-    t: [f64; 2],
-    nl: [f64; 2],
-    along: (f64, f64),
-    inward: (f64, f64),
-    z: (f64, f64),
-    m: Material,
-) -> Mesh {
-    let (s, n) = ((along.0 + along.1) / 2.0, (inward.0 + inward.1) / 2.0);
-    let center = [a[0] + t[0] * s + nl[0] * n, a[1] + t[1] * s + nl[1] * n];
-    cuboid(
-        center,
-        [along.1 - along.0, inward.1 - inward.0, z.1 - z.0],
-        t[1].atan2(t[0]),
-        z.0,
-        m,
+    let base = to_manifold(&body)?;
+    let recesses = recesses
+        .iter()
+        .map(to_manifold)
+        .collect::<Result<Vec<_>, _>>()?;
+    let parts = parts
+        .iter()
+        .map(to_manifold)
+        .collect::<Result<Vec<_>, _>>()?;
+    subtract_then_add(
+        &base,
+        &recesses.iter().collect::<Vec<_>>(),
+        &parts.iter().collect::<Vec<_>>(),
+        b.facade,
     )
 }
 
-fn facade_relief(b: &BuildingSpec, eave: f64, mesh: &mut Mesh) {
+/// The façade relief of `b` as prisms on its walls: the recesses (windows glazed and doors hung
+/// at their backs, reveals of the façade material) and the protrusions (balconies with their
+/// railings, drainpipes).
+fn facade_relief(b: &BuildingSpec) -> (Vec<Mesh>, Vec<Mesh>) {
     const EMBED: f64 = 0.05;
+    const DOOR_SET_BACK_M: f64 = 0.05;
+    let (mut recesses, mut protrusions) = (Vec::new(), Vec::new());
     let rings: Vec<&Vec<[f64; 2]>> = std::iter::once(&b.footprint.exterior)
         .chain(&b.footprint.holes)
         .collect();
-    for (ri, ring) in rings.iter().enumerate() {
-        for e in 0..ring.len() {
-            let (a, c) = (ring[e], ring[(e + 1) % ring.len()]);
-            let len = (c[0] - a[0]).hypot(c[1] - a[1]);
-            let t = [(c[0] - a[0]) / len, (c[1] - a[1]) / len];
-            // The solid is left of every ring edge (exterior counter-clockwise, holes clockwise).
-            let nl = [-t[1], t[0]];
-            let here: Vec<&FacadeFeature> = b
-                .features
-                .iter()
-                .filter(|f| f.ring == ri && f.edge == e)
-                .collect();
-            let openings: Vec<&&FacadeFeature> = here.iter().filter(|f| f.depth_m < 0.0).collect();
-            // The outer wall layer, base to eave, minus the openings: sweep the height breakpoints
-            // and cut each band at the openings spanning it.
-            let mut zs: Vec<f64> = vec![b.base_z, eave];
-            zs.extend(
-                openings
-                    .iter()
-                    .flat_map(|o| [o.z.0, o.z.1])
-                    .filter(|z| *z > b.base_z && *z < eave),
-            );
-            zs.sort_by(f64::total_cmp);
-            zs.dedup_by(|x, y| (*x - *y).abs() < 1e-6);
-            for band in zs.windows(2) {
-                let (z0, z1) = (band[0], band[1]);
-                let mut cuts: Vec<(f64, f64)> = openings
-                    .iter()
-                    .filter(|o| o.z.0 <= z0 + 1e-6 && o.z.1 >= z1 - 1e-6)
-                    .map(|o| o.along)
-                    .collect();
-                cuts.sort_by(|p, q| p.0.total_cmp(&q.0));
-                let mut s = 0.0;
-                for (c0, c1) in cuts.into_iter().chain(std::iter::once((len, len))) {
-                    if c0 - s > 1e-6 {
-                        mesh.append(&edge_box(
-                            a,
-                            t,
-                            nl,
-                            (s, c0),
-                            (0.0, RECESS_M + EMBED),
-                            (z0, z1),
-                            b.facade,
-                        ));
-                    }
-                    s = s.max(c1);
-                }
+    for f in &b.features {
+        let Some(ring) = rings.get(f.ring) else {
+            continue;
+        };
+        let n = ring.len();
+        if n < 2 {
+            continue;
+        }
+        let (a, c) = (ring[f.edge % n], ring[(f.edge + 1) % n]);
+        let len = (c[0] - a[0]).hypot(c[1] - a[1]);
+        if !(len > 0.0) {
+            continue;
+        }
+        let t = [(c[0] - a[0]) / len, (c[1] - a[1]) / len];
+        // The solid is left of every ring edge (exterior counter-clockwise, holes clockwise):
+        // the wall's outward normal is t turned clockwise.
+        let out = [t[1], -t[0], 0.0];
+        // Counter-clockwise seen from outside: along the edge, then up.
+        let on_wall = |z: (f64, f64)| -> [[f64; 3]; 4] {
+            let p = |s: f64, z: f64| [a[0] + t[0] * s, a[1] + t[1] * s, z];
+            [
+                p(f.along.0, z.0),
+                p(f.along.1, z.0),
+                p(f.along.1, z.1),
+                p(f.along.0, z.1),
+            ]
+        };
+        let box_on = |z: (f64, f64), reach: (f64, f64), m: [Material; 3]| {
+            quad_prism(on_wall(z), out, reach, m)
+        };
+        match f.kind {
+            FeatureKind::Window => recesses.push(box_on(
+                f.z,
+                (f.depth_m.min(-EMBED), EMBED),
+                [Material::Glass, b.facade, b.facade],
+            )),
+            FeatureKind::Door => recesses.push(box_on(
+                f.z,
+                ((f.depth_m + DOOR_SET_BACK_M).min(-EMBED), EMBED),
+                [Material::Wood, b.facade, b.facade],
+            )),
+            FeatureKind::Balcony => {
+                let slab = (f.z.0, f.z.0 + 0.15);
+                protrusions.push(box_on(slab, (-EMBED, f.depth_m), [Material::Concrete; 3]));
+                protrusions.push(box_on(
+                    (slab.1 - EMBED, f.z.1),
+                    (f.depth_m - 0.05, f.depth_m),
+                    [Material::Metal; 3],
+                ));
             }
-            for f in here {
-                match f.kind {
-                    FeatureKind::Door => mesh.append(&edge_box(
-                        a,
-                        t,
-                        nl,
-                        f.along,
-                        (RECESS_M - 0.05, RECESS_M + EMBED),
-                        f.z,
-                        Material::Wood,
-                    )),
-                    FeatureKind::Balcony => {
-                        let slab = (f.z.0, f.z.0 + 0.15);
-                        mesh.append(&edge_box(
-                            a,
-                            t,
-                            nl,
-                            f.along,
-                            (-f.depth_m, EMBED),
-                            slab,
-                            Material::Concrete,
-                        ));
-                        mesh.append(&edge_box(
-                            a,
-                            t,
-                            nl,
-                            f.along,
-                            (-f.depth_m, -f.depth_m + 0.05),
-                            (slab.1 - EMBED, f.z.1),
-                            Material::Metal,
-                        ));
-                    }
-                    FeatureKind::Drainpipe => mesh.append(&edge_box(
-                        a,
-                        t,
-                        nl,
-                        f.along,
-                        (-f.depth_m, EMBED),
-                        f.z,
-                        Material::Metal,
-                    )),
-                    FeatureKind::Window => {}
-                }
+            FeatureKind::Drainpipe => {
+                protrusions.push(box_on(f.z, (-EMBED, f.depth_m), [Material::Metal; 3]))
             }
         }
     }
+    (recesses, protrusions)
 }
 
 /// The rectangle shrunk by `d` on every side.
@@ -367,30 +327,4 @@ fn inset_rect(r: &Rect, d: f64) -> Rect {
         width: r.width - 2.0 * d,
         heading: r.heading,
     }
-}
-
-/// The polygon shrunk by `d` (every edge moved `d` into the solid, mitred corners).
-fn inset(p: &Polygon, d: f64) -> Result<Polygon, String> {
-    if d == 0.0 {
-        return Ok(p.clone());
-    }
-    let ring = |r: &Vec<[f64; 2]>| -> Vec<[f64; 2]> {
-        let n = r.len();
-        (0..n)
-            .map(|i| {
-                let (p0, p1, p2) = (r[(i + n - 1) % n], r[i], r[(i + 1) % n]);
-                let unit = |a: [f64; 2], b: [f64; 2]| {
-                    let l = (b[0] - a[0]).hypot(b[1] - a[1]);
-                    [(b[0] - a[0]) / l, (b[1] - a[1]) / l]
-                };
-                let (t0, t1) = (unit(p0, p1), unit(p1, p2));
-                let (n0, n1) = ([-t0[1], t0[0]], [-t1[1], t1[0]]);
-                // Intersection of the two offset lines: p1 + d * (n0 + n1) / (1 + n0 . n1).
-                let k = d / (1.0 + n0[0] * n1[0] + n0[1] * n1[1]);
-                [p1[0] + k * (n0[0] + n1[0]), p1[1] + k * (n0[1] + n1[1])]
-            })
-            .collect()
-    };
-    Polygon::normalized(ring(&p.exterior), p.holes.iter().map(ring).collect())
-        .ok_or_else(|| "the outline is too small for its façade".into())
 }
