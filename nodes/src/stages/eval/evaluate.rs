@@ -66,7 +66,8 @@ impl Stage for Evaluate {
     const KIND: &'static str = "Evaluate";
     // 3: LOS/NLOS from the measurements or a reference, never the model; floor-clamped links out
     // of the trend fits; lines fitted to the measurements too.
-    const VERSION: u32 = 3;
+    // 4: links_unpredicted counts measured links the model gave no number for (NaN or none).
+    const VERSION: u32 = 4;
     const DOC: &'static str = "P2P error, power-distance and close-in trend RMSE of predictions against measurements (per-tx offsets when EIRP is unknown; LOS/NLOS)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -217,6 +218,17 @@ fn set_link_counts(
     }
     m.set("links", meas.links.len() as f64);
     m.set("links_scored", scored as f64);
+    // Measured links the model says nothing about (no value, or NaN) are left out of every score;
+    // counted, so a model that fails where it is hard cannot look better for it.
+    let unpredicted = pred
+        .links
+        .iter()
+        .zip(&meas.links)
+        .filter(|(pl, ml)| {
+            measured_loss(ml).is_some() && !pl.path_loss_db.is_some_and(|v| !v.is_nan())
+        })
+        .count();
+    m.set("links_unpredicted", unpredicted as f64);
 }
 
 /// Where the LOS/NLOS grouping came from: how many links the measurements label, how many the
@@ -503,8 +515,15 @@ mod tests {
             floor_db: Some(140.0),
             ..Default::default()
         };
-        let m = evaluate(&p, links(&d, &pl, &[None; 6]), meas, None);
+        let m = evaluate(&p, links(&d, &pl, &[None; 6]), meas.clone(), None);
         assert_eq!(m.get("links_scored"), Some(6.0));
+        assert_eq!(m.get("links_unpredicted"), Some(0.0));
+        // A NaN prediction is no prediction: out of the scores, and counted.
+        let mut nan = pl.clone();
+        nan[0] = Some(f64::NAN);
+        let m_nan = evaluate(&p, links(&d, &nan, &[None; 6]), meas.clone(), None);
+        assert_eq!(m_nan.get("links_scored"), Some(5.0));
+        assert_eq!(m_nan.get("links_unpredicted"), Some(1.0));
         assert_eq!(m.get("floor_clamped"), Some(2.0));
         assert_eq!(m.get("trend_links"), Some(4.0));
         let close = |k: &str, want: f64| {

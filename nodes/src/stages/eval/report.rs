@@ -38,7 +38,7 @@ fn site() -> String {
 }
 
 /// The table's rows: (metric key in the evaluations, label).
-const ROWS: [(&str, &str); 13] = [
+const ROWS: [(&str, &str); 14] = [
     ("p2p_rmse_db", "P2P RMSE (dB)"),
     ("p2p_me_db", "P2P mean error (dB)"),
     ("p2p_std_db", "P2P std (dB)"),
@@ -51,6 +51,7 @@ const ROWS: [(&str, &str); 13] = [
     ("los/p2p_rmse_db", "LOS P2P RMSE (dB)"),
     ("nlos/p2p_rmse_db", "NLOS P2P RMSE (dB)"),
     ("links_scored", "links scored"),
+    ("links_unpredicted", "links the model gave no value (left out)"),
     (
         "floor_clamped",
         "links at the floor (left out of PD/CI fits)",
@@ -58,7 +59,7 @@ const ROWS: [(&str, &str); 13] = [
 ];
 
 /// Rows that count links, printed without decimals.
-const COUNT_ROWS: [&str; 2] = ["links_scored", "floor_clamped"];
+const COUNT_ROWS: [&str; 3] = ["links_scored", "links_unpredicted", "floor_clamped"];
 
 /// Table 1 and its plots as a folder: `report.md`, `table.csv`, `metrics.json`, `plots/*.png`,
 /// and `report.html` with all of it and the scenes in 3D.
