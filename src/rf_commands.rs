@@ -12,7 +12,7 @@ use kodama_nodes::io::export::{Encoded, encode};
 use kodama_nodes::io::sionna_xml::read_scene_with_thickness;
 use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::links_csv::{read_links, write_results};
-use kodama_nodes::rf::paths::{TraceOptions, trace_links};
+use kodama_nodes::rf::paths::{LinkEnds, LinkPaths, TraceOptions, trace_links};
 use kodama_nodes::rf::radiomap::{default_plane, radio_map};
 use kodama_nodes::rf::scene::RfScene;
 use kodama_nodes::{Artifact, Site, StageError};
@@ -91,6 +91,10 @@ pub struct TraceArgs {
     /// Where to write the links with path_gain_db (CSV).
     #[arg(long)]
     out: PathBuf,
+    /// Also write every path of every link (its interactions, points, triangles, length, delay
+    /// and complex gain) as JSON: what to read when one link's figure needs explaining.
+    #[arg(long)]
+    paths: Option<PathBuf>,
 }
 
 /// `radiomap` arguments.
@@ -256,6 +260,9 @@ pub fn trace(a: TraceArgs) -> Result<u8, Fail> {
         .map(|r| r.expect("every link is in one batch"))
         .collect();
     write_file(&a.out, write_results(&links, &results).as_bytes())?;
+    if let Some(dest) = &a.paths {
+        write_file(dest, paths_json(&links, &results).as_bytes())?;
+    }
     eprintln!(
         "traced {} links in {:.2} s -> {}",
         links.len(),
@@ -263,6 +270,40 @@ pub fn trace(a: TraceArgs) -> Result<u8, Fail> {
         a.out.display()
     );
     Ok(0)
+}
+
+/// The links and their paths as a JSON array, one object per link in the links file's order;
+/// each path's power in dB beside its complex gain (a gain of -inf dB is written as null).
+fn paths_json(links: &[LinkEnds], results: &[LinkPaths]) -> String {
+    let db = |x: f64| x.is_finite().then_some(x);
+    let rows: Vec<serde_json::Value> = links
+        .iter()
+        .zip(results)
+        .map(|((tx, rx), r)| {
+            let paths: Vec<serde_json::Value> = r
+                .paths
+                .iter()
+                .map(|p| {
+                    serde_json::json!({
+                        "gain_db": db(10.0 * (p.a[0] * p.a[0] + p.a[1] * p.a[1]).log10()),
+                        "a": p.a,
+                        "length_m": p.length_m,
+                        "delay_s": p.delay_s,
+                        "foliage_m": p.foliage_m,
+                        "interactions": p.interactions,
+                    })
+                })
+                .collect();
+            serde_json::json!({
+                "tx": tx,
+                "rx": rx,
+                "path_gain_db": db(r.gain_db),
+                "diffuse_gain_db": db(r.diffuse_gain_db),
+                "paths": paths,
+            })
+        })
+        .collect();
+    serde_json::to_string_pretty(&rows).expect("plain values serialize")
 }
 
 /// `kodama-dag radiomap`.
