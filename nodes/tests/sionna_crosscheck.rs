@@ -234,7 +234,7 @@ fn path_gains_with_diffraction_against_sionna_rt() {
         false,
         true,
     );
-    // Not a match yet (issue 17). Measured: median 0.178 dB and 90th percentile 6.2 dB over 91
+    // Not a match yet (issue 17). Measured: median 0.175 dB and 90th percentile 6.4 dB over 91
     // links, 34 of 130 one-sided. Sionna RT 2.2 chains diffraction with reflections (8-41 paths
     // per street-canyon link where our first-order wedges give 0-2), and finds nothing on 16
     // munich links where we diffract at 110-120 dB. These bounds hold today's figures, so that a
@@ -247,3 +247,97 @@ fn path_gains_with_diffraction_against_sionna_rt() {
         "{one_side} links with paths on one side only"
     );
 }
+
+/// First-order edge diffraction alone around one closed box (marble, then metal), against
+/// tests/fixtures/sionna_wedge.csv (scripts/sionna_wedge_fixture.py): two transmitters, receivers
+/// on a circle round the box at 1.5 m and 12 m, lit, grazing and deep-shadow geometries over its
+/// vertical corners and roof edges.
+#[test]
+fn path_gains_over_one_box_match_sionna_rt() {
+    use kodama_nodes::artifact::{ObjectClass, Scene, SceneObject};
+    use kodama_nodes::geom::mesh_build::cuboid;
+    use kodama_nodes::rf::materials::Material;
+    let mut r = csv::Reader::from_path(fixture("sionna_wedge.csv")).unwrap();
+    let mut groups: BTreeMap<String, Vec<(LinkEndsRow, f64)>> = BTreeMap::new();
+    for rec in r.records() {
+        let rec = rec.unwrap();
+        let f = |i: usize| -> f64 { rec[i].parse().unwrap() };
+        let db = if &rec[8] == "-inf" {
+            f64::NEG_INFINITY
+        } else {
+            f(8)
+        };
+        groups
+            .entry(rec[0].to_string())
+            .or_default()
+            .push((([f(1), f(2), f(3)], [f(4), f(5), f(6)]), db));
+    }
+    let opt = TraceOptions {
+        max_depth: 1,
+        los: false,
+        reflection: false,
+        transmission: false,
+        diffraction: true,
+        rays: 100_000,
+        foliage_db_per_m: None,
+        ..Default::default()
+    };
+    let ant = Antenna::default();
+    for (name, rows) in &groups {
+        let material = match name.as_str() {
+            "marble" => Material::Marble,
+            "metal" => Material::Metal,
+            other => panic!("no material {other}"),
+        };
+        let scene = Scene {
+            objects: vec![SceneObject {
+                id: "box".into(),
+                class: ObjectClass::Building,
+                mesh: cuboid([10.0, 10.0], [20.0, 20.0, 30.0], 0.0, 0.0, material),
+            }],
+        };
+        let rf = RfScene::new(&scene, 3.5e9, false).unwrap();
+        let links: Vec<_> = rows.iter().map(|r| r.0).collect();
+        let ours = trace_links(&rf, &links, &ant, &ant, &opt, 3.5e9);
+        let (mut diffs, mut one_side) = (Vec::new(), 0);
+        for ((l, sionna), got) in rows.iter().zip(&ours) {
+            match (sionna.is_finite(), got.gain_db.is_finite()) {
+                (true, true) => diffs.push((got.gain_db - sionna).abs()),
+                (false, false) => {}
+                _ => one_side += 1,
+            }
+            if !(sionna.is_finite() && got.gain_db.is_finite())
+                || (got.gain_db - sionna).abs() > 1.0
+            {
+                println!(
+                    "{name}: tx {:?} rx {:?}: Sionna {sionna:.2} dB, ours {:.2} dB ({} paths)",
+                    l.0,
+                    l.1,
+                    got.gain_db,
+                    got.paths.len()
+                );
+            }
+        }
+        let n = diffs.len();
+        let median = percentile(&mut diffs, 0.5);
+        let p90 = percentile(&mut diffs, 0.9);
+        println!(
+            "box, {name}: {n} links compared, {one_side} with paths on one side only; |difference| median {median:.3} dB, 90th percentile {p90:.3} dB"
+        );
+        // Not a match yet (issue 17). Measured: marble median 1.74 dB, 90th percentile 8.28;
+        // metal 1.09 and 7.73; every link diffracted on both sides. The two tracers find the
+        // same edges; the coefficients differ. Sionna RT 2.2 weights both faces by reflection
+        // factors at the incident ray's angles and sums R0 (D1 - D4) + Rn (D2 - D3) in rotated
+        // bases; ours is Kouyoumjian-Pathak with Luebbers' factors. On metal, where the factors
+        // are -1 either way, the largest gaps are lit-region links near the incident shadow
+        // boundary (tx (40, 30, 20), rx (-23.8, 19.1, 1.5): Sionna -113.3 dB, ours -99.7 dB,
+        // which is what the PEC soft coefficient |D1 + D2 - D3 - D4| = 0.41 gives by hand).
+        // These bounds hold today's figures so that a regression shows; they are not the target.
+        assert!(n >= 140, "{name}: {n}");
+        assert_eq!(one_side, 0, "{name}: links with paths on one side only");
+        assert!(median <= 2.0, "{name}: median {median}");
+        assert!(p90 <= 9.0, "{name}: 90th percentile {p90}");
+    }
+}
+
+type LinkEndsRow = ([f64; 3], [f64; 3]);

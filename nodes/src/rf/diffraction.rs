@@ -35,6 +35,37 @@ pub struct Wedge {
     pub trin: u32,
 }
 
+impl Wedge {
+    /// The same wedge labelled so that its 0-face is one a wave travelling along `ki` meets from
+    /// outside (`ki · n0 <= 0`), as Sionna RT does, and of two lit faces the one it meets more
+    /// squarely. The UTD's face reflection factors are taken at the incidence angle on the
+    /// 0-face, which only means something for a face the wave lights; labelled the other way
+    /// round, a wave grazing one face of a corner was weighted by the other face's near-normal
+    /// reflection, and the same corner diffracted 20 dB apart depending on which of its
+    /// triangles came first. Luebbers' factors are not symmetric in the two faces, so the
+    /// labelling of a corner lit on both faces is fixed too, never left to the mesh's order.
+    pub fn facing(&self, ki: DVec3) -> Wedge {
+        let (c0, cn) = (ki.dot(self.n0), ki.dot(self.nn));
+        let keep = if c0 <= 0.0 && cn <= 0.0 {
+            c0 <= cn
+        } else {
+            c0 <= 0.0
+        };
+        if keep {
+            return *self;
+        }
+        Wedge {
+            a: self.a + self.e * self.length,
+            e: -self.e,
+            n0: self.nn,
+            nn: self.n0,
+            tri0: self.trin,
+            trin: self.tri0,
+            ..*self
+        }
+    }
+}
+
 /// The convex edges of `scene`: edges shared by exactly two triangles (matched by vertex
 /// position, to the micrometre) whose normals differ, with the solid on the inner side.
 pub fn wedges(scene: &RfScene) -> Vec<Wedge> {
@@ -149,6 +180,7 @@ pub fn diffracted_field(
     let (si, so) = ((q - tx).length(), (rx - q).length());
     let ki = (q - tx) / si; // incident direction
     let ko = (rx - q) / so; // diffracted direction
+    let w = &w.facing(ki);
     let phi_i = face_angle(w, -ki);
     let phi = face_angle(w, ko);
     let limit = w.n * PI;

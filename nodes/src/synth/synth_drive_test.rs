@@ -121,7 +121,8 @@ impl Stage for SynthDriveTest {
     const KIND: &'static str = "SynthDriveTest";
     // 4: slabs take their thickness per material (rf::materials).
     // 5: diffraction square to an edge no longer gives NaN (rf::diffraction).
-    const VERSION: u32 = 5;
+    // 6: a wedge's 0-face is the face the wave lights (rf::diffraction::Wedge::facing).
+    const VERSION: u32 = 6;
     const DOC: &'static str = "drive-test measurements traced through the ground truth (richer settings) plus log-normal shadowing";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),
