@@ -51,7 +51,10 @@ const ROWS: [(&str, &str); 14] = [
     ("los/p2p_rmse_db", "LOS P2P RMSE (dB)"),
     ("nlos/p2p_rmse_db", "NLOS P2P RMSE (dB)"),
     ("links_scored", "links scored"),
-    ("links_unpredicted", "links the model gave no value (left out)"),
+    (
+        "links_unpredicted",
+        "links the model gave no value (left out)",
+    ),
     (
         "floor_clamped",
         "links at the floor (left out of PD/CI fits)",
