@@ -47,6 +47,9 @@ pub struct Interactions {
     /// No diffraction (the default; accepted for Sionna-style command lines).
     #[arg(long)]
     no_diffraction: bool,
+    /// Diffract only at edges where the faces turn by at least this many degrees (0-90).
+    #[arg(long, default_value_t = 0.0)]
+    min_wedge_deg: f64,
     /// Diffuse reflection (effective roughness, Lambertian; last bounce only for links).
     #[arg(long)]
     diffuse: bool,
@@ -72,6 +75,7 @@ impl Interactions {
             diffuse: self.diffuse && !self.no_diffuse,
             scattering_coefficient: self.scattering_coefficient,
             rays: self.rays,
+            min_wedge_deg: self.min_wedge_deg,
             ..Default::default()
         }
     }

@@ -509,3 +509,74 @@ fn a_wedge_diffracts_the_same_whichever_face_comes_first() {
     }
     assert!(diffracted > 20, "only {diffracted} receivers diffracted");
 }
+
+/// A ground bent by 2 degrees (flat, then falling away) is a convex edge to the UTD: over it a
+/// receiver gets a diffracted path. `min_wedge_deg` 5 takes such mesh bends out and keeps a real
+/// corner; out-of-range thresholds are refused.
+#[test]
+fn min_wedge_deg_drops_shallow_bends_and_keeps_corners() {
+    let drop = (2.0f32).to_radians().tan() * 50.0;
+    let bent = Scene {
+        objects: vec![
+            quad(
+                "flat",
+                [
+                    [-50.0, -50.0, 0.0],
+                    [0.0, -50.0, 0.0],
+                    [0.0, 50.0, 0.0],
+                    [-50.0, 50.0, 0.0],
+                ],
+                Material::MediumDryGround,
+            ),
+            quad(
+                "falling",
+                [
+                    [0.0, -50.0, 0.0],
+                    [50.0, -50.0, -drop],
+                    [50.0, 50.0, -drop],
+                    [0.0, 50.0, 0.0],
+                ],
+                Material::MediumDryGround,
+            ),
+        ],
+    };
+    let corner = Scene {
+        objects: vec![SceneObject {
+            id: "box".into(),
+            class: ObjectClass::Building,
+            mesh: cuboid(
+                [10.0, 10.0],
+                [20.0, 20.0, 30.0],
+                0.0,
+                0.0,
+                Material::Concrete,
+            ),
+        }],
+    };
+    let diffracted = |scene: &Scene, link: LinkEnds, min_wedge_deg: f64| -> usize {
+        let rf = RfScene::new(scene, F, false).unwrap();
+        let opt = TraceOptions {
+            max_depth: 1,
+            los: false,
+            reflection: false,
+            transmission: false,
+            diffraction: true,
+            rays: 20_000,
+            min_wedge_deg,
+            ..Default::default()
+        };
+        trace_one(&rf, &[link], &opt).paths.len()
+    };
+    let over_bend = ([-30.0, 0.0, 10.0], [30.0, 0.0, -0.5]);
+    assert!(diffracted(&bent, over_bend, 0.0) > 0);
+    assert_eq!(diffracted(&bent, over_bend, 5.0), 0);
+    let round_corner = ([40.0, 30.0, 20.0], [-24.9, 6.9, 1.5]);
+    assert!(diffracted(&corner, round_corner, 5.0) > 0);
+    for bad in [-1.0, 90.5, f64::NAN] {
+        let opt = TraceOptions {
+            min_wedge_deg: bad,
+            ..Default::default()
+        };
+        assert_eq!(opt.check().unwrap_err().0, "min_wedge_deg", "{bad}");
+    }
+}

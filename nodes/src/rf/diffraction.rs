@@ -67,8 +67,11 @@ impl Wedge {
 }
 
 /// The convex edges of `scene`: edges shared by exactly two triangles (matched by vertex
-/// position, to the micrometre) whose normals differ, with the solid on the inner side.
-pub fn wedges(scene: &RfScene) -> Vec<Wedge> {
+/// position, to the micrometre) whose normals turn by more than `min_deg` degrees (and by more
+/// than 0.08 degrees, where a plane split into triangles rounds), with the solid on the inner
+/// side.
+pub fn wedges(scene: &RfScene, min_deg: f64) -> Vec<Wedge> {
+    let max_cos = (1.0 - 1e-6f64).min(min_deg.to_radians().cos());
     let key = |p: DVec3| [p.x, p.y, p.z].map(|c| (c * 1e6).round() as i64);
     // Edge (by its ends' quantised positions) -> the triangles on it, with the edge's ends.
     type EdgeKey = ([i64; 3], [i64; 3]);
@@ -100,8 +103,8 @@ pub fn wedges(scene: &RfScene) -> Vec<Wedge> {
         let t1 = faces[1].0;
         let (n0, nn) = (scene.normals[t0 as usize], scene.normals[t1 as usize]);
         let c = n0.dot(nn).clamp(-1.0, 1.0);
-        if c > 1.0 - 1e-6 {
-            continue; // flat
+        if c >= max_cos {
+            continue; // flat, or a bend below the threshold
         }
         // Convex when each face's third vertex lies behind the other face.
         let third = |t: u32| {

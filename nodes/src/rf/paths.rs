@@ -49,6 +49,10 @@ pub struct TraceOptions {
     /// Loss inside foliage volumes, dB per metre; `None`: ITU-R P.833 at the carrier
     /// ([`specific_attenuation_db_per_m`]).
     pub foliage_db_per_m: Option<f64>,
+    /// Diffraction only at edges where the faces' normals turn by at least this much, degrees
+    /// in [0, 90]: a faceted terrain or dome bends by fractions of a degree between facets, and
+    /// a wedge there is an artefact of the mesh, not an edge. Default 0 (every convex edge).
+    pub min_wedge_deg: f64,
 }
 
 impl Default for TraceOptions {
@@ -64,6 +68,7 @@ impl Default for TraceOptions {
             scattering_pattern: ScatteringPattern::Lambertian,
             rays: 1_000_000,
             foliage_db_per_m: None,
+            min_wedge_deg: 0.0,
         }
     }
 }
@@ -76,6 +81,9 @@ impl TraceOptions {
         }
         if self.rays == 0 {
             return Err(("rays", "expected at least one ray"));
+        }
+        if !(0.0..=90.0).contains(&self.min_wedge_deg) {
+            return Err(("min_wedge_deg", "expected an angle in [0, 90] degrees"));
         }
         if self
             .foliage_db_per_m
@@ -206,7 +214,7 @@ pub fn trace_links(
             .expect("every tx was listed")
     };
     let all_wedges = if opt.diffraction && opt.max_depth > 0 {
-        super::diffraction::wedges(scene)
+        super::diffraction::wedges(scene, opt.min_wedge_deg)
     } else {
         Vec::new()
     };

@@ -64,6 +64,8 @@ pub struct TruthOptions {
     pub rays: u32,
     /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at `freq_hz` (rf.md §5.1).
     pub foliage_db_per_m: Option<f64>,
+    /// Diffract only where faces turn by at least this many degrees, in [0, 90]. Default 0.
+    pub min_wedge_deg: f64,
 }
 
 impl Default for TruthOptions {
@@ -76,6 +78,7 @@ impl Default for TruthOptions {
             scattering_pattern: ScatteringPattern::Lambertian,
             rays: 200_000,
             foliage_db_per_m: None,
+            min_wedge_deg: 0.0,
         }
     }
 }
@@ -94,6 +97,7 @@ impl TruthOptions {
             scattering_pattern: self.scattering_pattern,
             rays: self.rays,
             foliage_db_per_m: self.foliage_db_per_m,
+            min_wedge_deg: self.min_wedge_deg,
         }
     }
 }

@@ -93,6 +93,7 @@ impl MapOptions {
             scattering_pattern: self.scattering_pattern,
             rays: self.rays,
             foliage_db_per_m: self.foliage_db_per_m,
+            min_wedge_deg: 0.0,
         }
     }
 }

@@ -55,6 +55,8 @@ pub struct LinkOptions {
     pub rays: u32,
     /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at the link's carrier (rf.md §5.1).
     pub foliage_db_per_m: Option<f64>,
+    /// Diffract only where faces turn by at least this many degrees, in [0, 90]. Default 0.
+    pub min_wedge_deg: f64,
 }
 
 impl Default for LinkOptions {
@@ -71,6 +73,7 @@ impl Default for LinkOptions {
             scattering_pattern: o.scattering_pattern,
             rays: o.rays,
             foliage_db_per_m: o.foliage_db_per_m,
+            min_wedge_deg: o.min_wedge_deg,
         }
     }
 }
@@ -89,6 +92,7 @@ impl LinkOptions {
             scattering_pattern: self.scattering_pattern,
             rays: self.rays,
             foliage_db_per_m: self.foliage_db_per_m,
+            min_wedge_deg: self.min_wedge_deg,
         }
     }
 }
