@@ -36,6 +36,19 @@ fn options(max_depth: u32) -> TraceOptions {
     }
 }
 
+/// First-order diffraction alone (no line of sight, reflection or transmission), `rays` shot.
+fn diffraction_only(rays: u32) -> TraceOptions {
+    TraceOptions {
+        max_depth: 1,
+        los: false,
+        reflection: false,
+        transmission: false,
+        diffraction: true,
+        rays,
+        ..Default::default()
+    }
+}
+
 /// The first link's paths, isotropic vertical antennas at both ends.
 fn trace_one(scene: &RfScene, links: &[LinkEnds], opt: &TraceOptions) -> LinkPaths {
     trace_links(
@@ -472,15 +485,7 @@ fn a_wedge_diffracts_the_same_whichever_face_comes_first() {
         };
         RfScene::new(&scene, F, false).unwrap()
     };
-    let opt = TraceOptions {
-        max_depth: 1,
-        los: false,
-        reflection: false,
-        transmission: false,
-        diffraction: true,
-        rays: 20_000,
-        ..Default::default()
-    };
+    let opt = diffraction_only(20_000);
     let links: Vec<LinkEnds> = (0..36)
         .map(|k| {
             let a = std::f64::consts::TAU * (k as f64 + 0.5) / 36.0;
@@ -556,14 +561,8 @@ fn min_wedge_deg_drops_shallow_bends_and_keeps_corners() {
     let diffracted = |scene: &Scene, link: LinkEnds, min_wedge_deg: f64| -> usize {
         let rf = RfScene::new(scene, F, false).unwrap();
         let opt = TraceOptions {
-            max_depth: 1,
-            los: false,
-            reflection: false,
-            transmission: false,
-            diffraction: true,
-            rays: 20_000,
             min_wedge_deg,
-            ..Default::default()
+            ..diffraction_only(20_000)
         };
         trace_one(&rf, &[link], &opt).paths.len()
     };
