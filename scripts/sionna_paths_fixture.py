@@ -39,6 +39,21 @@ def outdoor(scene, p):
     return not bool(scene.mi_scene.ray_intersect(ray).is_valid()[0])
 
 
+def link_gains(paths, n_rx):
+    """Per receiver of a one-transmitter, one-antenna trace: the path gain 10 log10 sum |a|^2 as
+    the fixture writes it ("-inf" without paths) and the number of paths."""
+    a_re, a_im = paths.a
+    a = a_re.numpy() + 1j * a_im.numpy()  # [rx, rx_ant, tx, tx_ant, paths]
+    valid = paths.valid.numpy()
+    out = []
+    for i in range(n_rx):
+        ai = a[i, 0, 0, 0][valid[i, 0]] if valid.ndim == 3 else a[i, 0, 0, 0]
+        g = np.sum(np.abs(ai) ** 2)
+        out.append((f"{10 * np.log10(g):.4f}" if g > 0 else "-inf",
+                    int(np.count_nonzero(np.abs(ai) > 0))))
+    return out
+
+
 def main(root, out, refraction=False, depth=DEPTH, diffraction=False):
     rng = np.random.default_rng(2026)
     rows = []
@@ -61,15 +76,8 @@ def main(root, out, refraction=False, depth=DEPTH, diffraction=False):
                              specular_reflection=True, diffuse_reflection=False,
                              refraction=refraction, diffraction=diffraction,
                              synthetic_array=True)
-        a_re, a_im = paths.a
-        a = a_re.numpy() + 1j * a_im.numpy()  # [rx, rx_ant, tx, tx_ant, paths]
-        valid = paths.valid.numpy()
-        for i, p in enumerate(rxs):
-            ai = a[i, 0, 0, 0][valid[i, 0]] if valid.ndim == 3 else a[i, 0, 0, 0]
-            g = np.sum(np.abs(ai) ** 2)
-            rows.append([name, *tx, *p, FREQ, depth,
-                         f"{10 * np.log10(g):.4f}" if g > 0 else "-inf",
-                         int(np.count_nonzero(np.abs(ai) > 0))])
+        for p, (gain, n) in zip(rxs, link_gains(paths, len(rxs))):
+            rows.append([name, *tx, *p, FREQ, depth, gain, n])
         print(f"{name}: {len(rxs)} links")
     with open(out, "w", newline="") as f:
         w = csv.writer(f)

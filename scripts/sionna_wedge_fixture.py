@@ -20,6 +20,8 @@ import sionna_env  # noqa: F401
 import numpy as np
 from sionna.rt import PathSolver, PlanarArray, Receiver, Transmitter, load_scene
 
+from sionna_paths_fixture import link_gains
+
 FREQ = 3.5e9
 BOX = (0.0, 20.0, 0.0, 20.0, 0.0, 30.0)
 TXS = [(40.0, 30.0, 20.0), (30.0, -10.0, 40.0)]
@@ -84,15 +86,8 @@ def main(out_path):
                 paths = PathSolver()(scene, max_depth=1, samples_per_src=10**6, los=False,
                                      specular_reflection=False, diffuse_reflection=False,
                                      refraction=False, diffraction=True, synthetic_array=True)
-                a_re, a_im = paths.a
-                a = a_re.numpy() + 1j * a_im.numpy()
-                valid = paths.valid.numpy()
-                for i, p in enumerate(rxs):
-                    ai = a[i, 0, 0, 0][valid[i, 0]] if valid.ndim == 3 else a[i, 0, 0, 0]
-                    g = np.sum(np.abs(ai) ** 2)
-                    rows.append([material, *tx, *(f"{c:.6f}" for c in p), FREQ,
-                                 f"{10 * np.log10(g):.4f}" if g > 0 else "-inf",
-                                 int(np.count_nonzero(np.abs(ai) > 0))])
+                for p, (gain, n) in zip(rxs, link_gains(paths, len(rxs))):
+                    rows.append([material, *tx, *(f"{c:.6f}" for c in p), FREQ, gain, n])
                 print(f"{material}, tx {t}: {len(rxs)} links")
     with open(out_path, "w", newline="") as f:
         w = csv.writer(f)
