@@ -134,42 +134,15 @@ mod tests {
     /// the overlapping recesses (they share a corner region) are merged once.
     #[test]
     fn subtract_then_add_keeps_volumes_and_materials() {
-        let m = |mesh: &Mesh| to_manifold(mesh).unwrap();
-        let base = m(&cuboid(
-            [0.0, 0.0],
-            [4.0, 4.0, 4.0],
-            0.0,
-            0.0,
-            Material::Brick,
-        ));
-        let notch = m(&cuboid(
-            [2.0, 2.0],
-            [1.0, 1.0, 1.0],
-            0.0,
-            3.5,
-            Material::Glass,
-        ));
-        let overlap = m(&cuboid(
-            [1.75, 1.75],
-            [1.0, 1.0, 1.0],
-            0.0,
-            3.5,
-            Material::Glass,
-        ));
-        let slot = m(&cuboid(
-            [0.0, 2.0],
-            [2.0, 2.0, 2.0],
-            0.0,
-            1.0,
-            Material::Wood,
-        ));
-        let top = m(&cuboid(
-            [0.0, 0.0],
-            [1.0, 1.0, 1.0],
-            0.0,
-            4.0,
-            Material::Metal,
-        ));
+        // An upright cube of side `size` centred at (x, y), its floor at `z`.
+        let cube = |center: [f64; 2], size: f64, z: f64, mat: Material| {
+            to_manifold(&cuboid(center, [size; 3], 0.0, z, mat)).unwrap()
+        };
+        let base = cube([0.0, 0.0], 4.0, 0.0, Material::Brick);
+        let notch = cube([2.0, 2.0], 1.0, 3.5, Material::Glass);
+        let overlap = cube([1.75, 1.75], 1.0, 3.5, Material::Glass);
+        let slot = cube([0.0, 2.0], 2.0, 1.0, Material::Wood);
+        let top = cube([0.0, 0.0], 1.0, 4.0, Material::Metal);
         let out = subtract_then_add(
             &base,
             &[&notch, &overlap, &slot],
@@ -202,14 +175,7 @@ mod tests {
     #[test]
     fn union_of_nothing_is_none_and_of_one_is_itself() {
         assert!(union_all(&[]).unwrap().is_none());
-        let a = to_manifold(&cuboid(
-            [0.0, 0.0],
-            [1.0, 1.0, 1.0],
-            0.0,
-            0.0,
-            Material::Metal,
-        ))
-        .unwrap();
+        let a = to_manifold(&cuboid([0.0; 2], [1.0; 3], 0.0, 0.0, Material::Metal)).unwrap();
         let u = union_all(&[&a]).unwrap().unwrap();
         assert!((u.volume() - 1.0).abs() < 1e-9);
     }

@@ -168,14 +168,15 @@ pub fn wall_prisms(city: &City, truth: &Scene) -> Result<Scene, String> {
     Ok(Scene { objects })
 }
 
+/// How far parts that touch start inside each other, metres, so the Booleans cut cleanly.
+const EMBED: f64 = 0.05;
+
 /// One building as one closed solid: the body with its roof, a stepped tier or dome, roof
 /// furniture and façade relief, merged by exact Booleans (`geom::boolean`). One envelope, as a
 /// real building has: a wave crossing a wall crosses one slab, and a flat façade has no edge
-/// where two parts happen to meet. Parts that touch start 0.05 m inside each other so the
-/// Booleans cut cleanly.
+/// where two parts happen to meet. Parts that touch overlap by [`EMBED`].
 pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
     let eave = b.ground_z + b.eave_m;
-    const EMBED: f64 = 0.05;
     let mut parts: Vec<Mesh> = Vec::new();
     match &b.roof {
         Roof::Gabled { rect, ridge_m } | Roof::Hipped { rect, ridge_m } => {
@@ -254,7 +255,6 @@ pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
 /// at their backs, reveals of the façade material) and the protrusions (balconies with their
 /// railings, drainpipes).
 fn facade_relief(b: &BuildingSpec) -> (Vec<Mesh>, Vec<Mesh>) {
-    const EMBED: f64 = 0.05;
     const DOOR_SET_BACK_M: f64 = 0.05;
     let (mut recesses, mut protrusions) = (Vec::new(), Vec::new());
     let rings: Vec<&Vec<[f64; 2]>> = std::iter::once(&b.footprint.exterior)

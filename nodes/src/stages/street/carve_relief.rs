@@ -11,7 +11,8 @@ pub struct CarveRelief;
 
 impl Stage for CarveRelief {
     const KIND: &'static str = "CarveRelief";
-    const VERSION: u32 = 1;
+    // 2: unions merged in a balanced tree (geom::boolean): the same solids, other triangles.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "façade relief carved into the building solids by Booleans (recesses subtracted, protrusions added), every result a checked solid";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
