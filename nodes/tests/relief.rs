@@ -505,8 +505,10 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
     // Affine depth (0.8 z + 1 m) calibrates on every view (walls and ground spread the depths).
     assert_eq!(r.stats.calibrated, r.stats.views);
     assert!(sc.by_class["window"].observed > 50);
-    // The targets, but for drainpipes: 0.12 m wide, about one texel, they come out two
-    // or three texels wide and never match at IoU 0.5, even from the true poses.
+    // The targets, but for drainpipes: 0.12 m wide, 1.2 texels; what the views
+    // deposit is offset by 0.05-0.1 m (registration's residual, the blur of pixel, bilinear
+    // deposit and kernel), and at that offset an instance of any width misses IoU 0.5 on a
+    // 0.12 m pipe.
     for c in ["window", "door", "balcony"] {
         assert!(sc.by_class[c].observed >= 5, "{c}: {:?}", sc.by_class[c]);
         assert!(sc.recall(c) >= 0.8, "{c} recall {}", sc.recall(c));

@@ -23,7 +23,7 @@ use crate::geom::fusion::{ChartLookup, FusionParams, Vote, fuse_views_displaced}
 use crate::geom::raycast::SceneRays;
 use crate::raster::label::label_components;
 use crate::raster::label::label_regions;
-use crate::raster::morph::{dilate, erode};
+use crate::raster::morph::{close_within, dilate, erode};
 use crate::stage::Progress;
 
 /// The displacement classes Y, in the order every probability triple uses.
@@ -387,6 +387,11 @@ pub struct ReliefParams {
     pub delta: DeltaParams,
     /// Posterior an instance's texels need. Default 0.5.
     pub threshold: f64,
+    /// Lower posterior through which texels over `threshold` join into one instance
+    /// (hysteresis); the instance's extent is still its texels over `threshold`. Default 0.3:
+    /// a texel with some votes (R or P at level 1 gives 0.35 in the default CPT), not a texel
+    /// that looked flat (0.03).
+    pub grow_threshold: f64,
     /// Morphological opening radius for recesses and protrusions, texels. Default (1, 0): a
     /// drainpipe is one texel wide.
     pub open_texels: (u32, u32),
@@ -439,6 +444,7 @@ impl Default for ReliefParams {
             cpt: Cpt::default(),
             delta: DeltaParams::default(),
             threshold: 0.5,
+            grow_threshold: 0.3,
             open_texels: (1, 0),
             close_texels: 1,
             min_texels: 6,
@@ -501,6 +507,7 @@ impl ReliefParams {
         range("delta.trust", self.delta.trust, 0.0, 1.0)?;
         range("delta.search_m", self.delta.search_m, 0.01, 50.0)?;
         range("threshold", self.threshold, 0.0, 1.0)?;
+        range("grow_threshold", self.grow_threshold, 0.0, self.threshold)?;
         if self.open_texels.0 > 16 || self.open_texels.1 > 16 || self.close_texels > 16 {
             return Err(("open_texels", "expected radii of at most 16 texels".into()));
         }
@@ -937,7 +944,22 @@ fn view_relief(
         if disp > 0.0 && out.displace.is_empty() {
             out.displace = vec![0.0; n];
         }
+        // Only a protrusion's front face lies on the plane it is deposited on: a side-face
+        // pixel met at a smaller offset would land up to `disp` x tan(theta) short of where it
+        // stands, on the wall beside it (a drainpipe by a corner smeared over the corner's
+        // texels). Side faces, told by their normals, neither vote nor count as exposure.
+        let cos_side = p.side_angle_deg.to_radians().cos();
+        let is_side = |q: u32| {
+            normals.is_some_and(|nm| {
+                let ns = view.pose.to_site(nm[q as usize].map(|c| c as f64));
+                dot(ns, nrm) < cos_side
+            })
+        };
         for &q in pixels {
+            if disp > 0.0 && is_side(q) {
+                out.codes[q as usize] = MASKED;
+                continue;
+            }
             out.codes[q as usize] = sign;
             if disp > 0.0 {
                 out.displace[q as usize] = disp as f32;
@@ -1221,12 +1243,13 @@ fn instances(
         } else {
             (&lay.pr_protruding, &lay.pr_recessed)
         };
-        let mut mask: Vec<bool> = (0..n)
-            .map(|k| {
-                let (a, b) = (mine[k] as f64, other[k] as f64);
-                a.is_finite() && a >= p.threshold && a >= b && a >= 1.0 - a - b
-            })
-            .collect();
+        // Over `threshold`, ahead of the other relief class and of flat; or (grown) over
+        // `threshold` and ahead of the other relief class.
+        let over = |k: usize, threshold: f64, grown: bool| {
+            let (a, b) = (mine[k] as f64, other[k] as f64);
+            a.is_finite() && a >= threshold && a >= b && (grown || a >= 1.0 - a - b)
+        };
+        let mut mask: Vec<bool> = (0..n).map(|k| over(k, p.threshold, false)).collect();
         let open = if sign < 0 {
             p.open_texels.0
         } else {
@@ -1237,20 +1260,31 @@ fn instances(
         }
         let close = p.close_texels as i64;
         if close > 0 {
-            mask = erode(&dilate(&mask, w, h, close), w, h, close);
+            mask = close_within(&mask, w, h, close);
             // Closing never reaches off the surface.
             for (k, m) in mask.iter_mut().enumerate() {
                 *m &= c.triangle_at[k] != u32::MAX;
             }
         }
-        let labels = label_components(&mask, w, h, p.min_texels as usize);
+        // Hysteresis: texels over the threshold (the core) are grouped through texels over the
+        // lower `grow_threshold`, so a thin feature whose evidence straddles two texel columns
+        // (a 0.12 m drainpipe on 0.1 m texels reads about half in each) stays one instance
+        // rather than breaking wherever both halves dip under the threshold. The rectangle and
+        // the evidence come from the core alone.
+        let grown: Vec<bool> = (0..n)
+            .map(|k| mask[k] || (c.triangle_at[k] != u32::MAX && over(k, p.grow_threshold, true)))
+            .collect();
+        let labels = label_components(&grown, w, h, 1);
         let mut comps: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
         for (k, &l) in labels.iter().enumerate() {
-            if l != 0 {
+            if l != 0 && mask[k] {
                 comps.entry(l).or_default().push(k);
             }
         }
         for texels in comps.values() {
+            if texels.len() < p.min_texels as usize {
+                continue;
+            }
             let m = texels.len() as f64;
             let (mut su, mut sv) = (0.0, 0.0);
             for &k in texels {
@@ -1387,6 +1421,65 @@ mod tests {
         assert!((a - 0.8).abs() < 1e-9 && (b - 1.0).abs() < 1e-9, "{a} {b}");
         // No spread, no fit.
         assert!(robust_affine(&vec![10.0; 100], &vec![9.0; 100]).is_none());
+    }
+
+    /// A wall chart of `w` x `h` texels of 0.1 m, all on the surface.
+    fn flat_chart(w: u32, h: u32) -> crate::artifact::Chart {
+        crate::artifact::Chart {
+            object: 0,
+            building: "building-0".into(),
+            kind: ChartKind::Wall,
+            origin: [0.0; 3],
+            u_axis: [1.0, 0.0, 0.0],
+            v_axis: [0.0, 0.0, 1.0],
+            normal: [0.0, -1.0, 0.0],
+            texel_m: 0.1,
+            width: w,
+            height: h,
+            triangles: PodVec(vec![0]),
+            triangle_at: PodVec(vec![0; (w * h) as usize]),
+        }
+    }
+
+    #[test]
+    fn a_thin_protrusion_whose_evidence_dips_stays_one_instance() {
+        // A pipe down column 3, one texel from the chart's edge: two rows in every six its
+        // evidence dips to "some votes" (0.35), as when it straddles two texel columns.
+        let (w, h) = (12u32, 64u32);
+        let c = flat_chart(w, h);
+        let n = c.len();
+        let mut pr = vec![0.03f32; n];
+        for j in 0..h {
+            pr[(j * w + 3) as usize] = if j % 6 >= 4 { 0.35 } else { 0.85 };
+        }
+        let lay = ReliefLayers {
+            width: w,
+            height: h,
+            exposure: PodVec(vec![10.0; n]),
+            recessed: PodVec(vec![0.0; n]),
+            protruding: PodVec(vec![0.0; n]),
+            delta: PodVec(vec![f32::NAN; n]),
+            pr_recessed: PodVec(vec![0.03; n]),
+            pr_protruding: PodVec(pr),
+        };
+        let p = ReliefParams {
+            min_texels: 3,
+            ..Default::default()
+        };
+        let one = instances(0, &c, &lay, &[], false, &p);
+        assert_eq!(one.len(), 1, "{one:?}");
+        // The extent is the core's: one column wide, never grown over the gap to the edge.
+        let r = one[0].rect;
+        assert!(
+            r[0] > 2.9 && r[2] < 4.1 && r[1] < 0.5 && r[3] > 63.5,
+            "{r:?}"
+        );
+        let without = ReliefParams {
+            grow_threshold: p.threshold,
+            ..p
+        };
+        // Without the hysteresis (closing bridges one row, not two): a piece per stretch.
+        assert_eq!(instances(0, &c, &lay, &[], false, &without).len(), 11);
     }
 
     #[test]

@@ -73,9 +73,60 @@ pub fn erode(mask: &[bool], w: u32, h: u32, radius: i64) -> Vec<bool> {
     morph(mask, w, h, radius, false)
 }
 
+/// Morphological closing (dilation, then erosion) by a disk of `radius` cells as if the grid
+/// went on empty beyond its edge: [`erode`] counts outside as full, so a closing made of the two
+/// would fill the gap between a mask and the grid's edge (a drainpipe one texel from a wall's
+/// corner grown over that texel). Computed on a copy padded by `radius` empty cells.
+pub fn close_within(mask: &[bool], w: u32, h: u32, radius: i64) -> Vec<bool> {
+    if radius <= 0 {
+        return mask.to_vec();
+    }
+    let r = radius as u32;
+    let (pw, ph) = (w + 2 * r, h + 2 * r);
+    let mut padded = vec![false; (pw * ph) as usize];
+    for y in 0..h {
+        let row = (y * w) as usize..((y + 1) * w) as usize;
+        let at = ((y + r) * pw + r) as usize;
+        padded[at..at + w as usize].copy_from_slice(&mask[row]);
+    }
+    let closed = erode(&dilate(&padded, pw, ph, radius), pw, ph, radius);
+    (0..h)
+        .flat_map(|y| {
+            let at = ((y + r) * pw + r) as usize;
+            closed[at..at + w as usize].to_vec()
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn closing_within_leaves_the_edge_gap_and_bridges_inner_ones() {
+        // Columns: 0 empty (the gap to the edge), 1 full, 2 empty, 3 full, 4.. empty.
+        let (w, h) = (8u32, 6u32);
+        let mask: Vec<bool> = (0..w * h).map(|k| matches!(k % w, 1 | 3)).collect();
+        let closed = close_within(&mask, w, h, 1);
+        let col = |m: &[bool], x: u32, ys: std::ops::Range<u32>| {
+            ys.into_iter().all(|y| m[(y * w + x) as usize])
+        };
+        assert!(
+            !(0..h).any(|y| closed[(y * w) as usize]),
+            "the edge gap stays open"
+        );
+        assert!(
+            col(&closed, 1, 0..h) && col(&closed, 3, 0..h),
+            "the mask stays"
+        );
+        // The bridge's ends on the first and last rows open onto the empty outside.
+        assert!(col(&closed, 2, 1..h - 1), "the inner gap closes");
+        assert!(!closed[2] && !closed[((h - 1) * w + 2) as usize]);
+        assert!(!(0..h).any(|y| closed[(y * w + 5) as usize]));
+        // What the plain pair does, and why this exists: outside counts as full.
+        let plain = erode(&dilate(&mask, w, h, 1), w, h, 1);
+        assert!((0..h).all(|y| plain[(y * w) as usize]));
+    }
 
     #[test]
     fn the_square_dilation_matches_the_definition() {

@@ -13,7 +13,9 @@ pub struct Relief;
 
 impl Stage for Relief {
     const KIND: &'static str = "Relief";
-    const VERSION: u32 = 1;
+    // 2: protrusions' side faces no longer vote; closing stays inside the chart; instances
+    // grouped by hysteresis (grow_threshold).
+    const VERSION: u32 = 2;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),
