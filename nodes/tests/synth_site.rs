@@ -454,3 +454,27 @@ fn facade_relief_is_where_the_city_says() {
         "{wooden} doors"
     );
 }
+
+/// The 1 km² city of graphs/bench_1km.ron: building-530's Boolean leaves two vertices closer
+/// than an f32 step (6e-5 m at 800 m from the origin); rounded to the scene's f32 they were one
+/// point and the triangle between them degenerate, and TruthScene failed the whole graph. They
+/// are welded now, and the building is a solid.
+#[test]
+fn a_building_a_kilometre_out_stays_a_solid_in_f32() {
+    let mut p = SynthCityParams {
+        seed: 7,
+        size_m: (1000.0, 1000.0),
+        blocks: (10, 10),
+        ..Default::default()
+    };
+    p.terrain.seed = 7;
+    p.terrain.size_m = (1000.0, 1000.0);
+    let city = generate(&p);
+    let b = city
+        .buildings
+        .iter()
+        .find(|b| b.id == "building-530")
+        .expect("the bench city has building-530");
+    let mesh = kodama_nodes::synth::truth_scene::building_mesh(b).unwrap();
+    check_solid(&mesh).unwrap();
+}

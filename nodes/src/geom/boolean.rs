@@ -37,28 +37,44 @@ pub fn to_manifold(m: &Mesh) -> Result<Manifold, String> {
 }
 
 /// The mesh of `m`; a triangle whose face ID is no material takes `fallback`.
+///
+/// Positions are rounded to f32 (the scene's precision): two vertices the Boolean made closer
+/// than an f32 step apart (6e-5 m a kilometre from the origin) become one, and the triangles
+/// between them, now with a repeated corner, are dropped: the collapse of an edge shorter than
+/// the scene can represent. Whether what remains is still a solid is for the caller's check.
 pub fn from_manifold(m: &Manifold, fallback: Material) -> Mesh {
     let gl = m.get_mesh_gl64(-1);
     let np = gl.num_prop as usize;
-    let positions: Vec<[f32; 3]> = gl
+    let mut positions: Vec<[f32; 3]> = Vec::new();
+    let mut index_of: std::collections::HashMap<[u32; 3], u32> = Default::default();
+    let remap: Vec<u32> = gl
         .vert_properties
         .chunks_exact(np.max(3))
-        .map(|v| [v[0] as f32, v[1] as f32, v[2] as f32])
+        .map(|v| {
+            let p = [v[0] as f32, v[1] as f32, v[2] as f32];
+            *index_of
+                .entry(p.map(|c| (c + 0.0).to_bits()))
+                .or_insert_with(|| {
+                    positions.push(p);
+                    (positions.len() - 1) as u32
+                })
+        })
         .collect();
-    let triangles: Vec<[u32; 3]> = gl
-        .tri_verts
-        .chunks_exact(3)
-        .map(|t| [t[0] as u32, t[1] as u32, t[2] as u32])
-        .collect();
-    let materials: Vec<u8> = (0..triangles.len())
-        .map(|k| {
+    let (mut triangles, mut materials) = (Vec::new(), Vec::new());
+    for (k, t) in gl.tri_verts.chunks_exact(3).enumerate() {
+        let t = [t[0], t[1], t[2]].map(|i| remap[i as usize]);
+        if t[0] == t[1] || t[1] == t[2] || t[2] == t[0] {
+            continue;
+        }
+        triangles.push(t);
+        materials.push(
             gl.face_id
                 .get(k)
                 .and_then(|&f| u8::try_from(f).ok())
                 .filter(|&f| Material::from_u8(f).is_some())
-                .unwrap_or(fallback as u8)
-        })
-        .collect();
+                .unwrap_or(fallback as u8),
+        );
+    }
     Mesh {
         positions: PodVec(positions),
         triangles: PodVec(triangles),
