@@ -140,8 +140,10 @@ pub fn fuse_views_displaced(
     progress: &dyn Progress,
 ) -> TexelLayers {
     let lookup = ChartLookup::new(scene, charts);
-    let mut per_chart: Vec<ChartDeposits> = (0..charts.charts.len())
-        .map(|_| ChartDeposits::default())
+    let mut per_chart: Vec<ChartDeposits> = charts
+        .charts
+        .iter()
+        .map(|c| ChartDeposits::new(c.len()))
         .collect();
     let mut stats = FusionStats::default();
     progress.set_total(views.len() as u64);
@@ -205,24 +207,49 @@ impl ChartLookup {
     }
 }
 
-/// What the views left on one chart, in view order (pixel order within a view): the raw,
-/// unblurred deposits and the texels rays landed in. Kept sparse until the chart's layers are
-/// made, so memory follows what was seen rather than every texel of every class.
-#[derive(Default)]
+/// What the views left on one chart: per slot the raw, unblurred weight of every texel, and the
+/// pixel hits per texel. Sums run in view order, pixel order within a view, so they are the
+/// same at any thread count. A slot's grid is allocated when it first gets a weight, so a
+/// chart no view saw costs nothing.
 struct ChartDeposits {
-    deposits: Vec<(u32, u32, f64)>,
-    hits: Vec<u32>,
+    len: usize,
+    slots: Vec<Vec<f64>>,
+    hits: Vec<u16>,
 }
 
 impl ChartDeposits {
-    /// The chart's blurred layers. Sums run in a fixed order (slot, texel, then view and pixel
-    /// order), so they are the same at any thread count.
-    fn into_layers(mut self, c: &Chart, kernel: &[f64]) -> ChartLayers {
-        let n = c.len();
-        let mut hits = vec![0u16; n];
-        for &t in &self.hits {
-            hits[t as usize] = hits[t as usize].saturating_add(1);
+    fn new(len: usize) -> ChartDeposits {
+        ChartDeposits {
+            len,
+            slots: Vec::new(),
+            hits: Vec::new(),
         }
+    }
+
+    fn add(&mut self, texel: u32, slot: u32, w: f64) {
+        let s = slot as usize;
+        if self.slots.len() <= s {
+            self.slots.resize_with(s + 1, Vec::new);
+        }
+        let grid = &mut self.slots[s];
+        if grid.is_empty() {
+            *grid = vec![0.0; self.len];
+        }
+        grid[texel as usize] += w;
+    }
+
+    fn hit(&mut self, texel: u32) {
+        if self.hits.is_empty() {
+            self.hits = vec![0; self.len];
+        }
+        let h = &mut self.hits[texel as usize];
+        *h = h.saturating_add(1);
+    }
+
+    /// The chart's blurred layers: exposure from every slot (summed in slot order), votes from
+    /// every slot but 0.
+    fn into_layers(self, c: &Chart, kernel: &[f64]) -> ChartLayers {
+        let n = c.len();
         let (w, h) = (c.width as usize, c.height as usize);
         let blur = |raw: &[f64]| -> PodVec<f32> {
             let out = convolve(raw, w, h, kernel);
@@ -233,7 +260,18 @@ impl ChartDeposits {
                     .collect(),
             )
         };
-        if self.deposits.is_empty() {
+        let hits = if self.hits.is_empty() {
+            vec![0u16; n]
+        } else {
+            self.hits
+        };
+        let used: Vec<(usize, &Vec<f64>)> = self
+            .slots
+            .iter()
+            .enumerate()
+            .filter(|(_, g)| !g.is_empty())
+            .collect();
+        if used.is_empty() {
             return ChartLayers {
                 width: c.width,
                 height: c.height,
@@ -242,24 +280,19 @@ impl ChartDeposits {
                 votes: Vec::new(),
             };
         }
-        self.deposits.sort_by_key(|&(t, slot, _)| (slot, t));
-        let mut raw = vec![0.0; n];
-        for &(t, _, x) in &self.deposits {
-            raw[t as usize] += x;
-        }
-        let w_exp = blur(&raw);
-        let mut votes = Vec::new();
-        for group in self.deposits.chunk_by(|a, b| a.1 == b.1) {
-            let slot = group[0].1;
-            if slot == 0 {
-                continue;
+        let mut total = vec![0.0; n];
+        for (_, g) in &used {
+            for (t, x) in total.iter_mut().zip(g.iter()) {
+                *t += x;
             }
-            raw.fill(0.0);
-            for &(t, _, x) in group {
-                raw[t as usize] += x;
-            }
-            votes.push(((slot - 1) as u16, blur(&raw)));
         }
+        let w_exp = blur(&total);
+        drop(total);
+        let votes = used
+            .iter()
+            .filter(|(slot, _)| *slot != 0)
+            .map(|(slot, g)| ((slot - 1) as u16, blur(g)))
+            .collect();
         ChartLayers {
             width: c.width,
             height: c.height,
@@ -279,7 +312,7 @@ struct Deposit {
     w: f64,
 }
 
-/// One view's contributions, summed per (chart, texel, slot) in pixel order.
+/// One view's contributions in pixel order.
 struct ViewDeposits {
     deposits: Vec<Deposit>,
     hits: Vec<(u32, u32)>,
@@ -289,12 +322,10 @@ struct ViewDeposits {
 impl ViewDeposits {
     fn merge_into(self, per_chart: &mut [ChartDeposits], stats: &mut FusionStats) {
         for d in self.deposits {
-            per_chart[d.chart as usize]
-                .deposits
-                .push((d.texel, d.slot, d.w));
+            per_chart[d.chart as usize].add(d.texel, d.slot, d.w);
         }
         for (c, t) in self.hits {
-            per_chart[c as usize].hits.push(t);
+            per_chart[c as usize].hit(t);
         }
         stats.views += self.stats.views;
         stats.rays += self.stats.rays;
@@ -376,16 +407,6 @@ fn view_deposits(
             );
         }
     }
-    // Sum equal keys; the stable sort keeps pixel order among them, so the sums are reproducible.
-    out.deposits.sort_by_key(|d| (d.chart, d.texel, d.slot));
-    let mut merged: Vec<Deposit> = Vec::with_capacity(out.deposits.len() / 4);
-    for d in out.deposits.drain(..) {
-        match merged.last_mut() {
-            Some(m) if (m.chart, m.texel, m.slot) == (d.chart, d.texel, d.slot) => m.w += d.w,
-            _ => merged.push(d),
-        }
-    }
-    out.deposits = merged;
     out
 }
 

@@ -1096,7 +1096,9 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
     let vote = |k: usize, px: usize| -> Vote {
         match per_view.get(k).and_then(|r| r.codes.get(px)) {
             Some(&RECESSED) => Vote::Class(0),
-            Some(&NEUTRAL) => Vote::Class(1),
+            // No layer of neutral votes is read: a neutral pixel is exposure (R and P are
+            // shares of it), which is what Seen deposits, without a grid of its own.
+            Some(&NEUTRAL) => Vote::Seen,
             Some(&PROTRUDING) => Vote::Class(2),
             Some(&MASKED) => Vote::Masked,
             _ => Vote::Seen,

@@ -98,7 +98,9 @@ pub struct FuseMaterials;
 
 impl Stage for FuseMaterials {
     const KIND: &'static str = "FuseMaterials";
-    const VERSION: u32 = 1;
+    // 2: the fusion sums its deposits into dense grids in view and pixel order (other last
+    // bits).
+    const VERSION: u32 = 2;
     const DOC: &'static str = "per-texel ITU-R P.2040 materials from street-view material maps: class table, instance refinement, eq. (5), extension, Sec. 4.2.3";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(

@@ -55,7 +55,8 @@ pub struct FuseViews;
 impl Stage for FuseViews {
     const KIND: &'static str = "FuseViews";
     // 2: the output keeps the charts' frames; sums run slot by slot.
-    const VERSION: u32 = 2;
+    // 3: deposits summed into dense grids in view and pixel order (other last bits).
+    const VERSION: u32 = 3;
     const DOC: &'static str = "per-pixel labels of street views fused onto building charts by exposure-weighted projection, eq. (2)-(3)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),

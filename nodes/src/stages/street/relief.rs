@@ -15,7 +15,9 @@ impl Stage for Relief {
     const KIND: &'static str = "Relief";
     // 2: protrusions' side faces no longer vote; closing stays inside the chart; instances
     // grouped by hysteresis (grow_threshold).
-    const VERSION: u32 = 2;
+    // 3: the fusion sums its deposits into dense grids in view and pixel order (other last
+    // bits); neutral pixels deposit exposure only.
+    const VERSION: u32 = 3;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),
