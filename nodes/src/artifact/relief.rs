@@ -22,7 +22,8 @@ pub struct ReliefLayers {
     /// Protruding evidence E^+/W_exp, NaN where unobserved.
     pub protruding: PodVec<f32>,
     /// Signed discrepancy Delta to the source mesh along the outward normal, metres (positive:
-    /// the mesh stands in front of our façade); NaN where there is no mesh or no mesh hit.
+    /// the mesh stands in front of our façade); NaN where the mesh was not hit; empty when the
+    /// relief was given no mesh.
     pub delta: PodVec<f32>,
     /// Posterior Pr(Y = recessed | e) of eq. (4), NaN where there is no evidence at all.
     pub pr_recessed: PodVec<f32>,

@@ -1174,7 +1174,13 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
                 exposure: PodVec(vec![0.0; n]),
                 recessed: PodVec(vec![f32::NAN; n]),
                 protruding: PodVec(vec![f32::NAN; n]),
-                delta: PodVec(vec![f32::NAN; n]),
+                // Without a source mesh the layer would be NaN throughout: a sixth of the
+                // output for nothing (3 GB of layers on the 1 km² site).
+                delta: PodVec(if delta.is_some() {
+                    vec![f32::NAN; n]
+                } else {
+                    Vec::new()
+                }),
                 pr_recessed: PodVec(vec![f32::NAN; n]),
                 pr_protruding: PodVec(vec![f32::NAN; n]),
             };
@@ -1197,7 +1203,9 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
                     None
                 };
                 let dq = delta.map_or(f64::NAN, |d| d[k] as f64);
-                lay.delta[k] = dq as f32;
+                if let Some(slot) = lay.delta.get_mut(k) {
+                    *slot = dq as f32;
+                }
                 let pd = mesh_state_probabilities(dq, &p.delta);
                 if let Some(y) = relief_posterior(&cpt, levels, pd) {
                     lay.pr_recessed[k] = y[0] as f32;
@@ -1330,7 +1338,10 @@ fn instances(
                 // posterior used), rather than kept for every texel of every chart.
                 texels
                     .iter()
-                    .filter(|&&k| mesh_state_probabilities(lay.delta[k] as f64, &p.delta)[d] > 0.5)
+                    .filter(|&&k| {
+                        let dq = lay.delta.get(k).map_or(f64::NAN, |&x| x as f64);
+                        mesh_state_probabilities(dq, &p.delta)[d] > 0.5
+                    })
                     .count() as f64
                     / m
             });

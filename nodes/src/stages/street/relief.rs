@@ -17,7 +17,8 @@ impl Stage for Relief {
     // grouped by hysteresis (grow_threshold).
     // 3: the fusion sums its deposits into dense grids in view and pixel order (other last
     // bits); neutral pixels deposit exposure only.
-    const VERSION: u32 = 3;
+    // 4: no Delta layer without a mesh.
+    const VERSION: u32 = 4;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),
