@@ -201,8 +201,9 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 /// (calibrated depth), their z range and the main axis of their horizontal spread; the centre is
 /// the per-coordinate median pushed back along the horizontal viewing direction by the depth of
 /// the asset's visible surface (the points lie on the side facing the camera), or, for an
-/// elongated asset seen along its side, the middle of the points' extent along that side and
-/// half the asset's width behind it.
+/// elongated asset seen along its side, the middle of the points' extent along that side (half
+/// a length from the end that shows when it is seen short) and half the asset's width behind
+/// it.
 pub fn lift_view(
     k: usize,
     view: &View,
@@ -238,8 +239,10 @@ pub fn lift_view(
             continue;
         }
         let mut pts = Vec::with_capacity(px.len());
-        // Whether each lifted point's pixel lies on the image border (where a cut instance ends).
-        let mut on_border = Vec::with_capacity(px.len());
+        // Which image side of its row each lifted point's pixel ends the instance on, if any.
+        let mut row_end = Vec::with_capacity(px.len());
+        let ends = row_ends(&px);
+        let hidden_side = hidden_side(&ends, depth, view.width);
         for &(u, v) in &px {
             let d = depth[(v * view.width + u) as usize] as f64;
             let dh = cal.fit.eval(d);
@@ -252,7 +255,15 @@ pub fn lift_view(
                 continue;
             }
             pts.push([o[0] + dir[0] * t, o[1] + dir[1] * t, o[2] + dir[2] * t]);
-            on_border.push(u <= 1 || v <= 1 || u + 2 >= view.width || v + 2 >= view.height);
+            row_end.push(ends.get(&v).map_or(0i8, |&(lo, hi)| {
+                if u == lo {
+                    -1
+                } else if u == hi {
+                    1
+                } else {
+                    0
+                }
+            }));
         }
         if pts.len() < cfg.min_pixels {
             continue;
@@ -304,27 +315,38 @@ pub fn lift_view(
                 let mut along: Vec<f64> = pts.iter().map(|p| p[0] * a[0] + p[1] * a[1]).collect();
                 let mut across: Vec<f64> =
                     pts.iter().map(|p| p[0] * nrm[0] + p[1] * nrm[1]).collect();
-                let cut: Vec<f64> = along
-                    .iter()
-                    .zip(&on_border)
-                    .filter(|(_, b)| **b)
-                    .map(|(s, _)| *s)
-                    .collect();
+                // Where along the axis the instance's left and right image ends lie (before the
+                // percentiles sort `along`).
+                let side_along = |side: i8| {
+                    let v: Vec<f64> = along
+                        .iter()
+                        .zip(&row_end)
+                        .filter(|(_, e)| **e == side)
+                        .map(|(s, _)| *s)
+                        .collect();
+                    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+                };
+                let image_ends = [side_along(-1), side_along(1)];
                 let (s0, s1) = (percentile(&mut along, 0.03), percentile(&mut along, 0.97));
-                // Cut by the image border and shorter than the asset: the end away from the
-                // border is the asset's end, its centre half a length from there.
-                // Seen short of its length, the asset shows one end whole: the end away from
-                // the image border where the border cuts it, else the end nearer the camera
+                // Whether the image's left and right run along the asset's axis: seen end-on,
+                // they are its sides, and neither the border nor an occluder says which end
+                // shows.
+                let lengthwise = matches!(image_ends, [Some(lo), Some(hi)] if (lo - hi).abs() > 0.25 * (s1 - s0));
+                // Seen short of its length, the asset shows one end whole: the end the image's
+                // side edge or a nearer object does not hide, else the end nearer the camera
                 // (the far end hides behind the body). Its centre is half a length from there.
-                let c = cut.iter().sum::<f64>() / cut.len().max(1) as f64;
                 let near = o[0] * a[0] + o[1] * a[1];
                 let s = if s1 - s0 < 0.8 * size[0] {
-                    let low_end =
-                        if !cut.is_empty() && (c - (s0 + s1) / 2.0).abs() > 0.25 * (s1 - s0) {
-                            c > (s0 + s1) / 2.0
-                        } else {
-                            (near - s0).abs() < (near - s1).abs()
-                        };
+                    let hidden = hidden_side
+                        .and_then(|side| image_ends[(side > 0) as usize])
+                        .filter(|_| lengthwise);
+                    let low_end = if let Some(hidden) = hidden {
+                        // The image's edge or something nearer hides one end: the other end is
+                        // the asset's.
+                        hidden > (s0 + s1) / 2.0
+                    } else {
+                        (near - s0).abs() < (near - s1).abs()
+                    };
                     if low_end {
                         s0 + size[0] / 2.0
                     } else {
@@ -356,6 +378,57 @@ pub fn lift_view(
         });
     }
     out
+}
+
+/// Per image row of an instance, its leftmost and rightmost pixel.
+fn row_ends(px: &[(u32, u32)]) -> BTreeMap<u32, (u32, u32)> {
+    let mut ends: BTreeMap<u32, (u32, u32)> = BTreeMap::new();
+    for &(u, v) in px {
+        let e = ends.entry(v).or_insert((u, u));
+        e.0 = e.0.min(u);
+        e.1 = e.1.max(u);
+    }
+    ends
+}
+
+/// The image side (-1 left, +1 right) on which the instance is cut off, when one side is and
+/// the other is not: in most rows that end lies on the image's edge, or the pixel just beyond
+/// it reports a depth nearer than the end pixel's by more than half a metre (reported depths
+/// keep their order under the affine bias), where an object's own end shows what lies behind
+/// it. A vehicle parked behind another, or half out of the frame, is seen short of its length;
+/// its centre is half a length from the end that shows, not from the hidden one. (The top and
+/// bottom edges cut every part of a close vehicle alike and say nothing about its ends.)
+fn hidden_side(ends: &BTreeMap<u32, (u32, u32)>, depth: &[f32], width: u32) -> Option<i8> {
+    const GAP: f32 = 0.5;
+    let mut share = [(0u32, 0u32); 2];
+    for (&v, &(lo, hi)) in ends {
+        let row = (v * width) as usize;
+        let sides = [
+            (lo, (lo > 1).then(|| lo - 1)),
+            (hi, (hi + 2 < width).then_some(hi + 1)),
+        ];
+        for (k, (end, beyond)) in sides.into_iter().enumerate() {
+            let Some(b) = beyond else {
+                share[k] = (share[k].0 + 1, share[k].1 + 1);
+                continue;
+            };
+            let (Some(&de), Some(&db)) =
+                (depth.get(row + end as usize), depth.get(row + b as usize))
+            else {
+                continue;
+            };
+            if db.is_finite() && de.is_finite() {
+                share[k].1 += 1;
+                share[k].0 += (db < de - GAP) as u32;
+            }
+        }
+    }
+    let hidden = |(n, of): (u32, u32)| of > 0 && 2 * n > of;
+    match (hidden(share[0]), hidden(share[1])) {
+        (true, false) => Some(-1),
+        (false, true) => Some(1),
+        _ => None,
+    }
 }
 
 /// Detections of one object, merged.

@@ -179,7 +179,9 @@ pub struct PlaceClutter;
 
 impl Stage for PlaceClutter {
     const KIND: &'static str = "PlaceClutter";
-    const VERSION: u32 = 1;
+    // 2: a vehicle seen short of its length is placed from the end no image side or nearer
+    // object hides.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "street clutter from views: Theil-Sen depth calibration, lifting, clustering, NMS, scene grammar, asset library, Sec. 4.2.4";
     const INPUTS: &'static [InputSpec] = INPUTS;
     type Params = PlaceClutterParams;
@@ -205,7 +207,8 @@ pub struct ClutterMetrics;
 
 impl Stage for ClutterMetrics {
     const KIND: &'static str = "ClutterMetrics";
-    const VERSION: u32 = 1;
+    // 2: PlaceClutter 2.
+    const VERSION: u32 = 2;
     const DOC: &'static str =
         "counts of the clutter chain (detections, clusters, NMS, each grammar rule), Sec. 4.2.4";
     const INPUTS: &'static [InputSpec] = INPUTS;
