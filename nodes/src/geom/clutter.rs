@@ -331,7 +331,8 @@ pub fn lift_view(
                 // Whether the image's left and right run along the asset's axis: seen end-on,
                 // they are its sides, and neither the border nor an occluder says which end
                 // shows.
-                let lengthwise = matches!(image_ends, [Some(lo), Some(hi)] if (lo - hi).abs() > 0.25 * (s1 - s0));
+                let lengthwise = matches!(image_ends,
+                    [Some(lo), Some(hi)] if (lo - hi).abs() > 0.25 * (s1 - s0));
                 // Seen short of its length, the asset shows one end whole: the end the image's
                 // side edge or a nearer object does not hide, else the end nearer the camera
                 // (the far end hides behind the body). Its centre is half a length from there.
@@ -1010,6 +1011,40 @@ pub fn instantiate(placed: &[Placed]) -> Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_hidden_end_is_the_one_cut_by_the_frame_or_by_something_nearer() {
+        // A car 10 m away spans columns 5-14 of rows 2-5 in a 20-wide image; behind it (beyond
+        // both ends) the street at 30 m.
+        let (w, h) = (20u32, 8u32);
+        let px: Vec<(u32, u32)> = (2..6).flat_map(|v| (5..15).map(move |u| (u, v))).collect();
+        let ends = row_ends(&px);
+        assert_eq!(ends[&3], (5, 14));
+        let mut depth = vec![30.0f32; (w * h) as usize];
+        for &(u, v) in &px {
+            depth[(v * w + u) as usize] = 10.0;
+        }
+        assert_eq!(hidden_side(&ends, &depth, w), None, "both ends show");
+        // A nearer car just right of it, at 6 m: its right end is hidden.
+        for v in 0..h {
+            depth[(v * w + 15) as usize] = 6.0;
+        }
+        assert_eq!(hidden_side(&ends, &depth, w), Some(1));
+        // The same car cut by the frame's left edge instead: its left end is hidden.
+        let px: Vec<(u32, u32)> = (2..6).flat_map(|v| (0..10).map(move |u| (u, v))).collect();
+        let mut depth = vec![30.0f32; (w * h) as usize];
+        for &(u, v) in &px {
+            depth[(v * w + u) as usize] = 10.0;
+        }
+        assert_eq!(hidden_side(&row_ends(&px), &depth, w), Some(-1));
+        // Cut by the bottom edge only (a close car's lower rows): nothing said about its ends.
+        let px: Vec<(u32, u32)> = (4..8).flat_map(|v| (5..15).map(move |u| (u, v))).collect();
+        let mut depth = vec![30.0f32; (w * h) as usize];
+        for &(u, v) in &px {
+            depth[(v * w + u) as usize] = 10.0;
+        }
+        assert_eq!(hidden_side(&row_ends(&px), &depth, w), None);
+    }
 
     #[test]
     fn hull_and_distance() {
