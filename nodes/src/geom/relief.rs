@@ -892,16 +892,22 @@ fn view_relief(
         }
         // Normal cue: side faces' normals point toward a recess's centre, away from a
         // protrusion's (image-plane flow).
+        // A side-face pixel: its normal further than side_angle_deg from the wall's.
+        let cos_side = p.side_angle_deg.to_radians().cos();
+        let is_side = |q: u32| {
+            normals.is_some_and(|nm| {
+                let ns = view.pose.to_site(nm[q as usize].map(|c| c as f64));
+                dot(ns, nrm) < cos_side
+            })
+        };
         let mut v_normal = 0.0;
         if let Some(nm) = normals {
-            let cos_side = p.side_angle_deg.to_radians().cos();
             let (mut side, mut flow) = (0u32, 0.0);
             for &q in pixels {
-                let nc = nm[q as usize].map(|c| c as f64);
-                let ns = view.pose.to_site(nc);
-                if dot(ns, nrm) >= cos_side {
+                if !is_side(q) {
                     continue;
                 }
+                let nc = nm[q as usize].map(|c| c as f64);
                 side += 1;
                 let (x, y) = ((q % w) as f64 + 0.5 - cx, (q / w) as f64 + 0.5 - cy);
                 let f = nc[0] * x + nc[1] * y;
@@ -948,13 +954,6 @@ fn view_relief(
         // pixel met at a smaller offset would land up to `disp` x tan(theta) short of where it
         // stands, on the wall beside it (a drainpipe by a corner smeared over the corner's
         // texels). Side faces, told by their normals, neither vote nor count as exposure.
-        let cos_side = p.side_angle_deg.to_radians().cos();
-        let is_side = |q: u32| {
-            normals.is_some_and(|nm| {
-                let ns = view.pose.to_site(nm[q as usize].map(|c| c as f64));
-                dot(ns, nrm) < cos_side
-            })
-        };
         for &q in pixels {
             if disp > 0.0 && is_side(q) {
                 out.codes[q as usize] = MASKED;
