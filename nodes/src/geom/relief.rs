@@ -1495,6 +1495,18 @@ mod tests {
     }
 
     #[test]
+    fn grow_threshold_is_refused_above_the_threshold_or_not_finite() {
+        for g in [0.6, f64::NAN, -0.1] {
+            let p = ReliefParams {
+                grow_threshold: g,
+                ..Default::default()
+            };
+            assert_eq!(p.validate().map_err(|e| e.0), Err("grow_threshold"), "{g}");
+        }
+        assert!(ReliefParams::default().validate().is_ok());
+    }
+
+    #[test]
     fn weighted_median_follows_the_weights() {
         let mut v = vec![(0.25, 10.0), (0.1, 1.0), (0.3, 2.0)];
         assert_eq!(weighted_median(&mut v), Some(0.25));
