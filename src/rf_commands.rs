@@ -40,8 +40,8 @@ pub struct Interactions {
     /// No transmission through surfaces.
     #[arg(long)]
     no_transmission: bool,
-    /// First-order UTD edge diffraction (links only: `radiomap` refuses it; off by default, as
-    /// in Sionna RT).
+    /// First-order UTD edge diffraction, in links and radio maps (off by default, as in Sionna
+    /// RT).
     #[arg(long)]
     diffraction: bool,
     /// No diffraction (the default; accepted for Sionna-style command lines).
@@ -331,16 +331,6 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
         return Err((
             2,
             format!("error: --cell-m {} is not a positive size", a.cell_m),
-        ));
-    }
-    // Refused rather than ignored: a map that silently left diffraction out would be read as one
-    // that has it.
-    if a.interactions.diffraction && !a.interactions.no_diffraction {
-        return Err((
-            2,
-            "error: --diffraction: radio maps do not model diffraction yet (links do: `kodama-dag \
-             trace --diffraction`); leave the flag out"
-                .into(),
         ));
     }
     let task = Task::new(Mode::detect(false), "reading the scene", None);

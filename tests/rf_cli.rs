@@ -125,23 +125,54 @@ fn radiomap_writes_each_format_and_rejects_others() {
         "{}",
         r.stderr
     );
-    // Radio maps have no diffraction: asking for it is refused, not ignored.
-    let out = env.path("diffracted.tif");
-    let r = env.cli(&[
-        "radiomap",
-        "--scene",
-        canyon().to_str().unwrap(),
-        "--tx",
-        "-33,0,32",
-        "--freq-hz",
-        "3.5e9",
-        "--diffraction",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(r.code, 2, "{}", r.stderr);
-    assert!(r.stderr.contains("--diffraction"), "{}", r.stderr);
-    assert!(!out.exists());
+    // Diffraction is drawn into the map, not ignored: behind the canyon's buildings it reaches
+    // cells that rays alone leave dark, and adds power where they do not.
+    let map_db = |flag: &str, name: &str| {
+        let out = env.path(name);
+        let r = env.cli(&[
+            "radiomap",
+            "--scene",
+            canyon().to_str().unwrap(),
+            "--tx",
+            "-33,0,32",
+            "--freq-hz",
+            "3.5e9",
+            "--rays",
+            "200000",
+            "--cell-m",
+            "4",
+            "--max-depth",
+            "1",
+            "--no-transmission",
+            flag,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let tif = kodama_nodes::io::geotiff::read_geotiff(&out).unwrap();
+        let n = (tif.pixels.width * tif.pixels.height) as usize;
+        (0..n)
+            .map(|i| tif.sample(i, 0))
+            .map(|v| if Some(v) == tif.nodata { f64::NAN } else { v })
+            .collect::<Vec<f64>>()
+    };
+    let (plain, diffracted) = (
+        map_db("--no-diffraction", "plain.tif"),
+        map_db("--diffraction", "diffracted.tif"),
+    );
+    let reached = |m: &[f64]| m.iter().filter(|v| v.is_finite()).count();
+    assert!(
+        reached(&diffracted) > reached(&plain) + 10,
+        "{} cells with diffraction, {} without",
+        reached(&diffracted),
+        reached(&plain)
+    );
+    assert!(
+        plain
+            .iter()
+            .zip(&diffracted)
+            .all(|(p, d)| !p.is_finite() || *d >= *p - 1e-3)
+    );
 }
 
 #[test]

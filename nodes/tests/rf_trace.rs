@@ -467,14 +467,22 @@ fn a_radio_map_cell_behind_overlapping_canopies_loses_their_union_once() {
 /// the face the wave lights as the 0-face. Listed the other way round, a wave grazing one face
 /// of a building's corner was weighted by the far face's near-normal reflection factor and the
 /// corner diffracted 20 dB stronger (the demo's drive test and twin disagreed by that on NLOS
-/// links over one and the same corner). Lit, grazing and deep-shadow receivers around a box.
+/// links over one and the same corner). Nor does it matter which way the mesh winds its
+/// triangles: Sionna's own scenes wind their buildings inwards, and wedges found from the
+/// winding found none there (the street canyon's links had no diffracted path at all). Lit,
+/// grazing and deep-shadow receivers around a box.
 #[test]
-fn a_wedge_diffracts_the_same_whichever_face_comes_first() {
-    let scene_with = |reverse: bool| {
+fn a_wedge_diffracts_the_same_whatever_the_mesh_order_or_winding() {
+    let scene_with = |reverse: bool, inwards: bool| {
         let mut mesh = cuboid([10.0, 10.0], [20.0, 20.0, 30.0], 0.0, 0.0, Material::Marble);
         if reverse {
             mesh.triangles.0.reverse();
             mesh.materials.0.reverse();
+        }
+        if inwards {
+            for t in mesh.triangles.0.iter_mut() {
+                t.swap(1, 2);
+            }
         }
         let scene = Scene {
             objects: vec![SceneObject {
@@ -496,23 +504,25 @@ fn a_wedge_diffracts_the_same_whichever_face_comes_first() {
         })
         .collect();
     let ant = Antenna::default();
-    let one = trace_links(&scene_with(false), &links, &ant, &ant, &opt, F);
-    let other = trace_links(&scene_with(true), &links, &ant, &ant, &opt, F);
-    let mut diffracted = 0;
-    for ((l, a), b) in links.iter().zip(&one).zip(&other) {
-        assert_eq!(a.paths.len(), b.paths.len(), "rx {:?}", l.1);
-        if a.gain_db.is_finite() {
-            diffracted += 1;
-            assert!(
-                (a.gain_db - b.gain_db).abs() < 1e-3,
-                "rx {:?}: {:.3} dB against {:.3} dB",
-                l.1,
-                a.gain_db,
-                b.gain_db
-            );
+    let one = trace_links(&scene_with(false, false), &links, &ant, &ant, &opt, F);
+    for other in [(true, false), (false, true)] {
+        let other = trace_links(&scene_with(other.0, other.1), &links, &ant, &ant, &opt, F);
+        let mut diffracted = 0;
+        for ((l, a), b) in links.iter().zip(&one).zip(&other) {
+            assert_eq!(a.paths.len(), b.paths.len(), "rx {:?}", l.1);
+            if a.gain_db.is_finite() {
+                diffracted += 1;
+                assert!(
+                    (a.gain_db - b.gain_db).abs() < 1e-3,
+                    "rx {:?}: {:.3} dB against {:.3} dB",
+                    l.1,
+                    a.gain_db,
+                    b.gain_db
+                );
+            }
         }
+        assert!(diffracted > 20, "only {diffracted} receivers diffracted");
     }
-    assert!(diffracted > 20, "only {diffracted} receivers diffracted");
 }
 
 /// A ground bent by 2 degrees (flat, then falling away) is a convex edge to the UTD: over it a
@@ -578,4 +588,86 @@ fn min_wedge_deg_drops_shallow_bends_and_keeps_corners() {
         };
         assert_eq!(opt.check().unwrap_err().0, "min_wedge_deg", "{bad}");
     }
+}
+
+/// A radio map's edge-diffracted power is the mean of the diffracted field over each cell: behind
+/// a metal box (deep shadow, no line of sight or reflection), every cell the map reaches against
+/// the link tracer's first-order diffracted paths to the cell's centre, which find each
+/// diffraction point exactly (Keller's cone) where the map samples the edges and the cone.
+/// Checks the sampling of edges and cone angles and the change of variables from (edge length,
+/// cone angle) to map area.
+#[test]
+fn a_diffracted_radio_map_is_the_mean_of_the_diffracted_paths() {
+    use kodama_nodes::artifact::Grid;
+    use kodama_nodes::rf::radiomap::{MapPlane, radio_map};
+    let scene = Scene {
+        objects: vec![SceneObject {
+            id: "box".into(),
+            class: ObjectClass::Building,
+            mesh: cuboid([10.0, 10.0], [20.0, 20.0, 30.0], 0.0, 0.0, Material::Metal),
+        }],
+    };
+    let rf = RfScene::new(&scene, F, false).unwrap();
+    let tx = DVec3::new(40.0, 30.0, 20.0);
+    // Behind the box from the transmitter, 2 m cells at 1.5 m.
+    let plane = MapPlane::plane(
+        Grid {
+            x0: -40.0,
+            y0: 10.0,
+            cell_m: 2.0,
+            width: 20,
+            height: 20,
+        },
+        1.5,
+    );
+    let opt = diffraction_only(2_000_000);
+    let map = radio_map(&rf, tx, &Antenna::default(), &plane, &opt, F);
+    let g = plane.grid;
+    let mut links = Vec::new();
+    for r in 0..g.height {
+        for c in 0..g.width {
+            let (x, y) = g.center(c, r);
+            links.push((tx.to_array(), [x, y, 1.5]));
+        }
+    }
+    let paths = trace_links(
+        &rf,
+        &links,
+        &Antenna::default(),
+        &Antenna::default(),
+        &diffraction_only(100_000),
+        F,
+    );
+    let mut diffs = Vec::new();
+    let mut signed = Vec::new();
+    let mut one_side = 0;
+    for (k, lp) in paths.iter().enumerate() {
+        let cell = map.data[k] as f64;
+        match (cell > 0.0, lp.gain_db.is_finite()) {
+            (true, true) => {
+                signed.push(10.0 * cell.log10() - lp.gain_db);
+                diffs.push((10.0 * cell.log10() - lp.gain_db).abs())
+            }
+            (false, false) => {}
+            _ => one_side += 1,
+        }
+    }
+    diffs.sort_by(f64::total_cmp);
+    signed.sort_by(f64::total_cmp);
+    let bias = signed[signed.len() / 2];
+    let median = diffs[diffs.len() / 2];
+    let p90 = diffs[diffs.len() * 9 / 10];
+    println!(
+        "{} cells compared, {one_side} on one side only: map - links median {bias:+.3} dB, \
+         |map - links| median {median:.3} dB, 90th percentile {p90:.3} dB",
+        diffs.len()
+    );
+    // Measured: bias +0.02 dB, |difference| median 0.47 and 90th percentile 1.30 dB at 2 x 10^6
+    // samples (0.27 and 0.68 at 8 x 10^6: Monte Carlo noise, falling as 1/√N). A wrong
+    // Jacobian or sample weight shifts the bias by decibels.
+    assert_eq!(diffs.len(), 400);
+    assert_eq!(one_side, 0);
+    assert!(bias.abs() < 0.15, "bias {bias} dB");
+    assert!(median < 0.6, "median {median} dB");
+    assert!(p90 < 1.6, "90th percentile {p90} dB");
 }

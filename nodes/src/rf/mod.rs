@@ -2,7 +2,7 @@
 //! thin-slab coefficients, UTD wedge diffraction and the P.526 knife edge, antenna patterns,
 //! foliage loss (P.833), and the ray tracers built on them: links (`paths`, the entry point, and
 //! its parts `sequences`, `image_method`, `path_field`, `diffracted`, `diffuse`) and radio maps
-//! (`radiomap`). Formulas and test vectors: `shared/reference/rf.md`.
+//! (`radiomap`, with edge diffraction in `radiomap_diffraction`). Formulas and test vectors: `shared/reference/rf.md`.
 
 pub mod antenna;
 pub mod diffracted;
@@ -19,6 +19,7 @@ pub mod path_field;
 pub mod pathloss_fit;
 pub mod paths;
 pub mod radiomap;
+pub mod radiomap_diffraction;
 pub mod scattering;
 pub mod scene;
 pub mod sequences;

@@ -32,7 +32,7 @@ pub struct TraceOptions {
     pub reflection: bool,
     /// Transmission through surfaces as thin slabs (P.2040). Default true.
     pub transmission: bool,
-    /// First-order UTD diffraction at convex edges, for links (radio maps do not model it).
+    /// First-order UTD diffraction at convex edges (links and radio maps).
     /// Default false.
     pub diffraction: bool,
     /// Diffuse reflection (effective roughness): a fraction `scattering_coefficient`² of the

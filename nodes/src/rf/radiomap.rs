@@ -18,6 +18,7 @@ use super::fibonacci::fibonacci_run;
 use super::field::{self, CVec};
 use super::foliage::{FoliageDepth, loss_amplitude};
 use super::paths::TraceOptions;
+use super::radiomap_diffraction::{EdgeSampler, lit_wedges};
 use super::scattering::pattern;
 use super::scene::{EPS, RfScene};
 use super::slab_table::SlabTable;
@@ -68,18 +69,17 @@ impl MapPlane {
         })
     }
 
-    /// Each crossing of the surface by the segment `o + t d`, t in (EPS, t_end): the distance,
-    /// the cell, and 1 / (|cos θ| x the area of the surface over the cell).
-    fn crossings(&self, o: DVec3, d: DVec3, t_end: f64, out: &mut Vec<(f64, u32, f64)>) {
+    /// Each crossing of the surface by the segment `o + t d`, t in (EPS, t_end), in order.
+    pub(super) fn crossings(&self, o: DVec3, d: DVec3, t_end: f64, out: &mut Vec<Crossing>) {
         let g = self.grid;
-        let cell_area = g.cell_m * g.cell_m;
-        let mut add = |t: f64, n: DVec3| {
+        let mut add = |t: f64, normal: DVec3| {
             let p = o + d * t;
             if let Some((c, r)) = g.cell_of(p.x, p.y) {
-                let cos = d.dot(n).abs().max(1e-6);
-                // A tilted patch over the cell has area A / n_z.
-                let area = cell_area / n.z.abs().max(1e-6);
-                out.push((t, r * g.width + c, 1.0 / (cos * area)));
+                out.push(Crossing {
+                    t,
+                    cell: r * g.width + c,
+                    normal,
+                });
             }
         };
         match &self.lifted {
@@ -106,6 +106,20 @@ impl MapPlane {
             }
         }
     }
+
+    /// The area of the surface over one cell where its normal is `n`: a tilted patch over a cell
+    /// of area A has area A / n_z.
+    pub(super) fn patch_area(&self, n: DVec3) -> f64 {
+        self.grid.cell_m * self.grid.cell_m / n.z.abs().max(1e-6)
+    }
+}
+
+/// Where a ray crosses a map's surface: how far along, in which cell, and the surface's normal
+/// there.
+pub(super) struct Crossing {
+    pub t: f64,
+    pub cell: u32,
+    pub normal: DVec3,
 }
 
 /// Sionna's default plane: the scene's horizontal extent in cells of `cell_m`, centred on it,
@@ -128,8 +142,9 @@ pub fn default_plane(scene: &RfScene, cell_m: f64, z: f64) -> MapPlane {
 }
 
 /// The mean path gain (linear) of every cell of `plane` from a transmitter at `tx`; 0 where no
-/// ray arrived. `opt.rays` rays, interactions as `opt` enables them (not diffraction), foliage
-/// crossed at `opt.foliage_loss_db_per_m` (rf.md §5.1).
+/// ray arrived. `opt.rays` rays, interactions as `opt` enables them, foliage crossed at
+/// `opt.foliage_loss_db_per_m` (rf.md §5.1). Diffraction adds first-order edge-diffracted power
+/// from as many samples over the edges the rays first land by (`radiomap_diffraction`).
 pub fn radio_map(
     scene: &RfScene,
     tx: DVec3,
@@ -156,24 +171,48 @@ pub fn radio_map(
     };
     // Fixed chunks, summed in chunk order: the same bytes at any thread count.
     const CHUNK: u32 = 8192;
-    let chunks: Vec<Vec<CellPower>> = (0..opt.rays.div_ceil(CHUNK))
+    let diffraction = opt.diffraction && opt.max_depth > 0;
+    let chunks: Vec<(Vec<CellPower>, Vec<u32>)> = (0..opt.rays.div_ceil(CHUNK))
         .into_par_iter()
         .map(|k| {
             let (mut hits, mut crossings) = (Vec::new(), Vec::new());
+            let mut first = diffraction.then(Vec::new);
             let start = k * CHUNK;
             for (i, d) in (start..).zip(fibonacci_run(opt.rays, start, CHUNK)) {
                 let ray = Ray {
                     d0: d,
                     index: i as u64,
                 };
-                shooter.shoot(ray, (&mut hits, &mut crossings));
+                shooter.shoot(ray, (&mut hits, &mut crossings), first.as_mut());
             }
-            hits
+            let mut first = first.unwrap_or_default();
+            first.sort_unstable();
+            first.dedup();
+            (hits, first)
         })
         .collect();
     let mut acc = vec![0.0f64; g.len()];
-    for (cell, v) in chunks.into_iter().flatten() {
-        acc[cell as usize] += v;
+    let mut seen = Vec::new();
+    for (hits, first) in chunks {
+        for (cell, v) in hits {
+            acc[cell as usize] += v;
+        }
+        seen.extend(first);
+    }
+    if diffraction {
+        seen.sort_unstable();
+        seen.dedup();
+        let wedges = lit_wedges(scene, opt.min_wedge_deg, &seen, tx);
+        let sampler = EdgeSampler {
+            scene,
+            tx,
+            antenna,
+            plane,
+            foliage: (shooter.foliage.at_tx, shooter.foliage.db_per_m),
+        };
+        for (cell, v) in sampler.contributions(&wedges, opt.rays) {
+            acc[cell as usize] += v;
+        }
     }
     let scale = (scene.wavelength / (4.0 * std::f64::consts::PI)).powi(2);
     Raster {
@@ -216,11 +255,13 @@ impl Shooter<'_> {
     /// One ray from `tx` along `d0` to the end of its bounces: every crossing of the plane adds
     /// the power it carries to its cell (rf.md §7.2); foliage passed through attenuates it
     /// (§5.1). `out` takes (cell, power) per crossing; the second buffer is scratch, kept
-    /// between rays so a ray allocates nothing.
+    /// between rays so a ray allocates nothing. `first`, if given, takes the surface the ray
+    /// first lands on (foliage aside): the faces whose edges can diffract.
     fn shoot(
         &self,
         Ray { d0, index: ray }: Ray,
-        (out, crossings): (&mut Vec<CellPower>, &mut Vec<(f64, u32, f64)>),
+        (out, crossings): (&mut Vec<CellPower>, &mut Vec<Crossing>),
+        mut first: Option<&mut Vec<u32>>,
     ) {
         let Shooter {
             scene,
@@ -249,9 +290,11 @@ impl Shooter<'_> {
             if depth > 0 || opt.los {
                 crossings.clear();
                 plane.crossings(o, d, t_end, crossings);
-                for &(t, cell, weight) in crossings.iter() {
-                    let a = foliage_amp(t);
-                    out.push((cell, field::norm_sqr(&e) * a * a * omega * weight));
+                for c in crossings.iter() {
+                    let a = foliage_amp(c.t);
+                    let cos = d.dot(c.normal).abs().max(1e-6);
+                    let weight = 1.0 / (cos * plane.patch_area(c.normal));
+                    out.push((c.cell, field::norm_sqr(&e) * a * a * omega * weight));
                 }
             }
             let Some(h) = hit else { return };
@@ -263,6 +306,11 @@ impl Shooter<'_> {
                 continue;
             }
             let n = scene.normals[h.triangle as usize];
+            if depth == 0
+                && let Some(first) = first.take()
+            {
+                first.push(h.triangle);
+            }
             depth += 1;
             if depth > opt.max_depth {
                 return;

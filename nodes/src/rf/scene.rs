@@ -43,6 +43,8 @@ pub struct RfScene {
     pub wavelength: f64,
     /// Axis-aligned bounds of every vertex.
     pub bounds: (DVec3, DVec3),
+    /// Whether any triangle is foliage (asked once per ray segment, so kept).
+    foliage: bool,
 }
 
 impl RfScene {
@@ -88,6 +90,7 @@ impl RfScene {
             rays: SceneRays::new(scene),
             tris,
             normals,
+            foliage: material.contains(&Material::Foliage),
             material,
             eta,
             thickness: Material::ALL.iter().map(|m| m.slab_thickness_m()).collect(),
@@ -126,6 +129,28 @@ impl RfScene {
             t32 as f64
         };
         Some(SurfaceHit { t, triangle })
+    }
+
+    /// Whether a surface other than foliage lies strictly between `a` and `b` (`eps` metres kept
+    /// clear at each end): one any-hit query where the scene has no foliage.
+    pub fn blocked(&self, a: DVec3, b: DVec3, eps: f64) -> bool {
+        if self.has_foliage() {
+            return self
+                .hits_between(a, b, eps)
+                .iter()
+                .any(|h| !self.is_foliage(h.triangle));
+        }
+        let len = (b - a).length();
+        if len <= 2.0 * eps {
+            return false;
+        }
+        let d = (b - a) / len;
+        self.rays.occluded(
+            a.as_vec3().into(),
+            d.as_vec3().into(),
+            eps as f32,
+            (len - eps) as f32,
+        )
     }
 
     /// Every surface crossed strictly between `a` and `b` (`eps` metres kept clear at each end),
@@ -184,6 +209,6 @@ impl RfScene {
 
     /// True when any triangle is foliage.
     pub fn has_foliage(&self) -> bool {
-        self.material.contains(&Material::Foliage)
+        self.foliage
     }
 }

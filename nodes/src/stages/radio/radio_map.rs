@@ -38,7 +38,7 @@ pub struct RadioMapParams {
 }
 
 /// `options` of [`RadioMapParams`]: which interactions the rays follow, and how many there are.
-/// The defaults are Sionna RT's. No diffraction: radio maps do not model it.
+/// The defaults are Sionna RT's.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct MapOptions {
@@ -50,6 +50,12 @@ pub struct MapOptions {
     pub reflection: bool,
     /// Transmission through surfaces as thin slabs (P.2040). Default true.
     pub transmission: bool,
+    /// First-order UTD edge diffraction at the convex edges of the surfaces the transmitter
+    /// lights, as many samples as rays (Sionna RT's estimator). Default false.
+    pub diffraction: bool,
+    /// Diffraction only where an edge's faces turn by at least this many degrees, in [0, 90].
+    /// Default 0.
+    pub min_wedge_deg: f64,
     /// Diffuse reflection (effective roughness), at every bounce. Default false.
     pub diffuse: bool,
     /// Scattering coefficient S of every surface, in [0, 1]. Default 0.
@@ -70,6 +76,8 @@ impl Default for MapOptions {
             los: o.los,
             reflection: o.reflection,
             transmission: o.transmission,
+            diffraction: o.diffraction,
+            min_wedge_deg: o.min_wedge_deg,
             diffuse: o.diffuse,
             scattering_coefficient: o.scattering_coefficient,
             scattering_pattern: o.scattering_pattern,
@@ -87,13 +95,13 @@ impl MapOptions {
             los: self.los,
             reflection: self.reflection,
             transmission: self.transmission,
-            diffraction: false,
+            diffraction: self.diffraction,
             diffuse: self.diffuse,
             scattering_coefficient: self.scattering_coefficient,
             scattering_pattern: self.scattering_pattern,
             rays: self.rays,
             foliage_db_per_m: self.foliage_db_per_m,
-            min_wedge_deg: 0.0,
+            min_wedge_deg: self.min_wedge_deg,
         }
     }
 }
@@ -111,7 +119,8 @@ pub struct RadioMap;
 
 impl Stage for RadioMap {
     const KIND: &'static str = "RadioMap";
-    const VERSION: u32 = 3;
+    // 4: first-order edge diffraction in maps (rf::radiomap_diffraction).
+    const VERSION: u32 = 4;
     const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
@@ -250,7 +259,8 @@ mod tests {
         };
         let p = parse(r#"{"rays": 1000}"#).unwrap();
         assert!(RadioMap::validate(&p).is_ok());
-        assert!(parse(r#"{"diffraction": false}"#).is_err());
+        assert!(parse(r#"{"diffraction": true, "min_wedge_deg": 10.0}"#).is_ok());
+        assert!(parse(r#"{"refraction": true}"#).is_err());
         let bad = [
             MapOptions {
                 rays: 0,
@@ -262,6 +272,10 @@ mod tests {
             },
             MapOptions {
                 foliage_db_per_m: Some(-1.0),
+                ..p.options.clone()
+            },
+            MapOptions {
+                min_wedge_deg: f64::NAN,
                 ..p.options.clone()
             },
         ];

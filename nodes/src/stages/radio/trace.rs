@@ -105,7 +105,8 @@ impl Stage for Trace {
     const KIND: &'static str = "Trace";
     // 5: diffraction square to an edge no longer gives NaN (rf::diffraction).
     // 6: a wedge's 0-face is the face the wave lights (rf::diffraction::Wedge::facing).
-    const VERSION: u32 = 6;
+    // 7: wedges from the faces' geometry, not the mesh's winding (rf::diffraction::wedges).
+    const VERSION: u32 = 7;
     const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
