@@ -36,6 +36,13 @@ pub struct Wedge {
 }
 
 impl Wedge {
+    /// Whether a wave from `p` can reach the edge from outside the wedge: `p` in front of either
+    /// face's plane (Sionna's test). False for an inner corner seen from the air.
+    pub fn lit_from(&self, p: DVec3) -> bool {
+        let k = p - self.a;
+        k.dot(self.n0) > 1e-9 || k.dot(self.nn) > 1e-9
+    }
+
     /// The same wedge labelled so that its 0-face is one a wave travelling along `ki` meets from
     /// outside (`ki · n0 <= 0`), as Sionna RT does, and of two lit faces the one it meets more
     /// squarely. The UTD's face reflection factors are taken at the incidence angle on the
@@ -66,10 +73,14 @@ impl Wedge {
     }
 }
 
-/// The convex edges of `scene`: edges shared by exactly two triangles (matched by vertex
-/// position, to the micrometre) whose normals turn by more than `min_deg` degrees (and by more
-/// than 0.08 degrees, where a plane split into triangles rounds), with the solid on the inner
-/// side.
+/// The edges of `scene` that can diffract: edges shared by exactly two triangles (matched by
+/// vertex position, to the micrometre) whose faces turn by more than `min_deg` degrees (and by
+/// more than 0.08 degrees, where a plane split into triangles rounds). Each is a wedge of the
+/// angle under π between its faces, both normals turned away from the other face, as Sionna RT
+/// orients them: whichever way the mesh winds its triangles (Sionna's own scenes wind their
+/// buildings inwards), a solid's corner is a wedge whose outside is the air. At a corner where the
+/// air is the narrow side (an inner corner), the wedge's outside is the solid and no wave from the
+/// air diffracts there ([`Wedge::lit_from`]).
 pub fn wedges(scene: &RfScene, min_deg: f64) -> Vec<Wedge> {
     let max_cos = (1.0 - 1e-6f64).min(min_deg.to_radians().cos());
     let key = |p: DVec3| [p.x, p.y, p.z].map(|c| (c * 1e6).round() as i64);
@@ -101,12 +112,6 @@ pub fn wedges(scene: &RfScene, min_deg: f64) -> Vec<Wedge> {
         }
         let (t0, a, b) = faces[0];
         let t1 = faces[1].0;
-        let (n0, nn) = (scene.normals[t0 as usize], scene.normals[t1 as usize]);
-        let c = n0.dot(nn).clamp(-1.0, 1.0);
-        if c >= max_cos {
-            continue; // flat, or a bend below the threshold
-        }
-        // Convex when each face's third vertex lies behind the other face.
         let third = |t: u32| {
             scene.tris[t as usize]
                 .iter()
@@ -118,8 +123,21 @@ pub fn wedges(scene: &RfScene, min_deg: f64) -> Vec<Wedge> {
                 })
                 .expect("three vertices")
         };
-        if (third(t1) - a).dot(n0) > 1e-9 || (third(t0) - a).dot(nn) > 1e-9 {
-            continue; // concave
+        // Each normal turned away from the other face; a face in the other's plane either way
+        // round is no bend at all.
+        let away = |n: DVec3, other: u32| {
+            let h = (third(other) - a).dot(n);
+            (h.abs() > 1e-9).then_some(if h > 0.0 { -n } else { n })
+        };
+        let (Some(n0), Some(nn)) = (
+            away(scene.normals[t0 as usize], t1),
+            away(scene.normals[t1 as usize], t0),
+        ) else {
+            continue;
+        };
+        let c = n0.dot(nn).clamp(-1.0, 1.0);
+        if c >= max_cos {
+            continue; // a bend below the threshold
         }
         let e = n0.cross(nn);
         if e.length() < 1e-9 {
