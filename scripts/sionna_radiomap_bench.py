@@ -2,10 +2,12 @@
 
     kodama-dag radiomap --scene S/munich/munich.xml --tx 8.5,21,27 --freq-hz 3.5e9 --max-depth 3 \
         --rays 1000000 --cell-m 5 --height-m 1.5 --no-diffraction --out ours.tif
-    python3 scripts/sionna_radiomap_bench.py S/munich/munich.xml ours.tif [--rays N] [--depth D] [--runs R]
+    python3 scripts/sionna_radiomap_bench.py S/munich/munich.xml ours.tif [--rays N] [--depth D] [--runs R] \
+        [--diffraction]
 
 Sionna: RadioMapSolver, 10^6 rays (--rays), depth 3 (--depth), 5 m cells at 1.5 m, LOS + specular + refraction, no
-diffuse, no diffraction, isotropic V antennas; timed warm (best of --runs, default 3, after one run). The maps are
+diffuse, no diffraction (--diffraction: first-order edge diffraction; run ours with --diffraction
+too), isotropic V antennas; timed warm (best of --runs, default 3, after one run). The maps are
 compared cell by cell in dB where both are reached. Needs sionna-rt 2.2, rasterio, libLLVM 19."""
 import argparse
 import time
@@ -21,6 +23,7 @@ ap.add_argument("ours")
 ap.add_argument("--rays", type=float, default=1e6)
 ap.add_argument("--depth", type=int, default=3)
 ap.add_argument("--runs", type=int, default=3)
+ap.add_argument("--diffraction", action="store_true")
 args = ap.parse_args()
 
 scene = load_scene(args.scene)
@@ -31,7 +34,7 @@ scene.add(Transmitter(name="tx", position=[8.5, 21.0, 27.0]))
 solver = RadioMapSolver()
 kw = dict(cell_size=(5.0, 5.0), samples_per_tx=int(args.rays), max_depth=args.depth, los=True,
           specular_reflection=True, diffuse_reflection=False, refraction=True,
-          diffraction=False)
+          diffraction=args.diffraction)
 rm = solver(scene, **kw)
 times = []
 for _ in range(args.runs):

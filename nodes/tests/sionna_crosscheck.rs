@@ -234,16 +234,17 @@ fn path_gains_with_diffraction_against_sionna_rt() {
         false,
         true,
     );
-    // Not a match yet (issue 17). Measured: median 0.175 dB and 90th percentile 6.4 dB over 91
-    // links, 34 of 130 one-sided. Sionna RT 2.2 chains diffraction with reflections (8-41 paths
-    // per street-canyon link where our first-order wedges give 0-2), and finds nothing on 16
-    // munich links where we diffract at 110-120 dB. These bounds hold today's figures, so that a
+    // Not a match yet (issue 17). Measured: median 0.176 dB and 90th percentile 5.40 dB over 106
+    // links, 19 of 130 one-sided (91 links, 34 one-sided and 6.41 dB while wedges came from the
+    // mesh's winding: the street canyon's inward-wound buildings had none). Sionna RT 2.2 chains
+    // diffraction with reflections, and ignores edges between two shapes (munich's walls and
+    // roofs are separate meshes) where we diffract. These bounds hold today's figures, so that a
     // regression shows; they are not the target (median and 90th percentile <= 0.5 dB).
-    assert!(n >= 80, "{n}");
+    assert!(n >= 100, "{n}");
     assert!(median <= 0.5, "median {median}");
-    assert!(p90 <= 8.0, "90th percentile {p90}");
+    assert!(p90 <= 6.5, "90th percentile {p90}");
     assert!(
-        one_side <= 40,
+        one_side <= 22,
         "{one_side} links with paths on one side only"
     );
 }
@@ -341,3 +342,97 @@ fn path_gains_over_one_box_match_sionna_rt() {
 }
 
 type LinkEndsRow = ([f64; 3], [f64; 3]);
+
+/// Edge diffraction in radio maps around the same box (marble, then metal), against Sionna RT
+/// 2.2's RadioMapSolver with diffraction alone: tests/fixtures/sionna_wedge_map.csv
+/// (scripts/sionna_wedge_map_fixture.py), 2 m cells at 1.5 m round the box.
+#[test]
+fn radio_map_diffraction_over_one_box_against_sionna_rt() {
+    use kodama_nodes::artifact::{Grid, ObjectClass, Scene, SceneObject};
+    use kodama_nodes::geom::mesh_build::cuboid;
+    use kodama_nodes::rf::materials::Material;
+    use kodama_nodes::rf::radiomap::{MapPlane, radio_map};
+    let mut r = csv::Reader::from_path(fixture("sionna_wedge_map.csv")).unwrap();
+    let mut groups: BTreeMap<String, Vec<(u32, u32, f64)>> = BTreeMap::new();
+    for rec in r.records() {
+        let rec = rec.unwrap();
+        groups.entry(rec[0].to_string()).or_default().push((
+            rec[1].parse().unwrap(),
+            rec[2].parse().unwrap(),
+            rec[5].parse().unwrap(),
+        ));
+    }
+    let plane = MapPlane::plane(
+        Grid {
+            x0: -40.0,
+            y0: 60.0,
+            cell_m: 2.0,
+            width: 50,
+            height: 50,
+        },
+        1.5,
+    );
+    let opt = TraceOptions {
+        max_depth: 1,
+        los: false,
+        reflection: false,
+        transmission: false,
+        diffraction: true,
+        rays: 4_000_000,
+        ..Default::default()
+    };
+    let tx = glam::DVec3::new(40.0, 30.0, 20.0);
+    for (name, cells) in &groups {
+        let material = match name.as_str() {
+            "marble" => Material::Marble,
+            "metal" => Material::Metal,
+            other => panic!("no material {other}"),
+        };
+        let scene = Scene {
+            objects: vec![SceneObject {
+                id: "box".into(),
+                class: ObjectClass::Building,
+                mesh: cuboid([10.0, 10.0], [20.0, 20.0, 30.0], 0.0, 0.0, material),
+            }],
+        };
+        let rf = RfScene::new(&scene, 3.5e9, false).unwrap();
+        let map = radio_map(&rf, tx, &Antenna::default(), &plane, &opt, 3.5e9);
+        let (mut diffs, mut signed, mut one_side) = (Vec::new(), Vec::new(), 0);
+        for &(c, row, sionna) in cells {
+            let ours = map.at(c, row) as f64;
+            match (sionna.is_finite(), ours > 0.0) {
+                (true, true) => {
+                    let d = 10.0 * ours.log10() - sionna;
+                    signed.push(d);
+                    diffs.push(d.abs());
+                }
+                (false, false) => {}
+                _ => one_side += 1,
+            }
+        }
+        let n = diffs.len();
+        let median = percentile(&mut diffs, 0.5);
+        let p90 = percentile(&mut diffs, 0.9);
+        let bias = percentile(&mut signed, 0.5);
+        println!(
+            "box map, {name}: {n} cells compared, {one_side} reached by one side only; ours - \
+             Sionna median {bias:+.3} dB, |difference| median {median:.3} dB, 90th percentile \
+             {p90:.3} dB"
+        );
+        // The map's estimator agrees with our own links cell by cell (rf_trace.rs,
+        // a_diffracted_radio_map_is_the_mean_of_the_diffracted_paths); what is left here is the
+        // coefficients' difference the link check above shows (ARCHITECTURE.md). Measured: marble
+        // median -0.92 dB, |difference| median 1.80, 90th percentile 5.39; metal -0.42, 1.18,
+        // 7.94; one cell reached on one side only. Regression bounds, not the target.
+        let (max_median, max_p90) = if name == "metal" {
+            (1.5, 9.0)
+        } else {
+            (2.2, 6.5)
+        };
+        assert!(n >= 2390, "{name}: {n} cells");
+        assert!(one_side <= 3, "{name}: {one_side} cells on one side only");
+        assert!(bias.abs() <= 1.3, "{name}: median difference {bias}");
+        assert!(median <= max_median, "{name}: median {median}");
+        assert!(p90 <= max_p90, "{name}: 90th percentile {p90}");
+    }
+}
