@@ -255,9 +255,6 @@ fn path_gains_with_diffraction_against_sionna_rt() {
 /// vertical corners and roof edges.
 #[test]
 fn path_gains_over_one_box_match_sionna_rt() {
-    use kodama_nodes::artifact::{ObjectClass, Scene, SceneObject};
-    use kodama_nodes::geom::mesh_build::cuboid;
-    use kodama_nodes::rf::materials::Material;
     let mut r = csv::Reader::from_path(fixture("sionna_wedge.csv")).unwrap();
     let mut groups: BTreeMap<String, Vec<(LinkEndsRow, f64)>> = BTreeMap::new();
     for rec in r.records() {
@@ -285,19 +282,7 @@ fn path_gains_over_one_box_match_sionna_rt() {
     };
     let ant = Antenna::default();
     for (name, rows) in &groups {
-        let material = match name.as_str() {
-            "marble" => Material::Marble,
-            "metal" => Material::Metal,
-            other => panic!("no material {other}"),
-        };
-        let scene = Scene {
-            objects: vec![SceneObject {
-                id: "box".into(),
-                class: ObjectClass::Building,
-                mesh: cuboid([10.0, 10.0], [20.0, 20.0, 30.0], 0.0, 0.0, material),
-            }],
-        };
-        let rf = RfScene::new(&scene, 3.5e9, false).unwrap();
+        let rf = fixture_box(name);
         let links: Vec<_> = rows.iter().map(|r| r.0).collect();
         let ours = trace_links(&rf, &links, &ant, &ant, &opt, 3.5e9);
         let (mut diffs, mut one_side) = (Vec::new(), 0);
@@ -343,14 +328,33 @@ fn path_gains_over_one_box_match_sionna_rt() {
 
 type LinkEndsRow = ([f64; 3], [f64; 3]);
 
+/// The box of scripts/sionna_wedge_fixture.py (x, y in [0, 20], z in [0, 30]) in the fixture's
+/// material `name`, at 3.5 GHz.
+fn fixture_box(name: &str) -> RfScene {
+    use kodama_nodes::artifact::{ObjectClass, Scene, SceneObject};
+    use kodama_nodes::geom::mesh_build::cuboid;
+    use kodama_nodes::rf::materials::Material;
+    let material = match name {
+        "marble" => Material::Marble,
+        "metal" => Material::Metal,
+        other => panic!("no material {other}"),
+    };
+    let scene = Scene {
+        objects: vec![SceneObject {
+            id: "box".into(),
+            class: ObjectClass::Building,
+            mesh: cuboid([10.0, 10.0], [20.0, 20.0, 30.0], 0.0, 0.0, material),
+        }],
+    };
+    RfScene::new(&scene, 3.5e9, false).unwrap()
+}
+
 /// Edge diffraction in radio maps around the same box (marble, then metal), against Sionna RT
 /// 2.2's RadioMapSolver with diffraction alone: tests/fixtures/sionna_wedge_map.csv
 /// (scripts/sionna_wedge_map_fixture.py), 2 m cells at 1.5 m round the box.
 #[test]
 fn radio_map_diffraction_over_one_box_against_sionna_rt() {
-    use kodama_nodes::artifact::{Grid, ObjectClass, Scene, SceneObject};
-    use kodama_nodes::geom::mesh_build::cuboid;
-    use kodama_nodes::rf::materials::Material;
+    use kodama_nodes::artifact::Grid;
     use kodama_nodes::rf::radiomap::{MapPlane, radio_map};
     let mut r = csv::Reader::from_path(fixture("sionna_wedge_map.csv")).unwrap();
     let mut groups: BTreeMap<String, Vec<(u32, u32, f64)>> = BTreeMap::new();
@@ -383,19 +387,7 @@ fn radio_map_diffraction_over_one_box_against_sionna_rt() {
     };
     let tx = glam::DVec3::new(40.0, 30.0, 20.0);
     for (name, cells) in &groups {
-        let material = match name.as_str() {
-            "marble" => Material::Marble,
-            "metal" => Material::Metal,
-            other => panic!("no material {other}"),
-        };
-        let scene = Scene {
-            objects: vec![SceneObject {
-                id: "box".into(),
-                class: ObjectClass::Building,
-                mesh: cuboid([10.0, 10.0], [20.0, 20.0, 30.0], 0.0, 0.0, material),
-            }],
-        };
-        let rf = RfScene::new(&scene, 3.5e9, false).unwrap();
+        let rf = fixture_box(name);
         let map = radio_map(&rf, tx, &Antenna::default(), &plane, &opt, 3.5e9);
         let (mut diffs, mut signed, mut one_side) = (Vec::new(), Vec::new(), 0);
         for &(c, row, sionna) in cells {
