@@ -144,7 +144,8 @@ pub fn default_plane(scene: &RfScene, cell_m: f64, z: f64) -> MapPlane {
 /// The mean path gain (linear) of every cell of `plane` from a transmitter at `tx`; 0 where no
 /// ray arrived. `opt.rays` rays, interactions as `opt` enables them, foliage crossed at
 /// `opt.foliage_loss_db_per_m` (rf.md §5.1). Diffraction adds first-order edge-diffracted power
-/// from as many samples over the edges the rays first land by (`radiomap_diffraction`).
+/// from as many samples as rays, over the edges of the surfaces the rays first land on
+/// (`radiomap_diffraction`).
 pub fn radio_map(
     scene: &RfScene,
     tx: DVec3,
