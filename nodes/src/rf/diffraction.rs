@@ -187,6 +187,27 @@ fn face_angle(w: &Wedge, s: DVec3) -> f64 {
     PI - (PI - st.dot(t0).clamp(-1.0, 1.0).acos()) * sgn
 }
 
+/// A face's reflection of a wave along `ki` as a matrix on edge-fixed components ((φ, β) in,
+/// (φ, β) of the reflected direction out): the face's slab coefficients at incidence cosine
+/// `cos_theta`, in our Fresnel bases (`field::reflect`).
+fn face_reflection(
+    scene: &RfScene,
+    tri: u32,
+    normal: DVec3,
+    ki: DVec3,
+    e: DVec3,
+    cos_theta: f64,
+) -> [[C64; 2]; 2] {
+    let (r, _) = scene.slab(tri, cos_theta.min(1.0));
+    let phi_in = ki.cross(e).normalize();
+    let beta_in = phi_in.cross(ki);
+    let kr = field::mirror(ki, normal);
+    let phi_out = -(kr.cross(e)).normalize();
+    let beta_out = phi_out.cross(kr);
+    let cols = [phi_in, beta_in].map(|v| field::reflect(&field::real(v), ki, normal, r).0);
+    [phi_out, beta_out].map(|o| [field::dot(&cols[0], o), field::dot(&cols[1], o)])
+}
+
 /// The diffracted field at `rx` of a wave leaving `tx` with field `e_tx` (at unit distance),
 /// over wedge `w` at `q`, as a field vector (spreading included, propagation phase not), or
 /// `None` when either end is inside the wedge.
@@ -222,20 +243,65 @@ pub fn diffracted_field(
     let beta_hat_i = phi_hat_i.cross(ki);
     let phi_hat_o = -(ko.cross(w.e)).normalize();
     let beta_hat_o = phi_hat_o.cross(ko);
-    // Face reflection factors (Luebbers): the β component (along the edge) is TE to the faces,
-    // the φ component TM; incidence cosines |sin φ'| on the 0-face, |sin(nπ − φ)| on the n-face.
-    // Rotated into the edge-fixed bases (the W matrices of rf.md §3.1, at β0 = 90°) each picks
-    // up a sign: β̂ turns from +e to −e, and e_∥ = −φ̂' on the way in. So R = −diag(r_TM, r_TE),
-    // which for a perfect conductor gives the classic soft (β) and hard (φ) coefficients.
-    let (r0, _) = scene.slab(w.tri0, phi_i.sin().abs());
-    let (rn, _) = scene.slab(w.trin, (limit - phi).sin().abs());
-    let (r0, rn) = ((-r0.0, -r0.1), (-rn.0, -rn.1));
-    let (e_phi, e_beta) = (field::dot(e_tx, phi_hat_i), field::dot(e_tx, beta_hat_i));
+    // Face reflection factors (Luebbers), as matrices on the edge-fixed components: each face's
+    // reflection of the incident wave at its true angle of incidence on that face (|k · n|),
+    // taken from the incident edge-fixed basis into the face's (⊥, ∥) basis and back out into
+    // the edge-fixed basis of the reflected direction (rf.md §3.1's W matrices, with the
+    // reflected direction's basis as Hashimoto et al. and Sionna RT take it: the factor is the
+    // reflected field's own across its shadow boundary, where it matters). Square to the edge
+    // (β0 = 90°) this is −diag(r_∥, r_⊥): the classic soft (β) and hard (φ) coefficients for a
+    // perfect conductor; oblique to it the components mix.
+    let r0 = face_reflection(scene, w.tri0, w.n0, ki, w.e, ki.dot(w.n0).abs());
+    let rn = face_reflection(scene, w.trin, w.nn, ki, w.e, ki.dot(w.nn).abs());
+    let e_in = [field::dot(e_tx, phi_hat_i), field::dot(e_tx, beta_hat_i)];
     let spread = (1.0 / (si * so * (si + so))).sqrt();
-    let comp = |r0c: C64, rnc: C64, ei: C64| -> C64 {
-        -((d[0] + d[1]) - d[2] * rnc - d[3] * r0c) * ei * spread
+    let apply = |r: &[[C64; 2]; 2], i: usize| r[i][0] * e_in[0] + r[i][1] * e_in[1];
+    let comp = |i: usize| -> C64 {
+        -((d[0] + d[1]) * e_in[i] - d[2] * apply(&rn, i) - d[3] * apply(&r0, i)) * spread
     };
-    let out_phi = comp(r0.1, rn.1, e_phi);
-    let out_beta = comp(r0.0, rn.0, e_beta);
+    let (out_phi, out_beta) = (comp(0), comp(1));
     Some([0, 1, 2].map(|c| out_phi * phi_hat_o[c] + out_beta * beta_hat_o[c]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::artifact::{ObjectClass, Scene, SceneObject};
+    use crate::geom::mesh_build::cuboid;
+    use crate::rf::materials::Material;
+
+    fn concrete_box() -> RfScene {
+        let scene = Scene {
+            objects: vec![SceneObject {
+                id: "box".into(),
+                class: ObjectClass::Building,
+                mesh: cuboid([0.0, 0.0], [10.0, 10.0, 10.0], 0.0, 0.0, Material::Concrete),
+            }],
+        };
+        RfScene::new(&scene, 3.5e9, false).unwrap()
+    }
+
+    /// Square to the edge the face factors are −diag(r_∥, r_⊥) on (φ, β): no mixing of the
+    /// components, the soft and hard coefficients of the 2-D UTD. Oblique to it they mix.
+    #[test]
+    fn face_factors_square_to_the_edge_are_the_2d_ones_and_oblique_ones_mix() {
+        let rf = concrete_box();
+        let (tri, n, e) = (0, DVec3::X, DVec3::Z);
+        let cos = 0.6;
+        let (r, _) = rf.slab(tri, cos);
+        // In the plane square to the edge, at incidence cosine 0.6 on the face x = const.
+        let ki = DVec3::new(-0.6, 0.8, 0.0);
+        let m = face_reflection(&rf, tri, n, ki, e, cos);
+        let close = |a: C64, b: C64| (a - b).norm() < 1e-12;
+        assert!(
+            close(m[0][0], -r.1) && close(m[1][1], -r.0),
+            "{m:?} against {r:?}"
+        );
+        assert!(m[0][1].norm() < 1e-12 && m[1][0].norm() < 1e-12, "{m:?}");
+        // Oblique: the same face, the wave 40° off square to the edge.
+        let ki = DVec3::new(-0.6, 0.8, 0.0) * 40f64.to_radians().cos()
+            + DVec3::Z * 40f64.to_radians().sin();
+        let m = face_reflection(&rf, tri, n, ki, e, ki.dot(n).abs());
+        assert!(m[0][1].norm() > 1e-3 && m[1][0].norm() > 1e-3, "{m:?}");
+    }
 }

@@ -127,7 +127,8 @@ impl Stage for SynthDriveTest {
     // 5: diffraction square to an edge no longer gives NaN (rf::diffraction).
     // 6: a wedge's 0-face is the face the wave lights (rf::diffraction::Wedge::facing).
     // 7: wedges from the faces' geometry, not the mesh's winding (rf::diffraction::wedges).
-    const VERSION: u32 = 7;
+    // 8: UTD face factors at any incidence, in rotated bases (rf::diffraction).
+    const VERSION: u32 = 8;
     const DOC: &'static str = "drive-test measurements traced through the ground truth (richer settings) plus log-normal shadowing";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),

@@ -120,7 +120,8 @@ pub struct RadioMap;
 impl Stage for RadioMap {
     const KIND: &'static str = "RadioMap";
     // 4: first-order edge diffraction in maps (rf::radiomap_diffraction).
-    const VERSION: u32 = 4;
+    // 5: UTD face factors at any incidence, in rotated bases (rf::diffraction).
+    const VERSION: u32 = 5;
     const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),

@@ -106,7 +106,8 @@ impl Stage for Trace {
     // 5: diffraction square to an edge no longer gives NaN (rf::diffraction).
     // 6: a wedge's 0-face is the face the wave lights (rf::diffraction::Wedge::facing).
     // 7: wedges from the faces' geometry, not the mesh's winding (rf::diffraction::wedges).
-    const VERSION: u32 = 7;
+    // 8: UTD face factors at any incidence, in rotated bases (rf::diffraction).
+    const VERSION: u32 = 8;
     const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
