@@ -287,9 +287,12 @@ fn clutter_recall_and_precision_on_the_demo_site() {
     // The target is 0.8 for both. Cars meet it (0.873) since a car seen short of its
     // length is placed from the end that shows, told by which image side the frame's edge or
     // a nearer object cuts (0.794 before, when the bottom edge's cut of a close car chose the
-    // end and end-on views were read as lengthwise). Trees fall just short (0.795), so tree
-    // recall is held at 0.75 here. Registration took car recall from 0.76 to 0.79 and the
-    // median position error over all classes from 0.59 m to 0.28 m.
+    // end and end-on views were read as lengthwise). Trees meet it (recall 0.923, precision
+    // 0.973) since a crown seen narrower than a crown with one side hidden (by the next tree's
+    // crown in its row, or the frame) is placed half a width in from the side that shows
+    // (0.795 and 0.84 before: 6 of the 8 missed trees had a prediction 1.9-2.6 m off along
+    // their row). Registration took car recall from 0.76 to 0.79 and the median position
+    // error over all classes from 0.59 m to 0.28 m.
     let s = &results[1];
     let mut all_errors = Vec::new();
     for (class, c) in s {
@@ -299,8 +302,7 @@ fn clutter_recall_and_precision_on_the_demo_site() {
         let precision = c.true_pos as f64 / c.predicted.max(1) as f64;
         let recall = c.found as f64 / c.expected as f64;
         assert!(precision >= 0.8, "{class}: precision {precision:.3}");
-        let floor = if class == "tree" { 0.75 } else { 0.8 };
-        assert!(recall >= floor, "{class}: recall {recall:.3}");
+        assert!(recall >= 0.8, "{class}: recall {recall:.3}");
         all_errors.extend(c.errors.iter().copied());
     }
     let med = median(all_errors);

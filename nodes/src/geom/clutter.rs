@@ -203,7 +203,8 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 /// the asset's visible surface (the points lie on the side facing the camera), or, for an
 /// elongated asset seen along its side, the middle of the points' extent along that side (half
 /// a length from the end that shows when it is seen short) and half the asset's width behind
-/// it.
+/// it; a round asset seen narrower than it is with one image side hidden, half its width in from
+/// the side that shows.
 pub fn lift_view(
     k: usize,
     view: &View,
@@ -360,10 +361,21 @@ pub fn lift_view(
                 [a[0] * s + nrm[0] * q, a[1] * s + nrm[1] * q]
             }
             // Otherwise the median pushed back along the viewing direction by the depth of the
-            // asset's visible surface in front of its centre.
+            // asset's visible surface in front of its centre, and, for a round asset seen
+            // narrower than it is with one side hidden (a tree in a row behind the next one's
+            // crown, or cut by the frame), moved across the view to half a width from the side
+            // that shows.
             _ => {
                 let back = kind.visible_depth();
-                [mx + view_dir[0] * back, my + view_dir[1] * back]
+                let across = [view_dir[1], -view_dir[0]];
+                let at = (mx - o[0]) * across[0] + (my - o[1]) * across[1];
+                let shift = hidden_side
+                    .and_then(|side| centre_across(&pts, &row_end, o, across, side, size[1]))
+                    .map_or(0.0, |c| c - at);
+                [
+                    mx + view_dir[0] * back + across[0] * shift,
+                    my + view_dir[1] * back + across[1] * shift,
+                ]
             }
         };
         let weight = px.len() as f64 * if border.contains_key(&id) { 0.25 } else { 1.0 };
@@ -379,6 +391,51 @@ pub fn lift_view(
         });
     }
     out
+}
+
+/// Where across the view (the coordinate along `across` from the camera at `o`, metres) a round
+/// asset of width `width` stands, from its lifted points `pts`, when the image side `hidden` (-1
+/// left, +1 right) is cut: half a width in from the end that shows. `None` when the points span
+/// most of the width (nothing hidden to correct for) or when their left and right image ends do
+/// not say which way the image's left runs across the view. `row_end` is each point's image row
+/// end (-1, 0, +1).
+fn centre_across(
+    pts: &[[f64; 3]],
+    row_end: &[i8],
+    o: [f64; 3],
+    across: [f64; 2],
+    hidden: i8,
+    width: f64,
+) -> Option<f64> {
+    let lateral: Vec<f64> = pts
+        .iter()
+        .map(|p| (p[0] - o[0]) * across[0] + (p[1] - o[1]) * across[1])
+        .collect();
+    let mean_at = |side: i8| {
+        let v: Vec<f64> = lateral
+            .iter()
+            .zip(row_end)
+            .filter(|(_, e)| **e == side)
+            .map(|(l, _)| *l)
+            .collect();
+        (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+    };
+    let (left, right) = (mean_at(-1)?, mean_at(1)?);
+    if left == right {
+        return None;
+    }
+    let mut sorted = lateral;
+    let (l0, l1) = (percentile(&mut sorted, 0.03), percentile(&mut sorted, 0.97));
+    if l1 - l0 >= 0.9 * width {
+        return None;
+    }
+    // The side that shows, in `across` coordinates: the image's right when the left is hidden.
+    let shows_high = (hidden < 0) == (right > left);
+    Some(if shows_high {
+        l1 - width / 2.0
+    } else {
+        l0 + width / 2.0
+    })
 }
 
 /// Per image row of an instance, its leftmost and rightmost pixel.
@@ -1044,6 +1101,48 @@ mod tests {
             depth[(v * w + u) as usize] = 10.0;
         }
         assert_eq!(hidden_side(&row_ends(&px), &depth, w), None);
+    }
+
+    /// A crown 5.8 m wide, 20 m ahead of a camera looking along +y, of which only the part from
+    /// x = -1 to x = 2.9 shows (the left hidden behind a nearer crown): its centre is half a
+    /// width in from the right edge, at x = 0, not at the visible part's middle. With the image's
+    /// left on the other side, or the whole width in view, nothing moves.
+    #[test]
+    fn a_crown_half_hidden_is_placed_from_the_side_that_shows() {
+        let o = [0.0, 0.0, 1.5];
+        // Looking along +y, the image's right is +x: `across` = (dir.y, -dir.x) = (1, 0).
+        let across = [1.0, 0.0];
+        let points = |x0: f64, x1: f64| {
+            let mut pts = Vec::new();
+            let mut ends = Vec::new();
+            for row in 0..10 {
+                for k in 0..=20 {
+                    let x = x0 + (x1 - x0) * k as f64 / 20.0;
+                    pts.push([x, 20.0, 3.0 + row as f64 * 0.3]);
+                    ends.push(if k == 0 {
+                        -1
+                    } else if k == 20 {
+                        1
+                    } else {
+                        0
+                    });
+                }
+            }
+            (pts, ends)
+        };
+        let (pts, ends) = points(-1.0, 2.9);
+        let c = centre_across(&pts, &ends, o, across, -1, 5.8).unwrap();
+        assert!(c.abs() < 1e-9, "{c}");
+        // Hidden on the right instead: the left edge shows, the centre is half a width right of it.
+        let c = centre_across(&pts, &ends, o, across, 1, 5.8).unwrap();
+        assert!((c - 1.9).abs() < 1e-9, "{c}");
+        // Mirrored image (left ends at high x): the hidden left is the high side.
+        let flipped: Vec<i8> = ends.iter().map(|e| -e).collect();
+        let c = centre_across(&pts, &flipped, o, across, -1, 5.8).unwrap();
+        assert!((c - 1.9).abs() < 1e-9, "{c}");
+        // The whole crown in view: nothing to correct.
+        let (pts, ends) = points(-2.9, 2.9);
+        assert_eq!(centre_across(&pts, &ends, o, across, -1, 5.8), None);
     }
 
     #[test]

@@ -181,7 +181,9 @@ impl Stage for PlaceClutter {
     const KIND: &'static str = "PlaceClutter";
     // 2: a vehicle seen short of its length is placed from the end no image side or nearer
     // object hides.
-    const VERSION: u32 = 2;
+    // 3: a round asset seen narrower than it is with one side hidden is placed from the side
+    // that shows.
+    const VERSION: u32 = 3;
     const DOC: &'static str = "street clutter from views: Theil-Sen depth calibration, lifting, clustering, NMS, scene grammar, asset library, Sec. 4.2.4";
     const INPUTS: &'static [InputSpec] = INPUTS;
     type Params = PlaceClutterParams;
@@ -208,7 +210,8 @@ pub struct ClutterMetrics;
 impl Stage for ClutterMetrics {
     const KIND: &'static str = "ClutterMetrics";
     // 2: PlaceClutter 2.
-    const VERSION: u32 = 2;
+    // 3: PlaceClutter 3.
+    const VERSION: u32 = 3;
     const DOC: &'static str =
         "counts of the clutter chain (detections, clusters, NMS, each grammar rule), Sec. 4.2.4";
     const INPUTS: &'static [InputSpec] = INPUTS;
