@@ -7,8 +7,8 @@
 //! wedge drew, that is ∫ |E_d|² dA over every cell, the mean the shoot-and-bounce part of the
 //! map also gives. The field over the edge is the links' UTD (`diffraction`, rf.md §3.1).
 //!
-//! As in Sionna: the wedges are the convex edges of the triangles the transmitter's rays first
-//! land on; the transmitter must see `q` and a point 5 cm outside the corner (so a ray does not
+//! As in Sionna: the wedges are the edges of the triangles the transmitter's rays first land
+//! on that it meets from outside; the transmitter must see `q` and a point 5 cm outside the corner (so a ray does not
 //! slip into the solid between two triangles of the edge), and the diffracted ray must reach the
 //! map from both; samples are as many as the map's rays.
 
@@ -82,7 +82,7 @@ impl EdgeSampler<'_> {
             .map(|k| {
                 let mut out = Vec::new();
                 let mut crossings = Vec::new();
-                for i in k * CHUNK..((k + 1) * CHUNK).min(samples) {
+                for i in k * CHUNK..(k * CHUNK).saturating_add(CHUNK).min(samples) {
                     let w = pick(i);
                     let h = mix(SALT ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15));
                     let (u_edge, u_cone) = (unit(mix(h ^ 1)), unit(mix(h ^ 2)));
