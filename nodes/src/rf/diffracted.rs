@@ -15,10 +15,10 @@ use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
 use super::paths::{Interaction, InteractionKind, Path, TraceOptions, Tracer};
 use super::scene::{EPS, RfScene};
 
-/// The wedges of `all` that can diffract the wave of a transmitter at `tx`: those with a face it
-/// sees, met from outside. The first surfaces of its ray-found `sequences` are exactly the ones it sees (as in
-/// Sionna, which samples wedges from the first hits); without reflection, rays are shot to find
-/// them.
+/// The wedges of `all` that can diffract the wave of a transmitter at `tx`
+/// ([`Wedge::diffracts_from`]). The first surfaces of its ray-found `sequences` are exactly the
+/// ones it sees (as in Sionna, which samples wedges from the first hits); without reflection,
+/// rays are shot to find them.
 pub fn visible_wedges(
     scene: &RfScene,
     all: &[Wedge],
@@ -38,7 +38,7 @@ pub fn visible_wedges(
         first_hits(scene, tx, opt.rays)
     };
     all.iter()
-        .filter(|w| (seen.contains(&w.tri0) || seen.contains(&w.trin)) && w.lit_from(tx))
+        .filter(|w| w.diffracts_from(tx, |t| seen.contains(&t)))
         .copied()
         .collect()
 }

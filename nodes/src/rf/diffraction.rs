@@ -43,6 +43,13 @@ impl Wedge {
         k.dot(self.n0) > 1e-9 || k.dot(self.nn) > 1e-9
     }
 
+    /// Whether the wave of a transmitter at `tx` can diffract here: one of the wedge's faces
+    /// among the triangles it lights (`lights`, from where its rays first land, as Sionna
+    /// samples wedges), and the wedge met from outside.
+    pub fn diffracts_from(&self, tx: DVec3, lights: impl Fn(u32) -> bool) -> bool {
+        (lights(self.tri0) || lights(self.trin)) && self.lit_from(tx)
+    }
+
     /// The same wedge labelled so that its 0-face is one a wave travelling along `ki` meets from
     /// outside (`ki · n0 <= 0`), as Sionna RT does, and of two lit faces the one it meets more
     /// squarely. The UTD's face reflection factors are taken at the incidence angle on the
@@ -187,20 +194,18 @@ fn face_angle(w: &Wedge, s: DVec3) -> f64 {
     PI - (PI - st.dot(t0).clamp(-1.0, 1.0).acos()) * sgn
 }
 
-/// A face's reflection of a wave along `ki` as a matrix on edge-fixed components ((φ, β) in,
-/// (φ, β) of the reflected direction out): the face's slab coefficients at incidence cosine
-/// `cos_theta`, in our Fresnel bases (`field::reflect`).
+/// A face's reflection of a wave along `ki` (with its edge-fixed basis `phi_in`, `beta_in`) as
+/// a matrix on edge-fixed components ((φ, β) in, (φ, β) of the reflected direction out): the
+/// face's slab coefficients at the wave's incidence on it, in our Fresnel bases
+/// (`field::reflect`).
 fn face_reflection(
     scene: &RfScene,
     tri: u32,
     normal: DVec3,
-    ki: DVec3,
+    (ki, phi_in, beta_in): (DVec3, DVec3, DVec3),
     e: DVec3,
-    cos_theta: f64,
 ) -> [[C64; 2]; 2] {
-    let (r, _) = scene.slab(tri, cos_theta.min(1.0));
-    let phi_in = ki.cross(e).normalize();
-    let beta_in = phi_in.cross(ki);
+    let (r, _) = scene.slab(tri, ki.dot(normal).abs().min(1.0));
     let kr = field::mirror(ki, normal);
     let phi_out = -(kr.cross(e)).normalize();
     let beta_out = phi_out.cross(kr);
@@ -251,8 +256,9 @@ pub fn diffracted_field(
     // reflected field's own across its shadow boundary, where it matters). Square to the edge
     // (β0 = 90°) this is −diag(r_∥, r_⊥): the classic soft (β) and hard (φ) coefficients for a
     // perfect conductor; oblique to it the components mix.
-    let r0 = face_reflection(scene, w.tri0, w.n0, ki, w.e, ki.dot(w.n0).abs());
-    let rn = face_reflection(scene, w.trin, w.nn, ki, w.e, ki.dot(w.nn).abs());
+    let incident = (ki, phi_hat_i, beta_hat_i);
+    let r0 = face_reflection(scene, w.tri0, w.n0, incident, w.e);
+    let rn = face_reflection(scene, w.trin, w.nn, incident, w.e);
     let e_in = [field::dot(e_tx, phi_hat_i), field::dot(e_tx, beta_hat_i)];
     let spread = (1.0 / (si * so * (si + so))).sqrt();
     let apply = |r: &[[C64; 2]; 2], i: usize| r[i][0] * e_in[0] + r[i][1] * e_in[1];
@@ -291,7 +297,11 @@ mod tests {
         let (r, _) = rf.slab(tri, cos);
         // In the plane square to the edge, at incidence cosine 0.6 on the face x = const.
         let ki = DVec3::new(-0.6, 0.8, 0.0);
-        let m = face_reflection(&rf, tri, n, ki, e, cos);
+        let incident = |ki: DVec3| {
+            let phi = ki.cross(e).normalize();
+            (ki, phi, phi.cross(ki))
+        };
+        let m = face_reflection(&rf, tri, n, incident(ki), e);
         let close = |a: C64, b: C64| (a - b).norm() < 1e-12;
         assert!(
             close(m[0][0], -r.1) && close(m[1][1], -r.0),
@@ -301,7 +311,7 @@ mod tests {
         // Oblique: the same face, the wave 40° off square to the edge.
         let ki = DVec3::new(-0.6, 0.8, 0.0) * 40f64.to_radians().cos()
             + DVec3::Z * 40f64.to_radians().sin();
-        let m = face_reflection(&rf, tri, n, ki, e, ki.dot(n).abs());
+        let m = face_reflection(&rf, tri, n, incident(ki), e);
         assert!(m[0][1].norm() > 1e-3 && m[1][0].norm() > 1e-3, "{m:?}");
     }
 }

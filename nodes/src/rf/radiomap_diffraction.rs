@@ -43,13 +43,12 @@ pub(super) struct EdgeSampler<'a> {
     pub foliage: (FoliageDepth, f64),
 }
 
-/// The wedges (turning by at least `min_deg`) with a face among `seen`, the sorted triangles
-/// the transmitter's rays first land on, that a wave from `tx` meets from outside.
+/// The wedges (turning by at least `min_deg`) that can diffract the wave from `tx`, whose rays
+/// first land on the sorted triangles `seen` ([`Wedge::diffracts_from`]).
 pub(super) fn lit_wedges(scene: &RfScene, min_deg: f64, seen: &[u32], tx: DVec3) -> Vec<Wedge> {
-    let lit = |t: u32| seen.binary_search(&t).is_ok();
     wedges(scene, min_deg)
         .into_iter()
-        .filter(|w| (lit(w.tri0) || lit(w.trin)) && w.lit_from(tx))
+        .filter(|w| w.diffracts_from(tx, |t| seen.binary_search(&t).is_ok()))
         .collect()
 }
 
