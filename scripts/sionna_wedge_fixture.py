@@ -59,6 +59,17 @@ def scene_xml(folder, material, thickness):
     return f"{folder}/scene.xml"
 
 
+def box_scene(folder, material, thickness, tx):
+    """The box in `material`, loaded by Sionna at FREQ, isotropic V arrays, the transmitter at
+    `tx`."""
+    scene = load_scene(scene_xml(folder, material, thickness), merge_shapes=False)
+    scene.frequency = FREQ
+    scene.tx_array = PlanarArray(num_rows=1, num_cols=1, pattern="iso", polarization="V")
+    scene.rx_array = PlanarArray(num_rows=1, num_cols=1, pattern="iso", polarization="V")
+    scene.add(Transmitter(name="tx", position=list(tx)))
+    return scene
+
+
 def receivers():
     cx, cy = (BOX[0] + BOX[1]) / 2, (BOX[2] + BOX[3]) / 2
     out = []
@@ -75,12 +86,7 @@ def main(out_path):
     with tempfile.TemporaryDirectory() as tmp:
         for material, thickness in MATERIALS.items():
             for t, tx in enumerate(TXS):
-                scene = load_scene(scene_xml(f"{tmp}/{material}", material, thickness),
-                                   merge_shapes=False)
-                scene.frequency = FREQ
-                scene.tx_array = PlanarArray(num_rows=1, num_cols=1, pattern="iso", polarization="V")
-                scene.rx_array = PlanarArray(num_rows=1, num_cols=1, pattern="iso", polarization="V")
-                scene.add(Transmitter(name="tx", position=list(tx)))
+                scene = box_scene(f"{tmp}/{material}", material, thickness, tx)
                 for i, p in enumerate(rxs):
                     scene.add(Receiver(name=f"rx{i}", position=[float(c) for c in p]))
                 paths = PathSolver()(scene, max_depth=1, samples_per_src=10**6, los=False,

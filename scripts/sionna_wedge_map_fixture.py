@@ -15,9 +15,9 @@ import tempfile
 
 import sionna_env  # noqa: F401
 import numpy as np
-from sionna.rt import PlanarArray, RadioMapSolver, Transmitter, load_scene
+from sionna.rt import RadioMapSolver
 
-from sionna_wedge_fixture import FREQ, MATERIALS, scene_xml
+from sionna_wedge_fixture import MATERIALS, box_scene
 
 TX = (40.0, 30.0, 20.0)
 X0, Y0, SIZE, CELL, Z = -40.0, -40.0, 100.0, 2.0, 1.5
@@ -28,12 +28,7 @@ def main(out_path):
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for material, thickness in MATERIALS.items():
-            scene = load_scene(scene_xml(f"{tmp}/{material}", material, thickness),
-                               merge_shapes=False)
-            scene.frequency = FREQ
-            scene.tx_array = PlanarArray(num_rows=1, num_cols=1, pattern="iso", polarization="V")
-            scene.rx_array = PlanarArray(num_rows=1, num_cols=1, pattern="iso", polarization="V")
-            scene.add(Transmitter(name="tx", position=list(TX)))
+            scene = box_scene(f"{tmp}/{material}", material, thickness, TX)
             rm = RadioMapSolver()(scene, center=[X0 + SIZE / 2, Y0 + SIZE / 2, Z],
                                   orientation=[0.0, 0.0, 0.0], size=[SIZE, SIZE],
                                   cell_size=(CELL, CELL), samples_per_tx=SAMPLES, max_depth=1,

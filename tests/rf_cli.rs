@@ -79,26 +79,30 @@ fn trace_reproduces_sionna_on_the_street_canyon() {
     assert!(diffs[diffs.len() / 2] < 0.1, "{diffs:?}");
 }
 
+/// `kodama-dag radiomap` on the street canyon from its usual transmitter, with `options`, into
+/// `out`.
+fn canyon_map(env: &Env, options: &[&str], out: &Path) -> Run {
+    let scene = canyon();
+    let mut args = vec![
+        "radiomap",
+        "--scene",
+        scene.to_str().unwrap(),
+        "--tx",
+        "-33,0,32",
+        "--freq-hz",
+        "3.5e9",
+    ];
+    args.extend_from_slice(options);
+    args.extend_from_slice(&["--out", out.to_str().unwrap()]);
+    env.cli(&args)
+}
+
 #[test]
 fn radiomap_writes_each_format_and_rejects_others() {
     let env = Env::new();
     for ext in ["tif", "png", "exr"] {
         let out = env.path(&format!("map.{ext}"));
-        let r = env.cli(&[
-            "radiomap",
-            "--scene",
-            canyon().to_str().unwrap(),
-            "--tx",
-            "-33,0,32",
-            "--freq-hz",
-            "3.5e9",
-            "--rays",
-            "100000",
-            "--cell-m",
-            "2",
-            "--out",
-            out.to_str().unwrap(),
-        ]);
+        let r = canyon_map(&env, &["--rays", "100000", "--cell-m", "2"], &out);
         assert_eq!(r.code, 0, "{}", r.stderr);
         let bytes = std::fs::read(&out).unwrap();
         let magic: &[u8] = match ext {
@@ -129,14 +133,7 @@ fn radiomap_writes_each_format_and_rejects_others() {
     // cells that rays alone leave dark, and adds power where they do not.
     let map_db = |flag: &str, name: &str| {
         let out = env.path(name);
-        let r = env.cli(&[
-            "radiomap",
-            "--scene",
-            canyon().to_str().unwrap(),
-            "--tx",
-            "-33,0,32",
-            "--freq-hz",
-            "3.5e9",
+        let options = [
             "--rays",
             "200000",
             "--cell-m",
@@ -145,9 +142,8 @@ fn radiomap_writes_each_format_and_rejects_others() {
             "1",
             "--no-transmission",
             flag,
-            "--out",
-            out.to_str().unwrap(),
-        ]);
+        ];
+        let r = canyon_map(&env, &options, &out);
         assert_eq!(r.code, 0, "{}", r.stderr);
         // The map's samples (f32, NaN where nothing arrived); its site-frame CRS is our own.
         let file = std::fs::File::open(&out).unwrap();

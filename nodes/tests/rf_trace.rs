@@ -2,6 +2,9 @@
 //! slab transmission loss, the knife edge, diffuse ground scattering, and foliage loss through
 //! overlapping canopies.
 
+mod common;
+use common::diffraction_only;
+
 use glam::DVec3;
 use num_complex::Complex64 as C64;
 
@@ -32,19 +35,6 @@ fn options(max_depth: u32) -> TraceOptions {
     TraceOptions {
         max_depth,
         rays: 20_000,
-        ..Default::default()
-    }
-}
-
-/// First-order diffraction alone (no line of sight, reflection or transmission), `rays` shot.
-fn diffraction_only(rays: u32) -> TraceOptions {
-    TraceOptions {
-        max_depth: 1,
-        los: false,
-        reflection: false,
-        transmission: false,
-        diffraction: true,
-        rays,
         ..Default::default()
     }
 }

@@ -271,7 +271,7 @@ fn path_gains_over_one_box_match_sionna_rt() {
             .or_default()
             .push((([f(1), f(2), f(3)], [f(4), f(5), f(6)]), db));
     }
-    let opt = diffraction_alone(100_000);
+    let opt = diffraction_only(100_000);
     let ant = Antenna::default();
     for (name, rows) in &groups {
         let rf = fixture_box(name);
@@ -321,20 +321,6 @@ fn path_gains_over_one_box_match_sionna_rt() {
 
 type LinkEndsRow = ([f64; 3], [f64; 3]);
 
-/// First-order diffraction alone, as the box fixtures were traced: no line of sight, reflection
-/// or transmission; `rays` rays (or samples).
-fn diffraction_alone(rays: u32) -> TraceOptions {
-    TraceOptions {
-        max_depth: 1,
-        los: false,
-        reflection: false,
-        transmission: false,
-        diffraction: true,
-        rays,
-        ..Default::default()
-    }
-}
-
 /// The box of scripts/sionna_wedge_fixture.py (x, y in [0, 20], z in [0, 30]) in the fixture's
 /// material `name`, at 3.5 GHz.
 fn fixture_box(name: &str) -> RfScene {
@@ -383,7 +369,7 @@ fn radio_map_diffraction_over_one_box_against_sionna_rt() {
         },
         1.5,
     );
-    let opt = diffraction_alone(4_000_000);
+    let opt = diffraction_only(4_000_000);
     let tx = glam::DVec3::new(40.0, 30.0, 20.0);
     for (name, cells) in &groups {
         let rf = fixture_box(name);

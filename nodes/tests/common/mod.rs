@@ -20,6 +20,20 @@ use kodama_nodes::synth::synth_lidar::{SynthLidar, SynthLidarParams};
 use kodama_nodes::synth::truth_scene::{TruthScene, TruthSceneParams};
 use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
 
+/// First-order diffraction alone (no line of sight, reflection or transmission), `rays` shot
+/// (or, in a radio map, diffraction samples drawn).
+pub fn diffraction_only(rays: u32) -> kodama_nodes::rf::paths::TraceOptions {
+    kodama_nodes::rf::paths::TraceOptions {
+        max_depth: 1,
+        los: false,
+        reflection: false,
+        transmission: false,
+        diffraction: true,
+        rays,
+        ..Default::default()
+    }
+}
+
 /// A file of the real test data, which sits in `shared/data` beside the repository.
 pub fn shared(rel: &str) -> PathBuf {
     let p = Path::new(env!("CARGO_MANIFEST_DIR"))
