@@ -120,11 +120,15 @@ impl RfScene {
             tmin as f32,
             tmax.min(f32::MAX as f64) as f32,
         )?;
-        // Recompute t in f64 against the triangle's plane: the BVH works in f32.
+        // Recompute t in f64 against the triangle's plane: the BVH works in f32. A ray grazing
+        // the plane makes that division worse than the f32 hit (it once put a hit 1 mm ahead
+        // at t = 0, and a walk stepping from hit to hit stood still), so it refines only within
+        // the f32 hit's own error, and never below `tmin`.
         let n = self.normals[triangle as usize];
         let denom = n.dot(d);
-        let t = if denom.abs() > 1e-12 {
-            n.dot(self.tris[triangle as usize][0] - o) / denom
+        let t64 = n.dot(self.tris[triangle as usize][0] - o) / denom;
+        let t = if denom.abs() > 1e-12 && (t64 - t32 as f64).abs() <= 1e-3 * (1.0 + t32 as f64) {
+            t64.max(tmin)
         } else {
             t32 as f64
         };
