@@ -40,8 +40,8 @@ pub struct Interactions {
     /// No transmission through surfaces.
     #[arg(long)]
     no_transmission: bool,
-    /// First-order UTD edge diffraction, in links and radio maps (off by default, as in Sionna
-    /// RT).
+    /// UTD edge diffraction, one edge a path: in links chained with reflections before and after
+    /// it up to the depth, in radio maps first order (off by default, as in Sionna RT).
     #[arg(long)]
     diffraction: bool,
     /// No diffraction (the default; accepted for Sionna-style command lines).

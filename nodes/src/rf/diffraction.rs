@@ -185,6 +185,17 @@ pub fn diffraction_point(w: &Wedge, s1: DVec3, s2: DVec3) -> Option<f64> {
     (u > 1e-6 && u < w.length - 1e-6).then_some(u)
 }
 
+/// The direction at cone angle `phi` from the 0-face (towards its outside) on the Keller cone of
+/// a wave along `ki` at `w`: the angle to the edge kept, continuing forward along it.
+pub fn keller_cone(w: &Wedge, ki: DVec3, phi: f64) -> DVec3 {
+    let t0 = w.n0.cross(w.e).normalize();
+    let along = ki.dot(w.e);
+    let e_fwd = if along > 0.0 { w.e } else { -w.e };
+    let cos_b = along.abs().min(1.0);
+    let sin_b = (1.0 - cos_b * cos_b).sqrt();
+    (w.n0 * (phi.sin() * sin_b) + t0 * (phi.cos() * sin_b) + e_fwd * cos_b).normalize()
+}
+
 /// The angle of `s` (a unit direction away from the edge, projected across it) from the 0-face,
 /// in [0, 2π) (rf.md §3.1).
 fn face_angle(w: &Wedge, s: DVec3) -> f64 {

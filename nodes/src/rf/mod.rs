@@ -1,12 +1,14 @@
 //! Radio propagation physics: ITU-R P.2040 materials as complex permittivities, Fresnel and
 //! thin-slab coefficients, UTD wedge diffraction and the P.526 knife edge, antenna patterns,
 //! foliage loss (P.833), and the ray tracers built on them: links (`paths`, the entry point, and
-//! its parts `sequences`, `image_method`, `path_field`, `diffracted`, `diffuse`) and radio maps
+//! its parts `sequences`, `image_method`, `path_field`, `diffraction_search`, `diffracted`,
+//! `diffuse`) and radio maps
 //! (`radiomap`, with edge diffraction in `radiomap_diffraction`). Formulas and test vectors: `shared/reference/rf.md`.
 
 pub mod antenna;
 pub mod diffracted;
 pub mod diffraction;
+pub mod diffraction_search;
 pub mod diffuse;
 pub mod em;
 pub mod fibonacci;

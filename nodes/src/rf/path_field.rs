@@ -22,7 +22,6 @@ pub(super) fn evaluate(
     at_tx: FoliageDepth,
 ) -> Option<Path> {
     let (scene, opt) = (t.scene, t.opt);
-    let specular_factor = (1.0 - opt.scattering_coefficient.powi(2)).max(0.0).sqrt();
     let k0 = (points[1] - points[0]).normalize();
     let mut e: CVec = field::real(DVec3::from(t.tx_antenna.field(k0.to_array())));
     let mut interactions = Vec::new();
@@ -54,16 +53,9 @@ pub(super) fn evaluate(
             });
         }
         if s + 1 < points.len() - 1 {
-            let tri = seq[s];
-            let n = scene.normals[tri as usize];
-            let (r, _) = scene.slab(tri, d.dot(n));
-            let (e2, _) = field::reflect(&e, d, n, r);
-            e = e2.map(|c| c * specular_factor);
-            interactions.push(Interaction {
-                kind: InteractionKind::Reflection,
-                point: b.to_array(),
-                triangle: tri,
-            });
+            let (e2, at) = specular(t, seq[s], d, b, &e);
+            e = e2;
+            interactions.push(at);
         }
     }
     let k_last = (points[points.len() - 1] - points[points.len() - 2]).normalize();
@@ -75,4 +67,26 @@ pub(super) fn evaluate(
         return None; // e.g. specular reflection with S = 1: nothing travels this way
     }
     Some(Path::new(interactions, length, a, foliage_m))
+}
+
+/// The field `e` arriving along `d` after its specular reflection off surface `tri` at `point`:
+/// the slab's coefficients at that incidence (rf.md §2.2), scaled by √(1 − S²) for rough
+/// surfaces (§1.3); with the interaction to record.
+pub(super) fn specular(
+    t: &Tracer,
+    tri: u32,
+    d: DVec3,
+    point: DVec3,
+    e: &CVec,
+) -> (CVec, Interaction) {
+    let specular_factor = (1.0 - t.opt.scattering_coefficient.powi(2)).max(0.0).sqrt();
+    let n = t.scene.normals[tri as usize];
+    let (r, _) = t.scene.slab(tri, d.dot(n));
+    let e = field::reflect(e, d, n, r).0.map(|c| c * specular_factor);
+    let at = Interaction {
+        kind: InteractionKind::Reflection,
+        point: point.to_array(),
+        triangle: tri,
+    };
+    (e, at)
 }

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::antenna::Antenna;
-use super::diffraction::Wedge;
+use super::diffraction_search::{DiffractionSequence, diffraction_sequences};
 use super::foliage::{FoliageDepth, specific_attenuation_db_per_m};
 use super::scattering::ScatteringPattern;
 use super::scene::RfScene;
@@ -32,7 +32,8 @@ pub struct TraceOptions {
     pub reflection: bool,
     /// Transmission through surfaces as thin slabs (P.2040). Default true.
     pub transmission: bool,
-    /// First-order UTD diffraction at convex edges (links and radio maps).
+    /// UTD diffraction at convex edges, one edge a path: in links with specular reflections
+    /// before and after it up to the depth (as Sionna RT 2.2), in radio maps first order.
     /// Default false.
     pub diffraction: bool,
     /// Diffuse reflection (effective roughness): a fraction `scattering_coefficient`² of the
@@ -73,9 +74,16 @@ impl Default for TraceOptions {
     }
 }
 
+/// The deepest trace accepted: a ray walk between two parallel walls would otherwise bounce as
+/// long as asked (Sionna's own examples stop at 8-10).
+pub const MAX_DEPTH: u32 = 32;
+
 impl TraceOptions {
     /// The first setting out of its range: its name and what it should be.
     pub fn check(&self) -> Result<(), (&'static str, &'static str)> {
+        if self.max_depth > MAX_DEPTH {
+            return Err(("max_depth", "expected at most 32 interactions"));
+        }
         if !(0.0..=1.0).contains(&self.scattering_coefficient) {
             return Err(("scattering_coefficient", "expected a value in [0, 1]"));
         }
@@ -184,8 +192,8 @@ pub(super) struct Tracer<'a> {
 struct FromTx {
     /// The ray-found surface sequences, each with the transmitter's images in its surfaces.
     sequences: Vec<(Vec<u32>, Vec<DVec3>)>,
-    /// The wedges the transmitter sees (empty without diffraction).
-    wedges: Vec<Wedge>,
+    /// The candidate diffracted paths (empty without diffraction).
+    diffractions: Vec<DiffractionSequence>,
     /// How deep in foliage the transmitter stands.
     foliage: FoliageDepth,
 }
@@ -223,7 +231,7 @@ pub fn trace_links(
         .map(|t| {
             let tx = DVec3::from(t.map(f64::from_bits));
             let seqs = sequences::reflection_sequences(scene, tx, opt);
-            let wedges = diffracted::visible_wedges(scene, &all_wedges, tx, &seqs, opt);
+            let diffractions = diffraction_sequences(scene, &all_wedges, tx, &seqs, opt);
             FromTx {
                 sequences: seqs
                     .into_iter()
@@ -232,7 +240,7 @@ pub fn trace_links(
                         (seq, images)
                     })
                     .collect(),
-                wedges,
+                diffractions,
                 foliage: FoliageDepth::at(scene, tx),
             }
         })
@@ -259,10 +267,10 @@ pub fn trace_links(
             let shared = &from_tx[tx_of(link)];
             let (tx, rx) = (DVec3::from(link.0), DVec3::from(link.1));
             let mut paths = link_paths(&tracer, tx, rx, shared);
-            if !shared.wedges.is_empty() {
+            if !shared.diffractions.is_empty() {
                 paths.extend(diffracted::diffracted_paths(
                     &tracer,
-                    &shared.wedges,
+                    &shared.diffractions,
                     tx,
                     rx,
                     shared.foliage,

@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use crate::rng::{mix, unit};
 
 use super::antenna::Antenna;
-use super::diffraction::{Wedge, diffracted_field, wedges};
+use super::diffraction::{Wedge, diffracted_field, keller_cone, wedges};
 use super::field;
 use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
 use super::radiomap::{Crossing, MapPlane};
@@ -165,17 +165,6 @@ impl EdgeSampler<'_> {
             ));
         }
     }
-}
-
-/// The direction at cone angle `phi` from the 0-face (towards its outside) on the Keller cone of
-/// a wave along `ki` at `w`: the angle to the edge kept, continuing forward along it.
-fn keller_cone(w: &Wedge, ki: DVec3, phi: f64) -> DVec3 {
-    let t0 = w.n0.cross(w.e).normalize();
-    let along = ki.dot(w.e);
-    let e_fwd = if along > 0.0 { w.e } else { -w.e };
-    let cos_b = along.abs().min(1.0);
-    let sin_b = (1.0 - cos_b * cos_b).sqrt();
-    (w.n0 * (phi.sin() * sin_b) + t0 * (phi.cos() * sin_b) + e_fwd * cos_b).normalize()
 }
 
 /// Where the ray `o + t d` first meets a surface that is not foliage before `t_max` (infinity

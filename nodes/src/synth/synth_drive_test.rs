@@ -50,7 +50,8 @@ pub struct SynthDriveTestParams {
 pub struct TruthOptions {
     /// Most interactions (reflections + transmissions) along one path. Default 3.
     pub max_depth: u32,
-    /// First-order UTD diffraction at convex edges. Default true.
+    /// UTD diffraction at convex edges, one edge a path, chained with reflections before and
+    /// after it up to the depth. Default true.
     pub diffraction: bool,
     /// Diffuse reflection off the last surface. Default false: its cost grows with the number of
     /// receivers.
@@ -128,7 +129,8 @@ impl Stage for SynthDriveTest {
     // 6: a wedge's 0-face is the face the wave lights (rf::diffraction::Wedge::facing).
     // 7: wedges from the faces' geometry, not the mesh's winding (rf::diffraction::wedges).
     // 8: UTD face factors at any incidence, in rotated bases (rf::diffraction).
-    const VERSION: u32 = 8;
+    // 9: diffraction chained with reflections before and after the edge (rf::diffracted).
+    const VERSION: u32 = 9;
     const DOC: &'static str = "drive-test measurements traced through the ground truth (richer settings) plus log-normal shadowing";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),

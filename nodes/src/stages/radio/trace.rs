@@ -42,7 +42,8 @@ pub struct LinkOptions {
     pub reflection: bool,
     /// Transmission through surfaces as thin slabs (P.2040). Default true.
     pub transmission: bool,
-    /// First-order UTD diffraction at convex edges. Default false.
+    /// UTD diffraction at convex edges, one edge a path, chained with reflections before and
+    /// after it up to the depth (as Sionna RT 2.2). Default false.
     pub diffraction: bool,
     /// Diffuse reflection off the last surface (effective roughness). Default false.
     pub diffuse: bool,
@@ -107,7 +108,8 @@ impl Stage for Trace {
     // 6: a wedge's 0-face is the face the wave lights (rf::diffraction::Wedge::facing).
     // 7: wedges from the faces' geometry, not the mesh's winding (rf::diffraction::wedges).
     // 8: UTD face factors at any incidence, in rotated bases (rf::diffraction).
-    const VERSION: u32 = 8;
+    // 9: diffraction chained with reflections before and after the edge (rf::diffracted).
+    const VERSION: u32 = 9;
     const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
@@ -235,6 +237,10 @@ mod tests {
             },
             LinkOptions {
                 foliage_db_per_m: Some(f64::NAN),
+                ..Default::default()
+            },
+            LinkOptions {
+                max_depth: 33,
                 ..Default::default()
             },
         ] {
