@@ -50,6 +50,10 @@ pub struct Interactions {
     /// Diffract only at edges where the faces turn by at least this many degrees (0-90).
     #[arg(long, default_value_t = 0.0)]
     min_wedge_deg: f64,
+    /// Diffract only at edges within one shape of the scene file, as Sionna RT 2.2 does (by
+    /// default also where two shapes meet, e.g. a wall's top against a separate roof).
+    #[arg(long)]
+    wedges_within_shapes: bool,
     /// Diffuse reflection (effective roughness, Lambertian; last bounce only for links).
     #[arg(long)]
     diffuse: bool,
@@ -76,6 +80,7 @@ impl Interactions {
             scattering_coefficient: self.scattering_coefficient,
             rays: self.rays,
             min_wedge_deg: self.min_wedge_deg,
+            wedges_across_objects: !self.wedges_within_shapes,
             ..Default::default()
         }
     }

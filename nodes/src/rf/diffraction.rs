@@ -87,8 +87,9 @@ impl Wedge {
 /// orients them: whichever way the mesh winds its triangles (Sionna's own scenes wind their
 /// buildings inwards), a solid's corner is a wedge whose outside is the air. At a corner where the
 /// air is the narrow side (an inner corner), the wedge's outside is the solid and no wave from the
-/// air diffracts there ([`Wedge::lit_from`]).
-pub fn wedges(scene: &RfScene, min_deg: f64) -> Vec<Wedge> {
+/// air diffracts there ([`Wedge::lit_from`]). Without `across_objects`, only edges whose two
+/// triangles belong to one object (as Sionna RT 2.2 finds them, within a shape).
+pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool) -> Vec<Wedge> {
     let max_cos = (1.0 - 1e-6f64).min(min_deg.to_radians().cos());
     let key = |p: DVec3| [p.x, p.y, p.z].map(|c| (c * 1e6).round() as i64);
     // Edge (by its ends' quantised positions) -> the triangles on it, with the edge's ends.
@@ -119,6 +120,9 @@ pub fn wedges(scene: &RfScene, min_deg: f64) -> Vec<Wedge> {
         }
         let (t0, a, b) = faces[0];
         let t1 = faces[1].0;
+        if !across_objects && scene.object[t0 as usize] != scene.object[t1 as usize] {
+            continue;
+        }
         let third = |t: u32| {
             scene.tris[t as usize]
                 .iter()

@@ -54,6 +54,10 @@ pub struct TraceOptions {
     /// in [0, 90]: a faceted terrain or dome bends by fractions of a degree between facets, and
     /// a wedge there is an artefact of the mesh, not an edge. Default 0 (every convex edge).
     pub min_wedge_deg: f64,
+    /// Diffraction also at edges where two objects meet (a wall's top edge against a separate
+    /// roof). Sionna RT 2.2 finds a wedge's second face only within one shape; false diffracts
+    /// as it does, to compare with it. Default true.
+    pub wedges_across_objects: bool,
 }
 
 impl Default for TraceOptions {
@@ -70,6 +74,7 @@ impl Default for TraceOptions {
             rays: 1_000_000,
             foliage_db_per_m: None,
             min_wedge_deg: 0.0,
+            wedges_across_objects: true,
         }
     }
 }
@@ -222,7 +227,7 @@ pub fn trace_links(
             .expect("every tx was listed")
     };
     let all_wedges = if opt.diffraction && opt.max_depth > 0 {
-        super::diffraction::wedges(scene, opt.min_wedge_deg)
+        super::diffraction::wedges(scene, opt.min_wedge_deg, opt.wedges_across_objects)
     } else {
         Vec::new()
     };

@@ -203,7 +203,7 @@ pub fn radio_map(
     if diffraction {
         seen.sort_unstable();
         seen.dedup();
-        let wedges = lit_wedges(scene, opt.min_wedge_deg, &seen, tx);
+        let wedges = lit_wedges(scene, opt, &seen, tx);
         let sampler = EdgeSampler {
             scene,
             tx,

@@ -21,6 +21,7 @@ use super::antenna::Antenna;
 use super::diffraction::{Wedge, diffracted_field, keller_cone, wedges};
 use super::field;
 use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
+use super::paths::TraceOptions;
 use super::radiomap::{Crossing, MapPlane};
 use super::scene::RfScene;
 
@@ -43,10 +44,15 @@ pub(super) struct EdgeSampler<'a> {
     pub foliage: (FoliageDepth, f64),
 }
 
-/// The wedges (turning by at least `min_deg`) that can diffract the wave from `tx`, whose rays
-/// first land on the sorted triangles `seen` ([`Wedge::diffracts_from`]).
-pub(super) fn lit_wedges(scene: &RfScene, min_deg: f64, seen: &[u32], tx: DVec3) -> Vec<Wedge> {
-    wedges(scene, min_deg)
+/// The wedges (those `opt` allows) that can diffract the wave from `tx`, whose rays first land
+/// on the sorted triangles `seen` ([`Wedge::diffracts_from`]).
+pub(super) fn lit_wedges(
+    scene: &RfScene,
+    opt: &TraceOptions,
+    seen: &[u32],
+    tx: DVec3,
+) -> Vec<Wedge> {
+    wedges(scene, opt.min_wedge_deg, opt.wedges_across_objects)
         .into_iter()
         .filter(|w| w.diffracts_from(tx, |t| seen.binary_search(&t).is_ok()))
         .collect()

@@ -36,6 +36,8 @@ pub struct RfScene {
     pub normals: Vec<DVec3>,
     /// Material per triangle.
     pub material: Vec<Material>,
+    /// The index of the scene object each triangle comes from.
+    pub object: Vec<u32>,
     eta: Vec<Option<C64>>,
     /// Slab thickness per material (index = discriminant), metres.
     thickness: Vec<f64>,
@@ -55,9 +57,10 @@ impl RfScene {
             return Err(format!("frequency {freq_hz} Hz is not a positive number"));
         }
         let (mut tris, mut normals, mut material) = (Vec::new(), Vec::new(), Vec::new());
+        let mut object = Vec::new();
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
-        for obj in &scene.objects {
+        for (o, obj) in scene.objects.iter().enumerate() {
             let p = &obj.mesh.positions;
             for (k, t) in obj.mesh.triangles.iter().enumerate() {
                 let v = t.map(|i| DVec3::from(p[i as usize].map(f64::from)));
@@ -66,6 +69,7 @@ impl RfScene {
                     hi = hi.max(q);
                 }
                 tris.push(v);
+                object.push(o as u32);
                 normals.push((v[1] - v[0]).cross(v[2] - v[0]).normalize_or_zero());
                 let m = obj
                     .mesh
@@ -92,6 +96,7 @@ impl RfScene {
             normals,
             foliage: material.contains(&Material::Foliage),
             material,
+            object,
             eta,
             thickness: Material::ALL.iter().map(|m| m.slab_thickness_m()).collect(),
             wavelength: super::wavelength(freq_hz),

@@ -99,6 +99,7 @@ impl TruthOptions {
             rays: self.rays,
             foliage_db_per_m: self.foliage_db_per_m,
             min_wedge_deg: self.min_wedge_deg,
+            wedges_across_objects: true,
         }
     }
 }

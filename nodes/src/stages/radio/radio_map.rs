@@ -102,6 +102,7 @@ impl MapOptions {
             rays: self.rays,
             foliage_db_per_m: self.foliage_db_per_m,
             min_wedge_deg: self.min_wedge_deg,
+            wedges_across_objects: true,
         }
     }
 }

@@ -94,6 +94,7 @@ impl LinkOptions {
             rays: self.rays,
             foliage_db_per_m: self.foliage_db_per_m,
             min_wedge_deg: self.min_wedge_deg,
+            wedges_across_objects: true,
         }
     }
 }
