@@ -11,7 +11,7 @@ use super::diffraction::{diffracted_field, diffraction_point};
 use super::diffraction_search::DiffractionSequence;
 use super::field::{self, CVec};
 use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
-use super::image_method::{image_points, images_of};
+use super::image_method::{image_points, images_of, mirrored};
 use super::path_field::specular;
 use super::paths::{Interaction, InteractionKind, Path, Tracer};
 use super::scene::EPS;
@@ -48,10 +48,11 @@ fn diffracted_path(
     let w = &c.wedge;
     let source = c.pre_images.last().copied().unwrap_or(tx);
     // The receiver mirrored in the surfaces after the edge, the last one first.
-    let sink = c.post.iter().rev().fold(rx, |p, &tri| {
-        let (n, a) = (scene.normals[tri as usize], scene.tris[tri as usize][0]);
-        p - 2.0 * (p - a).dot(n) * n
-    });
+    let sink = c
+        .post
+        .iter()
+        .rev()
+        .fold(rx, |p, &tri| mirrored(scene, p, tri));
     let q = w.a + w.e * diffraction_point(w, source, sink)?;
     let before = if c.pre.is_empty() {
         vec![tx, q]

@@ -12,12 +12,16 @@ pub fn images_of(scene: &RfScene, tx: DVec3, seq: &[u32]) -> Vec<DVec3> {
     let mut images = Vec::with_capacity(seq.len());
     let mut img = tx;
     for &t in seq {
-        let n = scene.normals[t as usize];
-        let q = scene.tris[t as usize][0];
-        img -= 2.0 * (img - q).dot(n) * n;
+        img = mirrored(scene, img, t);
         images.push(img);
     }
     images
+}
+
+/// `p` mirrored in the plane of triangle `t`.
+pub fn mirrored(scene: &RfScene, p: DVec3, t: u32) -> DVec3 {
+    let (n, q) = (scene.normals[t as usize], scene.tris[t as usize][0]);
+    p - 2.0 * (p - q).dot(n) * n
 }
 
 /// The path `tx`, reflection points, `rx`: with the transmitter's `images` in the surfaces of
