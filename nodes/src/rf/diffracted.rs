@@ -64,28 +64,25 @@ fn diffracted_path(
     } else {
         image_points(scene, q, rx, &c.post, &images_of(scene, q, &c.post))?
     };
-    // Every leg clear (one any-hit query each), then the foliage along them.
-    let legs = || {
-        before.windows(2).chain(after.windows(2)).map(|leg| {
-            let eps = if leg[0] == q || leg[1] == q {
-                EDGE_EPS
-            } else {
-                EPS
-            };
-            (leg[0], leg[1], eps)
-        })
-    };
-    if legs().any(|(a, b, eps)| scene.blocked(a, b, eps)) {
-        return None;
-    }
+    // Every leg clear of surfaces (one any-hit query each without foliage), with the foliage
+    // along it.
     let (mut foliage_m, mut foliage) = (0.0, at_tx);
-    if scene.has_foliage() {
-        for (a, b, eps) in legs() {
-            let hits = scene.hits_between(a, b, eps);
-            let (inside, at_b) = foliage_length(scene, a, b, &hits, foliage);
-            foliage_m += inside;
-            foliage = at_b;
+    for leg in before.windows(2).chain(after.windows(2)) {
+        let (a, b) = (leg[0], leg[1]);
+        let eps = if a == q || b == q { EDGE_EPS } else { EPS };
+        if !scene.has_foliage() {
+            if scene.blocked(a, b, eps) {
+                return None;
+            }
+            continue;
         }
+        let hits = scene.hits_between(a, b, eps);
+        if hits.iter().any(|h| !scene.is_foliage(h.triangle)) {
+            return None;
+        }
+        let (inside, at_b) = foliage_length(scene, a, b, &hits, foliage);
+        foliage_m += inside;
+        foliage = at_b;
     }
     let mut interactions = Vec::with_capacity(c.pre.len() + 1 + c.post.len());
     let k0 = (before[1] - before[0]).normalize();
