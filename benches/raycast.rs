@@ -178,6 +178,86 @@ fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
             per_core(shadow.len(), any)
         );
     }
+    camera_case(&rays, tx, a);
+}
+
+/// A camera's rays: the six faces of a cube panorama of `size` x `size` pixels from `at`, each
+/// face's pixels in 8 x 8 tiles (the order views, orthophotos and the fusion cast in).
+fn panorama_rays(at: [f32; 3], size: u32) -> Vec<([f32; 3], [f32; 3])> {
+    let order = kodama_nodes::geom::raycast::tile_order(size, size);
+    let faces: [([f32; 3], [f32; 3], [f32; 3]); 6] = [
+        ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
+        ([-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]),
+        ([0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        ([0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        ([0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]),
+        ([0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]),
+    ];
+    let mut out = Vec::with_capacity(6 * order.len());
+    for (f, r, u) in faces {
+        for &p in &order {
+            let x = ((p % size) as f32 + 0.5) / size as f32 * 2.0 - 1.0;
+            let y = 1.0 - ((p / size) as f32 + 0.5) / size as f32 * 2.0;
+            let d = [0, 1, 2].map(|k| f[k] + x * r[k] + y * u[k]);
+            let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            out.push((at, d.map(|c| c / l)));
+        }
+    }
+    out
+}
+
+/// Closest hits of camera rays one by one and as packets ([`SceneRays::cast_coherent`]).
+fn camera_case(rays: &SceneRays, at: [f32; 3], a: &Args) {
+    for size in [512, 128, 32] {
+        camera_size_case(rays, at, size, a);
+    }
+}
+
+fn camera_size_case(rays: &SceneRays, at: [f32; 3], size: u32, a: &Args) {
+    let mut camera = panorama_rays(at, size);
+    // About 1.5 M rays whatever the size.
+    let copies = (1_572_864 / camera.len()).max(1);
+    camera = camera.repeat(copies);
+    for &threads in &a.threads {
+        // Alternated run by run: this machine's speed drifts for seconds at a time, and the
+        // ratio is what matters.
+        let (mut single, mut packets) = (f64::INFINITY, f64::INFINITY);
+        for _ in 0..a.n {
+            single = single.min(best_of(1, threads, || {
+                let hits: usize = camera
+                    .par_chunks(4096)
+                    .map(|c| {
+                        c.iter()
+                            .filter(|(o, d)| rays.cast(*o, *d, 1e-3, f32::INFINITY).is_some())
+                            .count()
+                    })
+                    .sum();
+                std::hint::black_box(hits);
+            }));
+            packets = packets.min(best_of(1, threads, || {
+                let hits: usize = camera
+                    .par_chunks(4096)
+                    .map(|c| {
+                        rays.cast_coherent(c, 1e-3, f32::INFINITY)
+                            .iter()
+                            .filter(|h| h.is_some())
+                            .count()
+                    })
+                    .sum();
+                std::hint::black_box(hits);
+            }));
+        }
+        let per_core = |s: f64| camera.len() as f64 / s / 1e6 / threads as f64;
+        println!(
+            "  {threads} thread(s), camera rays ({} from a cube panorama of {size} x {size} per face \
+             at {at:?}, 8 x 8 tiles of {:.1} degrees): one by one {:.1}, packets {:.1} M rays/s \
+             per core",
+            camera.len(),
+            8.0 * 90.0 / size as f64,
+            per_core(single),
+            per_core(packets)
+        );
+    }
 }
 
 fn synthetic_city() -> Scene {

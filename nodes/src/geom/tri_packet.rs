@@ -79,6 +79,11 @@ impl TriPacket {
         let below = u.lt(zero).or(v.lt(zero)).or(w.lt(zero));
         let above = u.gt(zero).or(v.gt(zero)).or(w.gt(zero));
         let det = u.add(v).add(w);
+        let miss = below.and(above).or(det.eq(zero));
+        // Most tests miss all four: skip the division (the slowest instruction here).
+        if on_edge == 0 && miss.bits() == (1 << LANES) - 1 {
+            return [f32::INFINITY; LANES];
+        }
         let t = u
             .mul(sz)
             .mul(az)
@@ -86,7 +91,6 @@ impl TriPacket {
             .add(w.mul(sz).mul(cz))
             .div(det);
         let inside = t.gt(F4::splat(ray.tmin)).and(t.lt(F4::splat(tmax)));
-        let miss = below.and(above).or(det.eq(zero));
         let mut out = inside
             .and_not(miss)
             .select(t, F4::splat(f32::INFINITY))

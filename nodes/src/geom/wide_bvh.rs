@@ -16,6 +16,9 @@ use obvhs::triangle::Triangle;
 use super::raycast::ShearedRay;
 use super::tri_packet::{LANES, TriPacket};
 
+mod packet;
+pub use packet::PACKET;
+
 /// Relative slack on a box's exit distance: the slab test and the triangle test round
 /// differently, and a box must never be culled for a triangle it holds.
 const PAD: f32 = 4.0 / (1 << 20) as f32;
@@ -64,6 +67,7 @@ struct Slabs {
 }
 
 impl Slabs {
+    #[inline(always)]
     fn new(o: Vec3A, d: Vec3A) -> Slabs {
         // A zero component would give inf * 0 = NaN on a box face through the origin; a tiny one
         // of the same sign keeps every distance finite and the box test exact in its sign.
@@ -662,6 +666,67 @@ mod tests {
         assert!(!bvh.uses_simd());
     }
 
+    /// Packets as casters make them: tiles of a camera's pixels (a shared origin, directions in
+    /// a narrow cone, some aimed at the grid's edges), parallel rays from a patch of a grid, and
+    /// scattered rays of one octant. Every ray's hit is the single-ray hit, on both paths.
+    #[test]
+    fn a_packet_gives_each_ray_its_own_hit() {
+        let tris = messy_triangles();
+        let bvh = build(&tris);
+        let mut scalar = build(&tris);
+        scalar.force_scalar();
+        let mut s = 5u64;
+        let mut checked = 0;
+        for case in 0..600 {
+            let centre = Vec3A::new(
+                u(&mut s) * 60.0 - 30.0,
+                u(&mut s) * 60.0 - 30.0,
+                u(&mut s) * 60.0 - 30.0,
+            );
+            let axis = Vec3A::new(u(&mut s) - 0.5, u(&mut s) - 0.5, u(&mut s) - 0.5)
+                .normalize_or(Vec3A::Z);
+            let spread = [0.002, 0.05, 0.5][case % 3];
+            let n = 1 + (u(&mut s) * PACKET as f32) as usize % PACKET;
+            let mut rays: Vec<(Vec3A, Vec3A)> = (0..n)
+                .map(|i| {
+                    let jitter =
+                        Vec3A::new(u(&mut s) - 0.5, u(&mut s) - 0.5, u(&mut s) - 0.5) * spread;
+                    match case % 4 {
+                        // A camera: one origin, a cone of directions, every fifth at a vertex.
+                        0 | 1 if i % 5 == 0 => {
+                            let target = (centre + axis * 20.0 + jitter * 40.0).round();
+                            (centre, (target - centre).normalize())
+                        }
+                        0 | 1 => (centre, (axis + jitter).normalize()),
+                        // A grid of parallel rays.
+                        2 => (centre + jitter * 20.0, axis),
+                        _ => (centre + jitter * 80.0, (axis + jitter * 2.0).normalize()),
+                    }
+                })
+                .collect();
+            // One octant per packet, as `SceneRays::cast_coherent` splits them.
+            let sign = |d: Vec3A| d.to_array().map(|c| (c + 0.0).is_sign_negative());
+            let first = sign(rays[0].1);
+            rays.retain(|r| sign(r.1) == first);
+            let (o, d): (Vec<Vec3A>, Vec<Vec3A>) = rays.iter().copied().unzip();
+            for (tmin, tmax) in [(0.0, f32::INFINITY), (1e-3, 7.5)] {
+                for b in [&bvh, &scalar] {
+                    let mut out = vec![None; o.len()];
+                    b.closest_packet(&o, &d, tmin, tmax, &mut out);
+                    for (k, got) in out.iter().enumerate() {
+                        assert_eq!(
+                            *got,
+                            b.closest(o[k], d[k], tmin, tmax),
+                            "case {case} ray {k}"
+                        );
+                        checked += got.is_some() as usize;
+                    }
+                }
+            }
+        }
+        assert!(checked > 10_000, "{checked} hits");
+    }
+
     #[test]
     fn empty_and_single_triangle_scenes() {
         let none = WideBvh::empty();
@@ -715,5 +780,63 @@ mod tests {
             hits += a.is_some() as usize;
         }
         assert!(hits > 10_000, "{hits} hits");
+
+        // A camera at the transmitter, its pixels cast in tiles, and a grid of rays looking
+        // down: the packets' hits are the single rays'.
+        let (w, h) = (96u32, 64u32);
+        let origin = [8.5f32, 21.0, 27.0];
+        let mut rays = Vec::new();
+        for p in crate::geom::raycast::tile_order(w, h) {
+            let (u, v) = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
+            let d = Vec3A::new(u / w as f32 * 2.0 - 1.0, 1.0, 0.3 - v / h as f32 * 1.2);
+            rays.push((origin, d.normalize().to_array()));
+        }
+        for p in crate::geom::raycast::tile_order(w, h) {
+            let (x, y) = ((p % w) as f32 * 3.1 - 150.0, (p / w) as f32 * 3.1 - 100.0);
+            rays.push(([x, y, 200.0], [0.0, 0.0, -1.0]));
+        }
+        for b in [&fast, &slow] {
+            let got = b.cast_coherent(&rays, 1e-3, f32::INFINITY);
+            for ((o, d), g) in rays.iter().zip(&got) {
+                assert_eq!(*g, b.cast(*o, *d, 1e-3, f32::INFINITY));
+            }
+            assert!(got.iter().filter(|h| h.is_some()).count() > 6_000);
+        }
+    }
+
+    /// `cast_coherent` splits a run across octants and casts the non-finite alone.
+    #[test]
+    fn cast_coherent_is_cast_for_any_run() {
+        let tris = messy_triangles();
+        let n = tris.len() as u32;
+        let scene = Scene {
+            objects: vec![crate::artifact::SceneObject {
+                id: "messy".into(),
+                class: crate::artifact::ObjectClass::Unsegmented,
+                mesh: crate::artifact::Mesh {
+                    positions: tris
+                        .iter()
+                        .flat_map(|t| [t.v0.to_array(), t.v1.to_array(), t.v2.to_array()])
+                        .collect::<Vec<_>>()
+                        .into(),
+                    triangles: (0..n)
+                        .map(|k| [3 * k, 3 * k + 1, 3 * k + 2])
+                        .collect::<Vec<_>>()
+                        .into(),
+                    materials: vec![0u8; n as usize].into(),
+                },
+            }],
+        };
+        let rays_ = SceneRays::new(&scene);
+        let mut list: Vec<([f32; 3], [f32; 3])> = rays(5_000, 9, 60.0)
+            .into_iter()
+            .map(|(o, d)| (o.to_array(), d.to_array()))
+            .collect();
+        list.push(([0.0; 3], [f32::NAN, 0.0, 1.0]));
+        list.push(([0.0; 3], [-0.0, -0.0, 1.0]));
+        let got = rays_.cast_coherent(&list, 1e-3, 100.0);
+        for ((o, d), g) in list.iter().zip(&got) {
+            assert_eq!(*g, rays_.cast(*o, *d, 1e-3, 100.0));
+        }
     }
 }
