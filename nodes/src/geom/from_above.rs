@@ -61,7 +61,58 @@ pub fn down(
     top: f32,
     keep: &dyn Fn(ObjectClass) -> bool,
 ) -> Option<Hit> {
-    let mut tmin = 0.0f32;
+    down_from(rays, scene, x, y, top, 0.0, keep)
+}
+
+/// Rows this many at a time make the 8 x 8 tiles [`down_rows`] casts as packets.
+pub const BAND_ROWS: usize = 8;
+
+/// [`down`] at the centre of every cell of `rows` rows of `grid` from row `first`, row-major.
+/// The first casts go in 8 x 8 tiles of parallel rays (packets); a cell whose first surface is
+/// of a class not kept goes on alone, as [`down`] does.
+pub fn down_rows(
+    rays: &SceneRays,
+    scene: &Scene,
+    grid: &Grid,
+    first: u32,
+    rows: u32,
+    top: f32,
+    keep: &dyn Fn(ObjectClass) -> bool,
+) -> Vec<Option<Hit>> {
+    let origin = |col: u32, row: u32| {
+        let (x, y) = grid.center(col, first + row);
+        [x as f32, y as f32, top]
+    };
+    let hits = rays.cast_grid(
+        grid.width,
+        rows,
+        |c, r| (origin(c, r), [0.0, 0.0, -1.0]),
+        0.0,
+        f32::INFINITY,
+    );
+    hits.into_iter()
+        .enumerate()
+        .map(|(i, h)| {
+            let h = h?;
+            if keep(scene.objects[h.object].class) {
+                return Some(h);
+            }
+            let (col, row) = (i as u32 % grid.width, i as u32 / grid.width);
+            let (x, y) = grid.center(col, first + row);
+            down_from(rays, scene, x, y, top, h.t + 1e-3, keep)
+        })
+        .collect()
+}
+
+fn down_from(
+    rays: &SceneRays,
+    scene: &Scene,
+    x: f64,
+    y: f64,
+    top: f32,
+    mut tmin: f32,
+    keep: &dyn Fn(ObjectClass) -> bool,
+) -> Option<Hit> {
     loop {
         let h = rays.cast(
             [x as f32, y as f32, top],

@@ -359,11 +359,29 @@ fn view_deposits(
     let cos_max = p.theta_max_deg.to_radians().cos();
     let pixel_weight = (s * s) as f64;
     let origin = view.pose.position.map(|c| c as f32);
-    for y in (s / 2..view.height).step_by(s as usize) {
-        for x in (s / 2..view.width).step_by(s as usize) {
+    // The pixels the stride keeps, as a grid cast in tiles.
+    let (gw, gh) = (
+        (view.width.saturating_sub(s / 2)).div_ceil(s),
+        (view.height.saturating_sub(s / 2)).div_ceil(s),
+    );
+    let pixel = |gx: u32, gy: u32| (s / 2 + gx * s, s / 2 + gy * s);
+    let ray = |gx: u32, gy: u32| {
+        let (x, y) = pixel(gx, gy);
+        view.pixel_ray(x as f64 + 0.5, y as f64 + 0.5).0
+    };
+    let hits = rays.cast_grid(
+        gw,
+        gh,
+        |gx, gy| (origin, ray(gx, gy).map(|c| c as f32)),
+        1e-3,
+        5000.0,
+    );
+    for gy in 0..gh {
+        for gx in 0..gw {
+            let (x, y) = pixel(gx, gy);
             out.stats.rays += 1;
-            let (d, _) = view.pixel_ray(x as f64 + 0.5, y as f64 + 0.5);
-            let Some(hit) = rays.cast(origin, d.map(|c| c as f32), 1e-3, 5000.0) else {
+            let d = ray(gx, gy);
+            let Some(hit) = hits[(gy * gw + gx) as usize] else {
                 continue;
             };
             let Some(ci) = lookup.chart(hit.object, hit.triangle) else {

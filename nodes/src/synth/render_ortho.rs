@@ -4,8 +4,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Ortho, PodVec, Scene};
-use crate::geom::from_above::{down, scene_grid, top_z};
-use crate::geom::raycast::SceneRays;
+use crate::geom::from_above::{BAND_ROWS, down_rows, scene_grid, top_z};
+use crate::geom::raycast::{Hit, SceneRays, tile_order};
 use crate::io::export::material_color;
 use crate::rf::materials::Material;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
@@ -81,15 +81,26 @@ impl Stage for RenderOrtho {
         let w = grid.width as usize;
         let mut rgb = vec![[0u8; 3]; grid.len()];
         let mut valid = vec![0u8; grid.len()];
-        rgb.par_chunks_mut(w)
-            .zip(valid.par_chunks_mut(w))
+        rgb.par_chunks_mut(w * BAND_ROWS)
+            .zip(valid.par_chunks_mut(w * BAND_ROWS))
             .enumerate()
-            .for_each(|(row, (px, ok))| {
-                for col in 0..w {
-                    let (x, y) = grid.center(col as u32, row as u32);
-                    let Some(h) = down(&rays, scene, x, y, top, &|_| true) else {
-                        continue;
-                    };
+            .for_each(|(band, (px, ok))| {
+                let rows = (px.len() / w) as u32;
+                let first = (band * BAND_ROWS) as u32;
+                let hits = down_rows(&rays, scene, &grid, first, rows, top, &|_| true);
+                // The shadow rays run parallel from nearby points: packets too, in tiles.
+                let order = tile_order(grid.width, rows);
+                let lit: Vec<(usize, Hit, [f32; 3])> = order
+                    .iter()
+                    .filter_map(|&i| {
+                        let h = hits[i as usize]?;
+                        let (x, y) = grid.center(i % grid.width, first + i / grid.width);
+                        Some((i as usize, h, [x as f32, y as f32, top - h.t + 0.05]))
+                    })
+                    .collect();
+                let shadow_rays: Vec<_> = lit.iter().map(|&(_, _, p0)| (p0, sun)).collect();
+                let shadows = rays.cast_coherent(&shadow_rays, 1e-2, f32::INFINITY);
+                for (&(i, h, _), shadow) in lit.iter().zip(shadows) {
                     let m = scene.objects[h.object]
                         .mesh
                         .materials
@@ -99,15 +110,12 @@ impl Stage for RenderOrtho {
                         .unwrap_or(Material::Concrete);
                     let n = h.normal;
                     let lambert = (n[0] * sun[0] + n[1] * sun[1] + n[2] * sun[2]).max(0.0);
-                    let p0 = [x as f32, y as f32, top - h.t + 0.05];
-                    let shadowed = rays.cast(p0, sun, 1e-2, f32::INFINITY).is_some();
-                    let light = 0.35 + 0.65 * if shadowed { 0.0 } else { lambert };
+                    let light = 0.35 + 0.65 * if shadow.is_some() { 0.0 } else { lambert };
                     let c = material_color(m);
-                    px[col] =
-                        c.map(|v| (255.0 * (v * light).clamp(0.0, 1.0).powf(1.0 / 2.2)) as u8);
-                    ok[col] = 1;
+                    px[i] = c.map(|v| (255.0 * (v * light).clamp(0.0, 1.0).powf(1.0 / 2.2)) as u8);
+                    ok[i] = 1;
                 }
-                ctx.progress.advance(1);
+                ctx.progress.advance(rows as u64);
             });
         Ok(Ortho {
             grid,

@@ -294,17 +294,27 @@ fn render(
     let seed = mix(p.seed ^ mix(k as u64));
     let sun = [0.35f64, -0.45, 0.82];
     let origin = pose.position.map(|v| v as f32);
+    let ray = |u: u32, v: u32| {
+        let cam = [
+            (u as f64 + 0.5 - intrinsics.cx) / f,
+            (v as f64 + 0.5 - intrinsics.cy) / f,
+            1.0,
+        ];
+        let norm = (cam[0] * cam[0] + cam[1] * cam[1] + 1.0).sqrt();
+        (pose.to_site(cam.map(|c| c / norm)), norm)
+    };
+    let hits = rays.cast_grid(
+        w,
+        h,
+        |u, v| (origin, ray(u, v).0.map(|d| d as f32)),
+        1e-3,
+        2000.0,
+    );
     for v in 0..h {
         for u in 0..w {
             let i = (v * w + u) as usize;
-            let cam = [
-                (u as f64 + 0.5 - intrinsics.cx) / f,
-                (v as f64 + 0.5 - intrinsics.cy) / f,
-                1.0,
-            ];
-            let norm = (cam[0] * cam[0] + cam[1] * cam[1] + 1.0).sqrt();
-            let dir = pose.to_site(cam.map(|c| c / norm));
-            let Some(hit) = rays.cast(origin, dir.map(|d| d as f32), 1e-3, 2000.0) else {
+            let (dir, norm) = ray(u, v);
+            let Some(hit) = hits[i] else {
                 image[i] = [150, 185, 225];
                 material[i] = rmsnet_index("sky");
                 continue;

@@ -5,7 +5,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, ObjectClass, PodVec, Raster, Scene};
-use crate::geom::from_above::{down, scene_grid, top_z};
+use crate::geom::from_above::{BAND_ROWS, down_rows, scene_grid, top_z};
 use crate::geom::raycast::SceneRays;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -52,15 +52,19 @@ impl Stage for RasterizeScene {
         ctx.progress.set_total(grid.height as u64);
         let w = grid.width as usize;
         let mut data = vec![f32::NAN; grid.len()];
-        data.par_chunks_mut(w).enumerate().for_each(|(row, out)| {
-            for (col, z) in out.iter_mut().enumerate() {
-                let (x, y) = grid.center(col as u32, row as u32);
-                if let Some(h) = down(&rays, scene, x, y, top, &keep) {
-                    *z = top - h.t;
+        data.par_chunks_mut(w * BAND_ROWS)
+            .enumerate()
+            .for_each(|(band, out)| {
+                let rows = (out.len() / w) as u32;
+                let first = (band * BAND_ROWS) as u32;
+                let hits = down_rows(&rays, scene, &grid, first, rows, top, &keep);
+                for (z, h) in out.iter_mut().zip(hits) {
+                    if let Some(h) = h {
+                        *z = top - h.t;
+                    }
                 }
-            }
-            ctx.progress.advance(1);
-        });
+                ctx.progress.advance(rows as u64);
+            });
         Ok(Raster {
             grid,
             data: PodVec(data),
