@@ -156,6 +156,11 @@ impl BuildingSpec {
     /// The truth for scoring what views and fusion find on a façade.
     pub fn feature_at(&self, p: [f64; 3], slack_m: f64) -> Option<usize> {
         self.features.iter().position(|f| {
+            // Most features are on other storeys: the height test first, before the edge's
+            // frame (views ask this of every building pixel).
+            if !(p[2] >= f.z.0 - slack_m && p[2] <= f.z.1 + slack_m) {
+                return false;
+            }
             let ring = if f.ring == 0 {
                 &self.footprint.exterior
             } else {
@@ -184,8 +189,6 @@ impl BuildingSpec {
             };
             along >= f.along.0 - slack_m
                 && along <= f.along.1 + slack_m
-                && p[2] >= f.z.0 - slack_m
-                && p[2] <= f.z.1 + slack_m
                 && inward >= lo - slack_m
                 && inward <= hi + slack_m
         })

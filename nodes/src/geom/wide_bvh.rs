@@ -368,10 +368,31 @@ fn closest<L: Lanes>(
     tmax: f32,
     stack: &mut [MaybeUninit<Entry>],
 ) -> Option<WideHit> {
-    let (mut best_t, mut best_p) = (tmax, u32::MAX);
+    let (best_t, best_p) =
+        closest_from::<L>(bvh, ray, slabs, tmin, tmax, stack, 0, (tmax, u32::MAX));
+    (best_p != u32::MAX).then_some(WideHit {
+        t: best_t,
+        prim: best_p,
+    })
+}
+
+/// The closest hit under inner node `start`, given the best (distance, triangle) found so far
+/// (`u32::MAX`: none): the smaller of the two by the same rule.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn closest_from<L: Lanes>(
+    bvh: &WideBvh,
+    ray: &ShearedRay,
+    slabs: &Slabs,
+    tmin: f32,
+    tmax: f32,
+    stack: &mut [MaybeUninit<Entry>],
+    start: u32,
+    (mut best_t, mut best_p): (f32, u32),
+) -> (f32, u32) {
     let mut top = 0usize;
     let mut cur = Entry {
-        index: 0,
+        index: start,
         count: 0,
         near: tmin,
     };
@@ -452,10 +473,7 @@ fn closest<L: Lanes>(
         // SAFETY: entries below `top` were written by the pushes above.
         cur = unsafe { stack[top].assume_init() };
     }
-    (best_p != u32::MAX).then_some(WideHit {
-        t: best_t,
-        prim: best_p,
-    })
+    (best_t, best_p)
 }
 
 #[inline(always)]
@@ -788,7 +806,8 @@ mod tests {
         let mut rays = Vec::new();
         for p in crate::geom::raycast::tile_order(w, h) {
             let (u, v) = ((p % w) as f32 + 0.5, (p / w) as f32 + 0.5);
-            let d = Vec3A::new(u / w as f32 * 2.0 - 1.0, 1.0, 0.3 - v / h as f32 * 1.2);
+            // A narrow lens: tiles of about 1.4 degrees, within what `cast_coherent` packs.
+            let d = Vec3A::new((u / w as f32 - 0.5) * 0.3, 1.0, 0.1 - v / h as f32 * 0.2);
             rays.push((origin, d.normalize().to_array()));
         }
         for p in crate::geom::raycast::tile_order(w, h) {
@@ -800,7 +819,7 @@ mod tests {
             for ((o, d), g) in rays.iter().zip(&got) {
                 assert_eq!(*g, b.cast(*o, *d, 1e-3, f32::INFINITY));
             }
-            assert!(got.iter().filter(|h| h.is_some()).count() > 6_000);
+            assert!(got.iter().filter(|h| h.is_some()).count() > 5_000);
         }
     }
 

@@ -40,16 +40,13 @@ impl Consensus {
         let turn = yaw.sin_cos();
         let mut cells = Pool::new();
         let (_, fine_stride) = strides(view, p);
-        let (dirs, facades): (Vec<[f64; 3]>, Vec<Facade>) = samples(view, fine_stride, None, p)
-            .into_iter()
-            .filter(|smp| smp.facade != Facade::None)
-            .map(|smp| (turned_dir(smp.dir, turn), smp.facade))
-            .unzip();
-        let rays: Vec<([f32; 3], [f32; 3])> =
-            dirs.iter().map(|d| (origin, d.map(|c| c as f32))).collect();
-        let hits = twin.rays.cast_coherent_index(&rays, 1e-3, twin.max_range);
-        for ((d, facade), hit) in dirs.iter().zip(facades).zip(hits) {
-            let Some((t, prim)) = hit else {
+        for smp in samples(view, fine_stride, None, p) {
+            if smp.facade == Facade::None {
+                continue;
+            }
+            let d = turned_dir(smp.dir, turn);
+            let dir = d.map(|c| c as f32);
+            let Some((t, prim)) = twin.rays.cast_index(origin, dir, 1e-3, twin.max_range) else {
                 continue;
             };
             if twin.shown_by_triangle[prim as usize].rendered != Rendered::Building {
@@ -57,7 +54,7 @@ impl Consensus {
             }
             let at = std::array::from_fn(|k| position[k] + d[k] * t as f64);
             let cell = cells.entry(Self::key(cell_m, at)).or_default();
-            cell[(facade == Facade::Wall) as usize] += 1;
+            cell[(smp.facade == Facade::Wall) as usize] += 1;
         }
         cells
     }

@@ -3,7 +3,6 @@
 //! edges between labels near which a small move changes the score.
 
 use crate::artifact::View;
-use crate::geom::raycast::tile_order;
 
 use super::RegistrationParams;
 
@@ -167,11 +166,8 @@ pub(super) fn samples(
     let cols = xs.len();
     let mut at = vec![u32::MAX; cols * ys.len()];
     let mut out: Vec<Sample> = Vec::new();
-    // In tiles of the lattice, so that neighbouring samples' rays form packets.
-    for cell in tile_order(cols as u32, ys.len() as u32) {
-        let (r, c) = (cell as usize / cols, cell as usize % cols);
-        {
-            let (x, y) = (xs[c], ys[r]);
+    for (r, &y) in ys.iter().enumerate() {
+        for (c, &x) in xs.iter().enumerate() {
             let px = (y * view.width + x) as usize;
             if keep.is_some_and(|k| !k[px]) {
                 continue;

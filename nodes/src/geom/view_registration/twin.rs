@@ -37,16 +37,12 @@ pub(super) fn score(
     let (s, c) = yaw.sin_cos();
     let origin = position.map(|v| v as f32);
     let (mut total, mut counted) = (0i64, 0i64);
-    // The samples come in tiles of the image: cast as packets.
-    let rays: Vec<([f32; 3], [f32; 3])> = samples
-        .iter()
-        .map(|smp| (origin, turned_dir(smp.dir, (s, c)).map(|v| v as f32)))
-        .collect();
-    let hits = twin.rays.cast_coherent_index(&rays, 1e-3, twin.max_range);
     let shown: Vec<Shown> = samples
         .iter()
-        .zip(rays.iter().zip(hits))
-        .map(|(smp, (&(_, dir), hit))| {
+        .map(|smp| {
+            let d = smp.dir;
+            let dir = turned_dir(d, (s, c)).map(|v| v as f32);
+            let hit = twin.rays.cast_index(origin, dir, 1e-3, twin.max_range);
             let sh = match hit {
                 None => Shown {
                     rendered: Rendered::Sky,

@@ -17,7 +17,7 @@ use std::mem::MaybeUninit;
 
 use glam::Vec3A;
 
-use super::{PAD, Slabs, WIDTH, WideBvh, WideHit, max, min};
+use super::{Lanes, PAD, Scalar, Slabs, WIDTH, WideBvh, WideHit, closest_from, max, min};
 use crate::geom::raycast::ShearedRay;
 
 /// The most rays in one packet.
@@ -39,7 +39,15 @@ struct Rays {
     o_hi: [f32; 3],
     inv_lo: [f32; 3],
     inv_hi: [f32; 3],
+    /// How far apart the rays may be at distance t: `spread * t + offset` metres (the widest
+    /// spread of a direction component, the widest spread of the origins).
+    spread: f32,
+    offset: f32,
 }
+
+/// A packet wider than this many times a node's box goes on ray by ray below it: most of its
+/// rays miss most of what the box holds, and the packet's bounds enter it all.
+const SPLIT_RATIO: f32 = 1.0;
 
 /// A stack entry: a child, the packet's lower bound on its entry distance, and for a leaf the
 /// node and slot holding its box.
@@ -89,7 +97,7 @@ impl WideBvh {
             // SAFETY: `simd` is only true when the CPU has AVX2.
             return unsafe { packet_avx2(self, origins, dirs, tmin, tmax, stack, out) };
         }
-        packet(self, origins, dirs, tmin, tmax, stack, out)
+        packet::<Scalar>(self, origins, dirs, tmin, tmax, stack, out)
     }
 }
 
@@ -109,7 +117,10 @@ impl Rays {
             o_hi: [f32::NEG_INFINITY; 3],
             inv_lo: [f32::INFINITY; 3],
             inv_hi: [f32::NEG_INFINITY; 3],
+            spread: 0.0,
+            offset: 0.0,
         };
+        let (mut d_lo, mut d_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
         // The intervals in registers: through the struct, each ray's update waited on the
         // last one's store.
         let (mut o_lo, mut o_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
@@ -124,6 +135,7 @@ impl Rays {
             let inv = Vec3A::from(s.inv);
             (o_lo, o_hi) = (o_lo.min(o), o_hi.max(o));
             (inv_lo, inv_hi) = (inv_lo.min(inv), inv_hi.max(inv));
+            (d_lo, d_hi) = (d_lo.min(d), d_hi.max(d));
             r.sheared[i].write(ShearedRay::new(o, d, tmin));
             r.best_t[g][l] = tmax;
         }
@@ -133,6 +145,8 @@ impl Rays {
         );
         (r.o_lo, r.o_hi) = (o_lo.to_array(), o_hi.to_array());
         (r.inv_lo, r.inv_hi) = (inv_lo.to_array(), inv_hi.to_array());
+        r.spread = (d_hi - d_lo).max_element();
+        r.offset = (o_hi - o_lo).max_element();
         r
     }
 
@@ -171,13 +185,13 @@ unsafe fn packet_avx2(
     stack: &mut [MaybeUninit<Entry>],
     out: &mut [Option<WideHit>],
 ) {
-    packet(bvh, origins, dirs, tmin, tmax, stack, out)
+    packet::<super::Avx2>(bvh, origins, dirs, tmin, tmax, stack, out)
 }
 
 /// The packet's set-up, traversal and hits, inlined into the AVX2 function so that the loops
 /// over lanes vectorise there.
 #[inline(always)]
-fn packet(
+fn packet<L: Lanes>(
     bvh: &WideBvh,
     origins: &[Vec3A],
     dirs: &[Vec3A],
@@ -187,8 +201,20 @@ fn packet(
     out: &mut [Option<WideHit>],
 ) {
     let mut rays = Rays::new(origins, dirs, tmin, tmax);
-    traverse(bvh, &mut rays, tmin, tmax, stack);
+    traverse::<L>(bvh, &mut rays, tmin, tmax, stack);
     rays.write(out);
+}
+
+/// Whether the packet, where it enters the box of inner node `e`, is wider than
+/// [`SPLIT_RATIO`] times the box.
+#[inline(always)]
+fn wider_than_box(bvh: &WideBvh, r: &Rays, e: &Entry) -> bool {
+    let parent = &bvh.nodes[e.parent as usize];
+    let i = e.slot as usize;
+    let size = (0..3)
+        .map(|a| parent.hi[a][i] - parent.lo[a][i])
+        .fold(0.0f32, max);
+    r.spread * e.near.max(0.0) + r.offset > SPLIT_RATIO * size
 }
 
 /// The packet's lower bound on each child's entry distance and a bit per child some ray may
@@ -247,7 +273,22 @@ fn leaf_rays(node: &super::Node, slot: usize, r: &Rays, g: usize, tmin: f32) -> 
 }
 
 #[inline(always)]
-fn traverse(bvh: &WideBvh, r: &mut Rays, tmin: f32, tmax: f32, stack: &mut [MaybeUninit<Entry>]) {
+fn traverse<L: Lanes>(
+    bvh: &WideBvh,
+    r: &mut Rays,
+    tmin: f32,
+    tmax: f32,
+    stack: &mut [MaybeUninit<Entry>],
+) {
+    // The stack of a ray going on alone below a node.
+    let mut small = [MaybeUninit::<super::Entry>::uninit(); 128];
+    let mut big = Vec::new();
+    let single: &mut [MaybeUninit<super::Entry>] = if bvh.stack_need <= small.len() {
+        &mut small
+    } else {
+        big.resize(bvh.stack_need, MaybeUninit::uninit());
+        &mut big
+    };
     let groups = r.n.div_ceil(GROUP);
     let mut far = tmax;
     let mut top = 0usize;
@@ -290,6 +331,25 @@ fn traverse(bvh: &WideBvh, r: &mut Rays, tmin: f32, tmax: f32, stack: &mut [Mayb
                 if changed {
                     far = r.far();
                 }
+            } else if cur.index != 0 && wider_than_box(bvh, r, &cur) {
+                for g in 0..groups {
+                    for l in 0..GROUP {
+                        if r.best_t[g][l] == f32::NEG_INFINITY {
+                            continue;
+                        }
+                        // SAFETY: as above, a live lane.
+                        let ray = unsafe { r.sheared[g * GROUP + l].assume_init_ref() };
+                        let slabs = Slabs {
+                            o: [0, 1, 2].map(|a| r.o[g][a][l]),
+                            inv: [0, 1, 2].map(|a| r.inv[g][a][l]),
+                        };
+                        let best = (r.best_t[g][l], r.best_p[g][l]);
+                        (r.best_t[g][l], r.best_p[g][l]) = closest_from::<L>(
+                            bvh, ray, &slabs, tmin, tmax, single, cur.index, best,
+                        );
+                    }
+                }
+                far = r.far();
             } else {
                 let node = &bvh.nodes[cur.index as usize];
                 let (mut mask, near) = frustum_boxes(node, r, tmin, far);
