@@ -239,13 +239,19 @@ fn frustum_boxes(node: &super::Node, r: &Rays, tmin: f32, far: f32) -> (u32, [f3
             tf[i] = min(tf[i], max(lo_max, hi_max));
         }
     }
+    (entered(&tn, &tf) & node.used, tn)
+}
+
+/// A bit per lane whose entry distance is within its (padded) exit distance.
+#[inline(always)]
+fn entered(tn: &[f32; 8], tf: &[f32; 8]) -> u32 {
     let mut mask = 0u32;
-    for i in 0..WIDTH {
+    for i in 0..8 {
         if tn[i] <= tf[i] + tf[i].abs() * PAD {
             mask |= 1 << i;
         }
     }
-    (mask & node.used, tn)
+    mask
 }
 
 /// A bit per ray of group `g` that enters child `slot` of `node` before its own best distance:
@@ -263,13 +269,7 @@ fn leaf_rays(node: &super::Node, slot: usize, r: &Rays, g: usize, tmin: f32) -> 
             tf[l] = min(tf[l], max(t1, t2));
         }
     }
-    let mut mask = 0u32;
-    for l in 0..GROUP {
-        if tn[l] <= tf[l] + tf[l].abs() * PAD {
-            mask |= 1 << l;
-        }
-    }
-    mask
+    entered(&tn, &tf)
 }
 
 #[inline(always)]
