@@ -365,14 +365,17 @@ fn view_deposits(
         (view.height.saturating_sub(s / 2)).div_ceil(s),
     );
     let pixel = |gx: u32, gy: u32| (s / 2 + gx * s, s / 2 + gy * s);
-    let ray = |gx: u32, gy: u32| {
-        let (x, y) = pixel(gx, gy);
-        view.pixel_ray(x as f64 + 0.5, y as f64 + 0.5).0
-    };
+    let dirs: Vec<[f64; 3]> = (0..gh)
+        .flat_map(|gy| (0..gw).map(move |gx| (gx, gy)))
+        .map(|(gx, gy)| {
+            let (x, y) = pixel(gx, gy);
+            view.pixel_ray(x as f64 + 0.5, y as f64 + 0.5).0
+        })
+        .collect();
     let hits = rays.cast_grid(
         gw,
         gh,
-        |gx, gy| (origin, ray(gx, gy).map(|c| c as f32)),
+        |gx, gy| (origin, dirs[(gy * gw + gx) as usize].map(|c| c as f32)),
         1e-3,
         5000.0,
     );
@@ -380,7 +383,7 @@ fn view_deposits(
         for gx in 0..gw {
             let (x, y) = pixel(gx, gy);
             out.stats.rays += 1;
-            let d = ray(gx, gy);
+            let d = dirs[(gy * gw + gx) as usize];
             let Some(hit) = hits[(gy * gw + gx) as usize] else {
                 continue;
             };

@@ -138,12 +138,14 @@ impl SceneRays {
 
     /// The closest hit of the ray from `origin` along the unit vector `dir` within (`tmin`, `tmax`).
     pub fn cast(&self, origin: [f32; 3], dir: [f32; 3], tmin: f32, tmax: f32) -> Option<Hit> {
-        // -0.0 and +0.0 must cast alike (computed directions carry either).
+        self.closest(origin, dir, tmin, tmax).map(|h| self.hit(h))
+    }
+
+    /// The BVH's closest hit. -0.0 and +0.0 must cast alike (computed directions carry either).
+    fn closest(&self, origin: [f32; 3], dir: [f32; 3], tmin: f32, tmax: f32) -> Option<WideHit> {
         let dir = dir.map(|c| c + 0.0);
-        let hit = self
-            .bvh
-            .closest(Vec3A::from(origin), Vec3A::from(dir), tmin, tmax)?;
-        Some(self.hit(hit))
+        self.bvh
+            .closest(Vec3A::from(origin), Vec3A::from(dir), tmin, tmax)
     }
 
     fn hit(&self, hit: WideHit) -> Hit {
@@ -250,11 +252,10 @@ impl SceneRays {
                 if o == 8 || run.len() < MIN_PACKET || !narrow(chunk, run) {
                     for &k in run {
                         let (origin, dir) = chunk[k as usize];
-                        let dir = dir.map(|c| c + 0.0);
-                        let h = self
-                            .bvh
-                            .closest(Vec3A::from(origin), Vec3A::from(dir), tmin, tmax);
-                        found(c * PACKET + k as usize, h);
+                        found(
+                            c * PACKET + k as usize,
+                            self.closest(origin, dir, tmin, tmax),
+                        );
                     }
                     continue;
                 }
@@ -282,11 +283,7 @@ impl SceneRays {
         tmin: f32,
         tmax: f32,
     ) -> Option<(f32, u32)> {
-        let dir = dir.map(|c| c + 0.0);
-        let hit = self
-            .bvh
-            .closest(Vec3A::from(origin), Vec3A::from(dir), tmin, tmax)?;
-        Some((hit.t, hit.prim))
+        self.closest(origin, dir, tmin, tmax).map(|h| (h.t, h.prim))
     }
 
     /// Whether any surface lies on the ray from `origin` along `dir` within (`tmin`, `tmax`):

@@ -303,17 +303,21 @@ fn render(
         let norm = (cam[0] * cam[0] + cam[1] * cam[1] + 1.0).sqrt();
         (pose.to_site(cam.map(|c| c / norm)), norm)
     };
+    let pixel_rays: Vec<([f64; 3], f64)> = (0..h)
+        .flat_map(|v| (0..w).map(move |u| (u, v)))
+        .map(|(u, v)| ray(u, v))
+        .collect();
     let hits = rays.cast_grid(
         w,
         h,
-        |u, v| (origin, ray(u, v).0.map(|d| d as f32)),
+        |u, v| (origin, pixel_rays[(v * w + u) as usize].0.map(|d| d as f32)),
         1e-3,
         2000.0,
     );
     for v in 0..h {
         for u in 0..w {
             let i = (v * w + u) as usize;
-            let (dir, norm) = ray(u, v);
+            let (dir, norm) = pixel_rays[i];
             let Some(hit) = hits[i] else {
                 image[i] = [150, 185, 225];
                 material[i] = rmsnet_index("sky");

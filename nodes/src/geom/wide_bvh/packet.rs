@@ -17,7 +17,9 @@ use std::mem::MaybeUninit;
 
 use glam::Vec3A;
 
-use super::{Lanes, PAD, Scalar, Slabs, WIDTH, WideBvh, WideHit, closest_from, max, min};
+use super::{
+    Lanes, PAD, Scalar, Slabs, WIDTH, WideBvh, WideHit, closest_from, max, min, with_stack,
+};
 use crate::geom::raycast::ShearedRay;
 
 /// The most rays in one packet.
@@ -48,6 +50,12 @@ struct Rays {
 /// A packet wider than this many times a node's box goes on ray by ray below it: most of its
 /// rays miss most of what the box holds, and the packet's bounds enter it all.
 const SPLIT_RATIO: f32 = 1.0;
+
+/// The packet's traversal stack and a lone ray's.
+type Stacks<'a> = (
+    &'a mut [MaybeUninit<Entry>],
+    &'a mut [MaybeUninit<super::Entry>],
+);
 
 /// A stack entry: a child, the packet's lower bound on its entry distance, and for a leaf the
 /// node and slot holding its box.
@@ -84,20 +92,19 @@ impl WideBvh {
             out.fill(None);
             return;
         }
-        let mut small = [MaybeUninit::<Entry>::uninit(); 128];
-        let mut big = Vec::new();
-        let stack: &mut [MaybeUninit<Entry>] = if self.stack_need <= small.len() {
-            &mut small
-        } else {
-            big.resize(self.stack_need, MaybeUninit::uninit());
-            &mut big
-        };
-        #[cfg(target_arch = "x86_64")]
-        if self.simd {
-            // SAFETY: `simd` is only true when the CPU has AVX2.
-            return unsafe { packet_avx2(self, origins, dirs, tmin, tmax, stack, out) };
-        }
-        packet::<Scalar>(self, origins, dirs, tmin, tmax, stack, out)
+        // The packet's stack, and one for a ray going on alone below a node.
+        with_stack(self.stack_need, |stack| {
+            with_stack(self.stack_need, |single| {
+                #[cfg(target_arch = "x86_64")]
+                if self.simd {
+                    // SAFETY: `simd` is only true when the CPU has AVX2.
+                    return unsafe {
+                        packet_avx2(self, origins, dirs, tmin, tmax, (stack, single), out)
+                    };
+                }
+                packet::<Scalar>(self, origins, dirs, tmin, tmax, (stack, single), out)
+            })
+        })
     }
 }
 
@@ -182,10 +189,10 @@ unsafe fn packet_avx2(
     dirs: &[Vec3A],
     tmin: f32,
     tmax: f32,
-    stack: &mut [MaybeUninit<Entry>],
+    stacks: Stacks,
     out: &mut [Option<WideHit>],
 ) {
-    packet::<super::Avx2>(bvh, origins, dirs, tmin, tmax, stack, out)
+    packet::<super::Avx2>(bvh, origins, dirs, tmin, tmax, stacks, out)
 }
 
 /// The packet's set-up, traversal and hits, inlined into the AVX2 function so that the loops
@@ -197,11 +204,11 @@ fn packet<L: Lanes>(
     dirs: &[Vec3A],
     tmin: f32,
     tmax: f32,
-    stack: &mut [MaybeUninit<Entry>],
+    stacks: Stacks,
     out: &mut [Option<WideHit>],
 ) {
     let mut rays = Rays::new(origins, dirs, tmin, tmax);
-    traverse::<L>(bvh, &mut rays, tmin, tmax, stack);
+    traverse::<L>(bvh, &mut rays, tmin, tmax, stacks);
     rays.write(out);
 }
 
@@ -273,22 +280,7 @@ fn leaf_rays(node: &super::Node, slot: usize, r: &Rays, g: usize, tmin: f32) -> 
 }
 
 #[inline(always)]
-fn traverse<L: Lanes>(
-    bvh: &WideBvh,
-    r: &mut Rays,
-    tmin: f32,
-    tmax: f32,
-    stack: &mut [MaybeUninit<Entry>],
-) {
-    // The stack of a ray going on alone below a node.
-    let mut small = [MaybeUninit::<super::Entry>::uninit(); 128];
-    let mut big = Vec::new();
-    let single: &mut [MaybeUninit<super::Entry>] = if bvh.stack_need <= small.len() {
-        &mut small
-    } else {
-        big.resize(bvh.stack_need, MaybeUninit::uninit());
-        &mut big
-    };
+fn traverse<L: Lanes>(bvh: &WideBvh, r: &mut Rays, tmin: f32, tmax: f32, (stack, single): Stacks) {
     let groups = r.n.div_ceil(GROUP);
     let mut far = tmax;
     let mut top = 0usize;
