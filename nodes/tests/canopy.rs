@@ -198,9 +198,10 @@ fn canopy_envelopes_match_the_true_crowns() {
         city.trees.len()
     );
     assert_eq!(in_building, 0, "canopy inside a building");
-    // The target is 0.7; measured 0.637 with the upper surface read from the field (0.53
-    // with an ellipse profile in the distance from the outline). What is left is the widest
-    // level's scatter per crown (bottom error rms 1.0 m) and crowns merged with a neighbour's
-    // returns. Held here as a regression floor, not as the target met.
-    assert!(iou >= 0.62, "canopy IoU {iou:.3}");
+    // The target. Measured 0.704 with the widest level and the lower surface read from
+    // the returns (0.637 with the widest level from the outline's field, 0.53 with an ellipse
+    // profile in the distance from the outline). Most of what is left: crown rims whose cells no
+    // pulse's echo reached, crowns within the 1 m fringe UnassignedAbove keeps from buildings, and
+    // crowns in the LiDAR shadow of a building (no return at all).
+    assert!(iou >= 0.70, "canopy IoU {iou:.3}");
 }

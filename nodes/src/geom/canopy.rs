@@ -2,7 +2,10 @@
 //! that are large, elevated and irregular (height roughness, or the share of multiple LiDAR
 //! returns) become closed foliage volumes. The crown's upper surface is the field itself (its
 //! local maximum, which reads through the gaps a few pulses find); its lower surface mirrors it
-//! about the crown's widest level, read where the crown outline is (an ellipsoidal crown is widest
+//! about the crown's widest level. With the LiDAR returns, that level is read from them (pulses
+//! that go through a crown echo along their path in it, so each column's chord between the upper
+//! surface and its lowest return is centred on it) and the mirror is averaged with the lowest
+//! return; without, the level is read where the crown outline is (an ellipsoidal crown is widest
 //! at its centre height, so the field on the outline is that height).
 //! The envelope is a stack of prisms: per height slice, the outline of the cells the crown covers
 //! there, simplified. Foliage volumes are `Material::Foliage` solids of class `Vegetation`: what
@@ -15,6 +18,7 @@ use crate::geom::mesh_build::prism;
 use crate::geom::mesh_check::check_solid;
 use crate::geom::polygon::{simplify_polygon, trace};
 use crate::raster::label::label_components;
+use crate::raster::morph::close_within;
 use crate::rf::materials::Material;
 
 /// Knobs of the canopy extraction.
@@ -36,8 +40,10 @@ pub struct CanopyConfig {
     pub simplify_m: f64,
     /// The lowest the crown's bottom may come, above ground, metres.
     pub min_clearance_m: f64,
-    /// Quantile of the field on the outline taken as the crown's widest level.
+    /// Quantile of the field on the outline taken as the crown's widest level (without points).
     pub edge_quantile: f64,
+    /// Radius of the morphological closing of each crown's cells, in cells.
+    pub close_cells: u32,
 }
 
 impl Default for CanopyConfig {
@@ -52,6 +58,7 @@ impl Default for CanopyConfig {
             simplify_m: 0.3,
             min_clearance_m: 1.0,
             edge_quantile: 0.4,
+            close_cells: 1,
         }
     }
 }
@@ -112,6 +119,7 @@ pub fn canopies(
             }
         }
     }
+    let returns = points.map(|ps| LowestReturns::new(ps, &labels, g, terrain, cfg.min_height_m));
     let mut m = Metrics::default();
     let mut bump = |name: &str| {
         let v = m.get(name).unwrap_or(0.0);
@@ -145,7 +153,16 @@ pub fn canopies(
             continue;
         }
         let mut failed = 0;
-        let env = envelope(&mut failed, l, idx, &labels, unassigned, terrain, cfg);
+        let env = envelope(
+            &mut failed,
+            l,
+            idx,
+            &labels,
+            unassigned,
+            terrain,
+            returns.as_ref(),
+            cfg,
+        );
         for _ in 0..failed {
             bump("slice_outlines_dropped");
         }
@@ -177,6 +194,7 @@ fn envelope(
     labels: &[u32],
     a: &Raster,
     terrain: &Raster,
+    returns: Option<&LowestReturns>,
     cfg: &CanopyConfig,
 ) -> Option<Canopy> {
     let g = a.grid;
@@ -278,32 +296,65 @@ fn envelope(
     // neighbours of the region. One cell alone is too rough (a cell whose few pulses went through a
     // gap reads low); the 3 x 3 maximum reads the surface, and fills the crown's gaps, at the cost
     // of a quarter-cell of width at the rim (a closing, max then min, lost a fifth of the volume).
+    // The crown's cells are closed by `close_cells` first: rim cells whose few pulses all missed
+    // the crown's edge leave notches in the outline.
     let value = |j: usize| {
         let i = (r0 + j / sw) * w + c0 + j % sw;
         (labels[i] == l).then(|| a.data[i] as f64)
     };
+    let crown: Vec<bool> = outside.iter().map(|&o| !o).collect();
+    let crown = close_within(&crown, sw as u32, sh as u32, cfg.close_cells as i64);
+    let neighbourhood = |j: usize| {
+        let (c, r) = (j % sw, j / sw);
+        (r.saturating_sub(1)..(r + 2).min(sh))
+            .flat_map(move |rr| (c.saturating_sub(1)..(c + 2).min(sw)).map(move |cc| rr * sw + cc))
+    };
     let upper: Vec<f64> = (0..sw * sh)
         .map(|j| {
-            if outside[j] {
+            if !crown[j] {
                 return f64::NAN;
             }
-            let (c, r) = (j % sw, j / sw);
-            let mut best = f64::NAN;
-            for rr in r.saturating_sub(1)..(r + 2).min(sh) {
-                for cc in c.saturating_sub(1)..(c + 2).min(sw) {
-                    if let Some(v) = value(rr * sw + cc) {
-                        best = best.max(v);
-                    }
-                }
-            }
+            let best = neighbourhood(j)
+                .filter_map(value)
+                .fold(f64::NAN, f64::max);
             best.min(top)
         })
         .collect();
-    // The lower surface mirrors the upper about the widest level; a cell whose upper surface is
-    // not above that level holds no crown.
+    // The lowest vegetation return over the cell and its eight neighbours of the region, and how
+    // many returns there are: pulses that go through the crown echo all along their path in it.
+    let lowest: Vec<(f64, u32)> = (0..sw * sh)
+        .map(|j| {
+            let Some(lr) = returns else {
+                return (f64::NAN, 0);
+            };
+            neighbourhood(j)
+                .map(|k| (r0 + k / sw) * w + c0 + k % sw)
+                .filter(|&i| labels[i] == l)
+                .fold((f64::NAN, 0), |(z, n), i| {
+                    (z.min(lr.lowest[i] as f64), n + lr.count[i])
+                })
+        })
+        .collect();
+    // With returns, the widest level is read from them: the median over the crown of each
+    // well-sampled column's midpoint between its upper surface and its lowest return (a crown
+    // symmetric about its widest level has every vertical chord centred on it). Without, the
+    // field on the outline (above) stands for it.
+    let mut midpoints: Vec<f64> = (0..sw * sh)
+        .filter(|&j| upper[j].is_finite() && lowest[j].1 >= MIN_MIDPOINT_RETURNS)
+        .map(|j| (upper[j] + lowest[j].0) / 2.0)
+        .collect();
+    let mid = crate::geom::theil_sen::median(&mut midpoints).unwrap_or(mid);
+    // The lower surface mirrors the upper about the widest level; where returns reached below the
+    // top, it is the mean of that mirror and the lowest return (the lowest of a handful of echoes
+    // stops short of the crown's bottom, the mirror is off where the crown is not symmetric). A
+    // cell whose upper surface is not above the widest level and that has no return below it
+    // holds no crown.
     let span = |j: usize| {
         let t = upper[j];
-        (t > mid).then(|| ((2.0 * mid - t).max(cfg.min_clearance_m), t))
+        let mirror = 2.0 * mid - t;
+        let (lo, _) = lowest[j];
+        let b = if lo < t { (lo + mirror) / 2.0 } else { mirror };
+        (t > mid || lo < t).then(|| (b.max(cfg.min_clearance_m), t))
     };
     let bottom = (0..sw * sh)
         .filter_map(span)
@@ -357,6 +408,60 @@ fn envelope(
         mid_m: mid,
         shells,
     })
+}
+
+/// Returns a column needs, over its 3 x 3 cells, for its midpoint to count toward the widest
+/// level: a handful of echoes spread along the chord.
+const MIN_MIDPOINT_RETURNS: u32 = 6;
+
+/// Per cell of the field's grid, the lowest vegetation return above ground and how many there are.
+struct LowestReturns {
+    /// Height above the terrain of the lowest return, metres; NaN where none.
+    lowest: Vec<f32>,
+    /// Number of returns.
+    count: Vec<u32>,
+}
+
+impl LowestReturns {
+    /// The vegetation returns (ASPRS 3-5 where the points are classified so, else any but ground,
+    /// building, noise and water) in labelled cells of `g`, at least `min_height_m` above
+    /// `terrain`.
+    fn new(
+        ps: &PointSet,
+        labels: &[u32],
+        g: Grid,
+        terrain: &Raster,
+        min_height_m: f64,
+    ) -> LowestReturns {
+        let vegetation_classes = ps.class.iter().any(|c| (3..=5).contains(c));
+        let mut lowest = vec![f32::NAN; g.len()];
+        let mut count = vec![0u32; g.len()];
+        for (k, p) in ps.xyz.iter().enumerate() {
+            let class = ps.class.get(k).copied().unwrap_or(0);
+            let vegetation = if vegetation_classes {
+                (3..=5).contains(&class)
+            } else {
+                !matches!(class, 2 | 6 | 7 | 9 | 18)
+            };
+            let (x, y) = (p[0] as f64, p[1] as f64);
+            let Some((c, r)) = g.cell_of(x, y).filter(|_| vegetation) else {
+                continue;
+            };
+            let i = r as usize * g.width as usize + c as usize;
+            if labels[i] == 0 {
+                continue;
+            }
+            let Some(t) = terrain.bilinear(x, y) else {
+                continue;
+            };
+            let z = p[2] as f64 - t;
+            if z >= min_height_m {
+                lowest[i] = lowest[i].min(z as f32);
+                count[i] += 1;
+            }
+        }
+        LowestReturns { lowest, count }
+    }
 }
 
 /// Fills one cell of every 2 x 2 block whose set cells touch only diagonally, so traced outlines

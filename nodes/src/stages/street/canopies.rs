@@ -29,9 +29,12 @@ pub struct CanopiesParams {
     pub simplify_m: f64,
     /// Lowest crown bottom above ground, metres. Default 1.
     pub min_clearance_m: f64,
-    /// Quantile of the field on a region's outline taken as the crown's widest level. Default
-    /// 0.4.
+    /// Quantile of the field on a region's outline taken as the crown's widest level when no
+    /// points are given (with points the returns tell it). Default 0.4.
     pub edge_quantile: f64,
+    /// Radius of the morphological closing of each crown's cells, in cells: fills the notches at
+    /// the rim where a cell's few pulses all missed the crown. Default 1.
+    pub close_cells: u32,
 }
 
 impl Default for CanopiesParams {
@@ -47,6 +50,7 @@ impl Default for CanopiesParams {
             simplify_m: c.simplify_m,
             min_clearance_m: c.min_clearance_m,
             edge_quantile: c.edge_quantile,
+            close_cells: c.close_cells,
         }
     }
 }
@@ -64,6 +68,7 @@ impl CanopiesParams {
             simplify_m: self.simplify_m,
             min_clearance_m: self.min_clearance_m,
             edge_quantile: self.edge_quantile,
+            close_cells: self.close_cells,
         }
     }
 }
@@ -73,7 +78,8 @@ pub struct Canopies;
 
 impl Stage for Canopies {
     const KIND: &'static str = "Canopies";
-    const VERSION: u32 = 2;
+    // 3: the widest level and the lower surface from the LiDAR returns; the crown's cells closed.
+    const VERSION: u32 = 3;
     const DOC: &'static str = "canopy envelopes (closed foliage volumes) from large, elevated, irregular unassigned above-ground regions, Sec. 4.2.4";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -85,7 +91,7 @@ impl Stage for Canopies {
         InputSpec::optional(
             "points",
             ArtifactType::Points,
-            "the LiDAR returns, for the share of multiple returns",
+            "the LiDAR returns: the share of multiple returns, the crowns' widest level and lower surface",
         ),
     ];
     type Params = CanopiesParams;
@@ -108,6 +114,9 @@ impl Stage for Canopies {
                     format!("expected a finite value in [{lo}, {hi}]"),
                 ));
             }
+        }
+        if p.close_cells > 8 {
+            return Err(ParamError::new("close_cells", "expected 0 to 8 cells"));
         }
         if !(1..=64).contains(&p.slices) {
             return Err(ParamError::new("slices", "expected 1 to 64 slices"));
