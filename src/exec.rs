@@ -19,7 +19,7 @@ use kodama_nodes::stage::{Arity, Slot};
 use kodama_nodes::{Artifact, Ctx, Inputs, StageError};
 use rayon::prelude::*;
 
-use crate::cache::{Cache, Digest, digest_bytes, write_atomic};
+use crate::cache::{Cache, Digest, write_atomic};
 use crate::graph::Graph;
 use crate::key::{action_key, site_digest};
 use crate::progress::Reporter;
@@ -505,19 +505,30 @@ impl<'a> Exec<'a> {
                 node.kind.output
             )));
         }
-        let bytes = rmp_serde::to_vec(&artifact)
-            .map_err(|e| StageError::Failed(format!("cannot encode the output: {e}")))?;
-        let digest = digest_bytes(&bytes);
         let store = |e: std::io::Error| {
             StageError::Failed(format!(
                 "cannot store the output in {}: {e}",
                 self.cache.root().display()
             ))
         };
-        self.cache.put_blob(&digest, &bytes).map_err(store)?;
-        self.cache
-            .put_action(&key, &digest, bytes.len() as u64)
+        // Encoded straight into the store: a large artifact's encoding is never held whole.
+        let (digest, size) = self
+            .cache
+            .put_blob_with(|w| {
+                rmp_serde::encode::write(w, &artifact).map_err(|e| {
+                    // A failed write (a full disk) is told as itself, not as an encoding error.
+                    let mut cause = std::error::Error::source(&e);
+                    while let Some(c) = cause {
+                        if let Some(io) = c.downcast_ref::<std::io::Error>() {
+                            return std::io::Error::new(io.kind(), io.to_string());
+                        }
+                        cause = c.source();
+                    }
+                    std::io::Error::other(format!("cannot encode the output: {e}"))
+                })
+            })
             .map_err(store)?;
+        self.cache.put_action(&key, &digest, size).map_err(store)?;
         snapshot.digest = Some(digest.to_hex().to_string());
         Ok(Executed {
             artifact: Arc::new(artifact),

@@ -57,6 +57,24 @@ impl std::fmt::Display for BlobError {
     }
 }
 
+/// The bytes of a stored blob, mapped from its file.
+pub enum Blob {
+    /// A blob of no bytes (nothing to map).
+    Empty,
+    /// The file's pages.
+    Mapped(memmap2::Mmap),
+}
+
+impl std::ops::Deref for Blob {
+    type Target = [u8];
+    fn deref(&self) -> &[u8] {
+        match self {
+            Blob::Empty => &[],
+            Blob::Mapped(m) => m,
+        }
+    }
+}
+
 /// A cache directory.
 pub struct Cache {
     root: PathBuf,
@@ -131,14 +149,32 @@ impl Cache {
         shard(&self.root.join("cas"), &d.to_hex())
     }
 
-    /// Stores `bytes` under `digest` (which the caller computed with [`digest_bytes`]).
-    pub fn put_blob(&self, digest: &Digest, bytes: &[u8]) -> io::Result<()> {
-        let path = self.blob_path(digest);
-        if self.has_blob(digest, bytes.len() as u64) {
-            return Ok(());
+    /// Stores what `write` writes as a blob, hashed as it is written (the encoding is never held
+    /// in memory whole), and returns its digest and size. The temp file is fsynced and renamed
+    /// into place, or removed if a blob of that digest is already stored or anything failed.
+    pub fn put_blob_with(
+        &self,
+        write: impl FnOnce(&mut dyn io::Write) -> io::Result<()>,
+    ) -> io::Result<(Digest, u64)> {
+        let (tmp, file) = atomic::create_temp(&self.tmp())?;
+        let result = (|| {
+            let mut w = atomic::HashingWriter::new(file);
+            write(&mut w)?;
+            let (file, digest, size) = w.finish()?;
+            drop(file);
+            if self.has_blob(&digest, size) {
+                fs::remove_file(&tmp)?;
+                return Ok((digest, size));
+            }
+            let path = self.blob_path(&digest);
+            fs::create_dir_all(path.parent().expect("sharded path has a parent"))?;
+            fs::rename(&tmp, &path)?;
+            Ok((digest, size))
+        })();
+        if result.is_err() {
+            let _ = fs::remove_file(&tmp);
         }
-        fs::create_dir_all(path.parent().expect("sharded path has a parent"))?;
-        write_atomic(&self.tmp(), &path, bytes)
+        result
     }
 
     /// True if a blob of `size` bytes is stored under `digest` (by stat, not by hashing); marks it
@@ -154,22 +190,34 @@ impl Cache {
         }
     }
 
-    /// Reads and verifies the blob `digest`.
-    pub fn get_blob(&self, digest: &Digest) -> Result<Vec<u8>, BlobError> {
+    /// Maps and verifies the blob `digest`: its bytes are the page cache's, never copied into
+    /// this process, so a large artifact is held once (decoded), not twice.
+    pub fn get_blob(&self, digest: &Digest) -> Result<Blob, BlobError> {
         let path = self.blob_path(digest);
-        let bytes = match fs::read(&path) {
-            Ok(b) => b,
+        let file = match File::open(&path) {
+            Ok(f) => f,
             Err(e) if e.kind() == io::ErrorKind::NotFound => return Err(BlobError::Missing),
             Err(e) => return Err(BlobError::Io(e)),
         };
-        if digest_bytes(&bytes) != *digest {
+        let len = file.metadata().map_err(BlobError::Io)?.len();
+        let blob = if len == 0 {
+            Blob::Empty
+        } else {
+            // SAFETY: a blob file is never written after it is renamed into place (writers rename
+            // complete temp files; gc unlinks, which leaves a mapping intact), so the mapped bytes
+            // cannot change under the reader. Only a process outside kodama-dag truncating a
+            // file inside the cache could fault it.
+            Blob::Mapped(unsafe { memmap2::Mmap::map(&file) }.map_err(BlobError::Io)?)
+        };
+        if digest_bytes(&blob) != *digest {
             // Remove it, or the rebuilt blob would be taken for already stored (same name, same
             // size) and the bad bytes would stay.
+            drop(blob);
             let _ = fs::remove_file(&path);
             return Err(BlobError::Corrupt);
         }
         touch(&path);
-        Ok(bytes)
+        Ok(blob)
     }
 
     /// The artifact digest and size recorded for action `key`, if any.
