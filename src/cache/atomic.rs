@@ -63,7 +63,7 @@ pub(crate) struct HashingWriter {
 }
 
 impl HashingWriter {
-    const BUF: usize = 8 << 20;
+    pub(crate) const BUF: usize = 8 << 20;
 
     pub(crate) fn new(file: File) -> HashingWriter {
         HashingWriter {

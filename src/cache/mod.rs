@@ -255,3 +255,59 @@ fn touch(path: &Path) {
         let _ = f.set_modified(SystemTime::now());
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    /// Writes of every size (headers of a few bytes, arrays across the buffer's edge, arrays
+    /// larger than the buffer) store exactly the bytes written, under the digest of the whole.
+    #[test]
+    fn a_streamed_blob_is_its_bytes_under_their_digest() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = Cache::open(dir.path()).unwrap();
+        let big = atomic::HashingWriter::BUF;
+        let pieces: Vec<Vec<u8>> = [3, 1 << 20, big - 5, 7, big + 11, 2 * big + 1, 0, 1]
+            .iter()
+            .enumerate()
+            .map(|(k, &n)| (0..n).map(|i| (i * 31 + k * 7) as u8).collect())
+            .collect();
+        let whole: Vec<u8> = pieces.concat();
+        let (digest, size) = cache
+            .put_blob_with(|w| {
+                for p in &pieces {
+                    w.write_all(p)?;
+                }
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(digest, blake3::hash(&whole));
+        assert_eq!(size, whole.len() as u64);
+        assert_eq!(&*cache.get_blob(&digest).unwrap(), &whole[..]);
+        // The same bytes again: stored once, no temp file left behind.
+        let again = cache.put_blob_with(|w| w.write_all(&whole)).unwrap();
+        assert_eq!(again, (digest, size));
+        assert_eq!(fs::read_dir(cache.tmp()).unwrap().count(), 0);
+        // An empty blob maps to nothing and still verifies.
+        let (empty, _) = cache.put_blob_with(|_| Ok(())).unwrap();
+        assert!(cache.get_blob(&empty).unwrap().is_empty());
+    }
+
+    /// A failing writer leaves neither a blob nor a temp file.
+    #[test]
+    fn a_failed_write_leaves_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = Cache::open(dir.path()).unwrap();
+        let r = cache.put_blob_with(|w| {
+            w.write_all(&[1u8; 100])?;
+            Err(io::Error::other("no space left"))
+        });
+        assert!(r.is_err());
+        assert_eq!(fs::read_dir(cache.tmp()).unwrap().count(), 0);
+        assert!(
+            !dir.path().join("cas").exists()
+                || fs::read_dir(dir.path().join("cas")).unwrap().count() == 0
+        );
+    }
+}

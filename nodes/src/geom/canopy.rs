@@ -314,9 +314,7 @@ fn envelope(
             if !crown[j] {
                 return f64::NAN;
             }
-            let best = neighbourhood(j)
-                .filter_map(value)
-                .fold(f64::NAN, f64::max);
+            let best = neighbourhood(j).filter_map(value).fold(f64::NAN, f64::max);
             best.min(top)
         })
         .collect();
