@@ -6,7 +6,9 @@
 //! that go through a crown echo along their path in it, so each column's chord between the upper
 //! surface and its lowest return is centred on it) and the mirror is averaged with the lowest
 //! return; without, the level is read where the crown outline is (an ellipsoidal crown is widest
-//! at its centre height, so the field on the outline is that height).
+//! at its centre height, so the field on the outline is that height). With returns, crowns also
+//! grow into the fringe the field leaves out beside buildings, through cells with vegetation
+//! returns.
 //! The envelope is a stack of prisms: per height slice, the outline of the cells the crown covers
 //! there, simplified. Foliage volumes are `Material::Foliage` solids of class `Vegetation`: what
 //! the tracer attenuates through (rf/foliage.rs).
@@ -44,6 +46,9 @@ pub struct CanopyConfig {
     pub edge_quantile: f64,
     /// Radius of the morphological closing of each crown's cells, in cells.
     pub close_cells: u32,
+    /// How far, in cells, a crown grows into the cells the field leaves out beside it, through
+    /// cells with vegetation returns (with points only).
+    pub fringe_cells: u32,
 }
 
 impl Default for CanopyConfig {
@@ -59,6 +64,7 @@ impl Default for CanopyConfig {
             min_clearance_m: 1.0,
             edge_quantile: 0.4,
             close_cells: 1,
+            fringe_cells: 2,
         }
     }
 }
@@ -87,6 +93,8 @@ pub fn canopies(
     points: Option<&PointSet>,
     cfg: &CanopyConfig,
 ) -> (Scene, Metrics) {
+    let grown = points.map(|ps| grow_into_fringe(unassigned, terrain, ps, cfg));
+    let unassigned = grown.as_ref().map_or(unassigned, |(r, _)| r);
     let g = unassigned.grid;
     let (w, h) = (g.width as usize, g.height as usize);
     let mask: Vec<bool> = unassigned
@@ -119,7 +127,9 @@ pub fn canopies(
             }
         }
     }
-    let returns = points.map(|ps| LowestReturns::new(ps, &labels, g, terrain, cfg.min_height_m));
+    let returns = points.zip(grown.as_ref()).map(|(ps, (_, fringe))| {
+        LowestReturns::new(ps, &labels, g, terrain, cfg.min_height_m, fringe.clone())
+    });
     let mut m = Metrics::default();
     let mut bump = |name: &str| {
         let v = m.get(name).unwrap_or(0.0);
@@ -347,12 +357,20 @@ fn envelope(
     // stops short of the crown's bottom, the mirror is off where the crown is not symmetric). A
     // cell whose upper surface is not above the widest level and that has no return below it
     // holds no crown.
+    // A cell the crown grew into from the fringe may lie over a building's roof: there the crown
+    // stops at the cell's own lowest return, above the roof.
+    let floor = |j: usize| {
+        let i = (r0 + j / sw) * w + c0 + j % sw;
+        returns
+            .filter(|lr| lr.fringe[i])
+            .map_or(f64::NEG_INFINITY, |lr| lr.lowest[i] as f64)
+    };
     let span = |j: usize| {
         let t = upper[j];
         let mirror = 2.0 * mid - t;
         let (lo, _) = lowest[j];
         let b = if lo < t { (lo + mirror) / 2.0 } else { mirror };
-        (t > mid || lo < t).then(|| (b.max(cfg.min_clearance_m), t))
+        (t > mid || lo < t).then(|| (b.max(floor(j)).max(cfg.min_clearance_m), t))
     };
     let bottom = (0..sw * sh)
         .filter_map(span)
@@ -418,6 +436,8 @@ struct LowestReturns {
     lowest: Vec<f32>,
     /// Number of returns.
     count: Vec<u32>,
+    /// Cells the crowns grew into from the field's fringe ([`grow_into_fringe`]).
+    fringe: Vec<bool>,
 }
 
 impl LowestReturns {
@@ -430,19 +450,14 @@ impl LowestReturns {
         g: Grid,
         terrain: &Raster,
         min_height_m: f64,
+        fringe: Vec<bool>,
     ) -> LowestReturns {
-        let vegetation_classes = ps.class.iter().any(|c| (3..=5).contains(c));
+        let vegetation = vegetation(ps);
         let mut lowest = vec![f32::NAN; g.len()];
         let mut count = vec![0u32; g.len()];
         for (k, p) in ps.xyz.iter().enumerate() {
-            let class = ps.class.get(k).copied().unwrap_or(0);
-            let vegetation = if vegetation_classes {
-                (3..=5).contains(&class)
-            } else {
-                !matches!(class, 2 | 6 | 7 | 9 | 18)
-            };
             let (x, y) = (p[0] as f64, p[1] as f64);
-            let Some((c, r)) = g.cell_of(x, y).filter(|_| vegetation) else {
+            let Some((c, r)) = g.cell_of(x, y).filter(|_| vegetation(k)) else {
                 continue;
             };
             let i = r as usize * g.width as usize + c as usize;
@@ -458,8 +473,83 @@ impl LowestReturns {
                 count[i] += 1;
             }
         }
-        LowestReturns { lowest, count }
+        LowestReturns {
+            lowest,
+            count,
+            fringe,
+        }
     }
+}
+
+/// Which points are vegetation returns: ASPRS 3-5 where the points are classified so, else any
+/// but ground, building, noise and water.
+fn vegetation(ps: &PointSet) -> impl Fn(usize) -> bool + '_ {
+    let classified = ps.class.iter().any(|c| (3..=5).contains(c));
+    move |k| {
+        let class = ps.class.get(k).copied().unwrap_or(0);
+        if classified {
+            (3..=5).contains(&class)
+        } else {
+            !matches!(class, 2 | 6 | 7 | 9 | 18)
+        }
+    }
+}
+
+/// `unassigned` with the crowns grown into the cells it leaves out beside them (the fringe
+/// UnassignedAbove keeps from buildings, where a wall's returns would pass for a crown's): up to
+/// `fringe_cells` steps from a canopy-high cell, through cells whose vegetation returns stand at
+/// least `min_height_m` above the terrain, each taking the height of its highest such return.
+/// Only vegetation-classified returns qualify where the points are classified, so a wall's
+/// returns never do. Returns the grown field and which cells grew.
+fn grow_into_fringe(
+    unassigned: &Raster,
+    terrain: &Raster,
+    ps: &PointSet,
+    cfg: &CanopyConfig,
+) -> (Raster, Vec<bool>) {
+    let g = unassigned.grid;
+    let (w, h) = (g.width as usize, g.height as usize);
+    let vegetation = vegetation(ps);
+    let mut top = vec![f32::NAN; g.len()];
+    for (k, p) in ps.xyz.iter().enumerate() {
+        let (x, y) = (p[0] as f64, p[1] as f64);
+        let Some((c, r)) = g.cell_of(x, y).filter(|_| vegetation(k)) else {
+            continue;
+        };
+        let i = r as usize * w + c as usize;
+        if unassigned.data[i].is_finite() {
+            continue;
+        }
+        if let Some(t) = terrain.bilinear(x, y) {
+            let z = (p[2] as f64 - t) as f32;
+            if z as f64 >= cfg.min_height_m {
+                top[i] = top[i].max(z);
+            }
+        }
+    }
+    let mut out = unassigned.clone();
+    let mut fringe = vec![false; g.len()];
+    let high = |v: f32| v.is_finite() && v as f64 >= cfg.min_height_m;
+    for _ in 0..cfg.fringe_cells {
+        let next: Vec<usize> = (0..g.len())
+            .filter(|&i| !out.data[i].is_finite() && top[i].is_finite())
+            .filter(|&i| {
+                let (c, r) = (i % w, i / w);
+                (c > 0 && high(out.data[i - 1]))
+                    || (c + 1 < w && high(out.data[i + 1]))
+                    || (r > 0 && high(out.data[i - w]))
+                    || (r + 1 < h && high(out.data[i + w]))
+            })
+            .collect();
+        if next.is_empty() {
+            break;
+        }
+        for i in next {
+            out.data[i] = top[i];
+            fringe[i] = true;
+        }
+    }
+    (out, fringe)
 }
 
 /// Fills one cell of every 2 x 2 block whose set cells touch only diagonally, so traced outlines

@@ -35,6 +35,10 @@ pub struct CanopiesParams {
     /// Radius of the morphological closing of each crown's cells, in cells: fills the notches at
     /// the rim where a cell's few pulses all missed the crown. Default 1.
     pub close_cells: u32,
+    /// How far, in cells, a crown grows into the cells `unassigned` leaves out beside it (the
+    /// fringe UnassignedAbove keeps from buildings), through cells with vegetation returns; with
+    /// points only. Default 2 (UnassignedAbove's 1 m at 0.5 m cells).
+    pub fringe_cells: u32,
 }
 
 impl Default for CanopiesParams {
@@ -51,6 +55,7 @@ impl Default for CanopiesParams {
             min_clearance_m: c.min_clearance_m,
             edge_quantile: c.edge_quantile,
             close_cells: c.close_cells,
+            fringe_cells: c.fringe_cells,
         }
     }
 }
@@ -69,6 +74,7 @@ impl CanopiesParams {
             min_clearance_m: self.min_clearance_m,
             edge_quantile: self.edge_quantile,
             close_cells: self.close_cells,
+            fringe_cells: self.fringe_cells,
         }
     }
 }
@@ -78,7 +84,8 @@ pub struct Canopies;
 
 impl Stage for Canopies {
     const KIND: &'static str = "Canopies";
-    // 3: the widest level and the lower surface from the LiDAR returns; the crown's cells closed.
+    // 3: the widest level and the lower surface from the LiDAR returns; the crown's cells closed;
+    // crowns grown into the fringe through cells with vegetation returns.
     const VERSION: u32 = 3;
     const DOC: &'static str = "canopy envelopes (closed foliage volumes) from large, elevated, irregular unassigned above-ground regions, Sec. 4.2.4";
     const INPUTS: &'static [InputSpec] = &[
@@ -117,6 +124,9 @@ impl Stage for Canopies {
         }
         if p.close_cells > 8 {
             return Err(ParamError::new("close_cells", "expected 0 to 8 cells"));
+        }
+        if p.fringe_cells > 16 {
+            return Err(ParamError::new("fringe_cells", "expected 0 to 16 cells"));
         }
         if !(1..=64).contains(&p.slices) {
             return Err(ParamError::new("slices", "expected 1 to 64 slices"));
