@@ -352,11 +352,6 @@ fn envelope(
         .map(|j| (upper[j] + lowest[j].0) / 2.0)
         .collect();
     let mid = crate::geom::theil_sen::median(&mut midpoints).unwrap_or(mid);
-    // The lower surface mirrors the upper about the widest level; where returns reached below the
-    // top, it is the mean of that mirror and the lowest return (the lowest of a handful of echoes
-    // stops short of the crown's bottom, the mirror is off where the crown is not symmetric). A
-    // cell whose upper surface is not above the widest level and that has no return below it
-    // holds no crown.
     // A cell the crown grew into from the fringe may lie over a building's roof: there the crown
     // stops at the cell's own lowest return, above the roof.
     let floor = |j: usize| {
@@ -365,6 +360,11 @@ fn envelope(
             .filter(|lr| lr.fringe[i])
             .map_or(f64::NEG_INFINITY, |lr| lr.lowest[i] as f64)
     };
+    // The lower surface mirrors the upper about the widest level; where returns reached below the
+    // top, it is the mean of that mirror and the lowest return (the lowest of a handful of echoes
+    // stops short of the crown's bottom, the mirror is off where the crown is not symmetric). A
+    // cell whose upper surface is not above the widest level and that has no return below it
+    // holds no crown.
     let span = |j: usize| {
         let t = upper[j];
         let mirror = 2.0 * mid - t;
@@ -452,24 +452,11 @@ impl LowestReturns {
         min_height_m: f64,
         fringe: Vec<bool>,
     ) -> LowestReturns {
-        let vegetation = vegetation(ps);
         let mut lowest = vec![f32::NAN; g.len()];
         let mut count = vec![0u32; g.len()];
-        for (k, p) in ps.xyz.iter().enumerate() {
-            let (x, y) = (p[0] as f64, p[1] as f64);
-            let Some((c, r)) = g.cell_of(x, y).filter(|_| vegetation(k)) else {
-                continue;
-            };
-            let i = r as usize * g.width as usize + c as usize;
-            if labels[i] == 0 {
-                continue;
-            }
-            let Some(t) = terrain.bilinear(x, y) else {
-                continue;
-            };
-            let z = p[2] as f64 - t;
-            if z >= min_height_m {
-                lowest[i] = lowest[i].min(z as f32);
+        for (i, z) in vegetation_heights(ps, g, terrain, min_height_m) {
+            if labels[i] != 0 {
+                lowest[i] = lowest[i].min(z);
                 count[i] += 1;
             }
         }
@@ -481,18 +468,28 @@ impl LowestReturns {
     }
 }
 
-/// Which points are vegetation returns: ASPRS 3-5 where the points are classified so, else any
-/// but ground, building, noise and water.
-fn vegetation(ps: &PointSet) -> impl Fn(usize) -> bool + '_ {
+/// The vegetation returns (ASPRS 3-5 where the points are classified so, else any but ground,
+/// building, noise and water) over `g`, as (cell index, height above `terrain`), at least
+/// `min_height_m` high.
+fn vegetation_heights<'a>(
+    ps: &'a PointSet,
+    g: Grid,
+    terrain: &'a Raster,
+    min_height_m: f64,
+) -> impl Iterator<Item = (usize, f32)> + 'a {
     let classified = ps.class.iter().any(|c| (3..=5).contains(c));
-    move |k| {
+    ps.xyz.iter().enumerate().filter_map(move |(k, p)| {
         let class = ps.class.get(k).copied().unwrap_or(0);
-        if classified {
+        let vegetation = if classified {
             (3..=5).contains(&class)
         } else {
             !matches!(class, 2 | 6 | 7 | 9 | 18)
-        }
-    }
+        };
+        let (x, y) = (p[0] as f64, p[1] as f64);
+        let (c, r) = g.cell_of(x, y).filter(|_| vegetation)?;
+        let z = p[2] as f64 - terrain.bilinear(x, y)?;
+        (z >= min_height_m).then_some((r as usize * g.width as usize + c as usize, z as f32))
+    })
 }
 
 /// `unassigned` with the crowns grown into the cells it leaves out beside them (the fringe
@@ -509,22 +506,10 @@ fn grow_into_fringe(
 ) -> (Raster, Vec<bool>) {
     let g = unassigned.grid;
     let (w, h) = (g.width as usize, g.height as usize);
-    let vegetation = vegetation(ps);
     let mut top = vec![f32::NAN; g.len()];
-    for (k, p) in ps.xyz.iter().enumerate() {
-        let (x, y) = (p[0] as f64, p[1] as f64);
-        let Some((c, r)) = g.cell_of(x, y).filter(|_| vegetation(k)) else {
-            continue;
-        };
-        let i = r as usize * w + c as usize;
-        if unassigned.data[i].is_finite() {
-            continue;
-        }
-        if let Some(t) = terrain.bilinear(x, y) {
-            let z = (p[2] as f64 - t) as f32;
-            if z as f64 >= cfg.min_height_m {
-                top[i] = top[i].max(z);
-            }
+    for (i, z) in vegetation_heights(ps, g, terrain, cfg.min_height_m) {
+        if !unassigned.data[i].is_finite() {
+            top[i] = top[i].max(z);
         }
     }
     let mut out = unassigned.clone();
