@@ -75,11 +75,7 @@ impl HashingWriter {
     }
 
     fn pass(&mut self, bytes: &[u8]) -> io::Result<()> {
-        if bytes.len() >= 1 << 20 {
-            self.hasher.update_rayon(bytes);
-        } else {
-            self.hasher.update(bytes);
-        }
+        super::hash_into(&mut self.hasher, bytes);
         self.size += bytes.len() as u64;
         self.file.write_all(bytes)
     }

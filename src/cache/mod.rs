@@ -82,12 +82,17 @@ pub struct Cache {
 
 /// Digest of `bytes`, using all threads for large inputs.
 pub fn digest_bytes(bytes: &[u8]) -> Digest {
+    let mut h = blake3::Hasher::new();
+    hash_into(&mut h, bytes);
+    h.finalize()
+}
+
+/// Feeds `bytes` to `h`, on all threads from 1 MiB up (below, splitting costs more than it gains).
+pub(crate) fn hash_into(h: &mut blake3::Hasher, bytes: &[u8]) {
     if bytes.len() >= 1 << 20 {
-        let mut h = blake3::Hasher::new();
         h.update_rayon(bytes);
-        h.finalize()
     } else {
-        blake3::hash(bytes)
+        h.update(bytes);
     }
 }
 
