@@ -111,6 +111,8 @@ struct Line {
     w: f64,
     /// Whether `d` was turned to a dominant direction.
     snapped: bool,
+    /// The traced ring's vertices the line stands for, first and last (it may wrap).
+    span: (usize, usize),
 }
 
 impl Line {
@@ -181,6 +183,7 @@ fn regularize_ring(
             o: sum / w,
             w,
             snapped,
+            span: (i, j),
         });
     }
     // Consecutive edges on (nearly) one line become one.
@@ -189,20 +192,18 @@ fn regularize_ring(
     if merged.len() < 3 {
         return None;
     }
-    // Cut corners and stair chords: a short edge off the dominant directions is the
-    // simplification's chamfer of a square corner or a step; its neighbours meet instead.
+    // Cut corners, stair chords and spikes: short edges off the dominant directions are what
+    // simplification makes of a square corner whose corner cell is missing, of a step, or of a
+    // cell of returns standing off a wall; the dominant lines on either side meet instead.
     let chamfer = 2.0 * cfg.simplify_m.max(1.0);
     let corner = 2.0 * chamfer;
     while merged.len() > 3 {
-        let k = merged.len();
-        let cut = (0..k).position(|e| {
-            let (prev, l, next) = (merged[(e + k - 1) % k], merged[e], merged[(e + 1) % k]);
-            let square = prev.snapped && next.snapped && !prev.parallel(&next);
-            !l.snapped && (l.w < chamfer || (square && l.w < corner))
-        });
-        match cut {
-            Some(e) => {
-                merged.remove(e);
+        match off_axis_cut(&merged, ring, chamfer, corner) {
+            Some((start, len)) => {
+                for _ in 0..len {
+                    let at = start % merged.len();
+                    merged.remove(at);
+                }
             }
             None => break,
         }
@@ -244,7 +245,7 @@ fn regularize_ring(
         let (a, b) = (merged[e], merged[(e + 1) % k]);
         if a.parallel(&b) {
             // A step: from a's line to b's, at the traced vertex between them.
-            let shared = nearest_on_ring(ring, &a, &b);
+            let shared = step_on_ring(ring, &a, &b);
             out.push(a.project(shared));
             out.push(b.project(shared));
         } else {
@@ -268,6 +269,45 @@ fn regularize_ring(
     Some(out)
 }
 
+/// The next run of lines off the dominant directions to remove, as (first index, count; it may
+/// wrap around the ring's end): a single one shorter than `chamfer`, else a run between two
+/// dominant lines that is either square to them (a chamfer, a chamfer beside a one-cell bump)
+/// and shorter than `corner` in all or with the square corner they would make within
+/// `chamfer / 2` of the traced `ring` (a cut corner, not a wall of its own), or between two
+/// parallel lines of one direction and shorter than `corner` (a spike on one wall, or the
+/// slanted side of a bay the LiDAR sees: a square step replaces it).
+fn off_axis_cut(
+    lines: &[Line],
+    ring: &[[f64; 2]],
+    chamfer: f64,
+    corner: f64,
+) -> Option<(usize, usize)> {
+    let k = lines.len();
+    if let Some(e) = (0..k).position(|e| !lines[e].snapped && lines[e].w < chamfer) {
+        return Some((e, 1));
+    }
+    (0..k).find_map(|e| {
+        let prev = lines[(e + k - 1) % k];
+        if lines[e].snapped || !prev.snapped {
+            return None;
+        }
+        let len = (0..k).take_while(|&r| !lines[(e + r) % k].snapped).count();
+        let next = lines[(e + len) % k];
+        if len + 2 > k || !next.snapped {
+            return None;
+        }
+        let w: f64 = (0..len).map(|r| lines[(e + r) % k].w).sum();
+        let cut = if prev.parallel(&next) {
+            w < corner && prev.d[0] * next.d[0] + prev.d[1] * next.d[1] > 0.0
+        } else {
+            w < corner
+                || intersect(&prev, &next)
+                    .is_some_and(|c| distance_to_ring(c, ring) <= chamfer / 2.0)
+        };
+        cut.then_some((e, len))
+    })
+}
+
 /// Merges consecutive snapped lines of one direction whose offsets differ by `tol` or less
 /// (around the ring's end too), each at their length-weighted mean offset.
 fn merge_collinear_lines(lines: &mut Vec<Line>, tol: f64) {
@@ -278,10 +318,12 @@ fn merge_collinear_lines(lines: &mut Vec<Line>, tol: f64) {
             && a.d[0] * b.d[0] + a.d[1] * b.d[1] > 0.0
             && (a.o - b.o).abs() <= tol
     };
+    // `b` follows `a` along the ring.
     let join = |a: &mut Line, b: &Line| {
         let w = a.w + b.w;
         a.o = (a.o * a.w + b.o * b.w) / w;
         a.w = w;
+        a.span.1 = b.span.1;
     };
     let mut out: Vec<Line> = Vec::with_capacity(lines.len());
     for l in lines.drain(..) {
@@ -295,22 +337,31 @@ fn merge_collinear_lines(lines: &mut Vec<Line>, tol: f64) {
         if !same(&out[0], &last) {
             break;
         }
-        join(&mut out[0], &last);
+        let first = out[0];
+        out[0] = last;
+        join(&mut out[0], &first);
         out.pop();
     }
     *lines = out;
 }
 
-/// Where the traced ring passes between two parallel lines: the ring vertex nearest to both.
-fn nearest_on_ring(ring: &[[f64; 2]], a: &Line, b: &Line) -> [f64; 2] {
+/// Where a step from line `a` to the parallel line `b` after it stands: the traced vertex,
+/// between the end of `a`'s run and the start of `b`'s, about equally far from both lines (the
+/// middle of the transition the removed edges made, or the vertex the two runs share).
+fn step_on_ring(ring: &[[f64; 2]], a: &Line, b: &Line) -> [f64; 2] {
     let dist = |l: &Line, p: [f64; 2]| {
         let n = l.normal();
         (n[0] * p[0] + n[1] * p[1] - l.o).abs()
     };
-    *ring
-        .iter()
-        .min_by(|p, q| (dist(a, **p) + dist(b, **p)).total_cmp(&(dist(a, **q) + dist(b, **q))))
-        .expect("ring is not empty")
+    let n = ring.len();
+    let gap = (b.span.0 + n - a.span.1) % n;
+    (0..=gap)
+        .map(|k| ring[(a.span.1 + k) % n])
+        .min_by(|p, q| {
+            let (dp, dq) = (dist(a, *p) - dist(b, *p), dist(a, *q) - dist(b, *q));
+            dp.abs().total_cmp(&dq.abs())
+        })
+        .expect("the range holds a.span.1")
 }
 
 fn intersect(a: &Line, b: &Line) -> Option<[f64; 2]> {
@@ -398,6 +449,11 @@ mod tests {
 
     /// The cells of a 0.5 m raster whose centres fall in `ring`, traced.
     fn traced(ring: &[[f64; 2]]) -> Polygon {
+        traced_cells(|x, y| point_in_ring([x, y], ring))
+    }
+
+    /// The cells of a 0.5 m raster whose centres `inside` takes, traced.
+    fn traced_cells(inside: impl Fn(f64, f64) -> bool) -> Polygon {
         let grid = Grid {
             x0: 0.0,
             y0: 60.0,
@@ -408,11 +464,7 @@ mod tests {
         let data = (0..grid.len())
             .map(|i| {
                 let (x, y) = grid.center(i as u32 % grid.width, i as u32 / grid.width);
-                if point_in_ring([x, y], ring) {
-                    1.0
-                } else {
-                    0.0
-                }
+                if inside(x, y) { 1.0 } else { 0.0 }
             })
             .collect();
         trace(&Raster {
@@ -462,6 +514,54 @@ mod tests {
                     .fold(f64::INFINITY, f64::min);
                 assert!(near < 0.5, "{deg}°: corner {b:?} is {near:.2} m off");
             }
+        }
+    }
+
+    /// What a LiDAR mask makes of a square building's corner (traced from a real one of the
+    /// demo's): the corner cell and its neighbour missing in a stair, a cell of returns standing
+    /// off the wall beside it (a drainpipe) and a missing cell after that. It comes back a
+    /// square corner: a chamfer left at a street corner mirrors a transmitter down the cross
+    /// street, where the building's real corner only diffracts.
+    #[test]
+    fn a_stair_corner_beside_a_spike_comes_back_square() {
+        let (x0, x1, y0, y1) = (14.5, 38.5, 14.0, 47.5);
+        let raw = traced_cells(|x, y| {
+            let rect = x > x0 && x < x1 && y > y0 && y < y1;
+            let stair = (x < 15.0 && y < 15.0) || (x < 15.5 && y < 14.5);
+            let notch = (17.5..18.0).contains(&x) && y < 14.5;
+            let pipe = (16.0..16.5).contains(&x) && (13.5..14.0).contains(&y);
+            (rect && !stair && !notch) || pipe
+        });
+        let out = regularize_polygon(&raw, &RegularizeConfig::default(), None)
+            .unwrap_or_else(|| panic!("refused: {:?}", raw.exterior));
+        let r = &out.exterior;
+        assert_eq!(r.len(), 4, "{r:?}");
+        for c in [[x0, y0], [x1, y0], [x1, y1], [x0, y1]] {
+            let near = r
+                .iter()
+                .map(|v| (v[0] - c[0]).hypot(v[1] - c[1]))
+                .fold(f64::INFINITY, f64::min);
+            assert!(near < 0.5, "corner {c:?} is {near:.2} m from {r:?}");
+        }
+    }
+
+    /// A bay the LiDAR sees in front of a wall, its sides slanted by the stair of cells,
+    /// comes back with square sides: a slanted face mirrors the street into a cross street.
+    #[test]
+    fn a_bay_with_slanted_sides_comes_back_square() {
+        let raw = traced_cells(|x, y| {
+            let rect = x > 10.0 && x < 40.0 && y > 10.0 && y < 30.0;
+            let bay = y > 8.5 && y <= 10.0 && x > 19.0 + (10.0 - y) && x < 24.0 - (10.0 - y);
+            rect || bay
+        });
+        let out = regularize_polygon(&raw, &RegularizeConfig::default(), None)
+            .unwrap_or_else(|| panic!("refused: {:?}", raw.exterior));
+        let r = &out.exterior;
+        assert_eq!(r.len(), 8, "{r:?}");
+        for k in 0..r.len() {
+            let (a, b) = (r[k], r[(k + 1) % r.len()]);
+            let axis = (a[0] - b[0]).abs().min((a[1] - b[1]).abs());
+            assert!(axis < 1e-6, "edge {a:?} -> {b:?} is slanted in {r:?}");
         }
     }
 

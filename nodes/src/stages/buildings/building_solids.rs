@@ -68,7 +68,8 @@ pub struct BuildingSolids;
 
 impl Stage for BuildingSolids {
     const KIND: &'static str = "BuildingSolids";
-    const VERSION: u32 = 2;
+    // 3: a cut corner beside a spike, or a spike of several edges, is squared (geom::regularize).
+    const VERSION: u32 = 3;
     const DOC: &'static str = "watertight building solids: cleaned roofs extruded to the terrain, remeshed to a tolerance and checked, Sec. 4.1";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(

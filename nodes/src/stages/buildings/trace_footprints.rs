@@ -42,7 +42,8 @@ pub struct TraceFootprints;
 
 impl Stage for TraceFootprints {
     const KIND: &'static str = "TraceFootprints";
-    const VERSION: u32 = 2;
+    // 3: a cut corner beside a spike, or a spike of several edges, is squared (geom::regularize).
+    const VERSION: u32 = 3;
     const DOC: &'static str = "footprint polygons (outlines and courtyards) traced from a building label raster, Sec. 4.1";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
