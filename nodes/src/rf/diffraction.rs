@@ -33,6 +33,20 @@ pub struct Wedge {
     pub tri0: u32,
     /// The n-face's triangle.
     pub trin: u32,
+    /// The flat face the 0-face's triangle belongs to ([`Wedges::face`]).
+    pub face0: u32,
+    /// The flat face of the n-face's triangle.
+    pub facen: u32,
+}
+
+/// A scene's wedges and its flat faces.
+#[derive(Clone, Debug, Default)]
+pub struct Wedges {
+    /// The wedges, one per run of edge between the same two faces and materials.
+    pub list: Vec<Wedge>,
+    /// Per triangle, its flat face: the triangles joined across the edges where the surface
+    /// does not bend, named by the smallest triangle index among them.
+    pub face: Vec<u32>,
 }
 
 impl Wedge {
@@ -43,11 +57,11 @@ impl Wedge {
         k.dot(self.n0) > 1e-9 || k.dot(self.nn) > 1e-9
     }
 
-    /// Whether the wave of a transmitter at `tx` can diffract here: one of the wedge's faces
-    /// among the triangles it lights (`lights`, from where its rays first land, as Sionna
-    /// samples wedges), and the wedge met from outside.
+    /// Whether the wave of a transmitter at `tx` can diffract here: one of the wedge's flat
+    /// faces among those it lights (`lights`, from where its rays first land, as Sionna samples
+    /// wedges, but by face rather than by triangle), and the wedge met from outside.
     pub fn diffracts_from(&self, tx: DVec3, lights: impl Fn(u32) -> bool) -> bool {
-        (lights(self.tri0) || lights(self.trin)) && self.lit_from(tx)
+        (lights(self.face0) || lights(self.facen)) && self.lit_from(tx)
     }
 
     /// The same wedge labelled so that its 0-face is one a wave travelling along `ki` meets from
@@ -75,6 +89,8 @@ impl Wedge {
             nn: self.n0,
             tri0: self.trin,
             trin: self.tri0,
+            face0: self.facen,
+            facen: self.face0,
             ..*self
         }
     }
@@ -89,7 +105,14 @@ impl Wedge {
 /// air is the narrow side (an inner corner), the wedge's outside is the solid and no wave from the
 /// air diffracts there ([`Wedge::lit_from`]). Without `across_objects`, only edges whose two
 /// triangles belong to one object (as Sionna RT 2.2 finds them, within a shape).
-pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool) -> Vec<Wedge> {
+///
+/// Where do the wedges' faces end? A wall split into many triangles (painted by material
+/// regions, carved around windows) is still one flat face, and its corner one edge: the
+/// triangles joined across unbent edges make the faces, and the pieces of edge one after the
+/// other between the same two faces and materials make one wedge. Which wedges a wave lights
+/// then does not hang on whether a ray happened to land on the sliver of triangle beside the
+/// edge (Sionna's sampling by triangle loses most edges of a finely split wall).
+pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool) -> Wedges {
     let max_cos = (1.0 - 1e-6f64).min(min_deg.to_radians().cos());
     let key = |p: DVec3| [p.x, p.y, p.z].map(|c| (c * 1e6).round() as i64);
     // Edge (by its ends' quantised positions) -> the triangles on it, with the edge's ends.
@@ -110,19 +133,18 @@ pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool) -> Vec<Wedge>
             edges.entry((lo, hi)).or_default().push((t as u32, a, b));
         }
     }
-    let mut out: Vec<Wedge> = Vec::new();
     let mut keys: Vec<_> = edges.keys().copied().collect();
     keys.sort_unstable();
+    // (t0, t1, a, b, n0, nn, cos of the bend) per edge that bends.
+    let mut bends = Vec::new();
+    let mut faces = Faces::new(scene.tris.len());
     for k in keys {
-        let faces = &edges[&k];
-        if faces.len() != 2 {
+        let on_edge = &edges[&k];
+        if on_edge.len() != 2 {
             continue;
         }
-        let (t0, a, b) = faces[0];
-        let t1 = faces[1].0;
-        if !across_objects && scene.object[t0 as usize] != scene.object[t1 as usize] {
-            continue;
-        }
+        let (t0, a, b) = on_edge[0];
+        let t1 = on_edge[1].0;
         let third = |t: u32| {
             scene.tris[t as usize]
                 .iter()
@@ -144,12 +166,31 @@ pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool) -> Vec<Wedge>
             away(scene.normals[t0 as usize], t1),
             away(scene.normals[t1 as usize], t0),
         ) else {
+            faces.join(t0, t1);
             continue;
         };
         let c = n0.dot(nn).clamp(-1.0, 1.0);
+        if c >= 1.0 - 1e-6 {
+            faces.join(t0, t1);
+            continue;
+        }
         if c >= max_cos {
             continue; // a bend below the threshold
         }
+        if !across_objects && scene.object[t0 as usize] != scene.object[t1 as usize] {
+            continue;
+        }
+        bends.push((t0, t1, a, b, n0, nn, c));
+    }
+    let face = faces.names();
+    let mut out: Vec<Wedge> = Vec::with_capacity(bends.len());
+    for (t0, t1, a, b, n0, nn, c) in bends {
+        // The face named first is the 0-face, so every piece of one edge points the same way.
+        let (t0, t1, n0, nn) = if face[t0 as usize] <= face[t1 as usize] {
+            (t0, t1, n0, nn)
+        } else {
+            (t1, t0, nn, n0)
+        };
         let e = n0.cross(nn);
         if e.length() < 1e-9 {
             continue;
@@ -169,9 +210,64 @@ pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool) -> Vec<Wedge>
             n: 1.0 + c.acos() / PI,
             tri0: t0,
             trin: t1,
+            face0: face[t0 as usize],
+            facen: face[t1 as usize],
         });
     }
+    Wedges {
+        list: join_pieces(out, scene),
+        face,
+    }
+}
+
+/// The pieces of one edge between the same two faces and materials, end to end, as one wedge
+/// each run; the rest as they are, in order of faces, materials and place along the edge.
+fn join_pieces(mut pieces: Vec<Wedge>, scene: &RfScene) -> Vec<Wedge> {
+    let mat = |t: u32| scene.material[t as usize];
+    let run_key = |w: &Wedge| (w.face0, w.facen, mat(w.tri0), mat(w.trin));
+    pieces.sort_by(|p, q| {
+        run_key(p)
+            .cmp(&run_key(q))
+            .then(p.a.dot(p.e).total_cmp(&q.a.dot(q.e)))
+    });
+    let mut out: Vec<Wedge> = Vec::with_capacity(pieces.len());
+    for w in pieces {
+        if let Some(last) = out.last_mut()
+            && run_key(last) == run_key(&w)
+            && (last.a + last.e * last.length).distance(w.a) < 1e-6
+        {
+            last.length = (w.a + w.e * w.length - last.a).dot(last.e);
+            continue;
+        }
+        out.push(w);
+    }
     out
+}
+
+/// Union-find over triangles; a set is named by its smallest triangle.
+struct Faces(Vec<u32>);
+
+impl Faces {
+    fn new(n: usize) -> Faces {
+        Faces((0..n as u32).collect())
+    }
+    fn root(&mut self, mut t: u32) -> u32 {
+        while self.0[t as usize] != t {
+            let up = self.0[self.0[t as usize] as usize];
+            self.0[t as usize] = up;
+            t = up;
+        }
+        t
+    }
+    fn join(&mut self, a: u32, b: u32) {
+        let (ra, rb) = (self.root(a), self.root(b));
+        let (lo, hi) = (ra.min(rb), ra.max(rb));
+        self.0[hi as usize] = lo;
+    }
+    /// Each triangle's set, by name.
+    fn names(mut self) -> Vec<u32> {
+        (0..self.0.len() as u32).map(|t| self.root(t)).collect()
+    }
 }
 
 /// The point of the edge where the path `s1 -> Q -> s2` is shortest (Keller's cone: equal angles

@@ -17,7 +17,7 @@ use rayon::prelude::*;
 
 use crate::rng::{mix, unit};
 
-use super::diffraction::{Wedge, keller_cone};
+use super::diffraction::{Wedge, Wedges, keller_cone};
 use super::fibonacci::fibonacci_sphere;
 use super::field;
 use super::image_method::images_of;
@@ -47,19 +47,21 @@ const SALT: u64 = 0xD1FF_5EA7_C400_0002;
 /// (pre, wedge index, post)
 type Candidate = (Vec<u32>, u32, Vec<u32>);
 
-/// The candidate diffracted paths from `tx` over the wedges `all`, given its ray-found
+/// The candidate diffracted paths from `tx` over the wedges `wedges`, given its ray-found
 /// reflection `sequences` (their first surfaces are the ones it sees), sorted.
 pub fn diffraction_sequences(
     scene: &RfScene,
-    all: &[Wedge],
+    wedges: &Wedges,
     tx: DVec3,
     sequences: &[Vec<u32>],
     opt: &TraceOptions,
 ) -> Vec<DiffractionSequence> {
+    let all = &wedges.list[..];
     if all.is_empty() || opt.max_depth == 0 {
         return Vec::new();
     }
-    let seen: HashSet<u32> = if opt.reflection {
+    // The faces the transmitter lights: those its rays first land on.
+    let seen_tris: HashSet<u32> = if opt.reflection {
         sequences
             .iter()
             .filter_map(|s| s.first().copied())
@@ -67,19 +69,24 @@ pub fn diffraction_sequences(
     } else {
         first_hits(scene, tx, opt.rays)
     };
+    let seen: HashSet<u32> = seen_tris
+        .into_iter()
+        .map(|t| wedges.face[t as usize])
+        .collect();
     let mut found: BTreeSet<Candidate> = (0..all.len() as u32)
-        .filter(|&i| all[i as usize].diffracts_from(tx, |t| seen.contains(&t)))
+        .filter(|&i| all[i as usize].diffracts_from(tx, |f| seen.contains(&f)))
         .map(|i| (Vec::new(), i, Vec::new()))
         .collect();
     if opt.reflection && opt.max_depth >= 2 {
         let mut by_face: HashMap<u32, Vec<u32>> = HashMap::new();
         for (i, w) in all.iter().enumerate() {
-            by_face.entry(w.tri0).or_default().push(i as u32);
-            by_face.entry(w.trin).or_default().push(i as u32);
+            by_face.entry(w.face0).or_default().push(i as u32);
+            by_face.entry(w.facen).or_default().push(i as u32);
         }
         let walk = Walk {
             scene,
             all,
+            face: &wedges.face,
             by_face: &by_face,
             depth: opt.max_depth,
         };
@@ -112,7 +119,9 @@ pub fn diffraction_sequences(
 struct Walk<'a> {
     scene: &'a RfScene,
     all: &'a [Wedge],
-    /// The wedges on each triangle (indices into `all`).
+    /// Each triangle's flat face (`Wedges::face`).
+    face: &'a [u32],
+    /// The wedges on each face (indices into `all`).
     by_face: &'a HashMap<u32, Vec<u32>>,
     depth: u32,
 }
@@ -128,7 +137,7 @@ impl Walk<'_> {
             };
             let h = mix(SALT ^ mix(i) ^ bounce as u64);
             if unit(h) < DIFFRACTION_PROBABILITY
-                && let Some(faces) = self.by_face.get(&tri)
+                && let Some(faces) = self.by_face.get(&self.face[tri as usize])
             {
                 // One of the face's wedges the ray meets from outside, as Sionna's silhouette
                 // sampling picks one edge of the primitive it lands on.

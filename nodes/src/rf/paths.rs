@@ -229,7 +229,7 @@ pub fn trace_links(
     let all_wedges = if opt.diffraction && opt.max_depth > 0 {
         super::diffraction::wedges(scene, opt.min_wedge_deg, opt.wedges_across_objects)
     } else {
-        Vec::new()
+        super::diffraction::Wedges::default()
     };
     let from_tx: Vec<FromTx> = txs
         .iter()

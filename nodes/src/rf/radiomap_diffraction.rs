@@ -52,9 +52,13 @@ pub(super) fn lit_wedges(
     seen: &[u32],
     tx: DVec3,
 ) -> Vec<Wedge> {
-    wedges(scene, opt.min_wedge_deg, opt.wedges_across_objects)
+    let all = wedges(scene, opt.min_wedge_deg, opt.wedges_across_objects);
+    let mut lit: Vec<u32> = seen.iter().map(|&t| all.face[t as usize]).collect();
+    lit.sort_unstable();
+    lit.dedup();
+    all.list
         .into_iter()
-        .filter(|w| w.diffracts_from(tx, |t| seen.binary_search(&t).is_ok()))
+        .filter(|w| w.diffracts_from(tx, |f| lit.binary_search(&f).is_ok()))
         .collect()
 }
 
@@ -238,6 +242,8 @@ mod tests {
             n: 1.5,
             tri0: 0,
             trin: 1,
+            face0: 0,
+            facen: 1,
         }
     }
 

@@ -131,7 +131,8 @@ impl Stage for SynthDriveTest {
     // 7: wedges from the faces' geometry, not the mesh's winding (rf::diffraction::wedges).
     // 8: UTD face factors at any incidence, in rotated bases (rf::diffraction).
     // 9: diffraction chained with reflections before and after the edge (rf::diffracted).
-    const VERSION: u32 = 9;
+    // 10: wedges lit by flat face, one wedge per run of edge (rf::diffraction::wedges).
+    const VERSION: u32 = 10;
     const DOC: &'static str = "drive-test measurements traced through the ground truth (richer settings) plus log-normal shadowing";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),

@@ -122,7 +122,8 @@ impl Stage for RadioMap {
     const KIND: &'static str = "RadioMap";
     // 4: first-order edge diffraction in maps (rf::radiomap_diffraction).
     // 5: UTD face factors at any incidence, in rotated bases (rf::diffraction).
-    const VERSION: u32 = 5;
+    // 6: wedges lit by flat face, one wedge per run of edge (rf::diffraction::wedges).
+    const VERSION: u32 = 6;
     const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),

@@ -110,7 +110,8 @@ impl Stage for Trace {
     // 7: wedges from the faces' geometry, not the mesh's winding (rf::diffraction::wedges).
     // 8: UTD face factors at any incidence, in rotated bases (rf::diffraction).
     // 9: diffraction chained with reflections before and after the edge (rf::diffracted).
-    const VERSION: u32 = 9;
+    // 10: wedges lit by flat face, one wedge per run of edge (rf::diffraction::wedges).
+    const VERSION: u32 = 10;
     const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
