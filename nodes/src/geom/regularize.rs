@@ -476,6 +476,14 @@ mod tests {
         .remove(0)
     }
 
+    /// How far `p` is from the nearest of `points`.
+    fn nearest(p: [f64; 2], points: &[[f64; 2]]) -> f64 {
+        points
+            .iter()
+            .map(|q| (q[0] - p[0]).hypot(q[1] - p[1]))
+            .fold(f64::INFINITY, f64::min)
+    }
+
     fn rotated_rect(c: [f64; 2], half: [f64; 2], deg: f64) -> Vec<[f64; 2]> {
         let (s, co) = deg.to_radians().sin_cos();
         [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]]
@@ -508,10 +516,7 @@ mod tests {
                 let (a, b, c) = (r[(k + 3) % 4], r[k], r[(k + 1) % 4]);
                 let dot = (b[0] - a[0]) * (c[0] - b[0]) + (b[1] - a[1]) * (c[1] - b[1]);
                 assert!(dot.abs() < 1e-6, "{deg}°: corner {k} not square");
-                let near = truth
-                    .iter()
-                    .map(|t| (t[0] - b[0]).hypot(t[1] - b[1]))
-                    .fold(f64::INFINITY, f64::min);
+                let near = nearest(b, &truth);
                 assert!(near < 0.5, "{deg}°: corner {b:?} is {near:.2} m off");
             }
         }
@@ -537,10 +542,7 @@ mod tests {
         let r = &out.exterior;
         assert_eq!(r.len(), 4, "{r:?}");
         for c in [[x0, y0], [x1, y0], [x1, y1], [x0, y1]] {
-            let near = r
-                .iter()
-                .map(|v| (v[0] - c[0]).hypot(v[1] - c[1]))
-                .fold(f64::INFINITY, f64::min);
+            let near = nearest(c, r);
             assert!(near < 0.5, "corner {c:?} is {near:.2} m from {r:?}");
         }
     }
