@@ -1,10 +1,11 @@
 //! The candidate diffracted paths of a transmitter: one edge, with specular reflections before
-//! and after it up to the depth, found as Sionna RT 2.2 finds them and solved exactly for each
-//! receiver (`diffracted`), as the reflection sequences are.
+//! and after it up to the depth, found as Sionna RT 2.2 finds them (but with wedges lit by flat
+//! face, not by triangle: `diffraction::wedges`) and solved exactly for each receiver
+//! (`diffracted`), as the reflection sequences are.
 //!
 //! - First order: every wedge the transmitter sees ([`Wedge::diffracts_from`]).
 //! - Chained: the transmitter's rays bounce as in the reflection search; where one lands on a
-//!   face with wedges it diffracts with Sionna's probability (0.2) at one of them met from
+//!   flat face with wedges it diffracts with Sionna's probability (0.2) at one of them met from
 //!   outside, at a point along the edge, and leaves on the Keller cone of its incidence at an
 //!   angle round the wedge's outside, bouncing on to the depth. The surfaces before the edge,
 //!   the edge and every prefix of those after it make a candidate. Every draw is a hash of the
