@@ -5,6 +5,7 @@
 use std::collections::BTreeMap;
 
 use crate::artifact::{Chart, ChartKind, ChartSet, Mesh, ObjectClass, PodVec, Scene};
+use crate::geom::union_find::UnionFind;
 
 /// How charts are cut and gridded.
 #[derive(Clone, Copy, Debug)]
@@ -84,14 +85,7 @@ fn face(m: &Mesh, t: usize) -> ([f64; 3], f64) {
 fn planar_groups(m: &Mesh, spec: &ChartSpec) -> Vec<Vec<u32>> {
     let n = m.triangles.len();
     let faces: Vec<([f64; 3], f64)> = (0..n).map(|t| face(m, t)).collect();
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            p[x as usize] = p[p[x as usize] as usize];
-            x = p[x as usize];
-        }
-        x
-    }
+    let mut sets = UnionFind::new(n);
     let mut by_edge: BTreeMap<(u32, u32), Vec<u32>> = BTreeMap::new();
     for (t, tri) in m.triangles.iter().enumerate() {
         for e in 0..3 {
@@ -116,10 +110,7 @@ fn planar_groups(m: &Mesh, spec: &ChartSpec) -> Vec<Vec<u32>> {
                     .iter()
                     .all(|&i| dot(sub(vertex(m, i), p0), ns).abs() <= spec.max_offset_m);
                 if flat {
-                    let (rs, rt) = (find(&mut parent, s), find(&mut parent, t));
-                    if rs != rt {
-                        parent[rs.max(rt) as usize] = rs.min(rt);
-                    }
+                    sets.join(s, t);
                 }
             }
         }
@@ -127,8 +118,7 @@ fn planar_groups(m: &Mesh, spec: &ChartSpec) -> Vec<Vec<u32>> {
     let mut groups: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
     for t in 0..n as u32 {
         if faces[t as usize].1 > 0.0 {
-            let r = find(&mut parent, t);
-            groups.entry(r).or_default().push(t);
+            groups.entry(sets.root(t)).or_default().push(t);
         }
     }
     groups.into_values().collect()

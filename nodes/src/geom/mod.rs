@@ -20,5 +20,6 @@ pub mod relief;
 pub mod terrain_mesh;
 pub mod theil_sen;
 pub mod tri_packet;
+pub mod union_find;
 pub mod view_registration;
 pub mod wide_bvh;

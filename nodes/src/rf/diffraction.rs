@@ -13,6 +13,7 @@ use num_complex::Complex64 as C64;
 use super::field::{self, CVec};
 use super::scene::RfScene;
 use super::utd::wedge_coefficients;
+use crate::geom::union_find::UnionFind;
 
 /// An edge where two faces meet at an exterior angle n π > π (a convex corner).
 #[derive(Clone, Copy, Debug)]
@@ -137,7 +138,7 @@ pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool) -> Wedges {
     keys.sort_unstable();
     // (t0, t1, a, b, n0, nn, cos of the bend) per edge that bends.
     let mut bends = Vec::new();
-    let mut faces = Faces::new(scene.tris.len());
+    let mut faces = UnionFind::new(scene.tris.len());
     for k in keys {
         let on_edge = &edges[&k];
         if on_edge.len() != 2 {
@@ -242,32 +243,6 @@ fn join_pieces(mut pieces: Vec<Wedge>, scene: &RfScene) -> Vec<Wedge> {
         out.push(w);
     }
     out
-}
-
-/// Union-find over triangles; a set is named by its smallest triangle.
-struct Faces(Vec<u32>);
-
-impl Faces {
-    fn new(n: usize) -> Faces {
-        Faces((0..n as u32).collect())
-    }
-    fn root(&mut self, mut t: u32) -> u32 {
-        while self.0[t as usize] != t {
-            let up = self.0[self.0[t as usize] as usize];
-            self.0[t as usize] = up;
-            t = up;
-        }
-        t
-    }
-    fn join(&mut self, a: u32, b: u32) {
-        let (ra, rb) = (self.root(a), self.root(b));
-        let (lo, hi) = (ra.min(rb), ra.max(rb));
-        self.0[hi as usize] = lo;
-    }
-    /// Each triangle's set, by name.
-    fn names(mut self) -> Vec<u32> {
-        (0..self.0.len() as u32).map(|t| self.root(t)).collect()
-    }
 }
 
 /// The point of the edge where the path `s1 -> Q -> s2` is shortest (Keller's cone: equal angles

@@ -5,6 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Footprints, Grid, Metrics, Raster};
+use crate::geom::union_find::UnionFind;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`FootprintScore`].
@@ -219,32 +220,19 @@ fn block_scores(
     let n_ref = scored.len() - 1;
     let n_pred = pred.iter().copied().max().unwrap_or(0) as usize;
     // Union-find over references 1..=n_ref and predictions n_ref+1..
-    let mut parent: Vec<usize> = (0..=n_ref + n_pred).collect();
-    fn find(parent: &mut [usize], mut a: usize) -> usize {
-        while parent[a] != a {
-            parent[a] = parent[parent[a]];
-            a = parent[a];
-        }
-        a
-    }
+    let mut sets = UnionFind::new(n_ref + n_pred + 1);
     for &(r, p) in overlap.keys() {
-        let (a, b) = (
-            find(&mut parent, r as usize),
-            find(&mut parent, n_ref + p as usize),
-        );
-        if a != b {
-            parent[a.max(b)] = a.min(b);
-        }
+        sets.join(r, (n_ref + p as usize) as u32);
     }
-    let mut valid = vec![None::<bool>; parent.len()];
+    let mut valid = vec![None::<bool>; n_ref + n_pred + 1];
     for (r, &ok) in scored.iter().enumerate().skip(1) {
-        let c = find(&mut parent, r);
+        let c = sets.root(r as u32) as usize;
         valid[c] = Some(valid[c].unwrap_or(true) && ok);
     }
     let mut acc = std::collections::BTreeMap::<usize, (usize, usize)>::new();
     for i in (0..refs.len()).filter(|&i| in_region[i]) {
-        let cr = (refs[i] > 0).then(|| find(&mut parent, refs[i] as usize));
-        let cp = (pred[i] > 0).then(|| find(&mut parent, n_ref + pred[i] as usize));
+        let cr = (refs[i] > 0).then(|| sets.root(refs[i]) as usize);
+        let cp = (pred[i] > 0).then(|| sets.root((n_ref + pred[i] as usize) as u32) as usize);
         let mut blocks = [cr, cp];
         if cr == cp {
             blocks[1] = None;
