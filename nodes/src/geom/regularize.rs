@@ -119,14 +119,22 @@ impl Line {
     fn normal(&self) -> [f64; 2] {
         [-self.d[1], self.d[0]]
     }
+    /// How far `p` lies from the line, to its left positive.
+    fn offset_of(&self, p: [f64; 2]) -> f64 {
+        let n = self.normal();
+        n[0] * p[0] + n[1] * p[1] - self.o
+    }
     /// The point of the line nearest to `p`.
     fn project(&self, p: [f64; 2]) -> [f64; 2] {
-        let n = self.normal();
-        let off = n[0] * p[0] + n[1] * p[1] - self.o;
+        let (n, off) = (self.normal(), self.offset_of(p));
         [p[0] - off * n[0], p[1] - off * n[1]]
     }
     fn parallel(&self, other: &Line) -> bool {
         (self.d[0] * other.d[1] - self.d[1] * other.d[0]).abs() < 1e-9
+    }
+    /// Parallel and running the same way.
+    fn same_way(&self, other: &Line) -> bool {
+        self.parallel(other) && self.d[0] * other.d[0] + self.d[1] * other.d[1] > 0.0
     }
 }
 
@@ -216,10 +224,9 @@ fn regularize_ring(
         // Each dominant-direction line's extent along itself: its run of the traced ring is gone
         // after merging, so take the ring's points within a cell of the line.
         for l in merged.iter_mut().filter(|l| l.snapped) {
-            let n = l.normal();
             let (s0, s1) = ring
                 .iter()
-                .filter(|p| (n[0] * p[0] + n[1] * p[1] - l.o).abs() <= cfg.simplify_m)
+                .filter(|p| l.offset_of(**p).abs() <= cfg.simplify_m)
                 .map(|p| l.d[0] * p[0] + l.d[1] * p[1])
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
                     (a.min(v), b.max(v))
@@ -298,7 +305,7 @@ fn off_axis_cut(
         }
         let w: f64 = (0..len).map(|r| lines[(e + r) % k].w).sum();
         let cut = if prev.parallel(&next) {
-            w < corner && prev.d[0] * next.d[0] + prev.d[1] * next.d[1] > 0.0
+            w < corner && prev.same_way(&next)
         } else {
             w < corner
                 || intersect(&prev, &next)
@@ -311,13 +318,8 @@ fn off_axis_cut(
 /// Merges consecutive snapped lines of one direction whose offsets differ by `tol` or less
 /// (around the ring's end too), each at their length-weighted mean offset.
 fn merge_collinear_lines(lines: &mut Vec<Line>, tol: f64) {
-    let same = |a: &Line, b: &Line| {
-        a.snapped
-            && b.snapped
-            && a.parallel(b)
-            && a.d[0] * b.d[0] + a.d[1] * b.d[1] > 0.0
-            && (a.o - b.o).abs() <= tol
-    };
+    let same =
+        |a: &Line, b: &Line| a.snapped && b.snapped && a.same_way(b) && (a.o - b.o).abs() <= tol;
     // `b` follows `a` along the ring.
     let join = |a: &mut Line, b: &Line| {
         let w = a.w + b.w;
@@ -349,10 +351,7 @@ fn merge_collinear_lines(lines: &mut Vec<Line>, tol: f64) {
 /// between the end of `a`'s run and the start of `b`'s, about equally far from both lines (the
 /// middle of the transition the removed edges made, or the vertex the two runs share).
 fn step_on_ring(ring: &[[f64; 2]], a: &Line, b: &Line) -> [f64; 2] {
-    let dist = |l: &Line, p: [f64; 2]| {
-        let n = l.normal();
-        (n[0] * p[0] + n[1] * p[1] - l.o).abs()
-    };
+    let dist = |l: &Line, p: [f64; 2]| l.offset_of(p).abs();
     let n = ring.len();
     let gap = (b.span.0 + n - a.span.1) % n;
     (0..=gap)
