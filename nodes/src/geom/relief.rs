@@ -21,6 +21,7 @@ use crate::artifact::{
 };
 use crate::geom::fusion::{ChartLookup, FusionParams, Vote, fuse_views_displaced};
 use crate::geom::raycast::SceneRays;
+use crate::geom::union_find::UnionFind;
 use crate::raster::label::label_components;
 use crate::raster::label::label_regions;
 use crate::raster::morph::{close_within, dilate, erode};
@@ -358,7 +359,7 @@ pub struct ReliefParams {
     /// Width of the ring around a region where its enclosing wall is looked for, pixels.
     /// Default 3.
     pub ring_px: u32,
-    /// Share of the ring (clutter aside) the dominant wall must hold. Default 0.5.
+    /// Share of the ring (clutter and sky aside) walls must hold. Default 0.5.
     pub enclosure_min: f64,
     /// Smallest depth step that counts, metres. Default 0.05.
     pub min_step_m: f64,
@@ -399,6 +400,9 @@ pub struct ReliefParams {
     pub close_texels: u32,
     /// Smallest instance, texels. Default 6.
     pub min_texels: u32,
+    /// Widest stretch of unobserved texels (or texels with some evidence) across which two
+    /// pieces of one feature join, texels. Default 5: a balcony slab's shadow on a drainpipe.
+    pub bridge_texels: u32,
 }
 
 impl Default for ReliefParams {
@@ -448,6 +452,7 @@ impl Default for ReliefParams {
             open_texels: (1, 0),
             close_texels: 1,
             min_texels: 6,
+            bridge_texels: 5,
         }
     }
 }
@@ -513,6 +518,9 @@ impl ReliefParams {
         }
         if !(1..=1_000_000).contains(&self.min_texels) {
             return Err(("min_texels", "expected 1 to 10^6 texels".into()));
+        }
+        if self.bridge_texels > 1000 {
+            return Err(("bridge_texels", "expected 0 to 1000 texels".into()));
         }
         Ok(())
     }
@@ -746,6 +754,7 @@ fn view_relief(
     let depth = view.depth.as_ref().filter(|d| d.len() == n);
     let normals = view.normal.as_ref().filter(|d| d.len() == n);
     let is_ground = |px: usize| arch.ids[px] == 0 && !masked(px);
+    let is_sky = |px: usize| arch.ids[px] == 0 && depth.is_some_and(|d| !d[px].is_finite());
     let cal = depth.and_then(|_| calibrate(view, rays, charts, lookup, &is_wall, &is_ground));
     out.calibrated = cal.is_some();
     // Region keys: a non-wall instance's id, or all unlabelled pixels with a depth.
@@ -825,9 +834,8 @@ fn view_relief(
             mask[(y * cw + x) as usize] = true;
         }
         let grown = dilate(&mask, cw, ch, r);
-        let mut ring_walls: BTreeMap<u16, u32> = BTreeMap::new();
         let mut ring_total = 0u32;
-        let mut ring_px: Vec<usize> = Vec::new();
+        let mut ring_px: Vec<(usize, u16)> = Vec::new();
         for yy in 0..ch {
             for xx in 0..cw {
                 let k = (yy * cw + xx) as usize;
@@ -835,24 +843,21 @@ fn view_relief(
                     continue;
                 }
                 let px = ((yy + by0) * w + xx + bx0) as usize;
-                if out.codes[px] == MASKED {
+                // Sky past a wall's edge (no label, no depth) neither encloses a region nor
+                // speaks against it: a drainpipe by a corner has it on one side.
+                if out.codes[px] == MASKED || is_sky(px) {
                     continue;
                 }
                 ring_total += 1;
                 if is_wall(px) {
-                    *ring_walls.entry(arch.ids[px]).or_default() += 1;
-                    ring_px.push(px);
+                    ring_px.push((px, arch.ids[px]));
                 }
             }
         }
-        let dominant = ring_walls
-            .iter()
-            .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
-            .map(|(&id, &c)| (id, c));
-        let Some((wall_id, count)) = dominant else {
-            continue;
-        };
-        if ring_total == 0 || (count as f64) < p.enclosure_min * ring_total as f64 {
+        // Enclosed by walls: the two façades of a corner are often two instances, each holding
+        // half the ring of a feature at the corner.
+        let walls = ring_px.len();
+        if walls == 0 || (walls as f64) < p.enclosure_min * ring_total as f64 {
             continue;
         }
         // The region's chart: where its centre ray meets the twin.
@@ -865,14 +870,23 @@ fn view_relief(
         };
         let chart = &charts.charts[ci as usize];
         let nrm = chart.normal;
+        let wall_id = region_wall(&ring_px, ci, |px| {
+            let (x, y) = (
+                (px % w as usize) as f64 + 0.5,
+                (px / w as usize) as f64 + 0.5,
+            );
+            let (d, _) = view.pixel_ray(x, y);
+            rays.cast(origin, d.map(|c| c as f32), 1e-3, 2000.0)
+                .and_then(|h| lookup.wall_chart(charts, h.object, h.triangle))
+        });
         // Depth cue: step against the plane with the wall's normal fitted to the ring.
         let mut step = f64::NAN;
         let mut v_depth = 0.0;
         if let Some(cal) = cal {
             let mut ring_s: Vec<f64> = ring_px
                 .iter()
-                .filter(|&&px| arch.ids[px] == wall_id)
-                .filter_map(|&px| point(px, cal))
+                .filter(|&&(_, id)| id == wall_id)
+                .filter_map(|&(px, _)| point(px, cal))
                 .map(|x| dot(x, nrm))
                 .collect();
             let mut reg_s: Vec<f64> = pixels
@@ -977,6 +991,34 @@ fn view_relief(
         });
     }
     out
+}
+
+/// The wall instance a region stands on, among those in its ring (`ring`: pixel and wall id):
+/// the one whose ring pixels' rays (`chart_at`; three of them: first, middle and last) meet the
+/// region's chart `chart` most often, then the one with most ring pixels. At a corner the other
+/// façade can hold as much of the ring, and the depth step must be measured against the region's
+/// own wall.
+fn region_wall(ring: &[(usize, u16)], chart: u32, chart_at: impl Fn(usize) -> Option<u32>) -> u16 {
+    let mut by_id: BTreeMap<u16, Vec<usize>> = BTreeMap::new();
+    for &(px, id) in ring {
+        by_id.entry(id).or_default().push(px);
+    }
+    let score = |pxs: &Vec<usize>| -> (u32, usize) {
+        let meets = if by_id.len() == 1 {
+            0
+        } else {
+            [0, pxs.len() / 2, pxs.len() - 1]
+                .iter()
+                .filter(|&&k| chart_at(pxs[k]) == Some(chart))
+                .count() as u32
+        };
+        (meets, pxs.len())
+    };
+    by_id
+        .iter()
+        .map(|(&id, pxs)| (score(pxs), id))
+        .max_by(|a, b| a.0.cmp(&b.0).then(b.1.cmp(&a.1)))
+        .map_or(0, |(_, id)| id)
 }
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -1290,32 +1332,22 @@ fn instances(
                 comps.entry(l).or_default().push(k);
             }
         }
-        for texels in comps.values() {
+        let passable = |k: usize| {
+            c.triangle_at[k] != u32::MAX
+                && (!(lay.exposure[k] as f64 >= p.exposure_min) || grown[k])
+        };
+        let comps = bridge_gaps(comps.into_values().collect(), w, p.bridge_texels, passable);
+        let evidence = if sign < 0 {
+            &lay.recessed
+        } else {
+            &lay.protruding
+        };
+        for texels in &comps {
             if texels.len() < p.min_texels as usize {
                 continue;
             }
             let m = texels.len() as f64;
-            let (mut su, mut sv) = (0.0, 0.0);
-            for &k in texels {
-                su += (k % w as usize) as f64 + 0.5;
-                sv += (k / w as usize) as f64 + 0.5;
-            }
-            let (mu, mv) = (su / m, sv / m);
-            let (mut vu, mut vv) = (0.0, 0.0);
-            for &k in texels {
-                let du = (k % w as usize) as f64 + 0.5 - mu;
-                let dv = (k / w as usize) as f64 + 0.5 - mv;
-                vu += du * du;
-                vv += dv * dv;
-            }
-            let (hu, hv) = ((3.0 * vu / m + 0.25).sqrt(), (3.0 * vv / m + 0.25).sqrt());
-            let r = [mu - hu, mv - hv, mu + hu, mv + hv];
-            let rect = [
-                r[0].max(0.0),
-                r[1].max(0.0),
-                r[2].min(w as f64),
-                r[3].min(h as f64),
-            ];
+            let rect = extent(texels, evidence, w, h);
             let mean = |l: &PodVec<f32>| {
                 texels
                     .iter()
@@ -1400,6 +1432,167 @@ fn instances(
         }
     }
     out
+}
+
+/// Texel box of a set of texels: (i0, j0, i1, j1), inclusive.
+fn texel_box(texels: &[usize], w: u32) -> [usize; 4] {
+    let w = w as usize;
+    texels.iter().fold([usize::MAX, usize::MAX, 0, 0], |b, &k| {
+        let (i, j) = (k % w, k / w);
+        [b[0].min(i), b[1].min(j), b[2].max(i), b[3].max(j)]
+    })
+}
+
+/// Joins components that face each other across a stretch at most `gap` texels wide where every
+/// line across has a `passable` texel (unobserved, or with some evidence) within their overlap:
+/// one feature seen in pieces (a drainpipe whose storeys a balcony slab hides from the views)
+/// rather than several. They must overlap across the gap over half the narrower one's span, and
+/// a line of observed flat wall stops the join, so a row of windows stays a row of windows.
+fn bridge_gaps(
+    comps: Vec<Vec<usize>>,
+    w: u32,
+    gap: u32,
+    passable: impl Fn(usize) -> bool,
+) -> Vec<Vec<usize>> {
+    if gap == 0 || comps.len() < 2 {
+        return comps;
+    }
+    let boxes: Vec<[usize; 4]> = comps.iter().map(|t| texel_box(t, w)).collect();
+    let wu = w as usize;
+    // Along axis `a` (0: u, 1: v) box `y` follows box `x` across a passable gap.
+    let faces = |x: &[usize; 4], y: &[usize; 4], a: usize| -> bool {
+        let b = 1 - a;
+        if y[a] <= x[a + 2] || y[a] - x[a + 2] - 1 > gap as usize {
+            return false;
+        }
+        let (lo, hi) = (x[b].max(y[b]), x[b + 2].min(y[b + 2]));
+        let narrower = (x[b + 2] - x[b]).min(y[b + 2] - y[b]) + 1;
+        if hi < lo || 2 * (hi - lo + 1) < narrower {
+            return false;
+        }
+        (x[a + 2] + 1..y[a]).all(|s| {
+            (lo..=hi).any(|t| {
+                let (i, j) = if a == 0 { (s, t) } else { (t, s) };
+                passable(j * wu + i)
+            })
+        })
+    };
+    let mut sets = UnionFind::new(comps.len());
+    for x in 0..boxes.len() {
+        for y in 0..boxes.len() {
+            if x != y && (faces(&boxes[x], &boxes[y], 0) || faces(&boxes[x], &boxes[y], 1)) {
+                sets.join(x as u32, y as u32);
+            }
+        }
+    }
+    let mut joined: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
+    for (x, name) in sets.names().into_iter().enumerate() {
+        joined.entry(name).or_default().extend_from_slice(&comps[x]);
+    }
+    joined
+        .into_values()
+        .map(|mut t| {
+            t.sort_unstable();
+            t
+        })
+        .collect()
+}
+
+/// How far the evidence reaches past an instance's texels: the fusion kernel's and the bilinear
+/// deposit's spread.
+const EXTENT_REACH: usize = 3;
+
+/// An instance's rectangle (u0, v0, u1, v1) in texels: along each axis, where its evidence
+/// profile (the layer's mean across the instance's span, per texel column or row) falls to half
+/// its peak, interpolated between texel centres. A feature narrower than two texels (a drainpipe)
+/// gets its width and place from how its evidence splits between the columns, not from the
+/// whole texels that cleared the threshold.
+fn extent(texels: &[usize], evidence: &[f32], w: u32, h: u32) -> [f64; 4] {
+    let b = texel_box(texels, w);
+    let (wu, hu) = (w as usize, h as usize);
+    let mean = |cells: &mut dyn Iterator<Item = usize>| {
+        let (mut s, mut n) = (0.0, 0usize);
+        for k in cells {
+            let e = evidence[k] as f64;
+            if e.is_finite() {
+                s += e;
+                n += 1;
+            }
+        }
+        if n == 0 { f64::NAN } else { s / n as f64 }
+    };
+    let span = |lo: usize, hi: usize, len: usize| {
+        (
+            lo.saturating_sub(EXTENT_REACH),
+            (hi + EXTENT_REACH).min(len - 1),
+        )
+    };
+    let (ua, ub) = span(b[0], b[2], wu);
+    let (va, vb) = span(b[1], b[3], hu);
+    let cols: Vec<f64> = (ua..=ub)
+        .map(|i| mean(&mut (b[1]..=b[3]).map(|j| j * wu + i)))
+        .collect();
+    let rows: Vec<f64> = (va..=vb)
+        .map(|j| mean(&mut (b[0]..=b[2]).map(|i| j * wu + i)))
+        .collect();
+    let (u0, u1) = half_peak_edges(&cols, b[0] - ua, b[2] - ua);
+    let (v0, v1) = half_peak_edges(&rows, b[1] - va, b[3] - va);
+    [
+        (ua as f64 + u0).max(0.0),
+        (va as f64 + v0).max(0.0),
+        (ua as f64 + u1).min(w as f64),
+        (va as f64 + v1).min(h as f64),
+    ]
+}
+
+/// Where `profile` (values at texel centres k + 0.5, NaN unobserved) crosses half its peak over
+/// the core span [lo, hi], one crossing each side, searched outward from the core's ends (inward
+/// where an end is already under half); an unobserved texel or the profile's end bounds the
+/// search at a texel edge.
+fn half_peak_edges(profile: &[f64], lo: usize, hi: usize) -> (f64, f64) {
+    let peak = profile[lo..=hi]
+        .iter()
+        .copied()
+        .filter(|x| x.is_finite())
+        .fold(0.0, f64::max);
+    if peak <= 0.0 {
+        return (lo as f64, hi as f64 + 1.0);
+    }
+    let level = peak / 2.0;
+    let above = |k: usize| profile[k] >= level;
+    // The crossing between texel `inner` (at or over the level) and its neighbour `outer`.
+    let cross = |inner: usize, outer: usize| -> f64 {
+        let (a, b) = (profile[inner], profile[outer]);
+        let edge = if outer < inner {
+            inner as f64
+        } else {
+            inner as f64 + 1.0
+        };
+        if !b.is_finite() {
+            return edge;
+        }
+        let f = (a - level) / (a - b);
+        let (ci, co) = (inner as f64 + 0.5, outer as f64 + 0.5);
+        ci + (co - ci) * f
+    };
+    // Innermost texel over the level from each end of the core.
+    let first = (lo..=hi).find(|&k| above(k)).unwrap_or(lo);
+    let last = (lo..=hi).rev().find(|&k| above(k)).unwrap_or(hi);
+    let mut l = first;
+    while l > 0 && profile[l - 1].is_finite() && above(l - 1) {
+        l -= 1;
+    }
+    let mut r = last;
+    while r + 1 < profile.len() && profile[r + 1].is_finite() && above(r + 1) {
+        r += 1;
+    }
+    let left = if l == 0 { 0.0 } else { cross(l, l - 1) };
+    let right = if r + 1 == profile.len() {
+        profile.len() as f64
+    } else {
+        cross(r, r + 1)
+    };
+    (left, right)
 }
 
 fn weighted_median(v: &mut [(f64, f64)]) -> Option<f64> {
@@ -1492,6 +1685,107 @@ mod tests {
         };
         // Without the hysteresis (closing bridges one row, not two): a piece per stretch.
         assert_eq!(instances(0, &c, &lay, &[], false, &without).len(), 11);
+    }
+
+    /// Layers of a `w` x `h` chart seen everywhere (exposure 10) with protruding posterior and
+    /// evidence `pr` and `e`.
+    fn seen_layers(w: u32, h: u32, pr: Vec<f32>, e: Vec<f32>) -> ReliefLayers {
+        let n = (w * h) as usize;
+        ReliefLayers {
+            width: w,
+            height: h,
+            exposure: PodVec(vec![10.0; n]),
+            recessed: PodVec(vec![0.0; n]),
+            protruding: PodVec(e),
+            delta: PodVec(vec![f32::NAN; n]),
+            pr_recessed: PodVec(vec![0.03; n]),
+            pr_protruding: PodVec(pr),
+        }
+    }
+
+    #[test]
+    fn a_thin_feature_sits_where_its_evidence_splits_between_columns() {
+        // Evidence all in column 3 (a pipe centred on it), then split evenly between columns 3
+        // and 4 (a pipe on their common edge): the posterior clears the threshold in column 3
+        // alone both times, the rectangle follows the evidence.
+        let (w, h) = (10u32, 30u32);
+        let c = flat_chart(w, h);
+        let n = c.len();
+        let mut pr = vec![0.03f32; n];
+        for j in 0..h {
+            pr[(j * w + 3) as usize] = 0.85;
+        }
+        let p = ReliefParams {
+            min_texels: 3,
+            ..Default::default()
+        };
+        let centre = |split: bool| {
+            let mut e = vec![0.0f32; n];
+            for j in 0..h {
+                e[(j * w + 2) as usize] = 0.3;
+                e[(j * w + 3) as usize] = 0.8;
+                e[(j * w + 4) as usize] = if split { 0.8 } else { 0.3 };
+                e[(j * w + 5) as usize] = if split { 0.3 } else { 0.0 };
+            }
+            let one = instances(0, &c, &seen_layers(w, h, pr.clone(), e), &[], false, &p);
+            assert_eq!(one.len(), 1, "{one:?}");
+            let r = one[0].rect;
+            assert!(r[1] < 0.5 && r[3] > 29.5, "{r:?}");
+            ((r[0] + r[2]) / 2.0, r[2] - r[0])
+        };
+        let (on_column, width) = centre(false);
+        assert!(
+            (on_column - 3.5).abs() < 1e-9 && width < 2.0,
+            "{on_column} {width}"
+        );
+        let (on_edge, width) = centre(true);
+        assert!(
+            (on_edge - 4.0).abs() < 1e-9 && width < 3.0,
+            "{on_edge} {width}"
+        );
+    }
+
+    #[test]
+    fn pieces_join_across_an_unobserved_stretch_not_across_observed_wall() {
+        // A pipe down column 3, rows 0-19 and 24-43; rows 20-23 between them unobserved (a
+        // balcony slab hid them), then observed and flat.
+        let (w, h) = (10u32, 44u32);
+        let c = flat_chart(w, h);
+        let n = c.len();
+        let mut pr = vec![0.03f32; n];
+        let mut e = vec![0.0f32; n];
+        for j in (0..20).chain(24..44) {
+            pr[(j * w + 3) as usize] = 0.85;
+            e[(j * w + 3) as usize] = 0.9;
+        }
+        let p = ReliefParams {
+            min_texels: 3,
+            ..Default::default()
+        };
+        let mut hidden = seen_layers(w, h, pr.clone(), e.clone());
+        for j in 20..24 {
+            for i in 0..w {
+                let k = (j * w + i) as usize;
+                hidden.exposure[k] = 0.0;
+                hidden.protruding[k] = f32::NAN;
+                hidden.pr_protruding[k] = f32::NAN;
+                hidden.pr_recessed[k] = f32::NAN;
+            }
+        }
+        let one = instances(0, &c, &hidden, &[], false, &p);
+        assert_eq!(one.len(), 1, "{one:?}");
+        assert!(
+            one[0].rect[1] < 0.5 && one[0].rect[3] > 43.5,
+            "{:?}",
+            one[0].rect
+        );
+        let narrow = ReliefParams {
+            bridge_texels: 3,
+            ..p.clone()
+        };
+        assert_eq!(instances(0, &c, &hidden, &[], false, &narrow).len(), 2);
+        let flat = seen_layers(w, h, pr, e);
+        assert_eq!(instances(0, &c, &flat, &[], false, &p).len(), 2);
     }
 
     #[test]

@@ -18,7 +18,9 @@ impl Stage for Relief {
     // 3: the fusion sums its deposits into dense grids in view and pixel order (other last
     // bits); neutral pixels deposit exposure only.
     // 4: no Delta layer without a mesh.
-    const VERSION: u32 = 4;
+    // 5: instance rectangles where the evidence falls to half its peak; pieces joined across
+    // unobserved stretches; sky left out of the enclosure ring, walls of any instance enclose.
+    const VERSION: u32 = 5;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),
