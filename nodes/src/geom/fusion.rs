@@ -148,8 +148,8 @@ pub fn fuse_views_displaced(
     let mut stats = FusionStats::default();
     progress.set_total(views.len() as u64);
     let chunk = (rayon::current_num_threads() * 2).max(1);
-    for (b, batch) in views.chunks(chunk).enumerate() {
-        let deposits: Vec<ViewDeposits> = batch
+    let compute = |b: usize, batch: &[View]| -> Vec<ViewDeposits> {
+        batch
             .par_iter()
             .enumerate()
             .map(|(k, v)| {
@@ -157,10 +157,24 @@ pub fn fuse_views_displaced(
                 progress.advance(1);
                 d
             })
-            .collect();
-        for d in deposits {
-            d.merge_into(&mut per_chart, &mut stats);
-        }
+            .collect()
+    };
+    // Each batch is merged in view order while the next is computed: the merge is serial, and
+    // would otherwise leave every other thread idle.
+    let mut pending: Vec<ViewDeposits> = Vec::new();
+    for (b, batch) in views.chunks(chunk).enumerate() {
+        let ((), next) = rayon::join(
+            || {
+                for d in pending.drain(..) {
+                    d.merge_into(&mut per_chart, &mut stats);
+                }
+            },
+            || compute(b, batch),
+        );
+        pending = next;
+    }
+    for d in pending {
+        d.merge_into(&mut per_chart, &mut stats);
     }
     let kernel = gaussian_kernel(p.sigma_texels);
     let layers = charts
@@ -372,6 +386,11 @@ fn view_deposits(
             view.pixel_ray(x as f64 + 0.5, y as f64 + 0.5).0
         })
         .collect();
+    // Four bilinear deposits and one hit per pixel at most: reserved once rather than grown by
+    // doubling (each doubling copies, and faults in fresh pages).
+    let pixels = (gw * gh) as usize;
+    out.deposits.reserve_exact(4 * pixels);
+    out.hits.reserve_exact(pixels);
     let hits = rays.cast_grid(
         gw,
         gh,

@@ -1274,9 +1274,9 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
     set
 }
 
-/// Threshold, opening, closing and connected components of one chart's posteriors, each
-/// component a rectangle (from its second moments: exact for a filled rectangle) with a class,
-/// a depth and its evidence.
+/// Threshold, opening, closing and connected components of one chart's posteriors (pieces
+/// joined across unobserved stretches), each component a rectangle (where its evidence falls to
+/// half its peak) with a class, a depth and its evidence.
 fn instances(
     ci: u32,
     c: &crate::artifact::Chart,
@@ -1301,6 +1301,10 @@ fn instances(
             a.is_finite() && a >= threshold && a >= b && (grown || a >= 1.0 - a - b)
         };
         let mut mask: Vec<bool> = (0..n).map(|k| over(k, p.threshold, false)).collect();
+        // Nothing over the threshold, nothing the morphology could make an instance of.
+        if !mask.contains(&true) {
+            continue;
+        }
         let open = if sign < 0 {
             p.open_texels.0
         } else {

@@ -3,6 +3,9 @@
 
 use rayon::prelude::*;
 
+/// Cells a parallel task of [`morph`] takes at least.
+const MIN_CELLS_PER_TASK: usize = 1 << 16;
+
 fn morph(mask: &[bool], w: u32, h: u32, radius: i64, dilate: bool) -> Vec<bool> {
     if radius <= 0 {
         return mask.to_vec();
@@ -27,26 +30,35 @@ fn morph(mask: &[bool], w: u32, h: u32, radius: i64, dilate: bool) -> Vec<bool> 
     if w == 0 {
         return out;
     }
-    out.par_chunks_mut(w).enumerate().for_each(|(r, row)| {
-        let mut window = vec![false; w];
-        for &(dr, span) in &spans {
-            let rr = r as i64 + dr;
-            if rr < 0 || rr >= h as i64 {
-                // Outside the grid counts as empty for dilation and as full for erosion, so
-                // buildings cut by the survey's edge are not eaten away: no effect either way.
-                continue;
-            }
-            let src = &mask[rr as usize * w..(rr as usize + 1) * w];
-            sliding_any(src, span, dilate, &mut window);
-            for (o, &x) in row.iter_mut().zip(&window) {
-                if dilate {
-                    *o |= x;
-                } else {
-                    *o &= !x;
+    // Bands of rows big enough to be worth a task: a façade chart's few thousand cells are one
+    // (the relief closes thousands of them, each already on a thread of its own).
+    let band = MIN_CELLS_PER_TASK.div_ceil(w).max(1);
+    out.par_chunks_mut(w * band)
+        .enumerate()
+        .for_each(|(b, rows)| {
+            let mut window = vec![false; w];
+            for (k, row) in rows.chunks_mut(w).enumerate() {
+                let r = b * band + k;
+                for &(dr, span) in &spans {
+                    let rr = r as i64 + dr;
+                    if rr < 0 || rr >= h as i64 {
+                        // Outside the grid counts as empty for dilation and as full for
+                        // erosion, so buildings cut by the survey's edge are not eaten away:
+                        // no effect either way.
+                        continue;
+                    }
+                    let src = &mask[rr as usize * w..(rr as usize + 1) * w];
+                    sliding_any(src, span, dilate, &mut window);
+                    for (o, &x) in row.iter_mut().zip(&window) {
+                        if dilate {
+                            *o |= x;
+                        } else {
+                            *o &= !x;
+                        }
+                    }
                 }
             }
-        }
-    });
+        });
     out
 }
 
