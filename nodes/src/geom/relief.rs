@@ -1661,16 +1661,7 @@ mod tests {
         for j in 0..h {
             pr[(j * w + 3) as usize] = if j % 6 >= 4 { 0.35 } else { 0.85 };
         }
-        let lay = ReliefLayers {
-            width: w,
-            height: h,
-            exposure: PodVec(vec![10.0; n]),
-            recessed: PodVec(vec![0.0; n]),
-            protruding: PodVec(vec![0.0; n]),
-            delta: PodVec(vec![f32::NAN; n]),
-            pr_recessed: PodVec(vec![0.03; n]),
-            pr_protruding: PodVec(pr),
-        };
+        let lay = seen_layers(w, h, pr, vec![0.0; n]);
         let p = ReliefParams {
             min_texels: 3,
             ..Default::default()
