@@ -264,7 +264,6 @@ fn touch(path: &Path) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::io::Write;
 
     /// Writes of every size (headers of a few bytes, arrays across the buffer's edge, arrays
     /// larger than the buffer) store exactly the bytes written, under the digest of the whole.
