@@ -361,6 +361,9 @@ pub struct ReliefParams {
     pub ring_px: u32,
     /// Share of the ring (clutter and sky aside) walls must hold. Default 0.5.
     pub enclosure_min: f64,
+    /// Unlabelled ring pixels whose calibrated depth puts them this close to the region's chart
+    /// plane count as wall (a wall the segmentation missed), metres. Default 0.3.
+    pub plane_tol_m: f64,
     /// Smallest depth step that counts, metres. Default 0.05.
     pub min_step_m: f64,
     /// And its significance: step over its standard error. Default 3.
@@ -431,6 +434,7 @@ impl Default for ReliefParams {
             min_region_px: 6,
             ring_px: 3,
             enclosure_min: 0.5,
+            plane_tol_m: 0.3,
             min_step_m: 0.05,
             step_z_min: 3.0,
             side_angle_deg: 30.0,
@@ -493,6 +497,7 @@ impl ReliefParams {
             return Err(("ring_px", "expected 1 to 32 pixels".into()));
         }
         range("enclosure_min", self.enclosure_min, 0.0, 1.0)?;
+        range("plane_tol_m", self.plane_tol_m, 0.0, 10.0)?;
         range("min_step_m", self.min_step_m, 0.0, 5.0)?;
         range("step_z_min", self.step_z_min, 0.0, 100.0)?;
         range("side_angle_deg", self.side_angle_deg, 1.0, 89.0)?;
@@ -836,6 +841,7 @@ fn view_relief(
         let grown = dilate(&mask, cw, ch, r);
         let mut ring_total = 0u32;
         let mut ring_px: Vec<(usize, u16)> = Vec::new();
+        let mut ring_plain: Vec<usize> = Vec::new();
         for yy in 0..ch {
             for xx in 0..cw {
                 let k = (yy * cw + xx) as usize;
@@ -851,13 +857,17 @@ fn view_relief(
                 ring_total += 1;
                 if is_wall(px) {
                     ring_px.push((px, arch.ids[px]));
+                } else if arch.ids[px] == 0 {
+                    ring_plain.push(px);
                 }
             }
         }
         // Enclosed by walls: the two façades of a corner are often two instances, each holding
         // half the ring of a feature at the corner.
         let walls = ring_px.len();
-        if walls == 0 || (walls as f64) < p.enclosure_min * ring_total as f64 {
+        let enough = |n: usize| n > 0 && n as f64 >= p.enclosure_min * ring_total as f64;
+        let walled = enough(walls);
+        if !walled && (cal.is_none() || ring_plain.is_empty()) {
             continue;
         }
         // The region's chart: where its centre ray meets the twin.
@@ -870,6 +880,24 @@ fn view_relief(
         };
         let chart = &charts.charts[ci as usize];
         let nrm = chart.normal;
+        // Where the segmentation missed the wall (its pixels unlabelled), the depth still tells
+        // it: unlabelled ring pixels that lie on the chart's plane enclose as wall.
+        let on_plane: Vec<usize> = match cal {
+            Some(cal) if !walled => {
+                let plane = dot(chart.origin, nrm);
+                ring_plain
+                    .iter()
+                    .copied()
+                    .filter(|&px| {
+                        point(px, cal).is_some_and(|x| (dot(x, nrm) - plane).abs() <= p.plane_tol_m)
+                    })
+                    .collect()
+            }
+            _ => Vec::new(),
+        };
+        if !walled && !enough(walls + on_plane.len()) {
+            continue;
+        }
         let wall_id = region_wall(&ring_px, ci, |px| {
             let (x, y) = (
                 (px % w as usize) as f64 + 0.5,
@@ -886,7 +914,9 @@ fn view_relief(
             let mut ring_s: Vec<f64> = ring_px
                 .iter()
                 .filter(|&&(_, id)| id == wall_id)
-                .filter_map(|&(px, _)| point(px, cal))
+                .map(|&(px, _)| px)
+                .chain(on_plane.iter().copied())
+                .filter_map(|px| point(px, cal))
                 .map(|x| dot(x, nrm))
                 .collect();
             let mut reg_s: Vec<f64> = pixels
