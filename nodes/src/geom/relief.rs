@@ -1826,6 +1826,22 @@ mod tests {
     }
 
     #[test]
+    fn plane_tolerance_and_bridge_width_are_refused_out_of_range() {
+        for t in [f64::NAN, f64::INFINITY, -0.1, 11.0] {
+            let p = ReliefParams {
+                plane_tol_m: t,
+                ..Default::default()
+            };
+            assert_eq!(p.validate().map_err(|e| e.0), Err("plane_tol_m"), "{t}");
+        }
+        let p = ReliefParams {
+            bridge_texels: 1001,
+            ..Default::default()
+        };
+        assert_eq!(p.validate().map_err(|e| e.0), Err("bridge_texels"));
+    }
+
+    #[test]
     fn weighted_median_follows_the_weights() {
         let mut v = vec![(0.25, 10.0), (0.1, 1.0), (0.3, 2.0)];
         assert_eq!(weighted_median(&mut v), Some(0.25));
