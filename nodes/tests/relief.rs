@@ -344,9 +344,6 @@ fn iou(a: [f64; 4], b: [f64; 4]) -> f64 {
 /// Share of a true feature's texels the views observed (exposure over the threshold).
 fn observed_share(r: &ReliefSet, f: &TrueFeature, exposure_min: f64) -> f64 {
     let l = &r.layers[f.chart];
-    if l.exposure.is_empty() {
-        return 0.0;
-    }
     let (mut n, mut seen) = (0, 0);
     for j in f.rect[1].floor() as u32..f.rect[3].ceil() as u32 {
         for i in f.rect[0].floor() as u32..f.rect[2].ceil() as u32 {
@@ -354,7 +351,7 @@ fn observed_share(r: &ReliefSet, f: &TrueFeature, exposure_min: f64) -> f64 {
                 continue;
             }
             n += 1;
-            if l.exposure[(j * l.width + i) as usize] as f64 >= exposure_min {
+            if l.exposure.get((j * l.width + i) as usize) as f64 >= exposure_min {
                 seen += 1;
             }
         }
@@ -947,10 +944,10 @@ fn delta_finds_recesses_the_views_miss_and_yields_where_many_views_disagree() {
         ((t.rect[1] + t.rect[3]) / 2.0) as u32,
     );
     let k = (cv * l.width + cu) as usize;
-    assert!((l.delta[k] + 0.25).abs() < 0.01, "{}", l.delta[k]);
-    let pd = mesh_state_probabilities(l.delta[k] as f64, &p.delta);
+    assert!((l.delta.get(k) + 0.25).abs() < 0.01, "{}", l.delta.get(k));
+    let pd = mesh_state_probabilities(l.delta.get(k) as f64, &p.delta);
     let want = relief_posterior(&p.cpt.expand(), None, pd).unwrap();
-    assert!((l.pr_recessed[k] as f64 - want[0]).abs() < 1e-6);
+    assert!((l.pr_recessed.get(k) as f64 - want[0]).abs() < 1e-6);
 
     // (b) The mesh is wrong: every wall 0.3 m further east than ours, so west-facing walls look
     // recessed to it everywhere. Where many views saw a plain wall, the views win.
@@ -967,20 +964,17 @@ fn delta_finds_recesses_the_views_miss_and_yields_where_many_views_disagree() {
             continue;
         }
         let l = &r.layers[ci];
-        if l.recessed.is_empty() {
-            continue;
-        }
-        for k in 0..c.len() {
-            let (rr, pp) = (l.recessed[k] as f64, l.protruding[k] as f64);
-            if !(rr.is_finite() && rr < 0.05 && pp < 0.05 && l.exposure[k] >= 5.0) {
+        for (k, rr) in l.recessed.kept() {
+            let (rr, pp) = (rr as f64, l.protruding.get(k) as f64);
+            if !(rr.is_finite() && rr < 0.05 && pp < 0.05 && l.exposure.get(k) >= 5.0) {
                 continue;
             }
-            assert!((l.delta[k] + 0.3).abs() < 0.02, "{}", l.delta[k]);
+            assert!((l.delta.get(k) + 0.3).abs() < 0.02, "{}", l.delta.get(k));
             checked += 1;
-            flat += (l.pr_recessed[k] < 0.5) as usize;
-            let pd = mesh_state_probabilities(l.delta[k] as f64, &p.delta);
+            flat += (l.pr_recessed.get(k) < 0.5) as usize;
+            let pd = mesh_state_probabilities(l.delta.get(k) as f64, &p.delta);
             let want = relief_posterior(&p.cpt.expand(), Some((0, 0)), pd).unwrap();
-            assert!((l.pr_recessed[k] as f64 - want[0]).abs() < 1e-6);
+            assert!((l.pr_recessed.get(k) as f64 - want[0]).abs() < 1e-6);
         }
     }
     println!("wrong mesh: {flat} of {checked} well-observed flat texels stay flat");

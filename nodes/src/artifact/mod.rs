@@ -18,7 +18,7 @@ mod views;
 
 use serde::{Deserialize, Serialize};
 
-pub use array::PodVec;
+pub use array::{PodVec, SparseLayer};
 pub use charts::{Chart, ChartFrame, ChartKind, ChartLayers, ChartSet, FusionStats, TexelLayers};
 pub use city::{
     BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, RECESS_M, Rect, Roof, RoofBox,

@@ -4,10 +4,12 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::PodVec;
+use super::SparseLayer;
 
-/// Per-texel relief layers of one chart. Empty vectors where no view saw the chart and no source
-/// mesh was given (every texel unobserved).
+/// Per-texel relief layers of one chart, in raster order (`v` rows of `width` texels). Each
+/// layer keeps only the texels that carry a value: NaN or zero everywhere else, which on a
+/// street-level site is most of every chart (the back of every building, the storeys no view
+/// reached).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ReliefLayers {
     /// Texels along `u`.
@@ -15,20 +17,20 @@ pub struct ReliefLayers {
     /// Texels along `v`.
     pub height: u32,
     /// Exposure W_exp over the reference exposure (one head-on view from the reference
-    /// distance); texels under the threshold are unobserved.
-    pub exposure: PodVec<f32>,
+    /// distance), 0 where no view saw the texel; texels under the threshold are unobserved.
+    pub exposure: SparseLayer,
     /// Recessed evidence E^-/W_exp, NaN where unobserved.
-    pub recessed: PodVec<f32>,
+    pub recessed: SparseLayer,
     /// Protruding evidence E^+/W_exp, NaN where unobserved.
-    pub protruding: PodVec<f32>,
+    pub protruding: SparseLayer,
     /// Signed discrepancy Delta to the source mesh along the outward normal, metres (positive:
-    /// the mesh stands in front of our façade); NaN where the mesh was not hit; empty when the
-    /// relief was given no mesh.
-    pub delta: PodVec<f32>,
+    /// the mesh stands in front of our façade); NaN where the mesh was not hit; of length 0
+    /// when the relief was given no mesh.
+    pub delta: SparseLayer,
     /// Posterior Pr(Y = recessed | e) of eq. (4), NaN where there is no evidence at all.
-    pub pr_recessed: PodVec<f32>,
+    pub pr_recessed: SparseLayer,
     /// Posterior Pr(Y = protruding | e), NaN likewise.
-    pub pr_protruding: PodVec<f32>,
+    pub pr_protruding: SparseLayer,
 }
 
 /// One recessed or protruding feature found on a chart: a rectangle in the chart's texel frame.

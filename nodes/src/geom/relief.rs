@@ -17,14 +17,15 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{
-    ChartKind, ChartSet, PodVec, ReliefInstance, ReliefLayers, ReliefSet, ReliefStats, Scene, View,
+    ChartKind, ChartLayers, ChartSet, PodVec, ReliefInstance, ReliefLayers, ReliefSet, ReliefStats,
+    Scene, SparseLayer, View,
 };
-use crate::geom::fusion::{ChartLookup, FusionParams, Vote, fuse_views_displaced};
+use crate::geom::fusion::{ChartLookup, FusionParams, Vote, fuse_views_each};
 use crate::geom::raycast::SceneRays;
 use crate::geom::union_find::UnionFind;
 use crate::raster::label::label_components;
 use crate::raster::label::label_regions;
-use crate::raster::morph::{close_within, dilate, erode};
+use crate::raster::morph::{close_within, dilate, erode, on_support};
 use crate::stage::Progress;
 
 /// The displacement classes Y, in the order every probability triple uses.
@@ -1187,17 +1188,6 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
         sigma_texels: p.sigma_texels,
         stride: p.stride,
     };
-    let fused = fuse_views_displaced(
-        scene,
-        rays,
-        charts,
-        views,
-        RELIEF_CLASSES.iter().map(|s| s.to_string()).collect(),
-        &vote,
-        &displace,
-        &fp,
-        progress,
-    );
     // The exposure unit: one head-on view from ref_distance_m at the views' median focal
     // length, one ray per pixel: J_ref^gamma x (pixels per texel = J_ref texel²).
     let mut focals: Vec<f64> = views.iter().map(|v| v.intrinsics.fx).collect();
@@ -1210,51 +1200,44 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
     let deltas = ctx.deltas;
     let with_mesh = deltas.is_some();
     let cpt = p.cpt.expand();
+    // Most texels of a seen chart are unseen and out of the mesh's reach: one posterior for all.
+    let unseen = relief_posterior(&cpt, None, mesh_state_probabilities(f64::NAN, &p.delta));
     let mut regions_by_chart: BTreeMap<u32, Vec<&RegionVote>> = BTreeMap::new();
     for v in &per_view {
         for r in &v.regions {
             regions_by_chart.entry(r.chart).or_default().push(r);
         }
     }
-    let results: Vec<(ReliefLayers, Vec<ReliefInstance>, u64)> = charts
-        .charts
-        .par_iter()
-        .enumerate()
-        .map(|(ci, c)| {
-            let l = &fused.charts[ci];
+    // Each chart's relief is made as soon as its fused layers are blurred, so no chart's dense
+    // layers outlive its own turn (all charts' at once were 1.5 GB on the 1 km² site).
+    let (results, _): (Vec<(ReliefLayers, Vec<ReliefInstance>, u64)>, _) = fuse_views_each(
+        scene,
+        rays,
+        charts,
+        views,
+        &vote,
+        &displace,
+        &fp,
+        progress,
+        |ci, c, l| {
             let w_ref = j_ref.powf(p.gamma) * j_ref * c.texel_m * c.texel_m;
             let delta = deltas.map(|d| &d[ci]).filter(|d| !d.is_empty());
-            let seen = l.w_exp.iter().any(|&w| w > 0.0);
-            if c.kind != ChartKind::Wall || (!seen && delta.is_none()) {
-                return (
-                    ReliefLayers {
-                        width: c.width,
-                        height: c.height,
-                        ..Default::default()
-                    },
-                    Vec::new(),
-                    0,
-                );
+            let l = l.filter(|l| l.w_exp.iter().any(|&w| w > 0.0));
+            if c.kind != ChartKind::Wall || (l.is_none() && delta.is_none()) {
+                return (unobserved_layers(c, with_mesh), Vec::new(), 0);
             }
+            // Unseen but reached by the mesh: Delta alone.
+            let l = l.unwrap_or_else(|| ChartLayers {
+                width: c.width,
+                height: c.height,
+                w_exp: PodVec(vec![0.0; c.len()]),
+                hits: PodVec::default(),
+                votes: Vec::new(),
+            });
             let votes = |k: u16| l.votes.iter().find(|(c, _)| *c == k).map(|(_, v)| v);
             let (em, ep) = (votes(0), votes(2));
             let n = c.len();
-            let mut lay = ReliefLayers {
-                width: c.width,
-                height: c.height,
-                exposure: PodVec(vec![0.0; n]),
-                recessed: PodVec(vec![f32::NAN; n]),
-                protruding: PodVec(vec![f32::NAN; n]),
-                // Without a source mesh the layer would be NaN throughout: a sixth of the
-                // output for nothing (3 GB of layers on the 1 km² site).
-                delta: PodVec(if delta.is_some() {
-                    vec![f32::NAN; n]
-                } else {
-                    Vec::new()
-                }),
-                pr_recessed: PodVec(vec![f32::NAN; n]),
-                pr_protruding: PodVec(vec![f32::NAN; n]),
-            };
+            let mut lay = DenseLayers::unobserved(n, delta.is_some());
             let mut observed = 0u64;
             for k in 0..n {
                 if c.triangle_at[k] == u32::MAX {
@@ -1277,20 +1260,25 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
                 if let Some(slot) = lay.delta.get_mut(k) {
                     *slot = dq as f32;
                 }
-                let pd = mesh_state_probabilities(dq, &p.delta);
-                if let Some(y) = relief_posterior(&cpt, levels, pd) {
+                let posterior = if levels.is_none() && dq.is_nan() {
+                    unseen
+                } else {
+                    relief_posterior(&cpt, levels, mesh_state_probabilities(dq, &p.delta))
+                };
+                if let Some(y) = posterior {
                     lay.pr_recessed[k] = y[0] as f32;
                     lay.pr_protruding[k] = y[2] as f32;
                 }
             }
+            drop(l);
             let regions = regions_by_chart
                 .get(&(ci as u32))
                 .map(Vec::as_slice)
                 .unwrap_or(&[]);
             let inst = instances(ci as u32, c, &lay, regions, with_mesh, p);
-            (lay, inst, observed)
-        })
-        .collect();
+            (lay.pack(c), inst, observed)
+        },
+    );
     let mut set = ReliefSet {
         with_mesh,
         ..Default::default()
@@ -1304,13 +1292,79 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
     set
 }
 
+/// The stored layers of a chart no view saw and no mesh reached (or not a wall).
+fn unobserved_layers(c: &crate::artifact::Chart, with_mesh: bool) -> ReliefLayers {
+    let n = c.len() as u32;
+    let nan = SparseLayer::filled(f32::NAN, n);
+    ReliefLayers {
+        width: c.width,
+        height: c.height,
+        exposure: SparseLayer::filled(0.0, n),
+        recessed: nan.clone(),
+        protruding: nan.clone(),
+        delta: if with_mesh {
+            nan.clone()
+        } else {
+            SparseLayer::filled(f32::NAN, 0)
+        },
+        pr_recessed: nan.clone(),
+        pr_protruding: nan,
+    }
+}
+
+/// One chart's relief layers while they are made: dense, in raster order, with the meaning of
+/// [`ReliefLayers`]' fields.
+struct DenseLayers {
+    exposure: Vec<f32>,
+    recessed: Vec<f32>,
+    protruding: Vec<f32>,
+    /// Empty without a source mesh.
+    delta: Vec<f32>,
+    pr_recessed: Vec<f32>,
+    pr_protruding: Vec<f32>,
+}
+
+impl DenseLayers {
+    /// `n` texels no view saw: no exposure, no evidence, no posterior.
+    fn unobserved(n: usize, with_mesh: bool) -> DenseLayers {
+        DenseLayers {
+            exposure: vec![0.0; n],
+            recessed: vec![f32::NAN; n],
+            protruding: vec![f32::NAN; n],
+            // Without a source mesh the layer would be NaN throughout.
+            delta: if with_mesh {
+                vec![f32::NAN; n]
+            } else {
+                Vec::new()
+            },
+            pr_recessed: vec![f32::NAN; n],
+            pr_protruding: vec![f32::NAN; n],
+        }
+    }
+
+    /// The layers as stored: the texels that carry a value.
+    fn pack(&self, c: &crate::artifact::Chart) -> ReliefLayers {
+        let nan = |v: &[f32]| SparseLayer::from_dense(v, f32::NAN);
+        ReliefLayers {
+            width: c.width,
+            height: c.height,
+            exposure: SparseLayer::from_dense(&self.exposure, 0.0),
+            recessed: nan(&self.recessed),
+            protruding: nan(&self.protruding),
+            delta: nan(&self.delta),
+            pr_recessed: nan(&self.pr_recessed),
+            pr_protruding: nan(&self.pr_protruding),
+        }
+    }
+}
+
 /// Threshold, opening, closing and connected components of one chart's posteriors (pieces
 /// joined across unobserved stretches), each component a rectangle (where its evidence falls to
 /// half its peak) with a class, a depth and its evidence.
 fn instances(
     ci: u32,
     c: &crate::artifact::Chart,
-    lay: &ReliefLayers,
+    lay: &DenseLayers,
     regions: &[&RegionVote],
     with_mesh: bool,
     p: &ReliefParams,
@@ -1340,12 +1394,20 @@ fn instances(
         } else {
             p.open_texels.1
         } as i64;
-        if open > 0 {
-            mask = dilate(&erode(&mask, w, h, open), w, h, open);
-        }
         let close = p.close_texels as i64;
+        mask = on_support(&mask, w, h, open.max(close) as u32, |m, w, h| {
+            let opened = if open > 0 {
+                dilate(&erode(m, w, h, open), w, h, open)
+            } else {
+                m.to_vec()
+            };
+            if close > 0 {
+                close_within(&opened, w, h, close)
+            } else {
+                opened
+            }
+        });
         if close > 0 {
-            mask = close_within(&mask, w, h, close);
             // Closing never reaches off the surface.
             for (k, m) in mask.iter_mut().enumerate() {
                 *m &= c.triangle_at[k] != u32::MAX;
@@ -1382,7 +1444,7 @@ fn instances(
             }
             let m = texels.len() as f64;
             let rect = extent(texels, evidence, w, h);
-            let mean = |l: &PodVec<f32>| {
+            let mean = |l: &[f32]| {
                 texels
                     .iter()
                     .map(|&k| l[k] as f64)
@@ -1714,17 +1776,15 @@ mod tests {
 
     /// Layers of a `w` x `h` chart seen everywhere (exposure 10) with protruding posterior and
     /// evidence `pr` and `e`.
-    fn seen_layers(w: u32, h: u32, pr: Vec<f32>, e: Vec<f32>) -> ReliefLayers {
+    fn seen_layers(w: u32, h: u32, pr: Vec<f32>, e: Vec<f32>) -> DenseLayers {
         let n = (w * h) as usize;
-        ReliefLayers {
-            width: w,
-            height: h,
-            exposure: PodVec(vec![10.0; n]),
-            recessed: PodVec(vec![0.0; n]),
-            protruding: PodVec(e),
-            delta: PodVec(vec![f32::NAN; n]),
-            pr_recessed: PodVec(vec![0.03; n]),
-            pr_protruding: PodVec(pr),
+        DenseLayers {
+            exposure: vec![10.0; n],
+            recessed: vec![0.0; n],
+            protruding: e,
+            delta: vec![f32::NAN; n],
+            pr_recessed: vec![0.03; n],
+            pr_protruding: pr,
         }
     }
 

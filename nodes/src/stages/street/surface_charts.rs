@@ -69,8 +69,12 @@ impl Stage for SurfaceCharts {
                 "expected an angle in [0, 45) degrees",
             ));
         }
-        if p.max_texels == 0 {
-            return Err(ParamError::new("max_texels", "expected a positive count"));
+        // Texels are indexed by u32 in the fusion and in every stored layer.
+        if p.max_texels == 0 || p.max_texels > u32::MAX as u64 {
+            return Err(ParamError::new(
+                "max_texels",
+                "expected a positive count of at most 4294967295",
+            ));
         }
         Ok(())
     }
@@ -86,5 +90,22 @@ impl Stage for SurfaceCharts {
         };
         building_charts(scene, &spec)
             .map_err(|m| StageError::Param(ParamError::new("wall_texel_m", m)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn max_texels_is_refused_past_what_a_texel_index_holds() {
+        let with = |max_texels| SurfaceChartsParams {
+            max_texels,
+            ..Default::default()
+        };
+        assert!(SurfaceCharts::validate(&with(u32::MAX as u64)).is_ok());
+        for bad in [0, u32::MAX as u64 + 1, u64::MAX] {
+            assert!(SurfaceCharts::validate(&with(bad)).is_err(), "{bad}");
+        }
     }
 }
