@@ -69,7 +69,12 @@ impl AtlasLayout {
     /// Packs the charts of `t`; refuses atlases over 2^30 texels.
     pub fn of(t: &TexelLayers) -> Result<AtlasLayout, String> {
         let sizes: Vec<(u32, u32)> = t.charts.iter().map(|c| (c.width, c.height)).collect();
-        let (at, width, height) = pack(&sizes);
+        AtlasLayout::of_sizes(&sizes)
+    }
+
+    /// Packs grids of `sizes` (width, height); refuses atlases over 2^30 texels.
+    pub fn of_sizes(sizes: &[(u32, u32)]) -> Result<AtlasLayout, String> {
+        let (at, width, height) = pack(sizes);
         if width as u64 * height as u64 > 1 << 30 {
             return Err(format!(
                 "the atlas would be {width} x {height} texels; too large to write"
@@ -80,7 +85,7 @@ impl AtlasLayout {
 
     /// Atlas pixel of chart `c`'s texel (i, j): atlas rows run down, chart `v` runs up, so the
     /// grid is flipped and walls stand upright.
-    fn pixel(&self, c: usize, height: u32, i: u32, j: u32) -> (u32, u32) {
+    pub fn pixel(&self, c: usize, height: u32, i: u32, j: u32) -> (u32, u32) {
         let (x0, y0) = self.at[c];
         (x0 + i, y0 + height - 1 - j)
     }

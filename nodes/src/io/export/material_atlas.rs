@@ -6,6 +6,7 @@
 use image::{ImageBuffer, Rgba, RgbaImage};
 use serde_json::json;
 
+use super::atlas::png;
 use crate::artifact::{MaterialLayers, MaterialSource, NO_MATERIAL};
 use crate::io::export::material_color;
 use crate::io::exr_io::write_exr;
@@ -27,17 +28,13 @@ pub fn write_material_atlas(m: &MaterialLayers) -> Result<Vec<(String, Vec<u8>)>
         return Err("material layers and fused layers disagree on the chart count".into());
     }
     let sizes: Vec<(u32, u32)> = layers.iter().map(|c| (c.width, c.height)).collect();
-    let (at, w, h) = super::atlas::pack(&sizes);
-    if w as u64 * h as u64 > 1 << 30 {
-        return Err(format!(
-            "the atlas would be {w} x {h} texels; too large to write"
-        ));
-    }
+    let layout = super::atlas::AtlasLayout::of_sizes(&sizes)?;
+    let (at, w, h) = (&layout.at, layout.width, layout.height);
     let n = (w * h) as usize;
     let (mut w_exp, mut hits) = (vec![0f32; n], vec![0f32; n]);
     let mut material: RgbaImage = ImageBuffer::from_pixel(w, h, Rgba([0, 0, 0, 0]));
     let mut source: RgbaImage = ImageBuffer::from_pixel(w, h, Rgba([0, 0, 0, 0]));
-    for ((l, c), &(x0, y0)) in layers.iter().zip(&m.charts).zip(&at) {
+    for ((l, c), &(x0, y0)) in layers.iter().zip(&m.charts).zip(at) {
         for j in 0..l.height {
             for i in 0..l.width {
                 let k = (j * l.width + i) as usize;
@@ -56,12 +53,6 @@ pub fn write_material_atlas(m: &MaterialLayers) -> Result<Vec<(String, Vec<u8>)>
             }
         }
     }
-    let png = |img: &RgbaImage| -> Result<Vec<u8>, String> {
-        let mut buf = std::io::Cursor::new(Vec::new());
-        img.write_to(&mut buf, image::ImageFormat::Png)
-            .map_err(|e| e.to_string())?;
-        Ok(buf.into_inner())
-    };
     let s = &m.stats;
     let index = json!({
         "width": w,
@@ -79,7 +70,7 @@ pub fn write_material_atlas(m: &MaterialLayers) -> Result<Vec<(String, Vec<u8>)>
             "colour": SOURCE_COLOURS[*x as usize],
             "texels": s.by_source[*x as usize],
         })).collect::<Vec<_>>(),
-        "charts": layers.iter().zip(&m.charts).zip(&at).map(|((l, c), &(x, y))| json!({
+        "charts": layers.iter().zip(&m.charts).zip(at).map(|((l, c), &(x, y))| json!({
             "x": x, "y": y, "width": l.width, "height": l.height,
             "dominant": c.dominant.and_then(Material::from_u8).and_then(|m| m.itu_type()),
         })).collect::<Vec<_>>(),
