@@ -9,6 +9,7 @@ mod glb;
 mod las;
 mod material_atlas;
 mod pixel_font;
+mod relief_atlas;
 mod relief_json;
 pub mod report_html;
 mod tiles;
@@ -45,7 +46,7 @@ pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
         ArtifactType::Report => &["report"],
         ArtifactType::Charts => &["json"],
         ArtifactType::Texels => &["atlas", "glb"],
-        ArtifactType::Relief => &["json", "geojson"],
+        ArtifactType::Relief => &["json", "geojson", "atlas"],
         ArtifactType::Materials => &["atlas"],
     }
 }
@@ -152,6 +153,7 @@ fn encode_unchecked(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, 
         }
         (Artifact::Relief(r), "json") => file(relief_json::relief_json(r)?),
         (Artifact::Relief(r), "geojson") => file(relief_json::relief_geojson(r, site)?),
+        (Artifact::Relief(r), "atlas") => Ok(Encoded::Folder(relief_atlas::write_relief_atlas(r)?)),
         (Artifact::Texels(t), "atlas") => Ok(Encoded::Folder(atlas::write_atlas(t)?)),
         (Artifact::Texels(t), "glb") => file(chart_glb::write_chart_glb(t)?),
         (a, f) => Err(format!(
