@@ -148,6 +148,7 @@ pub fn fuse_views_displaced(
         displace,
         p,
         progress,
+        // A chart no pixel reached is stored as layers of zeros (no votes).
         |_, c, l| l.unwrap_or_else(|| ChartDeposits::new(c).into_layers(c, &[1.0])),
     );
     TexelLayers {
