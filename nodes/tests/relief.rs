@@ -502,15 +502,31 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
     // Affine depth (0.8 z + 1 m) calibrates on every view (walls and ground spread the depths).
     assert_eq!(r.stats.calibrated, r.stats.views);
     assert!(sc.by_class["window"].observed > 50);
-    // The targets, but for drainpipes: 0.12 m wide, 1.2 texels; what the views
-    // deposit is offset by 0.05-0.1 m (registration's residual, the blur of pixel, bilinear
-    // deposit and kernel), and at that offset an instance of any width misses IoU 0.5 on a
-    // 0.12 m pipe.
+    // The targets, but for drainpipes: 0.12 m wide, 1.2 texels, seen by one to three
+    // views each, and where registration leaves a view's evidence half a texel off, or the
+    // segmentation missed the pipe in the one view that saw a stretch of it, IoU 0.5 is out of
+    // reach. Five of the eight observed are found (three before pipes ran up to the eave, the
+    // blur came off thin features and protrusions no view measured were dropped).
     for c in ["window", "door", "balcony"] {
         assert!(sc.by_class[c].observed >= 5, "{c}: {:?}", sc.by_class[c]);
         assert!(sc.recall(c) >= 0.8, "{c} recall {}", sc.recall(c));
         assert!(sc.precision(c) >= 0.8, "{c} precision {}", sc.precision(c));
     }
+    assert!(
+        sc.by_class["drainpipe"].observed >= 6,
+        "{:?}",
+        sc.by_class["drainpipe"]
+    );
+    assert!(
+        sc.recall("drainpipe") >= 0.6,
+        "drainpipe recall {}",
+        sc.recall("drainpipe")
+    );
+    assert!(
+        sc.precision("drainpipe") >= 0.5,
+        "drainpipe precision {}",
+        sc.precision("drainpipe")
+    );
     assert!(
         sc.median_depth_error() <= 0.05,
         "{}",

@@ -41,6 +41,12 @@ pub struct ClassRule {
     pub prior: i8,
     /// Depth range, metres (min, max): an instance's measured depth is clamped into it.
     pub depth_m: (f64, f64),
+    /// The feature runs up the wall to its top (a drainpipe from the ground to its gutter at
+    /// the eave): an instance reaches up through texels the views did not observe, or that hold
+    /// some of its evidence, to the first observed flat wall or the wall's top, and pieces of
+    /// it that then overlap are one instance. Default false.
+    #[serde(default)]
+    pub runs_up: bool,
 }
 
 /// Weights of the cues in g(v).
@@ -365,7 +371,10 @@ pub struct ReliefParams {
     /// Unlabelled ring pixels whose calibrated depth puts them this close to the region's chart
     /// plane count as wall (a wall the segmentation missed), metres. Default 0.3.
     pub plane_tol_m: f64,
-    /// Smallest depth step that counts, metres. Default 0.05.
+    /// Smallest depth step that counts, metres. Default 0.05. A protruding instance needs its
+    /// views to have measured it standing out at least this far: the class in the image alone
+    /// does not say which wall a protrusion stands on (a drainpipe round the corner, seen
+    /// past it, lands on the near wall's last texels).
     pub min_step_m: f64,
     /// And its significance: step over its standard error. Default 3.
     pub step_z_min: f64,
@@ -411,10 +420,11 @@ pub struct ReliefParams {
 
 impl Default for ReliefParams {
     fn default() -> Self {
-        let rule = |name: &str, prior, depth_m| ClassRule {
+        let rule = |name: &str, prior, depth_m, runs_up| ClassRule {
             name: name.into(),
             prior,
             depth_m,
+            runs_up,
         };
         ReliefParams {
             gamma: 2.0,
@@ -425,10 +435,12 @@ impl Default for ReliefParams {
             wall_class: "wall".into(),
             ignore_classes: vec!["roof".into()],
             classes: vec![
-                rule("window", -1, (0.1, 0.3)),
-                rule("door", -1, (0.1, 0.3)),
-                rule("balcony", 1, (0.3, 1.5)),
-                rule("drainpipe", 1, (0.05, 0.3)),
+                rule("window", -1, (0.1, 0.3), false),
+                rule("door", -1, (0.1, 0.3), false),
+                rule("balcony", 1, (0.3, 1.5), false),
+                // Views see a drainpipe between balconies and parked cars, in pieces, and rarely
+                // up to the eave from the street: it runs there all the same.
+                rule("drainpipe", 1, (0.05, 0.3), true),
             ],
             unknown_recess_m: (0.05, 0.5),
             unknown_protrusion_m: (0.05, 1.5),
@@ -1432,18 +1444,89 @@ fn instances(
             c.triangle_at[k] != u32::MAX
                 && (!(lay.exposure[k] as f64 >= p.exposure_min) || grown[k])
         };
-        let comps = bridge_gaps(comps.into_values().collect(), w, p.bridge_texels, passable);
+        let comps = bridge_gaps(comps.into_values().collect(), w, p.bridge_texels, &passable);
         let evidence = if sign < 0 {
             &lay.recessed
         } else {
             &lay.protruding
         };
-        for texels in &comps {
-            if texels.len() < p.min_texels as usize {
-                continue;
+        // The evidence's blur: the kernel and the bilinear deposit (a triangle of variance 1/6).
+        let spread = (p.sigma_texels * p.sigma_texels + 1.0 / 6.0).sqrt();
+        // The regions that voted inside a rectangle (with the deposit's slack).
+        let inside = |rect: [f64; 4]| -> Vec<&RegionVote> {
+            let slack = 2.0;
+            regions
+                .iter()
+                .copied()
+                .filter(|r| {
+                    r.sign == sign
+                        && r.uv.0 >= rect[0] - slack
+                        && r.uv.0 <= rect[2] + slack
+                        && r.uv.1 >= rect[1] - slack
+                        && r.uv.1 <= rect[3] + slack
+                })
+                .collect()
+        };
+        // Class by pixel-weighted majority of the regions inside (named classes first).
+        let class_of = |inside: &[&RegionVote]| -> String {
+            let mut by_class: BTreeMap<&str, u64> = BTreeMap::new();
+            for r in inside {
+                *by_class.entry(r.class.as_str()).or_default() += r.pixels as u64;
             }
+            by_class
+                .iter()
+                .filter(|(c, _)| **c != "unknown")
+                .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
+                .map_or("unknown", |(c, _)| c)
+                .to_owned()
+        };
+        let runs_up = |class: &str| p.classes.iter().any(|r| r.name == class && r.runs_up);
+        // Each piece's rectangle. A piece of a class that runs up the wall (a drainpipe, from
+        // the ground to its gutter) reaches up to where observed flat wall or the surface's end
+        // stops it, and pieces that then overlap are one feature.
+        let pieces: Vec<(Vec<usize>, [f64; 4])> = comps
+            .into_iter()
+            .filter(|t| t.len() >= p.min_texels as usize)
+            .map(|t| {
+                let rect = extent(&t, evidence, w, h, spread);
+                (t, rect)
+            })
+            .collect();
+        let up: Vec<bool> = pieces
+            .iter()
+            .map(|(_, rect)| runs_up(&class_of(&inside(*rect))))
+            .collect();
+        let reach = |rect: [f64; 4]| run_up(rect, w, h, &passable);
+        let reached: Vec<[f64; 4]> = pieces
+            .iter()
+            .zip(&up)
+            .map(|((_, rect), &u)| if u { reach(*rect) } else { *rect })
+            .collect();
+        let mut sets = UnionFind::new(pieces.len());
+        for x in 0..pieces.len() {
+            for y in x + 1..pieces.len() {
+                if up[x] && up[y] && one_column(&reached[x], &reached[y]) {
+                    sets.join(x as u32, y as u32);
+                }
+            }
+        }
+        let mut groups: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
+        for (x, name) in sets.names().into_iter().enumerate() {
+            groups.entry(name).or_default().push(x);
+        }
+        for members in groups.into_values() {
+            let (texels, rect) = if let [one] = members[..] {
+                (pieces[one].0.clone(), reached[one])
+            } else {
+                let mut t: Vec<usize> = members
+                    .iter()
+                    .flat_map(|&x| pieces[x].0.iter().copied())
+                    .collect();
+                t.sort_unstable();
+                let rect = reach(extent(&t, evidence, w, h, spread));
+                (t, rect)
+            };
             let m = texels.len() as f64;
-            let rect = extent(texels, evidence, w, h);
             let mean = |l: &[f32]| {
                 texels
                     .iter()
@@ -1472,35 +1555,21 @@ fn instances(
                     .count() as f64
                     / m
             });
-            // The regions that voted for it: class by pixel-weighted majority (named classes
-            // first), depth by pixel-weighted median of the measured steps.
-            let slack = 2.0;
-            let inside: Vec<&&RegionVote> = regions
-                .iter()
-                .filter(|r| {
-                    r.sign == sign
-                        && r.uv.0 >= rect[0] - slack
-                        && r.uv.0 <= rect[2] + slack
-                        && r.uv.1 >= rect[1] - slack
-                        && r.uv.1 <= rect[3] + slack
-                })
-                .collect();
-            let mut by_class: BTreeMap<&str, u64> = BTreeMap::new();
-            for r in &inside {
-                *by_class.entry(r.class.as_str()).or_default() += r.pixels as u64;
-            }
-            let class = by_class
-                .iter()
-                .filter(|(c, _)| **c != "unknown")
-                .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
-                .map_or("unknown", |(c, _)| c)
-                .to_owned();
+            // The regions that voted for it: class by majority, depth by pixel-weighted median
+            // of the measured steps.
+            let inside = inside(rect);
+            let class = class_of(&inside);
             let mut steps: Vec<(f64, f64)> = inside
                 .iter()
                 .filter(|r| r.step_m.is_finite() && r.step_m * sign as f64 > 0.0)
                 .map(|r| (r.step_m.abs(), r.pixels as f64))
                 .collect();
             let measured = weighted_median(&mut steps);
+            // A protrusion is deposited on the plane its measured step gives; with none, the
+            // class alone put it on this wall.
+            if sign > 0 && !measured.is_some_and(|d| d >= p.min_step_m) {
+                continue;
+            }
             let (lo, hi) = p.depth_range(&class, sign);
             let depth_m = measured.unwrap_or((lo + hi) / 2.0).clamp(lo, hi);
             let views: BTreeSet<u32> = inside.iter().map(|r| r.view).collect();
@@ -1528,6 +1597,31 @@ fn instances(
         }
     }
     out
+}
+
+/// `rect` with its top raised through every row above it where a texel of its columns is
+/// `passable` (unobserved, or with some evidence), up to the first row of observed flat wall or
+/// off the surface, or the chart's top.
+fn run_up(rect: [f64; 4], w: u32, h: u32, passable: impl Fn(usize) -> bool) -> [f64; 4] {
+    let (wu, hu) = (w as usize, h as usize);
+    let i0 = (rect[0].floor().max(0.0) as usize).min(wu - 1);
+    let i1 = (rect[2].ceil() as usize).clamp(i0 + 1, wu);
+    let mut top = rect[3];
+    for j in (rect[3].ceil() as usize)..hu {
+        if !(i0..i1).any(|i| passable(j * wu + i)) {
+            break;
+        }
+        top = (j + 1) as f64;
+    }
+    [rect[0], rect[1], rect[2], top]
+}
+
+/// Whether two rectangles are pieces of one upright feature: they overlap along `u` over half
+/// the narrower one's width, and their `v` spans meet.
+fn one_column(a: &[f64; 4], b: &[f64; 4]) -> bool {
+    let overlap = a[2].min(b[2]) - a[0].max(b[0]);
+    let narrower = (a[2] - a[0]).min(b[2] - b[0]);
+    overlap > 0.0 && 2.0 * overlap >= narrower && a[1] <= b[3] && b[1] <= a[3]
 }
 
 /// Texel box of a set of texels: (i0, j0, i1, j1), inclusive.
@@ -1603,7 +1697,7 @@ const EXTENT_REACH: usize = 3;
 /// its peak, interpolated between texel centres. A feature narrower than two texels (a drainpipe)
 /// gets its width and place from how its evidence splits between the columns, not from the
 /// whole texels that cleared the threshold.
-fn extent(texels: &[usize], evidence: &[f32], w: u32, h: u32) -> [f64; 4] {
+fn extent(texels: &[usize], evidence: &[f32], w: u32, h: u32, spread: f64) -> [f64; 4] {
     let b = texel_box(texels, w);
     let (wu, hu) = (w as usize, h as usize);
     let mean = |cells: &mut dyn Iterator<Item = usize>| {
@@ -1631,8 +1725,8 @@ fn extent(texels: &[usize], evidence: &[f32], w: u32, h: u32) -> [f64; 4] {
     let rows: Vec<f64> = (va..=vb)
         .map(|j| mean(&mut (b[0]..=b[2]).map(|i| j * wu + i)))
         .collect();
-    let (u0, u1) = half_peak_edges(&cols, b[0] - ua, b[2] - ua);
-    let (v0, v1) = half_peak_edges(&rows, b[1] - va, b[3] - va);
+    let (u0, u1) = deblurred(half_peak_edges(&cols, b[0] - ua, b[2] - ua), spread);
+    let (v0, v1) = deblurred(half_peak_edges(&rows, b[1] - va, b[3] - va), spread);
     [
         (ua as f64 + u0).max(0.0),
         (va as f64 + v0).max(0.0),
@@ -1641,23 +1735,118 @@ fn extent(texels: &[usize], evidence: &[f32], w: u32, h: u32) -> [f64; 4] {
     ]
 }
 
+/// Narrowest rectangle the extent gives, texels: a feature whose evidence is no wider than the
+/// fusion's own spread has a width the evidence cannot tell, and the rectangle must stay one to
+/// carve.
+const MIN_WIDTH_TEXELS: f64 = 0.5;
+
+/// The half-peak interval narrowed to the box whose blur by a Gaussian of standard deviation
+/// `spread` (texels) reads as wide, each side that is a half-peak crossing moved in by its share
+/// of the blur; a side bounded by the chart's end or by unobserved texels stays. The fusion
+/// widens every feature by its kernel and its bilinear deposit: a 0.12 m drainpipe (1.2 texels)
+/// reads about 1.75 texels wide at half its peak; a 1.4 m window is unchanged to a hundredth of
+/// a texel.
+fn deblurred(e: HalfPeak, spread: f64) -> (f64, f64) {
+    let measured = e.hi - e.lo;
+    let sides = e.lo_blurred as u8 + e.hi_blurred as u8;
+    if spread <= 0.0 || measured <= 0.0 || sides == 0 {
+        return (e.lo, e.hi);
+    }
+    // What a box of width `a` reads as with `sides` of its edges blurred.
+    let reads = |a: f64| a + sides as f64 * (blurred_width(a, spread) - a) / 2.0;
+    let floor = MIN_WIDTH_TEXELS.min(measured);
+    let width = if reads(0.0) >= measured {
+        floor
+    } else {
+        // `reads` grows with the width and exceeds it: bisect on [0, measured].
+        let (mut lo, mut hi) = (0.0, measured);
+        for _ in 0..48 {
+            let mid = 0.5 * (lo + hi);
+            if reads(mid) < measured {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        (0.5 * (lo + hi)).max(floor)
+    };
+    match (e.lo_blurred, e.hi_blurred) {
+        (true, true) => {
+            let c = 0.5 * (e.lo + e.hi);
+            (c - width / 2.0, c + width / 2.0)
+        }
+        (false, _) => (e.lo, e.lo + width),
+        (true, false) => (e.hi - width, e.hi),
+    }
+}
+
+/// Half-peak width of a box of width `a` convolved with a Gaussian of standard deviation `s`:
+/// 2x where Phi((x + a/2) / s) - Phi((x - a/2) / s) is half its value at 0.
+fn blurred_width(a: f64, s: f64) -> f64 {
+    if a < 1e-6 * s {
+        // The limit, a point: the Gaussian's own full width at half maximum.
+        return 2.0 * (2.0 * std::f64::consts::LN_2).sqrt() * s;
+    }
+    let f = |x: f64| phi((x + a / 2.0) / s) - phi((x - a / 2.0) / s);
+    let half = f(0.0) / 2.0;
+    let (mut lo, mut hi) = (0.0, a / 2.0 + 6.0 * s);
+    for _ in 0..48 {
+        let mid = 0.5 * (lo + hi);
+        if f(mid) > half {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo + hi
+}
+
+/// The standard normal distribution function, by erf (Abramowitz and Stegun 7.1.26, absolute
+/// error under 1.5e-7).
+fn phi(x: f64) -> f64 {
+    let z = x / std::f64::consts::SQRT_2;
+    let t = 1.0 / (1.0 + 0.327_591_1 * z.abs());
+    let poly = t
+        * (0.254_829_592
+            + t * (-0.284_496_736
+                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+    let erf = 1.0 - poly * (-z * z).exp();
+    0.5 * (1.0 + erf.copysign(z))
+}
+
+/// Where a profile crosses half its peak on each side, and whether each side is such a crossing
+/// (blurred by the fusion) rather than a bound (the profile's end, an unobserved texel).
+#[derive(Clone, Copy, Debug)]
+struct HalfPeak {
+    lo: f64,
+    hi: f64,
+    lo_blurred: bool,
+    hi_blurred: bool,
+}
+
 /// Where `profile` (values at texel centres k + 0.5, NaN unobserved) crosses half its peak over
 /// the core span [lo, hi], one crossing each side, searched outward from the core's ends (inward
 /// where an end is already under half); an unobserved texel or the profile's end bounds the
 /// search at a texel edge.
-fn half_peak_edges(profile: &[f64], lo: usize, hi: usize) -> (f64, f64) {
+fn half_peak_edges(profile: &[f64], lo: usize, hi: usize) -> HalfPeak {
     let peak = profile[lo..=hi]
         .iter()
         .copied()
         .filter(|x| x.is_finite())
         .fold(0.0, f64::max);
     if peak <= 0.0 {
-        return (lo as f64, hi as f64 + 1.0);
+        return HalfPeak {
+            lo: lo as f64,
+            hi: hi as f64 + 1.0,
+            lo_blurred: false,
+            hi_blurred: false,
+        };
     }
     let level = peak / 2.0;
     let above = |k: usize| profile[k] >= level;
-    // The crossing between texel `inner` (at or over the level) and its neighbour `outer`.
-    let cross = |inner: usize, outer: usize| -> f64 {
+    // The crossing between texel `inner` (at or over the level) and its neighbour `outer`, and
+    // whether it is one (false: the texel edge, `outer` unobserved).
+    let cross = |inner: usize, outer: usize| -> (f64, bool) {
         let (a, b) = (profile[inner], profile[outer]);
         let edge = if outer < inner {
             inner as f64
@@ -1665,11 +1854,11 @@ fn half_peak_edges(profile: &[f64], lo: usize, hi: usize) -> (f64, f64) {
             inner as f64 + 1.0
         };
         if !b.is_finite() {
-            return edge;
+            return (edge, false);
         }
         let f = (a - level) / (a - b);
         let (ci, co) = (inner as f64 + 0.5, outer as f64 + 0.5);
-        ci + (co - ci) * f
+        (ci + (co - ci) * f, true)
     };
     // Innermost texel over the level from each end of the core.
     let first = (lo..=hi).find(|&k| above(k)).unwrap_or(lo);
@@ -1682,13 +1871,22 @@ fn half_peak_edges(profile: &[f64], lo: usize, hi: usize) -> (f64, f64) {
     while r + 1 < profile.len() && profile[r + 1].is_finite() && above(r + 1) {
         r += 1;
     }
-    let left = if l == 0 { 0.0 } else { cross(l, l - 1) };
-    let right = if r + 1 == profile.len() {
-        profile.len() as f64
+    let (left, lo_blurred) = if l == 0 {
+        (0.0, false)
+    } else {
+        cross(l, l - 1)
+    };
+    let (right, hi_blurred) = if r + 1 == profile.len() {
+        (profile.len() as f64, false)
     } else {
         cross(r, r + 1)
     };
-    (left, right)
+    HalfPeak {
+        lo: left,
+        hi: right,
+        lo_blurred,
+        hi_blurred,
+    }
 }
 
 fn weighted_median(v: &mut [(f64, f64)]) -> Option<f64> {
@@ -1758,7 +1956,11 @@ mod tests {
             min_texels: 3,
             ..Default::default()
         };
-        let one = instances(0, &c, &lay, &[], false, &p);
+        // The views measured it standing out all along.
+        let at: Vec<(f64, f64)> = (0..h).map(|j| (3.5, j as f64 + 0.5)).collect();
+        let votes = measured_out("unknown", &at);
+        let votes: Vec<&RegionVote> = votes.iter().collect();
+        let one = instances(0, &c, &lay, &votes, false, &p);
         assert_eq!(one.len(), 1, "{one:?}");
         // The extent is the core's: one column wide, never grown over the gap to the edge.
         let r = one[0].rect;
@@ -1771,7 +1973,7 @@ mod tests {
             ..p
         };
         // Without the hysteresis (closing bridges one row, not two): a piece per stretch.
-        assert_eq!(instances(0, &c, &lay, &[], false, &without).len(), 11);
+        assert_eq!(instances(0, &c, &lay, &votes, false, &without).len(), 11);
     }
 
     /// Layers of a `w` x `h` chart seen everywhere (exposure 10) with protruding posterior and
@@ -1786,6 +1988,22 @@ mod tests {
             pr_recessed: vec![0.03; n],
             pr_protruding: pr,
         }
+    }
+
+    /// Region votes that measured a protrusion standing 0.15 m out, one at each of `at` (texel
+    /// coordinates), of class `class`.
+    fn measured_out(class: &str, at: &[(f64, f64)]) -> Vec<RegionVote> {
+        at.iter()
+            .map(|&uv| RegionVote {
+                view: 0,
+                chart: 0,
+                uv,
+                class: class.into(),
+                sign: 1,
+                step_m: 0.15,
+                pixels: 50,
+            })
+            .collect()
     }
 
     #[test]
@@ -1812,7 +2030,9 @@ mod tests {
                 e[(j * w + 4) as usize] = if split { 0.8 } else { 0.3 };
                 e[(j * w + 5) as usize] = if split { 0.3 } else { 0.0 };
             }
-            let one = instances(0, &c, &seen_layers(w, h, pr.clone(), e), &[], false, &p);
+            let votes = measured_out("unknown", &[(3.5, 15.0)]);
+            let votes: Vec<&RegionVote> = votes.iter().collect();
+            let one = instances(0, &c, &seen_layers(w, h, pr.clone(), e), &votes, false, &p);
             assert_eq!(one.len(), 1, "{one:?}");
             let r = one[0].rect;
             assert!(r[1] < 0.5 && r[3] > 29.5, "{r:?}");
@@ -1857,7 +2077,9 @@ mod tests {
                 hidden.pr_recessed[k] = f32::NAN;
             }
         }
-        let one = instances(0, &c, &hidden, &[], false, &p);
+        let votes = measured_out("unknown", &[(3.5, 10.0), (3.5, 34.0)]);
+        let votes: Vec<&RegionVote> = votes.iter().collect();
+        let one = instances(0, &c, &hidden, &votes, false, &p);
         assert_eq!(one.len(), 1, "{one:?}");
         assert!(
             one[0].rect[1] < 0.5 && one[0].rect[3] > 43.5,
@@ -1868,9 +2090,146 @@ mod tests {
             bridge_texels: 3,
             ..p.clone()
         };
-        assert_eq!(instances(0, &c, &hidden, &[], false, &narrow).len(), 2);
+        assert_eq!(instances(0, &c, &hidden, &votes, false, &narrow).len(), 2);
         let flat = seen_layers(w, h, pr, e);
-        assert_eq!(instances(0, &c, &flat, &[], false, &p).len(), 2);
+        assert_eq!(instances(0, &c, &flat, &votes, false, &p).len(), 2);
+    }
+
+    #[test]
+    fn a_protrusion_no_view_measured_standing_out_is_dropped() {
+        // The pipe of `pieces_join_...`, seen whole: found when a view measured it 0.15 m out,
+        // dropped with no step or a step under `min_step_m` (the class in the image alone).
+        let (w, h) = (10u32, 30u32);
+        let c = flat_chart(w, h);
+        let n = c.len();
+        let mut pr = vec![0.03f32; n];
+        let mut e = vec![0.0f32; n];
+        for j in 0..h {
+            pr[(j * w + 3) as usize] = 0.85;
+            e[(j * w + 3) as usize] = 0.9;
+        }
+        let lay = seen_layers(w, h, pr, e);
+        let p = ReliefParams {
+            min_texels: 3,
+            ..Default::default()
+        };
+        let found = |step_m: f64| {
+            let mut votes = measured_out("unknown", &[(3.5, 15.0)]);
+            votes[0].step_m = step_m;
+            let votes: Vec<&RegionVote> = votes.iter().collect();
+            instances(0, &c, &lay, &votes, false, &p).len()
+        };
+        assert_eq!(found(0.15), 1);
+        assert_eq!(found(0.02), 0);
+        assert_eq!(found(f64::NAN), 0);
+        assert!(instances(0, &c, &lay, &[], false, &p).is_empty());
+    }
+
+    #[test]
+    fn a_drainpipe_runs_up_through_what_the_views_missed_not_through_flat_wall() {
+        // A pipe seen in column 3 on rows 0-9 and 30-34 of a 50-row wall; the rows between and
+        // above are unobserved (`hidden`) or observed flat (`flat_between`).
+        let (w, h) = (10u32, 50u32);
+        let c = flat_chart(w, h);
+        let n = c.len();
+        let mut pr = vec![0.03f32; n];
+        let mut e = vec![0.0f32; n];
+        for j in (0..10).chain(30..35) {
+            pr[(j * w + 3) as usize] = 0.85;
+            e[(j * w + 3) as usize] = 0.9;
+        }
+        let p = ReliefParams {
+            min_texels: 3,
+            ..Default::default()
+        };
+        let unseen = |lay: &mut DenseLayers, rows: std::ops::Range<u32>| {
+            for j in rows {
+                for i in 0..w {
+                    let k = (j * w + i) as usize;
+                    lay.exposure[k] = 0.0;
+                    lay.protruding[k] = f32::NAN;
+                    lay.pr_protruding[k] = f32::NAN;
+                    lay.pr_recessed[k] = f32::NAN;
+                }
+            }
+        };
+        let mut hidden = seen_layers(w, h, pr.clone(), e.clone());
+        unseen(&mut hidden, 10..30);
+        unseen(&mut hidden, 35..50);
+        let run = |lay: &DenseLayers, class: &str| {
+            let votes = measured_out(class, &[(3.5, 5.0), (3.5, 32.0)]);
+            let votes: Vec<&RegionVote> = votes.iter().collect();
+            let mut r: Vec<[f64; 4]> = instances(0, &c, lay, &votes, false, &p)
+                .iter()
+                .map(|i| i.rect)
+                .collect();
+            r.sort_by(|a, b| a[1].total_cmp(&b[1]));
+            r
+        };
+        // A drainpipe: the two pieces are one, up to the wall's top.
+        let pipe = run(&hidden, "drainpipe");
+        assert_eq!(pipe.len(), 1, "{pipe:?}");
+        assert!(pipe[0][1] < 0.5 && pipe[0][3] == 50.0, "{pipe:?}");
+        // A feature of no such class stays where it was seen: two pieces (20 rows apart, past
+        // `bridge_texels`).
+        let other = run(&hidden, "unknown");
+        assert_eq!(other.len(), 2, "{other:?}");
+        assert!(other[0][3] < 10.5 && other[1][3] < 35.5, "{other:?}");
+        // Observed flat wall between the pieces stops the lower one; the upper still runs up.
+        let mut flat_between = seen_layers(w, h, pr, e);
+        unseen(&mut flat_between, 35..50);
+        let pipe = run(&flat_between, "drainpipe");
+        assert_eq!(pipe.len(), 2, "{pipe:?}");
+        assert!(pipe[0][3] < 10.5 && pipe[1][3] == 50.0, "{pipe:?}");
+    }
+
+    #[test]
+    fn the_blur_comes_off_a_thin_feature_and_not_off_a_wide_one() {
+        // Known values: a point blurred by a Gaussian reads its FWHM, 2 sqrt(2 ln 2) sigma; a
+        // wide box reads its own width; Phi(1.959964) = 0.975.
+        let s = 0.645;
+        assert!((blurred_width(0.0, s) - 2.354_820 * s).abs() < 1e-5);
+        assert!((blurred_width(14.0, s) - 14.0).abs() < 1e-6);
+        assert!((phi(1.959_964) - 0.975).abs() < 1e-6 && (phi(0.0) - 0.5).abs() < 1e-7);
+        let both = |a: f64| {
+            let b = blurred_width(a, s);
+            HalfPeak {
+                lo: 5.0 - b / 2.0,
+                hi: 5.0 + b / 2.0,
+                lo_blurred: true,
+                hi_blurred: true,
+            }
+        };
+        for a in [0.6, 1.2, 3.0, 14.0] {
+            let (lo, hi) = deblurred(both(a), s);
+            assert!(
+                (hi - lo - a).abs() < 1e-6 && (lo + hi - 10.0).abs() < 1e-9,
+                "{a}"
+            );
+        }
+        // A side bounded by the chart's end stays; only the blurred side moves in.
+        let b = both(1.2);
+        let (lo, hi) = deblurred(
+            HalfPeak {
+                lo: 0.0,
+                hi: b.hi - b.lo - (b.hi - b.lo - 1.2) / 2.0,
+                lo_blurred: false,
+                hi_blurred: true,
+            },
+            s,
+        );
+        assert!(lo == 0.0 && (hi - 1.2).abs() < 1e-6, "{lo} {hi}");
+        // Narrower than the blur alone reads: the floor.
+        let (lo, hi) = deblurred(
+            HalfPeak {
+                lo: 0.0,
+                hi: 1.0,
+                lo_blurred: true,
+                hi_blurred: true,
+            },
+            s,
+        );
+        assert!((hi - lo - MIN_WIDTH_TEXELS).abs() < 1e-12);
     }
 
     #[test]

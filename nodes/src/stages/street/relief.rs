@@ -22,7 +22,9 @@ impl Stage for Relief {
     // unobserved stretches; sky left out of the enclosure ring, walls of any instance enclose.
     // 6: unlabelled ring pixels on the chart's plane enclose as wall (plane_tol_m).
     // 7: layers stored sparse (the texels that carry a value), 2.6 GB -> 0.6 GB on 1 km².
-    const VERSION: u32 = 7;
+    // 8: thin features' rectangles without the fusion's blur; drainpipes run up to the eave;
+    // protrusions no view measured standing out are dropped.
+    const VERSION: u32 = 8;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),
