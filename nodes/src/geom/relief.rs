@@ -31,7 +31,8 @@ use crate::stage::Progress;
 /// The displacement classes Y, in the order every probability triple uses.
 pub const RELIEF_CLASSES: [&str; 3] = ["recessed", "neutral", "protruding"];
 
-/// Per semantic class: its prior sign and the depths it may be carved at.
+/// Per semantic class: its prior sign, the depths it may be carved at, and whether it runs up
+/// the wall.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ClassRule {
@@ -355,7 +356,9 @@ pub struct ReliefParams {
     pub wall_class: String,
     /// Classes that never form regions (roofs). Default ["roof"].
     pub ignore_classes: Vec<String>,
-    /// Per class: prior sign and depth range.
+    /// Per class: prior sign, depth range, and whether it runs up the wall. Default: windows
+    /// and doors recessed 0.1-0.3 m, balconies protruding 0.3-1.5 m, drainpipes protruding
+    /// 0.05-0.3 m and running up to the eave.
     pub classes: Vec<ClassRule>,
     /// Depth range of recesses of no known class, metres. Default (0.05, 0.5).
     pub unknown_recess_m: (f64, f64),
