@@ -1993,6 +1993,31 @@ mod tests {
         }
     }
 
+    /// Protruding posterior and evidence of a pipe down column 3 of a `w`-wide chart of `n`
+    /// texels, on `rows`; flat elsewhere.
+    fn pipe_in_column_3(w: u32, n: usize, rows: impl Iterator<Item = u32>) -> (Vec<f32>, Vec<f32>) {
+        let mut pr = vec![0.03f32; n];
+        let mut e = vec![0.0f32; n];
+        for j in rows {
+            pr[(j * w + 3) as usize] = 0.85;
+            e[(j * w + 3) as usize] = 0.9;
+        }
+        (pr, e)
+    }
+
+    /// Makes `rows` of `lay` unobserved (no exposure, no evidence, no posterior).
+    fn unobserve(lay: &mut DenseLayers, w: u32, rows: std::ops::Range<u32>) {
+        for j in rows {
+            for i in 0..w {
+                let k = (j * w + i) as usize;
+                lay.exposure[k] = 0.0;
+                lay.protruding[k] = f32::NAN;
+                lay.pr_protruding[k] = f32::NAN;
+                lay.pr_recessed[k] = f32::NAN;
+            }
+        }
+    }
+
     /// Region votes that measured a protrusion standing 0.15 m out, one at each of `at` (texel
     /// coordinates), of class `class`.
     fn measured_out(class: &str, at: &[(f64, f64)]) -> Vec<RegionVote> {
@@ -2059,27 +2084,13 @@ mod tests {
         // balcony slab hid them), then observed and flat.
         let (w, h) = (10u32, 44u32);
         let c = flat_chart(w, h);
-        let n = c.len();
-        let mut pr = vec![0.03f32; n];
-        let mut e = vec![0.0f32; n];
-        for j in (0..20).chain(24..44) {
-            pr[(j * w + 3) as usize] = 0.85;
-            e[(j * w + 3) as usize] = 0.9;
-        }
+        let (pr, e) = pipe_in_column_3(w, c.len(), (0..20).chain(24..44));
         let p = ReliefParams {
             min_texels: 3,
             ..Default::default()
         };
         let mut hidden = seen_layers(w, h, pr.clone(), e.clone());
-        for j in 20..24 {
-            for i in 0..w {
-                let k = (j * w + i) as usize;
-                hidden.exposure[k] = 0.0;
-                hidden.protruding[k] = f32::NAN;
-                hidden.pr_protruding[k] = f32::NAN;
-                hidden.pr_recessed[k] = f32::NAN;
-            }
-        }
+        unobserve(&mut hidden, w, 20..24);
         let votes = measured_out("unknown", &[(3.5, 10.0), (3.5, 34.0)]);
         let votes: Vec<&RegionVote> = votes.iter().collect();
         let one = instances(0, &c, &hidden, &votes, false, &p);
@@ -2104,13 +2115,7 @@ mod tests {
         // dropped with no step or a step under `min_step_m` (the class in the image alone).
         let (w, h) = (10u32, 30u32);
         let c = flat_chart(w, h);
-        let n = c.len();
-        let mut pr = vec![0.03f32; n];
-        let mut e = vec![0.0f32; n];
-        for j in 0..h {
-            pr[(j * w + 3) as usize] = 0.85;
-            e[(j * w + 3) as usize] = 0.9;
-        }
+        let (pr, e) = pipe_in_column_3(w, c.len(), 0..h);
         let lay = seen_layers(w, h, pr, e);
         let p = ReliefParams {
             min_texels: 3,
@@ -2134,31 +2139,14 @@ mod tests {
         // above are unobserved (`hidden`) or observed flat (`flat_between`).
         let (w, h) = (10u32, 50u32);
         let c = flat_chart(w, h);
-        let n = c.len();
-        let mut pr = vec![0.03f32; n];
-        let mut e = vec![0.0f32; n];
-        for j in (0..10).chain(30..35) {
-            pr[(j * w + 3) as usize] = 0.85;
-            e[(j * w + 3) as usize] = 0.9;
-        }
+        let (pr, e) = pipe_in_column_3(w, c.len(), (0..10).chain(30..35));
         let p = ReliefParams {
             min_texels: 3,
             ..Default::default()
         };
-        let unseen = |lay: &mut DenseLayers, rows: std::ops::Range<u32>| {
-            for j in rows {
-                for i in 0..w {
-                    let k = (j * w + i) as usize;
-                    lay.exposure[k] = 0.0;
-                    lay.protruding[k] = f32::NAN;
-                    lay.pr_protruding[k] = f32::NAN;
-                    lay.pr_recessed[k] = f32::NAN;
-                }
-            }
-        };
         let mut hidden = seen_layers(w, h, pr.clone(), e.clone());
-        unseen(&mut hidden, 10..30);
-        unseen(&mut hidden, 35..50);
+        unobserve(&mut hidden, w, 10..30);
+        unobserve(&mut hidden, w, 35..50);
         let run = |lay: &DenseLayers, class: &str| {
             let votes = measured_out(class, &[(3.5, 5.0), (3.5, 32.0)]);
             let votes: Vec<&RegionVote> = votes.iter().collect();
@@ -2180,7 +2168,7 @@ mod tests {
         assert!(other[0][3] < 10.5 && other[1][3] < 35.5, "{other:?}");
         // Observed flat wall between the pieces stops the lower one; the upper still runs up.
         let mut flat_between = seen_layers(w, h, pr, e);
-        unseen(&mut flat_between, 35..50);
+        unobserve(&mut flat_between, w, 35..50);
         let pipe = run(&flat_between, "drainpipe");
         assert_eq!(pipe.len(), 2, "{pipe:?}");
         assert!(pipe[0][3] < 10.5 && pipe[1][3] == 50.0, "{pipe:?}");
