@@ -163,40 +163,35 @@ impl SparseLayer {
         self.len == 0
     }
 
+    /// Run `i`: its first index and its values.
+    fn run(&self, i: usize) -> (usize, &[f32]) {
+        let [start, offset] = self.runs[i];
+        let end = self
+            .runs
+            .get(i + 1)
+            .map_or(self.values.len(), |r| r[1] as usize);
+        (
+            start as usize,
+            self.values.get(offset as usize..end).unwrap_or(&[]),
+        )
+    }
+
     /// Index `k`'s value; `fill` outside the runs and past the end.
     pub fn get(&self, k: usize) -> f32 {
         let i = self.runs.partition_point(|r| r[0] as usize <= k);
-        let Some(&[start, offset]) = i.checked_sub(1).and_then(|i| self.runs.get(i)) else {
+        let Some(i) = i.checked_sub(1) else {
             return self.fill;
         };
-        let end = self
-            .runs
-            .get(i)
-            .map_or(self.values.len(), |r| r[1] as usize);
-        let at = offset as usize + (k - start as usize);
-        if at < end {
-            self.values.get(at).copied().unwrap_or(self.fill)
-        } else {
-            self.fill
-        }
+        let (start, values) = self.run(i);
+        values.get(k - start).copied().unwrap_or(self.fill)
     }
 
     /// The kept values with their indices, in index order.
     pub fn kept(&self) -> impl Iterator<Item = (usize, f32)> + '_ {
-        self.runs
-            .iter()
-            .enumerate()
-            .flat_map(move |(i, &[start, offset])| {
-                let end = self
-                    .runs
-                    .get(i + 1)
-                    .map_or(self.values.len(), |r| r[1] as usize);
-                let values = self.values.get(offset as usize..end).unwrap_or(&[]);
-                values
-                    .iter()
-                    .enumerate()
-                    .map(move |(j, &v)| (start as usize + j, v))
-            })
+        (0..self.runs.len()).flat_map(move |i| {
+            let (start, values) = self.run(i);
+            values.iter().enumerate().map(move |(j, &v)| (start + j, v))
+        })
     }
 
     /// Every value, `fill` included.

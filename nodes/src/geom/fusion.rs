@@ -522,18 +522,9 @@ fn convolve(raw: &[f64], w: usize, h: usize, kernel: &[f64]) -> Vec<f64> {
     }
     let r = kernel.len() / 2;
     let mut out = vec![0.0; raw.len()];
-    let (mut y0, mut y1, mut x0, mut x1) = (usize::MAX, 0, usize::MAX, 0);
-    for (y, row) in raw.chunks_exact(w.max(1)).take(h).enumerate() {
-        if let (Some(a), Some(b)) = (
-            row.iter().position(|&v| v != 0.0),
-            row.iter().rposition(|&v| v != 0.0),
-        ) {
-            (y0, y1, x0, x1) = (y0.min(y), y, x0.min(a), x1.max(b));
-        }
-    }
-    if y0 == usize::MAX {
+    let Some([x0, x1, y0, y1]) = crate::raster::set_box(raw, w, h, |&v| v != 0.0) else {
         return out;
-    }
+    };
     // The row pass's output: the nonzero rows, the nonzero columns and r either side.
     let (rx0, rx1) = (x0.saturating_sub(r), (x1 + r).min(w - 1));
     let rw = rx1 - rx0 + 1;

@@ -154,21 +154,12 @@ pub fn on_support(
     op: impl FnOnce(&[bool], u32, u32) -> Vec<bool>,
 ) -> Vec<bool> {
     let (wu, hu) = (w as usize, h as usize);
-    let mut rows = (usize::MAX, 0usize);
-    let mut cols = (usize::MAX, 0usize);
-    for (y, row) in mask.chunks_exact(wu.max(1)).take(hu).enumerate() {
-        let (Some(a), Some(b)) = (row.iter().position(|&m| m), row.iter().rposition(|&m| m)) else {
-            continue;
-        };
-        rows = (rows.0.min(y), y);
-        cols = (cols.0.min(a), cols.1.max(b));
-    }
-    if rows.0 == usize::MAX {
+    let Some([sx0, sx1, sy0, sy1]) = super::set_box(mask, wu, hu, |&m| m) else {
         return op(mask, w, h);
-    }
+    };
     let m = margin as usize;
-    let (x0, x1) = (cols.0.saturating_sub(m), (cols.1 + m).min(wu - 1));
-    let (y0, y1) = (rows.0.saturating_sub(m), (rows.1 + m).min(hu - 1));
+    let (x0, x1) = (sx0.saturating_sub(m), (sx1 + m).min(wu - 1));
+    let (y0, y1) = (sy0.saturating_sub(m), (sy1 + m).min(hu - 1));
     let (cw, ch) = (x1 - x0 + 1, y1 - y0 + 1);
     if cw == wu && ch == hu {
         return op(mask, w, h);
@@ -312,9 +303,7 @@ mod tests {
         // whole grid against the set cells' box: equal cell for cell.
         let mut seed = 12345u64;
         let mut rnd = move || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            seed = crate::rng::mix(seed);
             (seed >> 33) as u32
         };
         for case in 0..200 {
