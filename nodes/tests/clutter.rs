@@ -75,13 +75,13 @@ fn every_asset_passes_check_solid() {
 
 /// The demo's city and views ("views" in graphs/demo.ron), the twin (the truth's terrain and
 /// building prisms) and a 0.5 m terrain raster.
-fn demo_site() -> (City, Scene, ViewSet, Scene, Raster) {
+fn demo_site(max_views: u32) -> (City, Scene, ViewSet, Scene, Raster) {
     let city = generate(&SynthCityParams::default());
     let truth = scene_of(&city);
     let p = SynthViewsParams {
         size: (320, 240),
         spacing_m: 15.0,
-        max_views: 64,
+        max_views,
         pose_noise_m: 0.5,
         heading_noise_deg: 1.0,
         depth_scale: 0.8,
@@ -235,33 +235,46 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-#[test]
-fn clutter_recall_and_precision_on_the_demo_site() {
-    let (city, truth, views, twin, terrain) = demo_site();
-    // Calibration: every view's fit against the truth bias (z = 1.25 d - 1.25).
-    let cfg = ClutterConfig::default();
-    let cals = calibrate(&views.views, &twin, &cfg);
-    let slopes: Vec<f64> = cals.iter().flatten().map(|c| c.fit.slope).collect();
-    let icepts: Vec<f64> = cals.iter().flatten().map(|c| c.fit.intercept).collect();
-    println!(
-        "calibration over {} views: slope median {:.4} (truth 1.25), intercept median {:.3} (truth -1.25), {} pooled",
-        slopes.len(),
-        median(slopes.clone()),
-        median(icepts.clone()),
-        cals.iter().flatten().filter(|c| c.pooled).count()
-    );
-    assert!((median(slopes) - 1.25).abs() / 1.25 < 0.02);
-    assert!((median(icepts) + 1.25).abs() < 0.3);
+/// Every class's precision and recall at least 0.8 (classes with three or more visible
+/// objects) and the median position error over all classes, scored with the intersection rule
+/// off: the synthetic city parks cars in intersections (SynthCity places them at any x along a
+/// street), so the rule drops true cars there.
+fn assert_targets(s: &BTreeMap<String, ClassScore>, max_median_m: f64) {
+    let mut all_errors = Vec::new();
+    for (class, c) in s {
+        if c.expected < 3 {
+            continue;
+        }
+        let precision = c.true_pos as f64 / c.predicted.max(1) as f64;
+        let recall = c.found as f64 / c.expected as f64;
+        assert!(precision >= 0.8, "{class}: precision {precision:.3}");
+        assert!(recall >= 0.8, "{class}: recall {recall:.3}");
+        all_errors.extend(c.errors.iter().copied());
+    }
+    let med = median(all_errors);
+    println!("median position error over all classes: {med:.2} m");
+    assert!(med <= max_median_m, "median position error {med:.2} m");
+}
 
-    let truth_objs = truth_objects(&city);
-    let seen = visible(&truth, &views, cfg.min_pixels, cfg.max_range_m);
+/// The chain on `views`, scored against the truth, per class, with the intersection rule on
+/// and off (printed), returned with it off.
+fn scores(
+    city: &City,
+    truth: &Scene,
+    views: &ViewSet,
+    twin: &Scene,
+    terrain: &Raster,
+) -> BTreeMap<String, ClassScore> {
+    let cfg = ClutterConfig::default();
+    let truth_objs = truth_objects(city);
+    let seen = visible(truth, views, cfg.min_pixels, cfg.max_range_m);
     let mut results = Vec::new();
     for drop_int in [true, false] {
         let cfg = ClutterConfig {
             drop_vehicles_in_intersections: drop_int,
             ..ClutterConfig::default()
         };
-        let (placed, metrics) = place_clutter(&views.views, &twin, &terrain, None, &cfg);
+        let (placed, metrics) = place_clutter(&views.views, twin, terrain, None, &cfg);
         println!(
             "drop_vehicles_in_intersections {drop_int}: {:?}",
             metrics.values
@@ -282,38 +295,55 @@ fn clutter_recall_and_precision_on_the_demo_site() {
         }
         results.push(s);
     }
-    // Scored with the intersection rule off: the synthetic city parks cars in intersections
-    // (SynthCity places them at any x along a street), so the rule drops true cars there.
-    // The target is 0.8 for both. Cars meet it (0.873) since a car seen short of its
-    // length is placed from the end that shows, told by which image side the frame's edge or
-    // a nearer object cuts (0.794 before, when the bottom edge's cut of a close car chose the
-    // end and end-on views were read as lengthwise). Trees meet it (recall 0.923, precision
-    // 0.973) since a crown seen narrower than a crown with one side hidden (by the next tree's
-    // crown in its row, or the frame) is placed half a width in from the side that shows
-    // (0.795 and 0.84 before: 6 of the 8 missed trees had a prediction 1.9-2.6 m off along
-    // their row). Registration took car recall from 0.76 to 0.79 and the median position
-    // error over all classes from 0.59 m to 0.28 m.
-    let s = &results[1];
-    let mut all_errors = Vec::new();
-    for (class, c) in s {
-        if c.expected < 3 {
-            continue;
-        }
-        let precision = c.true_pos as f64 / c.predicted.max(1) as f64;
-        let recall = c.found as f64 / c.expected as f64;
-        assert!(precision >= 0.8, "{class}: precision {precision:.3}");
-        assert!(recall >= 0.8, "{class}: recall {recall:.3}");
-        all_errors.extend(c.errors.iter().copied());
-    }
-    let med = median(all_errors);
-    println!("median position error over all classes: {med:.2} m");
-    assert!(med <= 0.4, "median position error {med:.2} m");
+    results.pop().unwrap()
+}
+
+#[test]
+fn clutter_recall_and_precision_on_the_demo_site() {
+    let (city, truth, views, twin, terrain) = demo_site(64);
+    // Calibration: every view's fit against the truth bias (z = 1.25 d - 1.25).
+    let cfg = ClutterConfig::default();
+    let cals = calibrate(&views.views, &twin, &cfg);
+    let slopes: Vec<f64> = cals.iter().flatten().map(|c| c.fit.slope).collect();
+    let icepts: Vec<f64> = cals.iter().flatten().map(|c| c.fit.intercept).collect();
+    println!(
+        "calibration over {} views: slope median {:.4} (truth 1.25), intercept median {:.3} (truth -1.25), {} pooled",
+        slopes.len(),
+        median(slopes.clone()),
+        median(icepts.clone()),
+        cals.iter().flatten().filter(|c| c.pooled).count()
+    );
+    assert!((median(slopes) - 1.25).abs() / 1.25 < 0.02);
+    assert!((median(icepts) + 1.25).abs() < 0.3);
+    // Cars meet the target (0.873) since a car seen short of its length is placed from the end
+    // that shows, told by which image side the frame's edge or a nearer object cuts (0.794
+    // before, when the bottom edge's cut of a close car chose the end and end-on views were
+    // read as lengthwise). Trees meet it (recall 0.923, precision 0.973) since a crown seen
+    // narrower than a crown with one side hidden (by the next tree's crown in its row, or the
+    // frame) is placed half a width in from the side that shows (0.795 and 0.84 before: 6 of
+    // the 8 missed trees had a prediction 1.9-2.6 m off along their row). Registration took
+    // car recall from 0.76 to 0.79 and the median position error over all classes from 0.59 m
+    // to 0.28 m.
+    assert_targets(&scores(&city, &truth, &views, &twin, &terrain), 0.4);
+}
+
+/// Every street photographed (416 views, as the street-level sweep's twin has them): the
+/// crossings are in the views, where a lamp post on a corner's pavement stands 6 m from one
+/// street's axis and 8.5 m from the other's. Read against one axis fitted to the cameras of both
+/// streets, such posts were dropped as standing in the carriageway: recall 0.795 (62 of 78)
+/// for poles, 0.783 (18 of 23) for signs; against the nearest street's axis 0.885 (69) and
+/// 0.826 (19), with car recall 0.893 -> 0.923 and car precision 0.946 -> 0.919.
+#[test]
+fn clutter_on_every_street_with_its_crossings() {
+    let (city, truth, views, twin, terrain) = demo_site(1000);
+    assert!(views.views.len() > 400, "{} views", views.views.len());
+    assert_targets(&scores(&city, &truth, &views, &twin, &terrain), 0.4);
 }
 
 /// The stage's scene: checked solids, distinct ids, the same at one and at two threads.
 #[test]
 fn place_clutter_stage_is_deterministic() {
-    let (_, _, views, twin, terrain) = demo_site();
+    let (_, _, views, twin, terrain) = demo_site(64);
     let inputs = Inputs::new()
         .with("views", slot(Artifact::Views(views)))
         .with("scene", slot(Artifact::Scene(twin)))

@@ -34,12 +34,14 @@ pub struct PlaceClutterParams {
     pub nms_factor: f64,
     /// Objects seen from fewer views are dropped. Default 1.
     pub min_views: u32,
-    /// Vehicles farther than this from the camera track's axis are off the road, metres.
+    /// Vehicles farther than this from the nearest street axis the camera track draws are
+    /// off the road, metres.
     /// Default 7.
     pub road_half_width_m: f64,
     /// Vehicles closer than this to a building are on the sidewalk, metres. Default 2.
     pub vehicle_building_gap_m: f64,
-    /// Roadside furniture closer than this to the track's axis is in the carriageway, metres.
+    /// Roadside furniture closer than this to the nearest street axis the track draws is in
+    /// the carriageway, metres.
     /// Default 4.
     pub roadside_min_m: f64,
     /// Free of buildings this far on both sides across the street: an intersection, metres.
@@ -183,7 +185,9 @@ impl Stage for PlaceClutter {
     // object hides.
     // 3: a round asset seen narrower than it is with one side hidden is placed from the side
     // that shows.
-    const VERSION: u32 = 3;
+    // 4: the road at a point is the nearest of the streets the track draws there, not one axis
+    // fitted across a crossing.
+    const VERSION: u32 = 4;
     const DOC: &'static str = "street clutter from views: Theil-Sen depth calibration, lifting, clustering, NMS, scene grammar, asset library, Sec. 4.2.4";
     const INPUTS: &'static [InputSpec] = INPUTS;
     type Params = PlaceClutterParams;
@@ -211,7 +215,8 @@ impl Stage for ClutterMetrics {
     const KIND: &'static str = "ClutterMetrics";
     // 2: PlaceClutter 2.
     // 3: PlaceClutter 3.
-    const VERSION: u32 = 3;
+    // 4: PlaceClutter 4.
+    const VERSION: u32 = 4;
     const DOC: &'static str =
         "counts of the clutter chain (detections, clusters, NMS, each grammar rule), Sec. 4.2.4";
     const INPUTS: &'static [InputSpec] = INPUTS;
