@@ -27,7 +27,7 @@ use kodama_nodes::geom::relief::{
 use kodama_nodes::io::export::write_glb;
 use kodama_nodes::stages::street::relief::Relief;
 use kodama_nodes::stages::street::surface_charts::{SurfaceCharts, SurfaceChartsParams};
-use kodama_nodes::synth::synth_city::generate;
+use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
 use kodama_nodes::synth::truth_scene::wall_prisms;
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
@@ -188,7 +188,11 @@ fn demo_views() -> SynthViewsParams {
 }
 
 fn make_site(views: SynthViewsParams) -> Site {
-    let city = generate(&small_city());
+    make_site_in(&small_city(), views)
+}
+
+fn make_site_in(city: &SynthCityParams, views: SynthViewsParams) -> Site {
+    let city = generate(city);
     let truth = scene_of(&city);
     let s = site();
     let ctx = Ctx::new(&s, &[]);
@@ -505,8 +509,10 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
     // The targets, but for drainpipes: 0.12 m wide, 1.2 texels, seen by one to three
     // views each, and where registration leaves a view's evidence half a texel off, or the
     // segmentation missed the pipe in the one view that saw a stretch of it, IoU 0.5 is out of
-    // reach. Five of the eight observed are found (three before pipes ran up to the eave, the
-    // blur came off thin features and protrusions no view measured were dropped).
+    // reach. Four of the eight observed are found here (five before drainpipes took a width
+    // within their class's range, three before pipes ran up to the eave, the blur came off thin
+    // features and protrusions no view measured were dropped); eight pipes are too few to tell
+    // one rule from another, and the test on every street below (49 observed) scores them.
     for c in ["window", "door", "balcony"] {
         assert!(sc.by_class[c].observed >= 5, "{c}: {:?}", sc.by_class[c]);
         assert!(sc.recall(c) >= 0.8, "{c} recall {}", sc.recall(c));
@@ -518,7 +524,7 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
         sc.by_class["drainpipe"]
     );
     assert!(
-        sc.recall("drainpipe") >= 0.6,
+        sc.recall("drainpipe") >= 0.5,
         "drainpipe recall {}",
         sc.recall("drainpipe")
     );
@@ -585,6 +591,51 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
     assert!(
         curve[2] < curve[0],
         "fewer views, fewer windows found: {curve:?}"
+    );
+}
+
+/// The demo city (400 m x 300 m, 72 buildings) with every street photographed (416 views, the
+/// street-level sweep's twin), registered: a sample large enough to score the thin classes (49
+/// observed drainpipes against the 8 above). Windows and doors meet the 0.8; balconies
+/// (0.75 / 0.71) and drainpipes (0.37 / 0.33) do not, and the asserts below are the levels
+/// measured on 2026-11-26, guards against regressions rather than the targets. Drainpipes were
+/// 0.29 / 0.23 before a half-peak side toward a chart's end was extrapolated (a pipe 0.1 m from
+/// a corner) and before their rectangles took a width within the class's range (a 0.12 m pipe
+/// reads 0.2-0.3 m wide through the kernel and the views' registration scatter).
+#[test]
+fn relief_on_every_street_of_the_demo_city() {
+    let s = make_site_in(
+        &SynthCityParams::default(),
+        SynthViewsParams {
+            max_views: 1000,
+            ..demo_views()
+        },
+    );
+    assert!(s.views.views.len() > 400, "{} views", s.views.views.len());
+    let views = register_views(&s.views, &s.walls);
+    let p = ReliefParams::default();
+    let r = run_relief(&s, &views, None, &p);
+    let sc = score(&s, &r, &p);
+    print_scores("the demo city, every street, views registered:", &sc);
+    let guards = [
+        ("window", 0.85, 0.88),
+        ("door", 0.8, 0.85),
+        ("balcony", 0.72, 0.68),
+        ("drainpipe", 0.35, 0.3),
+    ];
+    for (c, recall, precision) in guards {
+        assert!(sc.by_class[c].observed >= 20, "{c}: {:?}", sc.by_class[c]);
+        assert!(sc.recall(c) >= recall, "{c} recall {}", sc.recall(c));
+        assert!(
+            sc.precision(c) >= precision,
+            "{c} precision {}",
+            sc.precision(c)
+        );
+    }
+    assert!(
+        sc.median_depth_error() <= 0.05,
+        "{}",
+        sc.median_depth_error()
     );
 }
 

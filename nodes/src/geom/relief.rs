@@ -48,6 +48,13 @@ pub struct ClassRule {
     /// it that then overlap are one instance. Default false.
     #[serde(default)]
     pub runs_up: bool,
+    /// Width range across the wall, metres (min, max), for a class whose width the evidence
+    /// cannot tell: a feature not much wider than a texel reads as wide as the fusion's kernel
+    /// plus the views' registration scatter (a 0.12 m drainpipe reads 0.2-0.3 m), so its
+    /// rectangle keeps the evidence's centre and takes a width within this range. None (the
+    /// default): the evidence's width.
+    #[serde(default)]
+    pub width_m: Option<(f64, f64)>,
 }
 
 /// Weights of the cues in g(v).
@@ -423,11 +430,12 @@ pub struct ReliefParams {
 
 impl Default for ReliefParams {
     fn default() -> Self {
-        let rule = |name: &str, prior, depth_m, runs_up| ClassRule {
+        let rule = |name: &str, prior, depth_m, runs_up, width_m| ClassRule {
             name: name.into(),
             prior,
             depth_m,
             runs_up,
+            width_m,
         };
         ReliefParams {
             gamma: 2.0,
@@ -438,12 +446,13 @@ impl Default for ReliefParams {
             wall_class: "wall".into(),
             ignore_classes: vec!["roof".into()],
             classes: vec![
-                rule("window", -1, (0.1, 0.3), false),
-                rule("door", -1, (0.1, 0.3), false),
-                rule("balcony", 1, (0.3, 1.5), false),
+                rule("window", -1, (0.1, 0.3), false, None),
+                rule("door", -1, (0.1, 0.3), false, None),
+                rule("balcony", 1, (0.3, 1.5), false, None),
                 // Views see a drainpipe between balconies and parked cars, in pieces, and rarely
-                // up to the eave from the street: it runs there all the same.
-                rule("drainpipe", 1, (0.05, 0.3), true),
+                // up to the eave from the street: it runs there all the same. Downpipes are
+                // made 50 to 150 mm across (EN 12200's nominal sizes).
+                rule("drainpipe", 1, (0.05, 0.3), true, Some((0.05, 0.15))),
             ],
             unknown_recess_m: (0.05, 0.5),
             unknown_protrusion_m: (0.05, 1.5),
@@ -496,6 +505,9 @@ impl ReliefParams {
         };
         for c in &self.classes {
             depth_range("classes", c.depth_m)?;
+            if let Some(w) = c.width_m {
+                depth_range("classes", w)?;
+            }
             if !(-1..=1).contains(&c.prior) {
                 return Err(("classes", format!("{}: prior is -1, 0 or 1", c.name)));
             }
@@ -1575,6 +1587,13 @@ fn instances(
             }
             let (lo, hi) = p.depth_range(&class, sign);
             let depth_m = measured.unwrap_or((lo + hi) / 2.0).clamp(lo, hi);
+            let rect = match p.classes.iter().find(|r| r.name == class) {
+                Some(ClassRule {
+                    width_m: Some(range),
+                    ..
+                }) => within_width(rect, *range, c.texel_m, w, evidence),
+                _ => rect,
+            };
             let views: BTreeSet<u32> = inside.iter().map(|r| r.view).collect();
             let corners = [
                 c.world_of(rect[0], rect[1]),
@@ -1600,6 +1619,43 @@ fn instances(
         }
     }
     out
+}
+
+/// `rect` narrowed or widened along `u` to a width within `range` (metres; the chart's texels
+/// are `texel_m`) about the centroid of its columns' mean `evidence` (a side the chart's end
+/// bounds leaves the rectangle's middle off the feature's), kept on the chart's `w` texels.
+fn within_width(
+    rect: [f64; 4],
+    range: (f64, f64),
+    texel_m: f64,
+    w: u32,
+    evidence: &[f32],
+) -> [f64; 4] {
+    let width = (rect[2] - rect[0]).clamp(range.0 / texel_m, range.1 / texel_m);
+    let rows = rect[1].floor() as usize..(rect[3].ceil() as usize).min(evidence.len() / w as usize);
+    let (mut sum, mut weight) = (0.0, 0.0);
+    for i in rect[0].floor() as usize..(rect[2].ceil() as usize).min(w as usize) {
+        let (mut e, mut n) = (0.0, 0usize);
+        for j in rows.clone() {
+            let x = evidence[j * w as usize + i] as f64;
+            if x.is_finite() {
+                e += x;
+                n += 1;
+            }
+        }
+        if n > 0 {
+            let mean = e / n as f64;
+            sum += mean * (i as f64 + 0.5);
+            weight += mean;
+        }
+    }
+    let centre = if weight > 0.0 {
+        sum / weight
+    } else {
+        0.5 * (rect[0] + rect[2])
+    };
+    let u0 = (centre - width / 2.0).clamp(0.0, (w as f64 - width).max(0.0));
+    [u0, rect[1], (u0 + width).min(w as f64), rect[3]]
 }
 
 /// `rect` with its top raised through every row above it where a texel of its columns is
@@ -1745,7 +1801,8 @@ const MIN_WIDTH_TEXELS: f64 = 0.5;
 
 /// The half-peak interval narrowed to the box whose blur by a Gaussian of standard deviation
 /// `spread` (texels) reads as wide, each side that is a half-peak crossing moved in by its share
-/// of the blur; a side bounded by the chart's end or by unobserved texels stays. The fusion
+/// of the blur; a side bounded by the chart's end or by unobserved texels, where the evidence
+/// does not fall toward it, stays. The fusion
 /// widens every feature by its kernel and its bilinear deposit: a 0.12 m drainpipe (1.2 texels)
 /// reads about 1.75 texels wide at half its peak; a 1.4 m window is unchanged to a hundredth of
 /// a texel.
@@ -1847,17 +1904,37 @@ fn half_peak_edges(profile: &[f64], lo: usize, hi: usize) -> HalfPeak {
     }
     let level = peak / 2.0;
     let above = |k: usize| profile[k] >= level;
-    // The crossing between texel `inner` (at or over the level) and its neighbour `outer`, and
-    // whether it is one (false: the texel edge, `outer` unobserved).
+    // Past an unobserved texel or the profile's end there is no neighbour to cross to, but the
+    // profile may still be seen falling toward it (a drainpipe 0.1 m from a corner reads
+    // highest one texel in from the chart's end): the line through the last two texels gives
+    // the crossing when it falls within the bound; where the profile does not fall, or falls
+    // to half its peak only past the bound, the feature runs to the bound.
+    let toward_bound = |inner: usize, further_in: Option<usize>, bound: f64| -> (f64, bool) {
+        let (a, b) = match further_in {
+            Some(j) if profile[j].is_finite() => (profile[inner], profile[j]),
+            _ => return (bound, false),
+        };
+        if b <= a {
+            return (bound, false);
+        }
+        let centre = inner as f64 + 0.5;
+        let x = centre + (bound - centre).signum() * (a - level) / (b - a);
+        if (x - bound) * (centre - bound) >= 0.0 {
+            (x, true)
+        } else {
+            (bound, false)
+        }
+    };
+    // The crossing between texel `inner` (at or over the level) and its neighbour `outer`.
     let cross = |inner: usize, outer: usize| -> (f64, bool) {
         let (a, b) = (profile[inner], profile[outer]);
-        let edge = if outer < inner {
-            inner as f64
-        } else {
-            inner as f64 + 1.0
-        };
         if !b.is_finite() {
-            return (edge, false);
+            let (bound, further_in) = if outer < inner {
+                (inner as f64, Some(inner + 1).filter(|&j| j < profile.len()))
+            } else {
+                (inner as f64 + 1.0, inner.checked_sub(1))
+            };
+            return toward_bound(inner, further_in, bound);
         }
         let f = (a - level) / (a - b);
         let (ci, co) = (inner as f64 + 0.5, outer as f64 + 0.5);
@@ -1875,12 +1952,12 @@ fn half_peak_edges(profile: &[f64], lo: usize, hi: usize) -> HalfPeak {
         r += 1;
     }
     let (left, lo_blurred) = if l == 0 {
-        (0.0, false)
+        toward_bound(0, (profile.len() > 1).then_some(1), 0.0)
     } else {
         cross(l, l - 1)
     };
     let (right, hi_blurred) = if r + 1 == profile.len() {
-        (profile.len() as f64, false)
+        toward_bound(r, r.checked_sub(1), profile.len() as f64)
     } else {
         cross(r, r + 1)
     };
@@ -2221,6 +2298,59 @@ mod tests {
             s,
         );
         assert!((hi - lo - MIN_WIDTH_TEXELS).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_side_at_the_charts_end_is_extrapolated_where_the_evidence_falls_toward_it() {
+        // A drainpipe 0.1 m from a corner, as the demo city's views read it: highest one texel
+        // in from the chart's end, falling toward the end and away from it.
+        let e = half_peak_edges(&[0.535, 0.867, 0.516, 0.026, 0.0], 0, 2);
+        let level = 0.867 / 2.0;
+        let lo = 0.5 - (0.535 - level) / (0.867 - 0.535);
+        let hi = 2.5 + (0.516 - level) / (0.516 - 0.026);
+        assert!(e.lo_blurred && (e.lo - lo).abs() < 1e-12, "{e:?}");
+        assert!(e.hi_blurred && (e.hi - hi).abs() < 1e-12, "{e:?}");
+        // Level to the end: cut by the chart, the bound stays.
+        let e = half_peak_edges(&[0.9, 0.9, 0.5, 0.0], 0, 2);
+        assert!(!e.lo_blurred && e.lo == 0.0, "{e:?}");
+        // Falling, but reaching half the peak only past the end: the bound stays.
+        let e = half_peak_edges(&[0.8, 0.9, 0.2], 0, 1);
+        assert!(!e.lo_blurred && e.lo == 0.0, "{e:?}");
+        // An unobserved texel bounds as the end does: extrapolated toward it, mirrored.
+        let e = half_peak_edges(&[0.0, 0.026, 0.516, 0.867, 0.535, f64::NAN], 2, 4);
+        assert!(e.hi_blurred && (e.hi - (5.0 - lo)).abs() < 1e-12, "{e:?}");
+    }
+
+    #[test]
+    fn a_drainpipe_takes_its_classs_width_about_the_evidence_centroid() {
+        // Evidence over columns 0..3 centred on column 1.5 (texel centres k + 0.5), two rows.
+        let w = 6;
+        let row = [0.5f32, 1.0, 1.0, 0.5, 0.0, 0.0];
+        let evidence: Vec<f32> = row.iter().chain(row.iter()).copied().collect();
+        let r = within_width([0.0, 0.0, 4.0, 2.0], (0.05, 0.15), 0.1, w, &evidence);
+        assert!((r[2] - r[0] - 1.5).abs() < 1e-9, "{r:?}");
+        assert!((r[0] + r[2] - 4.0).abs() < 1e-9, "{r:?}");
+        assert_eq!((r[1], r[3]), (0.0, 2.0));
+        // Narrower than the class: widened about its one column's centre, and kept on the
+        // chart where that would reach past its end.
+        let r = within_width([0.0, 0.0, 0.2, 2.0], (0.05, 0.15), 0.1, w, &evidence);
+        assert_eq!(r, [0.25, 0.0, 0.75, 2.0]);
+        let r = within_width([0.0, 0.0, 0.2, 2.0], (0.15, 0.3), 0.1, w, &evidence);
+        assert!(r[0] == 0.0 && (r[2] - 1.5).abs() < 1e-9, "{r:?}");
+    }
+
+    #[test]
+    fn a_class_width_range_is_refused_out_of_order_or_not_finite() {
+        for bad in [
+            (0.2, 0.1),
+            (f64::NAN, 0.1),
+            (0.05, f64::INFINITY),
+            (-0.1, 0.1),
+        ] {
+            let mut p = ReliefParams::default();
+            p.classes[3].width_m = Some(bad);
+            assert_eq!(p.validate().map_err(|e| e.0), Err("classes"), "{bad:?}");
+        }
     }
 
     #[test]

@@ -24,7 +24,9 @@ impl Stage for Relief {
     // 7: layers stored sparse (the texels that carry a value), 2.6 GB -> 0.6 GB on 1 km².
     // 8: thin features' rectangles without the fusion's blur; drainpipes run up to the eave;
     // protrusions no view measured standing out are dropped.
-    const VERSION: u32 = 8;
+    // 9: a half-peak side toward the chart's end or unobserved texels extrapolated where the
+    // evidence falls toward it; drainpipes 0.05-0.15 m wide (ClassRule::width_m).
+    const VERSION: u32 = 9;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),
