@@ -17,6 +17,7 @@ pub mod polygon;
 pub mod raycast;
 pub mod regularize;
 pub mod relief;
+pub mod roof_planes;
 pub mod terrain_mesh;
 pub mod theil_sen;
 pub mod tri_packet;
