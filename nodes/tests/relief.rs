@@ -509,10 +509,11 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
     // The targets, but for drainpipes: 0.12 m wide, 1.2 texels, seen by one to three
     // views each, and where registration leaves a view's evidence half a texel off, or the
     // segmentation missed the pipe in the one view that saw a stretch of it, IoU 0.5 is out of
-    // reach. Four of the eight observed are found here (five before drainpipes took a width
-    // within their class's range, three before pipes ran up to the eave, the blur came off thin
-    // features and protrusions no view measured were dropped); eight pipes are too few to tell
-    // one rule from another, and the test on every street below (49 observed) scores them.
+    // reach. Five of the eight observed are found here (three before pipes ran up to the eave,
+    // the blur came off thin features and protrusions no view measured were dropped; four for
+    // a while after drainpipes took a width within their class's range, five again since they
+    // run up through wall seen too coarsely to show them); eight pipes are too few to tell one
+    // rule from another, and the test on every street below (49 observed) scores them.
     for c in ["window", "door", "balcony"] {
         assert!(sc.by_class[c].observed >= 5, "{c}: {:?}", sc.by_class[c]);
         assert!(sc.recall(c) >= 0.8, "{c} recall {}", sc.recall(c));
@@ -524,7 +525,7 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
         sc.by_class["drainpipe"]
     );
     assert!(
-        sc.recall("drainpipe") >= 0.5,
+        sc.recall("drainpipe") >= 0.6,
         "drainpipe recall {}",
         sc.recall("drainpipe")
     );
@@ -597,11 +598,12 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
 /// The demo city (400 m x 300 m, 72 buildings) with every street photographed (416 views, the
 /// street-level sweep's twin), registered: a sample large enough to score the thin classes (49
 /// observed drainpipes against the 8 above). Windows and doors meet the 0.8; balconies
-/// (0.75 / 0.71) and drainpipes (0.37 / 0.33) do not, and the asserts below are the levels
+/// (0.75 / 0.71) and drainpipes (0.43 / 0.42) do not, and the asserts below are the levels
 /// measured on 2026-11-26, guards against regressions rather than the targets. Drainpipes were
 /// 0.29 / 0.23 before a half-peak side toward a chart's end was extrapolated (a pipe 0.1 m from
-/// a corner) and before their rectangles took a width within the class's range (a 0.12 m pipe
-/// reads 0.2-0.3 m wide through the kernel and the views' registration scatter).
+/// a corner) and their rectangles took a width within the class's range (a 0.12 m pipe reads
+/// 0.2-0.3 m wide through the kernel and the views' registration scatter): 0.37 / 0.33; then
+/// 0.43 / 0.42 once a pipe ran up through wall no view saw sharply enough to show it.
 #[test]
 fn relief_on_every_street_of_the_demo_city() {
     let s = make_site_in(
@@ -621,7 +623,7 @@ fn relief_on_every_street_of_the_demo_city() {
         ("window", 0.85, 0.88),
         ("door", 0.8, 0.85),
         ("balcony", 0.72, 0.68),
-        ("drainpipe", 0.35, 0.3),
+        ("drainpipe", 0.4, 0.4),
     ];
     for (c, recall, precision) in guards {
         assert!(sc.by_class[c].observed >= 20, "{c}: {:?}", sc.by_class[c]);

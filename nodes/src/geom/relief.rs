@@ -44,8 +44,9 @@ pub struct ClassRule {
     pub depth_m: (f64, f64),
     /// The feature runs up the wall to its top (a drainpipe from the ground to its gutter at
     /// the eave): an instance reaches up through texels the views did not observe, or that hold
-    /// some of its evidence, to the first observed flat wall or the wall's top, and pieces of
-    /// it that then overlap are one instance. Default false.
+    /// some of its evidence, to the first flat wall the views saw well enough to have resolved
+    /// it (with `width_m`, the exposure of a view that sees its widest across as one pixel) or
+    /// the wall's top, and pieces of it that then overlap are one instance. Default false.
     #[serde(default)]
     pub runs_up: bool,
     /// Width range across the wall, metres (min, max), for a class whose width the evidence
@@ -1302,7 +1303,7 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
                 .get(&(ci as u32))
                 .map(Vec::as_slice)
                 .unwrap_or(&[]);
-            let inst = instances(ci as u32, c, &lay, regions, with_mesh, p);
+            let inst = instances(ci as u32, c, &lay, regions, with_mesh, j_ref, p);
             (lay.pack(c), inst, observed)
         },
     );
@@ -1341,6 +1342,7 @@ fn unobserved_layers(c: &crate::artifact::Chart, with_mesh: bool) -> ReliefLayer
 
 /// One chart's relief layers while they are made: dense, in raster order, with the meaning of
 /// [`ReliefLayers`]' fields.
+#[cfg_attr(test, derive(Clone))]
 struct DenseLayers {
     exposure: Vec<f32>,
     recessed: Vec<f32>,
@@ -1394,6 +1396,7 @@ fn instances(
     lay: &DenseLayers,
     regions: &[&RegionVote],
     with_mesh: bool,
+    j_ref: f64,
     p: &ReliefParams,
 ) -> Vec<ReliefInstance> {
     let (w, h) = (c.width, c.height);
@@ -1495,10 +1498,19 @@ fn instances(
                 .map_or("unknown", |(c, _)| c)
                 .to_owned()
         };
-        let runs_up = |class: &str| p.classes.iter().any(|r| r.name == class && r.runs_up);
-        // Each piece's rectangle. A piece of a class that runs up the wall (a drainpipe, from
-        // the ground to its gutter) reaches up to where observed flat wall or the surface's end
-        // stops it, and pieces that then overlap are one feature.
+        // A piece of a class that runs up the wall (a drainpipe, from the ground to its gutter)
+        // reaches up to where observed flat wall or the surface's end stops it, and pieces that
+        // then overlap are one feature. Flat wall stops it only where the views saw it well
+        // enough to have resolved the feature: an exposure over what one view resolving the
+        // class's widest (`width_m`) across gives, (1 / (w² J_ref))^(gamma + 1) in exposure
+        // units (a far view sees a 0.12 m pipe under a pixel wide and reads the wall flat).
+        let stop_exposure = |class: &str| -> Option<f64> {
+            let r = p.classes.iter().find(|r| r.name == class && r.runs_up)?;
+            let resolve = r
+                .width_m
+                .map_or(0.0, |(_, hi)| (1.0 / (hi * hi * j_ref)).powf(p.gamma + 1.0));
+            Some(resolve.max(p.exposure_min))
+        };
         let pieces: Vec<(Vec<usize>, [f64; 4])> = comps
             .into_iter()
             .filter(|t| t.len() >= p.min_texels as usize)
@@ -1507,20 +1519,24 @@ fn instances(
                 (t, rect)
             })
             .collect();
-        let up: Vec<bool> = pieces
+        let up: Vec<Option<f64>> = pieces
             .iter()
-            .map(|(_, rect)| runs_up(&class_of(&inside(*rect))))
+            .map(|(_, rect)| stop_exposure(&class_of(&inside(*rect))))
             .collect();
-        let reach = |rect: [f64; 4]| run_up(rect, w, h, &passable);
+        let reach = |rect: [f64; 4], stop: f64| {
+            run_up(rect, w, h, |k| {
+                c.triangle_at[k] != u32::MAX && (!(lay.exposure[k] as f64 >= stop) || grown[k])
+            })
+        };
         let reached: Vec<[f64; 4]> = pieces
             .iter()
             .zip(&up)
-            .map(|((_, rect), &u)| if u { reach(*rect) } else { *rect })
+            .map(|((_, rect), u)| u.map_or(*rect, |stop| reach(*rect, stop)))
             .collect();
         let mut sets = UnionFind::new(pieces.len());
         for x in 0..pieces.len() {
             for y in x + 1..pieces.len() {
-                if up[x] && up[y] && one_column(&reached[x], &reached[y]) {
+                if up[x].is_some() && up[y].is_some() && one_column(&reached[x], &reached[y]) {
                     sets.join(x as u32, y as u32);
                 }
             }
@@ -1538,7 +1554,9 @@ fn instances(
                     .flat_map(|&x| pieces[x].0.iter().copied())
                     .collect();
                 t.sort_unstable();
-                let rect = reach(extent(&t, evidence, w, h, spread));
+                // Pieces join only when both run up, so the group's first has a stop.
+                let stop = up[members[0]].unwrap_or(p.exposure_min);
+                let rect = reach(extent(&t, evidence, w, h, spread), stop);
                 (t, rect)
             };
             let m = texels.len() as f64;
@@ -2040,7 +2058,7 @@ mod tests {
         let at: Vec<(f64, f64)> = (0..h).map(|j| (3.5, j as f64 + 0.5)).collect();
         let votes = measured_out("unknown", &at);
         let votes: Vec<&RegionVote> = votes.iter().collect();
-        let one = instances(0, &c, &lay, &votes, false, &p);
+        let one = instances(0, &c, &lay, &votes, false, 1e12, &p);
         assert_eq!(one.len(), 1, "{one:?}");
         // The extent is the core's: one column wide, never grown over the gap to the edge.
         let r = one[0].rect;
@@ -2053,7 +2071,10 @@ mod tests {
             ..p
         };
         // Without the hysteresis (closing bridges one row, not two): a piece per stretch.
-        assert_eq!(instances(0, &c, &lay, &votes, false, &without).len(), 11);
+        assert_eq!(
+            instances(0, &c, &lay, &votes, false, 1e12, &without).len(),
+            11
+        );
     }
 
     /// Layers of a `w` x `h` chart seen everywhere (exposure 10) with protruding posterior and
@@ -2137,7 +2158,15 @@ mod tests {
             }
             let votes = measured_out("unknown", &[(3.5, 15.0)]);
             let votes: Vec<&RegionVote> = votes.iter().collect();
-            let one = instances(0, &c, &seen_layers(w, h, pr.clone(), e), &votes, false, &p);
+            let one = instances(
+                0,
+                &c,
+                &seen_layers(w, h, pr.clone(), e),
+                &votes,
+                false,
+                1e12,
+                &p,
+            );
             assert_eq!(one.len(), 1, "{one:?}");
             let r = one[0].rect;
             assert!(r[1] < 0.5 && r[3] > 29.5, "{r:?}");
@@ -2170,7 +2199,7 @@ mod tests {
         unobserve(&mut hidden, w, 20..24);
         let votes = measured_out("unknown", &[(3.5, 10.0), (3.5, 34.0)]);
         let votes: Vec<&RegionVote> = votes.iter().collect();
-        let one = instances(0, &c, &hidden, &votes, false, &p);
+        let one = instances(0, &c, &hidden, &votes, false, 1e12, &p);
         assert_eq!(one.len(), 1, "{one:?}");
         assert!(
             one[0].rect[1] < 0.5 && one[0].rect[3] > 43.5,
@@ -2181,9 +2210,12 @@ mod tests {
             bridge_texels: 3,
             ..p.clone()
         };
-        assert_eq!(instances(0, &c, &hidden, &votes, false, &narrow).len(), 2);
+        assert_eq!(
+            instances(0, &c, &hidden, &votes, false, 1e12, &narrow).len(),
+            2
+        );
         let flat = seen_layers(w, h, pr, e);
-        assert_eq!(instances(0, &c, &flat, &votes, false, &p).len(), 2);
+        assert_eq!(instances(0, &c, &flat, &votes, false, 1e12, &p).len(), 2);
     }
 
     #[test]
@@ -2202,12 +2234,12 @@ mod tests {
             let mut votes = measured_out("unknown", &[(3.5, 15.0)]);
             votes[0].step_m = step_m;
             let votes: Vec<&RegionVote> = votes.iter().collect();
-            instances(0, &c, &lay, &votes, false, &p).len()
+            instances(0, &c, &lay, &votes, false, 1e12, &p).len()
         };
         assert_eq!(found(0.15), 1);
         assert_eq!(found(0.02), 0);
         assert_eq!(found(f64::NAN), 0);
-        assert!(instances(0, &c, &lay, &[], false, &p).is_empty());
+        assert!(instances(0, &c, &lay, &[], false, 1e12, &p).is_empty());
     }
 
     #[test]
@@ -2227,7 +2259,7 @@ mod tests {
         let run = |lay: &DenseLayers, class: &str| {
             let votes = measured_out(class, &[(3.5, 5.0), (3.5, 32.0)]);
             let votes: Vec<&RegionVote> = votes.iter().collect();
-            let mut r: Vec<[f64; 4]> = instances(0, &c, lay, &votes, false, &p)
+            let mut r: Vec<[f64; 4]> = instances(0, &c, lay, &votes, false, 1e12, &p)
                 .iter()
                 .map(|i| i.rect)
                 .collect();
@@ -2249,6 +2281,25 @@ mod tests {
         let pipe = run(&flat_between, "drainpipe");
         assert_eq!(pipe.len(), 2, "{pipe:?}");
         assert!(pipe[0][3] < 10.5 && pipe[1][3] == 50.0, "{pipe:?}");
+        // Flat only to views too far to have resolved a pipe: it runs through. The reference
+        // view sees 28.4 pixels a square metre (f = 160 px at 30 m); resolving 0.15 m across
+        // takes 44.4, (44.4 / 28.4)^3 = 3.8 reference exposures at gamma 2.
+        let j_ref = (160.0f64 / 30.0).powi(2);
+        let far = |e: f32| {
+            let mut lay = flat_between.clone();
+            for j in 10..30 {
+                for i in 0..w {
+                    lay.exposure[(j * w + i) as usize] = e;
+                }
+            }
+            let votes = measured_out("drainpipe", &[(3.5, 5.0), (3.5, 32.0)]);
+            let votes: Vec<&RegionVote> = votes.iter().collect();
+            instances(0, &c, &lay, &votes, false, j_ref, &p)
+        };
+        let through = far(3.0);
+        assert_eq!(through.len(), 1, "{through:?}");
+        assert!(through[0].rect[1] < 0.5 && through[0].rect[3] == 50.0);
+        assert_eq!(far(4.5).len(), 2);
     }
 
     #[test]
