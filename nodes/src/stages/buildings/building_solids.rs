@@ -899,7 +899,7 @@ mod tests {
     fn a_hipped_roof_read_through_lidar_noise_keeps_one_sharp_ridge() {
         let planes = ridge_cover(&Default::default());
         let cells = ridge_cover(&BuildingSolidsParams {
-            roof_planes: true,
+            roof_planes: false,
             ..Default::default()
         });
         println!("ridge covered {planes:.2} with roof planes, {cells:.2} from the cells alone");
