@@ -280,23 +280,13 @@ pub fn lift_view(
         );
         let z = (percentile(&mut zs, 0.05), percentile(&mut zs, 0.95));
         // Main horizontal axis of the points (principal component).
-        let n = pts.len() as f64;
-        let (cx, cy) = (
-            pts.iter().map(|p| p[0]).sum::<f64>() / n,
-            pts.iter().map(|p| p[1]).sum::<f64>() / n,
-        );
-        let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
-        for p in &pts {
-            let (dx, dy) = (p[0] - cx, p[1] - cy);
-            sxx += dx * dx;
-            syy += dy * dy;
-            sxy += dx * dy;
-        }
+        let spread = Spread::of(pts.iter().map(|p| [p[0], p[1]]));
+        let (sxx, syy, sxy) = (spread.sxx, spread.syy, spread.sxy);
         let tr = sxx + syy;
         let det = sxx * syy - sxy * sxy;
         let disc = (tr * tr / 4.0 - det).max(0.0).sqrt();
         let (l1, l2) = (tr / 2.0 + disc, tr / 2.0 - disc);
-        let heading = (l1 > 4.0 * l2.max(1e-12)).then(|| 0.5 * (2.0 * sxy).atan2(sxx - syy));
+        let heading = (l1 > 4.0 * l2.max(1e-12)).then(|| spread.axis_angle());
         let (vx, vy) = (mx - o[0], my - o[1]);
         let vl = vx.hypot(vy).max(1e-9);
         let view_dir = [vx / vl, vy / vl];
@@ -716,20 +706,45 @@ fn strongest_line(points: &[[f64; 2]]) -> Option<([f64; 2], [f64; 2], Vec<usize>
         }
     }
     let inliers = best.filter(|b| b.len() >= 3)?;
-    let n = inliers.len() as f64;
-    let centre = [
-        inliers.iter().map(|&k| points[k][0]).sum::<f64>() / n,
-        inliers.iter().map(|&k| points[k][1]).sum::<f64>() / n,
-    ];
-    let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
-    for &k in &inliers {
-        let (dx, dy) = (points[k][0] - centre[0], points[k][1] - centre[1]);
-        sxx += dx * dx;
-        syy += dy * dy;
-        sxy += dx * dy;
+    let spread = Spread::of(inliers.iter().map(|&k| points[k]));
+    let a = spread.axis_angle();
+    Some(([a.cos(), a.sin()], spread.centre, inliers))
+}
+
+/// Points' centroid and second moments about it (sums of dx², dy², dx dy).
+struct Spread {
+    centre: [f64; 2],
+    sxx: f64,
+    syy: f64,
+    sxy: f64,
+}
+
+impl Spread {
+    fn of(points: impl Iterator<Item = [f64; 2]> + Clone) -> Spread {
+        let n = points.clone().count() as f64;
+        let centre = [
+            points.clone().map(|p| p[0]).sum::<f64>() / n,
+            points.clone().map(|p| p[1]).sum::<f64>() / n,
+        ];
+        let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+        for p in points {
+            let (dx, dy) = (p[0] - centre[0], p[1] - centre[1]);
+            sxx += dx * dx;
+            syy += dy * dy;
+            sxy += dx * dy;
+        }
+        Spread {
+            centre,
+            sxx,
+            syy,
+            sxy,
+        }
     }
-    let a = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-    Some(([a.cos(), a.sin()], centre, inliers))
+
+    /// Direction of the principal axis, radians.
+    fn axis_angle(&self) -> f64 {
+        0.5 * (2.0 * self.sxy).atan2(self.sxx - self.syy)
+    }
 }
 
 /// What the grammar knows of the ground: the terrain, where the twin's buildings stand and how

@@ -1653,16 +1653,8 @@ fn within_width(
     let rows = rect[1].floor() as usize..(rect[3].ceil() as usize).min(evidence.len() / w as usize);
     let (mut sum, mut weight) = (0.0, 0.0);
     for i in rect[0].floor() as usize..(rect[2].ceil() as usize).min(w as usize) {
-        let (mut e, mut n) = (0.0, 0usize);
-        for j in rows.clone() {
-            let x = evidence[j * w as usize + i] as f64;
-            if x.is_finite() {
-                e += x;
-                n += 1;
-            }
-        }
-        if n > 0 {
-            let mean = e / n as f64;
+        let mean = mean_finite(evidence, &mut rows.clone().map(|j| j * w as usize + i));
+        if mean.is_finite() {
             sum += mean * (i as f64 + 0.5);
             weight += mean;
         }
@@ -1777,17 +1769,6 @@ const EXTENT_REACH: usize = 3;
 fn extent(texels: &[usize], evidence: &[f32], w: u32, h: u32, spread: f64) -> [f64; 4] {
     let b = texel_box(texels, w);
     let (wu, hu) = (w as usize, h as usize);
-    let mean = |cells: &mut dyn Iterator<Item = usize>| {
-        let (mut s, mut n) = (0.0, 0usize);
-        for k in cells {
-            let e = evidence[k] as f64;
-            if e.is_finite() {
-                s += e;
-                n += 1;
-            }
-        }
-        if n == 0 { f64::NAN } else { s / n as f64 }
-    };
     let span = |lo: usize, hi: usize, len: usize| {
         (
             lo.saturating_sub(EXTENT_REACH),
@@ -1797,10 +1778,10 @@ fn extent(texels: &[usize], evidence: &[f32], w: u32, h: u32, spread: f64) -> [f
     let (ua, ub) = span(b[0], b[2], wu);
     let (va, vb) = span(b[1], b[3], hu);
     let cols: Vec<f64> = (ua..=ub)
-        .map(|i| mean(&mut (b[1]..=b[3]).map(|j| j * wu + i)))
+        .map(|i| mean_finite(evidence, &mut (b[1]..=b[3]).map(|j| j * wu + i)))
         .collect();
     let rows: Vec<f64> = (va..=vb)
-        .map(|j| mean(&mut (b[0]..=b[2]).map(|i| j * wu + i)))
+        .map(|j| mean_finite(evidence, &mut (b[0]..=b[2]).map(|i| j * wu + i)))
         .collect();
     let (u0, u1) = deblurred(half_peak_edges(&cols, b[0] - ua, b[2] - ua), spread);
     let (v0, v1) = deblurred(half_peak_edges(&rows, b[1] - va, b[3] - va), spread);
@@ -1810,6 +1791,19 @@ fn extent(texels: &[usize], evidence: &[f32], w: u32, h: u32, spread: f64) -> [f
         (ua as f64 + u1).min(w as f64),
         (va as f64 + v1).min(h as f64),
     ]
+}
+
+/// Mean of the finite `evidence` at `cells`, NaN where none is.
+fn mean_finite(evidence: &[f32], cells: &mut dyn Iterator<Item = usize>) -> f64 {
+    let (mut s, mut n) = (0.0, 0usize);
+    for k in cells {
+        let e = evidence[k] as f64;
+        if e.is_finite() {
+            s += e;
+            n += 1;
+        }
+    }
+    if n == 0 { f64::NAN } else { s / n as f64 }
 }
 
 /// Narrowest rectangle the extent gives, texels: a feature whose evidence is no wider than the
