@@ -54,6 +54,11 @@ pub struct Interactions {
     /// default also where two shapes meet, e.g. a wall's top against a separate roof).
     #[arg(long)]
     wedges_within_shapes: bool,
+    /// Take every wedge's faces as unbounded, as the UTD and Sionna RT 2.2 do (by default a
+    /// face's reflection term is no stronger than a face of its width can reflect: a post's
+    /// narrow facets do not shine like a wall).
+    #[arg(long)]
+    infinite_faces: bool,
     /// Diffuse reflection (effective roughness, Lambertian; last bounce only for links).
     #[arg(long)]
     diffuse: bool,
@@ -81,6 +86,7 @@ impl Interactions {
             rays: self.rays,
             min_wedge_deg: self.min_wedge_deg,
             wedges_across_objects: !self.wedges_within_shapes,
+            finite_faces: !self.infinite_faces,
             ..Default::default()
         }
     }

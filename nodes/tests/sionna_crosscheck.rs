@@ -94,6 +94,8 @@ fn compare_with(
             rays: 1_000_000,
             foliage_db_per_m: None,
             wedges_across_objects,
+            // Sionna's UTD takes faces and edges unbounded: like with like.
+            finite_faces: false,
             ..Default::default()
         };
         let links: Vec<_> = rows.iter().map(|r| (r.tx, r.rx)).collect();
@@ -286,8 +288,8 @@ fn path_gains_with_diffraction_against_sionna_rt() {
     assert!(canyon.median <= 0.15, "canyon median {}", canyon.median);
     assert!(canyon.p90 <= 3.0, "canyon 90th percentile {}", canyon.p90);
     // With Sionna's wedges (within one shape only) munich comes to the canyon's figures:
-    // measured 108 links, 3 one-sided, median 0.095 dB, 90th percentile 3.28 dB (munich alone
-    // with ours: 17 one-sided, 8.02 dB).
+    // measured 107 links, 3 one-sided, median 0.082 dB, 90th percentile 2.95 dB (munich alone
+    // with ours: 18 one-sided, 7.63 dB; 2026-11-26).
     let within = compare_with(
         "sionna_paths_diffraction.csv",
         "with diffraction, wedges within shapes",
@@ -297,7 +299,7 @@ fn path_gains_with_diffraction_against_sionna_rt() {
     );
     assert!(within.n >= 100, "{}", within.n);
     assert!(within.median <= 0.15, "median {}", within.median);
-    assert!(within.p90 <= 3.6, "90th percentile {}", within.p90);
+    assert!(within.p90 <= 3.3, "90th percentile {}", within.p90);
     assert!(within.one_side <= 4, "{} one-sided", within.one_side);
 }
 
@@ -322,7 +324,10 @@ fn path_gains_over_one_box_match_sionna_rt() {
             .or_default()
             .push((([f(1), f(2), f(3)], [f(4), f(5), f(6)]), db));
     }
-    let opt = diffraction_only(100_000);
+    let opt = TraceOptions {
+        finite_faces: false,
+        ..diffraction_only(100_000)
+    };
     let ant = Antenna::default();
     for (name, rows) in &groups {
         let rf = fixture_box(name);
@@ -420,7 +425,10 @@ fn radio_map_diffraction_over_one_box_against_sionna_rt() {
         },
         1.5,
     );
-    let opt = diffraction_only(4_000_000);
+    let opt = TraceOptions {
+        finite_faces: false,
+        ..diffraction_only(4_000_000)
+    };
     let tx = glam::DVec3::new(40.0, 30.0, 20.0);
     for (name, cells) in &groups {
         let rf = fixture_box(name);

@@ -58,6 +58,10 @@ pub struct TraceOptions {
     /// roof). Sionna RT 2.2 finds a wedge's second face only within one shape; false diffracts
     /// as it does, to compare with it. Default true.
     pub wedges_across_objects: bool,
+    /// Each wedge's faces as wide as the mesh makes them: a face's reflection term of the UTD
+    /// no stronger than the face can reflect (`diffraction::bounded_by_face`). False takes
+    /// them unbounded, as the UTD and Sionna RT 2.2 do. Default true.
+    pub finite_faces: bool,
 }
 
 impl Default for TraceOptions {
@@ -75,6 +79,7 @@ impl Default for TraceOptions {
             foliage_db_per_m: None,
             min_wedge_deg: 0.0,
             wedges_across_objects: true,
+            finite_faces: true,
         }
     }
 }
@@ -227,7 +232,12 @@ pub fn trace_links(
             .expect("every tx was listed")
     };
     let all_wedges = if opt.diffraction && opt.max_depth > 0 {
-        super::diffraction::wedges(scene, opt.min_wedge_deg, opt.wedges_across_objects)
+        super::diffraction::wedges(
+            scene,
+            opt.min_wedge_deg,
+            opt.wedges_across_objects,
+            opt.finite_faces,
+        )
     } else {
         super::diffraction::Wedges::default()
     };

@@ -52,7 +52,12 @@ pub(super) fn lit_wedges(
     seen: &[u32],
     tx: DVec3,
 ) -> Vec<Wedge> {
-    let all = wedges(scene, opt.min_wedge_deg, opt.wedges_across_objects);
+    let all = wedges(
+        scene,
+        opt.min_wedge_deg,
+        opt.wedges_across_objects,
+        opt.finite_faces,
+    );
     let mut lit: Vec<u32> = seen.iter().map(|&t| all.face[t as usize]).collect();
     lit.sort_unstable();
     lit.dedup();
@@ -244,6 +249,7 @@ mod tests {
             trin: 1,
             face0: 0,
             facen: 1,
+            reach: None,
         }
     }
 

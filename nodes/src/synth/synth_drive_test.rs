@@ -100,6 +100,7 @@ impl TruthOptions {
             foliage_db_per_m: self.foliage_db_per_m,
             min_wedge_deg: self.min_wedge_deg,
             wedges_across_objects: true,
+            finite_faces: true,
         }
     }
 }
@@ -132,7 +133,8 @@ impl Stage for SynthDriveTest {
     // 8: UTD face factors at any incidence, in rotated bases (rf::diffraction).
     // 9: diffraction chained with reflections before and after the edge (rf::diffracted).
     // 10: wedges lit by flat face, one wedge per run of edge (rf::diffraction::wedges).
-    const VERSION: u32 = 10;
+    // 11: a wedge diffracts no more than its size allows (rf::diffraction::bounded_by_size).
+    const VERSION: u32 = 11;
     const DOC: &'static str = "drive-test measurements traced through the ground truth (richer settings) plus log-normal shadowing";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),

@@ -103,6 +103,7 @@ impl MapOptions {
             foliage_db_per_m: self.foliage_db_per_m,
             min_wedge_deg: self.min_wedge_deg,
             wedges_across_objects: true,
+            finite_faces: true,
         }
     }
 }
@@ -123,7 +124,8 @@ impl Stage for RadioMap {
     // 4: first-order edge diffraction in maps (rf::radiomap_diffraction).
     // 5: UTD face factors at any incidence, in rotated bases (rf::diffraction).
     // 6: wedges lit by flat face, one wedge per run of edge (rf::diffraction::wedges).
-    const VERSION: u32 = 6;
+    // 7: a wedge diffracts no more than its size allows (rf::diffraction::bounded_by_size).
+    const VERSION: u32 = 7;
     const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),

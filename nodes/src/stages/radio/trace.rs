@@ -95,6 +95,7 @@ impl LinkOptions {
             foliage_db_per_m: self.foliage_db_per_m,
             min_wedge_deg: self.min_wedge_deg,
             wedges_across_objects: true,
+            finite_faces: true,
         }
     }
 }
@@ -111,7 +112,8 @@ impl Stage for Trace {
     // 8: UTD face factors at any incidence, in rotated bases (rf::diffraction).
     // 9: diffraction chained with reflections before and after the edge (rf::diffracted).
     // 10: wedges lit by flat face, one wedge per run of edge (rf::diffraction::wedges).
-    const VERSION: u32 = 10;
+    // 11: a wedge diffracts no more than its size allows (rf::diffraction::bounded_by_size).
+    const VERSION: u32 = 11;
     const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
