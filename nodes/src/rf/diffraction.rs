@@ -13,6 +13,7 @@ use num_complex::Complex64 as C64;
 use super::field::{self, CVec};
 use super::scene::RfScene;
 use super::utd::wedge_coefficients;
+use crate::geom::clutter::convex_hull;
 use crate::geom::union_find::UnionFind;
 
 /// An edge where two faces meet at an exterior angle n π > π (a convex corner).
@@ -234,7 +235,9 @@ pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool, finite_faces:
 
 /// Sets each wedge's faces' reach: the farthest any vertex of the flat face lies from the edge's
 /// line. A face that reaches past the edge's ends counts its whole reach, so a reach can err
-/// wide (the UTD as without the bound) but never narrow.
+/// wide (the UTD as without the bound) but never narrow. The farthest point of a flat face
+/// from a line in its plane is a corner of its convex hull, so only those are visited (a
+/// carved wall is thousands of vertices and dozens of wedges, its hull a handful).
 fn face_reach(list: &mut [Wedge], scene: &RfScene, face: &[u32]) {
     let mut slot: HashMap<u32, usize> = HashMap::new();
     for w in list.iter() {
@@ -243,14 +246,19 @@ fn face_reach(list: &mut [Wedge], scene: &RfScene, face: &[u32]) {
             slot.entry(f).or_insert(next);
         }
     }
-    let mut verts: Vec<Vec<DVec3>> = vec![Vec::new(); slot.len()];
+    let mut verts: Vec<(DVec3, Vec<DVec3>)> = vec![(DVec3::ZERO, Vec::new()); slot.len()];
     for (t, f) in face.iter().enumerate() {
         if let Some(&k) = slot.get(f) {
-            verts[k].extend_from_slice(&scene.tris[t]);
+            verts[k].0 = scene.normals[t];
+            verts[k].1.extend_from_slice(&scene.tris[t]);
         }
     }
+    let hulls: Vec<Vec<DVec3>> = verts
+        .into_iter()
+        .map(|(n, v)| hull_in_plane(n, &v))
+        .collect();
     let reach = |w: &Wedge, f: u32| {
-        verts[slot[&f]]
+        hulls[slot[&f]]
             .iter()
             .map(|&v| {
                 let d = v - w.a;
@@ -261,6 +269,30 @@ fn face_reach(list: &mut [Wedge], scene: &RfScene, face: &[u32]) {
     for w in list.iter_mut() {
         w.reach = Some((reach(w, w.face0), reach(w, w.facen)));
     }
+}
+
+/// The corners of the convex hull of points `p` lying in one plane of normal `n`.
+fn hull_in_plane(n: DVec3, p: &[DVec3]) -> Vec<DVec3> {
+    let Some(&o) = p.first() else {
+        return Vec::new();
+    };
+    let u = n.any_orthonormal_vector();
+    let v = n.cross(u);
+    let key = |c: [f64; 2]| c.map(f64::to_bits);
+    let mut back = HashMap::new();
+    let flat = p
+        .iter()
+        .map(|&q| {
+            let c = [(q - o).dot(u), (q - o).dot(v)];
+            back.insert(key(c), q);
+            c
+        })
+        .collect();
+    // The hull's corners are copies of input coordinates: each maps back to its vertex.
+    convex_hull(flat)
+        .into_iter()
+        .map(|c| back[&key(c)])
+        .collect()
 }
 
 /// The pieces of one edge between the same two faces and materials, end to end, as one wedge
