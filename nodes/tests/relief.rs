@@ -597,9 +597,11 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
 
 /// The demo city (400 m x 300 m, 72 buildings) with every street photographed (416 views, the
 /// street-level sweep's twin), registered: a sample large enough to score the thin classes (49
-/// observed drainpipes against the 8 above). Windows and doors meet the 0.8; balconies
-/// (0.75 / 0.71) and drainpipes (0.43 / 0.42) do not, and the asserts below are the levels
-/// measured on 2026-11-26, guards against regressions rather than the targets. Drainpipes were
+/// observed drainpipes against the 8 above). Windows, doors and balconies meet the 0.8
+/// (balconies 0.75 / 0.71 until their depth step was measured on their fronts: read short, they
+/// were deposited up to half a metre off); drainpipes (0.43 / 0.41) do not, and their asserts
+/// below are the levels measured on 2026-11-26, guards against regressions rather than the
+/// target. Drainpipes were
 /// 0.29 / 0.23 before a half-peak side toward a chart's end was extrapolated (a pipe 0.1 m from
 /// a corner) and their rectangles took a width within the class's range (a 0.12 m pipe reads
 /// 0.2-0.3 m wide through the kernel and the views' registration scatter): 0.37 / 0.33; then
@@ -622,7 +624,7 @@ fn relief_on_every_street_of_the_demo_city() {
     let guards = [
         ("window", 0.85, 0.88),
         ("door", 0.8, 0.85),
-        ("balcony", 0.72, 0.68),
+        ("balcony", 0.8, 0.8),
         ("drainpipe", 0.4, 0.4),
     ];
     for (c, recall, precision) in guards {
@@ -634,6 +636,15 @@ fn relief_on_every_street_of_the_demo_city() {
             sc.precision(c)
         );
     }
+    // A balcony's step read over all its pixels (slab underside, side panels) came 0.16 m short
+    // of its 1.2 m; on its front, 0.04.
+    let mut d = sc.depth_errors["balcony"].clone();
+    d.sort_by(f64::total_cmp);
+    assert!(
+        d[d.len() / 2] <= 0.08,
+        "balcony median depth error {}",
+        d[d.len() / 2]
+    );
     assert!(
         sc.median_depth_error() <= 0.05,
         "{}",

@@ -27,7 +27,9 @@ impl Stage for Relief {
     // 9: a half-peak side toward the chart's end or unobserved texels extrapolated where the
     // evidence falls toward it; drainpipes 0.05-0.15 m wide (ClassRule::width_m).
     // 10: a drainpipe runs up through flat wall no view saw sharply enough to resolve it.
-    const VERSION: u32 = 10;
+    // 11: a region's depth step measured on its faces parallel to the wall where that stands
+    // farther out (balconies were read 0.15 m short, and deposited that far off).
+    const VERSION: u32 = 11;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),
