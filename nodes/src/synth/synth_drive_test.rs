@@ -67,6 +67,9 @@ pub struct TruthOptions {
     pub foliage_db_per_m: Option<f64>,
     /// Diffract only where faces turn by at least this many degrees, in [0, 90]. Default 0.
     pub min_wedge_deg: f64,
+    /// A wedge diffracts no more than an edge of its length and faces of their width can
+    /// (`rf::diffraction::bounded_by_size`); false: the unbounded UTD, as Sionna RT. Default true.
+    pub finite_faces: bool,
 }
 
 impl Default for TruthOptions {
@@ -80,6 +83,7 @@ impl Default for TruthOptions {
             rays: 200_000,
             foliage_db_per_m: None,
             min_wedge_deg: 0.0,
+            finite_faces: true,
         }
     }
 }
@@ -100,7 +104,7 @@ impl TruthOptions {
             foliage_db_per_m: self.foliage_db_per_m,
             min_wedge_deg: self.min_wedge_deg,
             wedges_across_objects: true,
-            finite_faces: true,
+            finite_faces: self.finite_faces,
         }
     }
 }

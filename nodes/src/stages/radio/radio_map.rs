@@ -56,6 +56,9 @@ pub struct MapOptions {
     /// Diffraction only where an edge's faces turn by at least this many degrees, in [0, 90].
     /// Default 0.
     pub min_wedge_deg: f64,
+    /// A wedge diffracts no more than an edge of its length and faces of their width can
+    /// (`rf::diffraction::bounded_by_size`); false: the unbounded UTD, as Sionna RT. Default true.
+    pub finite_faces: bool,
     /// Diffuse reflection (effective roughness), at every bounce. Default false.
     pub diffuse: bool,
     /// Scattering coefficient S of every surface, in [0, 1]. Default 0.
@@ -78,6 +81,7 @@ impl Default for MapOptions {
             transmission: o.transmission,
             diffraction: o.diffraction,
             min_wedge_deg: o.min_wedge_deg,
+            finite_faces: o.finite_faces,
             diffuse: o.diffuse,
             scattering_coefficient: o.scattering_coefficient,
             scattering_pattern: o.scattering_pattern,
@@ -103,7 +107,7 @@ impl MapOptions {
             foliage_db_per_m: self.foliage_db_per_m,
             min_wedge_deg: self.min_wedge_deg,
             wedges_across_objects: true,
-            finite_faces: true,
+            finite_faces: self.finite_faces,
         }
     }
 }

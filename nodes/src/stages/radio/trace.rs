@@ -58,6 +58,9 @@ pub struct LinkOptions {
     pub foliage_db_per_m: Option<f64>,
     /// Diffract only where faces turn by at least this many degrees, in [0, 90]. Default 0.
     pub min_wedge_deg: f64,
+    /// A wedge diffracts no more than an edge of its length and faces of their width can
+    /// (`rf::diffraction::bounded_by_size`); false: the unbounded UTD, as Sionna RT. Default true.
+    pub finite_faces: bool,
 }
 
 impl Default for LinkOptions {
@@ -75,6 +78,7 @@ impl Default for LinkOptions {
             rays: o.rays,
             foliage_db_per_m: o.foliage_db_per_m,
             min_wedge_deg: o.min_wedge_deg,
+            finite_faces: o.finite_faces,
         }
     }
 }
@@ -95,7 +99,7 @@ impl LinkOptions {
             foliage_db_per_m: self.foliage_db_per_m,
             min_wedge_deg: self.min_wedge_deg,
             wedges_across_objects: true,
-            finite_faces: true,
+            finite_faces: self.finite_faces,
         }
     }
 }
