@@ -129,7 +129,8 @@ impl Stage for RadioMap {
     // 5: UTD face factors at any incidence, in rotated bases (rf::diffraction).
     // 6: wedges lit by flat face, one wedge per run of edge (rf::diffraction::wedges).
     // 7: a wedge diffracts no more than its size allows (rf::diffraction::bounded_by_size).
-    const VERSION: u32 = 7;
+    // 8: a face's reflection term capped at half a strip's peak, as the UTD's at a boundary.
+    const VERSION: u32 = 8;
     const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),

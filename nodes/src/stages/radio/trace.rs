@@ -117,7 +117,8 @@ impl Stage for Trace {
     // 9: diffraction chained with reflections before and after the edge (rf::diffracted).
     // 10: wedges lit by flat face, one wedge per run of edge (rf::diffraction::wedges).
     // 11: a wedge diffracts no more than its size allows (rf::diffraction::bounded_by_size).
-    const VERSION: u32 = 11;
+    // 12: a face's reflection term capped at half a strip's peak, as the UTD's at a boundary.
+    const VERSION: u32 = 12;
     const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
