@@ -39,10 +39,22 @@ pub struct Wedge {
     pub face0: u32,
     /// The flat face of the n-face's triangle.
     pub facen: u32,
-    /// How far the 0-face and the n-face reach from the edge, across it, metres
-    /// ([`face_reach`]): the wedge's size, which bounds what it diffracts
-    /// ([`bounded_by_size`]). `None`: faces and edge unbounded, as the UTD takes them.
-    pub reach: Option<(f64, f64)>,
+    /// The wedge's size, which bounds what it diffracts ([`bounded_by_size`]). `None`: faces
+    /// and edge unbounded, as the UTD takes them.
+    pub size: Option<WedgeSize>,
+}
+
+/// How big a wedge is ([`wedge_sizes`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WedgeSize {
+    /// How far the 0-face reaches from the edge, across it, metres.
+    pub reach0: f64,
+    /// How far the n-face reaches from the edge, metres.
+    pub reachn: f64,
+    /// Length of the edge the wedge is a piece of, metres: the pieces between the same two flat
+    /// faces end to end, whatever their materials (a corner painted glass and brick storey by
+    /// storey is one edge to the wave).
+    pub run: f64,
 }
 
 /// A scene's wedges and its flat faces.
@@ -97,7 +109,11 @@ impl Wedge {
             trin: self.tri0,
             face0: self.facen,
             facen: self.face0,
-            reach: self.reach.map(|(r0, rn)| (rn, r0)),
+            size: self.size.map(|s| WedgeSize {
+                reach0: s.reachn,
+                reachn: s.reach0,
+                ..s
+            }),
             ..*self
         }
     }
@@ -120,9 +136,9 @@ impl Wedge {
 /// then does not hang on whether a ray happened to land on the sliver of triangle beside the
 /// edge (Sionna's sampling by triangle loses most edges of a finely split wall).
 ///
-/// With `finite_faces`, each wedge carries how far its two faces reach from the edge
-/// ([`Wedge::reach`]), which with its length bounds what it diffracts; without, faces and
-/// edge are unbounded, as the UTD (and Sionna RT) takes them.
+/// With `finite_faces`, each wedge carries its size ([`Wedge::size`]: how far its two faces
+/// reach from the edge, how long the edge runs), which bounds what it diffracts; without, faces
+/// and edge are unbounded, as the UTD (and Sionna RT) takes them.
 pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool, finite_faces: bool) -> Wedges {
     let max_cos = (1.0 - 1e-6f64).min(min_deg.to_radians().cos());
     let key = |p: DVec3| [p.x, p.y, p.z].map(|c| (c * 1e6).round() as i64);
@@ -223,24 +239,24 @@ pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool, finite_faces:
             trin: t1,
             face0: face[t0 as usize],
             facen: face[t1 as usize],
-            reach: None,
+            size: None,
         });
     }
     let mut list = join_pieces(out, scene);
     if finite_faces {
-        face_reach(&mut list, scene, &face);
+        wedge_sizes(&mut list, scene, &face);
     }
     Wedges { list, face }
 }
 
-/// Sets each wedge's faces' reach: the farthest any vertex of the flat face lies from the edge's
+/// Sets each wedge's size. A face's reach is the farthest any vertex of the flat face lies from the edge's
 /// line. A face that reaches past the edge's ends counts its whole reach, so a reach errs wide
 /// (the UTD as without the bound) rather than narrow; but a face is what [`wedges`] joins
 /// across shared edges, and a wall whose triangles meet at T-junctions is several faces, each
 /// reaching less (the meshes the graph builds share their edges). The farthest point of a flat face
 /// from a line in its plane is a corner of its convex hull, so only those are visited (a
 /// carved wall is thousands of vertices and dozens of wedges, its hull a handful).
-fn face_reach(list: &mut [Wedge], scene: &RfScene, face: &[u32]) {
+fn wedge_sizes(list: &mut [Wedge], scene: &RfScene, face: &[u32]) {
     let mut slot: HashMap<u32, usize> = HashMap::new();
     for w in list.iter() {
         for f in [w.face0, w.facen] {
@@ -268,9 +284,49 @@ fn face_reach(list: &mut [Wedge], scene: &RfScene, face: &[u32]) {
             })
             .fold(0.0, f64::max)
     };
-    for w in list.iter_mut() {
-        w.reach = Some((reach(w, w.face0), reach(w, w.facen)));
+    let run = edge_runs(list);
+    for (w, run) in list.iter_mut().zip(run) {
+        w.size = Some(WedgeSize {
+            reach0: reach(w, w.face0),
+            reachn: reach(w, w.facen),
+            run,
+        });
     }
+}
+
+/// Per wedge, the length of the run of edge it belongs to: its pieces between the same two
+/// flat faces, end to end, whatever their materials.
+fn edge_runs(list: &[Wedge]) -> Vec<f64> {
+    let start = |w: &Wedge| w.a.dot(w.e);
+    let mut order: Vec<usize> = (0..list.len()).collect();
+    order.sort_by(|&i, &j| {
+        let (p, q) = (&list[i], &list[j]);
+        (p.face0, p.facen)
+            .cmp(&(q.face0, q.facen))
+            .then(start(p).total_cmp(&start(q)))
+    });
+    let mut run = vec![0.0; list.len()];
+    let mut k = 0;
+    while k < order.len() {
+        // Pieces [k, end) touch end to end.
+        let first = &list[order[k]];
+        let mut end = k + 1;
+        let mut reach_to = first.a + first.e * first.length;
+        while end < order.len() {
+            let w = &list[order[end]];
+            if (w.face0, w.facen) != (first.face0, first.facen) || w.a.distance(reach_to) >= 1e-6 {
+                break;
+            }
+            reach_to = w.a + w.e * w.length;
+            end += 1;
+        }
+        let total = (reach_to - first.a).dot(first.e);
+        for &i in &order[k..end] {
+            run[i] = total;
+        }
+        k = end;
+    }
+    run
 }
 
 /// The corners of the convex hull of points `p` lying in one plane of normal `n`.
@@ -381,7 +437,8 @@ fn face_reflection(
 ///
 /// - The field comes from the first Fresnel zone along the edge, √(λ L_e) long with
 ///   1/L_e = sin² β0 (1/s' + 1/s) (the path's curvature along the edge at the stationary
-///   point). An edge of length ℓ spans at most ℓ of it, and the integral of a unit phasor over ℓ
+///   point). An edge of length ℓ (the whole run the wedge is a piece of, [`WedgeSize::run`])
+///   spans at most ℓ of it, and the integral of a unit phasor over ℓ
 ///   is at most ℓ: every term is scaled by min(1, ℓ / √(λ L_e)).
 /// - On a face's reflection shadow boundary its term (D3 for the n-face, D4 for the 0-face) is
 ///   half the field the face would reflect if it were unbounded. A strip of width w reflects at
@@ -395,20 +452,19 @@ fn face_reflection(
 /// wall.
 fn bounded_by_size(
     d: &mut [C64; 4],
-    (reach0, reachn): (f64, f64),
-    length: f64,
+    size: WedgeSize,
     (k, sin_b): (f64, f64),
     (si, so): (f64, f64),
 ) {
     let fresnel_zone = (2.0 * PI / k / (sin_b * sin_b * (1.0 / si + 1.0 / so))).sqrt();
-    let along = (length / fresnel_zone).min(1.0);
+    let along = (size.run / fresnel_zone).min(1.0);
     let cap = |d: C64, reach: f64| {
         let most = 0.5 * reach * (k / (2.0 * PI)).sqrt() / sin_b;
         let norm = d.norm();
         if norm > most { d * (most / norm) } else { d }
     };
-    d[2] = cap(d[2], reachn);
-    d[3] = cap(d[3], reach0);
+    d[2] = cap(d[2], size.reachn);
+    d[3] = cap(d[3], size.reach0);
     for t in d.iter_mut() {
         *t *= along;
     }
@@ -444,8 +500,8 @@ pub fn diffracted_field(
     let k = 2.0 * PI / scene.wavelength;
     let l = si * so * sin_b * sin_b / (si + so);
     let mut d = wedge_coefficients(w.n, phi, phi_i, beta0, k, l);
-    if let Some(reach) = w.reach {
-        bounded_by_size(&mut d, reach, w.length, (k, sin_b), (si, so));
+    if let Some(size) = w.size {
+        bounded_by_size(&mut d, size, (k, sin_b), (si, so));
     }
     // Edge-fixed bases.
     let phi_hat_i = ki.cross(w.e).normalize();
@@ -516,6 +572,32 @@ mod tests {
         let u = diffraction_point(w, tx, rx).expect("a diffraction point on the edge");
         let e = diffracted_field(rf, w, w.a + w.e * u, tx, rx, &field::real(DVec3::Z)).unwrap();
         e.iter().map(|c| c.norm_sqr()).sum::<f64>().sqrt()
+    }
+
+    /// Pieces of one edge painted in different materials make one run; a stretch of the same
+    /// two faces elsewhere (past a notch) is a run of its own.
+    #[test]
+    fn a_corner_painted_storey_by_storey_is_one_edge() {
+        let piece = |from: f64, to: f64, tri0: u32| Wedge {
+            a: DVec3::new(0.0, 0.0, from),
+            e: DVec3::Z,
+            length: to - from,
+            n0: DVec3::NEG_Y,
+            nn: DVec3::NEG_X,
+            n: 1.5,
+            tri0,
+            trin: 1,
+            face0: 0,
+            facen: 1,
+            size: None,
+        };
+        let list = [
+            piece(3.0, 6.0, 7),
+            piece(0.0, 3.0, 5),
+            piece(8.0, 9.5, 5),
+            piece(6.0, 6.4, 9),
+        ];
+        assert_eq!(edge_runs(&list), vec![6.4, 6.4, 1.5, 6.4]);
     }
 
     /// A building's corner is metres wide and long: its size bounds nothing, and the field is

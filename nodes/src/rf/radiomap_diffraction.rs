@@ -249,7 +249,7 @@ mod tests {
             trin: 1,
             face0: 0,
             facen: 1,
-            reach: None,
+            size: None,
         }
     }
 

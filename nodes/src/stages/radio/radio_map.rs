@@ -130,7 +130,8 @@ impl Stage for RadioMap {
     // 6: wedges lit by flat face, one wedge per run of edge (rf::diffraction::wedges).
     // 7: a wedge diffracts no more than its size allows (rf::diffraction::bounded_by_size).
     // 8: a face's reflection term capped at half a strip's peak, as the UTD's at a boundary.
-    const VERSION: u32 = 8;
+    // 9: an edge's length for that bound is its run across material changes.
+    const VERSION: u32 = 9;
     const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),

@@ -118,7 +118,8 @@ impl Stage for Trace {
     // 10: wedges lit by flat face, one wedge per run of edge (rf::diffraction::wedges).
     // 11: a wedge diffracts no more than its size allows (rf::diffraction::bounded_by_size).
     // 12: a face's reflection term capped at half a strip's peak, as the UTD's at a boundary.
-    const VERSION: u32 = 12;
+    // 13: an edge's length for that bound is its run across material changes.
+    const VERSION: u32 = 13;
     const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
