@@ -58,9 +58,9 @@ pub struct TraceOptions {
     /// roof). Sionna RT 2.2 finds a wedge's second face only within one shape; false diffracts
     /// as it does, to compare with it. Default true.
     pub wedges_across_objects: bool,
-    /// Each wedge's faces as wide as the mesh makes them: a face's reflection term of the UTD
-    /// no stronger than the face can reflect (`diffraction::bounded_by_face`). False takes
-    /// them unbounded, as the UTD and Sionna RT 2.2 do. Default true.
+    /// Each wedge as big as the mesh makes it: no UTD term stronger than an edge of its run and
+    /// faces of their reach can give (`diffraction::bounded_by_size`). False takes edge and
+    /// faces unbounded, as the UTD and Sionna RT 2.2 do. Default true.
     pub finite_faces: bool,
 }
 
