@@ -968,20 +968,22 @@ fn view_relief(
                 .filter_map(|px| point(px, cal))
                 .map(|x| dot(x, nrm))
                 .collect();
-            let offsets = |front_only: bool| -> Vec<f64> {
-                pixels
-                    .iter()
-                    .filter(|&&q| !front_only || !is_side(q))
-                    .filter_map(|&q| point(q as usize, cal))
-                    .map(|x| dot(x, nrm))
-                    .collect()
+            // Each pixel's offset from the wall, and whether it lies on a face parallel to it.
+            let at: Vec<(f64, bool)> = pixels
+                .iter()
+                .filter_map(|&q| point(q as usize, cal).map(|x| (dot(x, nrm), !is_side(q))))
+                .collect();
+            let across = pixels.len() as f64 / (x1 - x0 + 1).max(y1 - y0 + 1) as f64;
+            let mut front_s: Vec<f64> = if across >= FACE_MIN_PX {
+                at.iter().filter(|a| a.1).map(|a| a.0).collect()
+            } else {
+                Vec::new()
             };
-            let (mut front_s, mut reg_s) = (offsets(true), offsets(false));
+            let mut reg_s: Vec<f64> = at.iter().map(|a| a.0).collect();
             if ring_s.len() >= 5 && reg_s.len() >= 5 {
                 let (off, se0) = median_se(&mut ring_s);
                 let (mut m, mut se1) = median_se(&mut reg_s);
-                let across = pixels.len() as f64 / (x1 - x0 + 1).max(y1 - y0 + 1) as f64;
-                if front_s.len() >= 5 && across >= FACE_MIN_PX {
+                if front_s.len() >= 5 {
                     let (mf, sef) = median_se(&mut front_s);
                     if (mf - off).abs() > (m - off).abs() {
                         (m, se1) = (mf, sef);
