@@ -10,6 +10,7 @@ use rayon::prelude::*;
 use crate::artifact::{Metrics, ObjectClass, Raster, Scene, SceneObject, View};
 use crate::geom::assets::AssetKind;
 use crate::geom::from_above::{down, top_z};
+use crate::geom::polygon::convex_hull;
 use crate::geom::raycast::SceneRays;
 use crate::geom::theil_sen::{LineFit, median, theil_sen};
 
@@ -894,37 +895,6 @@ pub(crate) fn distance_transform(mask: &[bool], w: usize, h: usize, cell: f64) -
         }
     }
     d
-}
-
-/// Convex hull (monotone chain), counter-clockwise.
-pub fn convex_hull(mut p: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
-    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
-    p.dedup();
-    if p.len() < 3 {
-        return p;
-    }
-    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| {
-        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
-    };
-    let mut hull: Vec<[f64; 2]> = Vec::new();
-    for pass in 0..2 {
-        let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
-            Box::new(p.iter())
-        } else {
-            Box::new(p.iter().rev())
-        };
-        for &q in iter {
-            while hull.len() >= start + 2
-                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
-            {
-                hull.pop();
-            }
-            hull.push(q);
-        }
-        hull.pop();
-    }
-    hull
 }
 
 /// A clutter object that survived the grammar.

@@ -1,5 +1,5 @@
-//! Polygon operations: point in ring, ring area, outlines traced from label rasters, and
-//! Douglas-Peucker simplification of closed rings.
+//! Polygon operations: point in ring, ring area, convex hull, outlines traced from label
+//! rasters, and Douglas-Peucker simplification of closed rings.
 
 use std::collections::BTreeMap;
 
@@ -233,4 +233,35 @@ pub fn simplify_polygon(p: Polygon, tol: f64) -> Polygon {
         exterior: simplify(p.exterior),
         holes: p.holes.into_iter().map(simplify).collect(),
     }
+}
+
+/// Convex hull (monotone chain), counter-clockwise.
+pub fn convex_hull(mut p: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| {
+        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    };
+    let mut hull: Vec<[f64; 2]> = Vec::new();
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
 }

@@ -13,7 +13,7 @@ use num_complex::Complex64 as C64;
 use super::field::{self, CVec};
 use super::scene::RfScene;
 use super::utd::wedge_coefficients;
-use crate::geom::clutter::convex_hull;
+use crate::geom::polygon::convex_hull;
 use crate::geom::union_find::UnionFind;
 
 /// An edge where two faces meet at an exterior angle n π > π (a convex corner).
