@@ -22,6 +22,7 @@ use std::path::{Path, PathBuf};
 
 use kodama_nodes::Artifact;
 use kodama_nodes::artifact::Metrics;
+use kodama_nodes::io::csv_text;
 
 use crate::cache::{Cache, Digest, write_atomic};
 use crate::exec::{RunError, RunOptions, run};
@@ -566,7 +567,7 @@ fn write_tables(
     );
     let mut csv = header
         .iter()
-        .map(|h| csv_field(h))
+        .map(|h| csv_text::field(h))
         .collect::<Vec<_>>()
         .join(",")
         + "\n";
@@ -582,7 +583,7 @@ fn write_tables(
         csv.push_str(
             &(row
                 .iter()
-                .map(|c| csv_field(c))
+                .map(|c| csv_text::field(c))
                 .collect::<Vec<_>>()
                 .join(",")
                 + "\n"),
@@ -594,14 +595,6 @@ fn write_tables(
             .map_err(|e| format!("{}: {e}", out.join(name).display()))?;
     }
     Ok(())
-}
-
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
 }
 
 #[cfg(test)]

@@ -119,7 +119,41 @@ fn check_report(dir: &Path) {
         csv.starts_with("site,metric,KODAMA twin,OSM baseline,3GPP UMi\nsynthetic,P2P RMSE (dB),"),
         "{csv}"
     );
+    check_links_csv(dir, &metrics, links as usize);
     check_report_in_browser(dir);
+}
+
+/// links.csv lists every link as it was scored: each model's error column gives back its P2P
+/// RMSE, over all links and over the LOS ones.
+fn check_links_csv(dir: &Path, metrics: &serde_json::Value, links: usize) {
+    let text = std::fs::read_to_string(dir.join("links.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), links);
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let los = col("los");
+    for m in ["KODAMA twin", "OSM baseline", "3GPP UMi"] {
+        let err = col(&format!("{m} error_db"));
+        let rmse = |keep: &dyn Fn(&[&str]) -> bool| {
+            let e: Vec<f64> = rows
+                .iter()
+                .filter(|r| keep(r))
+                .map(|r| r[err].parse::<f64>().unwrap())
+                .collect();
+            (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt()
+        };
+        for (key, got) in [
+            ("p2p_rmse_db", rmse(&|_| true)),
+            ("los/p2p_rmse_db", rmse(&|r| r[los] == "1")),
+        ] {
+            let want = metrics[m][key].as_f64().unwrap();
+            assert!(
+                (got - want).abs() < 2e-3,
+                "{m} {key}: links.csv {got}, metrics {want}"
+            );
+        }
+    }
 }
 
 /// A Chromium to drive: `$KODAMA_CHROMIUM`, else the usual names on PATH.

@@ -3,6 +3,7 @@
 //! reference systems, ECEF/ENU, and resampling into the site frame. Never imports a stage.
 
 pub mod crs;
+pub mod csv_text;
 pub mod ecef;
 pub mod export;
 pub mod exr_io;

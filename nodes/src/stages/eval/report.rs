@@ -8,9 +8,10 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{
-    ArtifactType, Height, Measurements, Metrics, Ortho, Raster, ReportFiles, Scene,
+    ArtifactType, Height, Link, Measurements, Metrics, Ortho, Raster, ReportFiles, Scene,
 };
 use crate::artifact::{link_distance, measured_loss};
+use crate::io::csv_text;
 use crate::io::export::figures::charts::{ErrorCdf, ModelSeries, PathLossDistance, Scatter};
 use crate::io::export::figures::maps::{Layer, MapFigure, Palette, robust_range, view_grid};
 use crate::io::export::figures::{Figure, render};
@@ -64,16 +65,17 @@ const ROWS: [(&str, &str); 14] = [
 /// Rows that count links, printed without decimals.
 const COUNT_ROWS: [&str; 3] = ["links_scored", "links_unpredicted", "floor_clamped"];
 
-/// Table 1 and its plots as a folder: `report.md`, `table.csv`, `metrics.json`, `plots/*.png`,
-/// and `report.html` with all of it and the scenes in 3D.
+/// Table 1 and its plots as a folder: `report.md`, `table.csv`, `links.csv` (every link as
+/// scored), `metrics.json`, `plots/*.png`, and `report.html` with all of it and the scenes in 3D.
 pub struct Report;
 
 impl Stage for Report {
     const KIND: &'static str = "Report";
     // 3: report.html with the 3D view; 4: scenes past the page's budget left out, named;
     // 5: plotters figures as SVG and PNG at print size, per-stage figures; 6: close-in lines in
-    // the path-loss chart; 7: both trend-line variants, the floor count, the definitions.
-    const VERSION: u32 = 7;
+    // the path-loss chart; 7: both trend-line variants, the floor count, the definitions;
+    // 8: links.csv, every link as scored.
+    const VERSION: u32 = 8;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -219,6 +221,10 @@ impl Stage for Report {
         files.push(("report.md".to_string(), md.into_bytes()));
         files.push(("table.csv".to_string(), csv.into_bytes()));
         files.push((
+            "links.csv".to_string(),
+            links_csv(&p.models, meas, &preds, &evals).into_bytes(),
+        ));
+        files.push((
             "metrics.json".to_string(),
             (serde_json::to_string_pretty(&json).map_err(|e| fail(e.to_string()))? + "\n")
                 .into_bytes(),
@@ -329,7 +335,7 @@ fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
         p.models.join(" | "),
         "---|".repeat(p.models.len())
     );
-    let mut csv = format!("site,metric,{}\n", p.models.join(","));
+    let mut csv = format!("site,metric,{}\n", csv_row(&p.models));
     for row in table_rows(evals) {
         let shown: Vec<String> = row
             .values
@@ -349,14 +355,86 @@ fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
             row.label,
             shown.join(" | ")
         ));
-        csv.push_str(&format!(
-            "{},{},{}\n",
-            p.site,
-            row.label,
-            row.values.join(",")
-        ));
+        let cells = [p.site.clone(), row.label].into_iter().chain(row.values);
+        csv.push_str(&csv_row(&cells.collect::<Vec<_>>()));
+        csv.push('\n');
     }
     (md, csv)
+}
+
+/// Every measured link, one row each, as the evaluations scored it: where it is, the measured
+/// path loss, and per model the prediction (at most the floor) and its error against the
+/// measurement with that model's offset taken out; empty where a model was not scored there.
+fn links_csv(
+    models: &[String],
+    meas: &Measurements,
+    preds: &[&Measurements],
+    evals: &[&Metrics],
+) -> String {
+    let mut header: Vec<String> = [
+        "tx_id",
+        "rx_id",
+        "tx_x",
+        "tx_y",
+        "rx_x",
+        "rx_y",
+        "distance_m",
+        "freq_hz",
+        "los",
+        "measured_db",
+    ]
+    .map(String::from)
+    .into();
+    for m in models {
+        header.push(format!("{m} predicted_db"));
+        header.push(format!("{m} error_db"));
+    }
+    let mut out = csv_row(&header) + "\n";
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.3}"));
+    for (k, m) in meas.links.iter().enumerate() {
+        let measured = measured_loss(m);
+        let mut row = vec![
+            m.tx.id.clone(),
+            m.rx.id.clone(),
+            format!("{:.3}", m.tx.x),
+            format!("{:.3}", m.tx.y),
+            format!("{:.3}", m.rx.x),
+            format!("{:.3}", m.rx.y),
+            format!("{:.3}", link_distance(m, None)),
+            format!("{}", m.freq_hz),
+            m.los.map_or(String::new(), |l| u8::from(l).to_string()),
+            opt(measured),
+        ];
+        for (pr, ev) in preds.iter().zip(evals) {
+            let predicted = pr.links.get(k).and_then(|l| scored_prediction(l, ev));
+            let offset = ev.get(&format!("offset_db/{}", m.tx.id)).unwrap_or(0.0);
+            let error = predicted.zip(measured).map(|(p, q)| p - (q - offset));
+            row.push(opt(predicted));
+            row.push(opt(error));
+        }
+        out += &csv_row(&row);
+        out.push('\n');
+    }
+    out
+}
+
+/// A prediction as Evaluate scores it: beyond the floor (or no path) it is the floor; without a
+/// floor, no path is no score; NaN is no score.
+fn scored_prediction(l: &Link, ev: &Metrics) -> Option<f64> {
+    l.path_loss_db
+        .filter(|v| !v.is_nan())
+        .and_then(|v| match ev.get("floor_db") {
+            Some(f) => Some(v.min(f)),
+            None => v.is_finite().then_some(v),
+        })
+}
+
+fn csv_row(cells: &[String]) -> String {
+    cells
+        .iter()
+        .map(|c| csv_text::field(c))
+        .collect::<Vec<_>>()
+        .join(",")
 }
 
 /// Each scored link as ((distance, measured with the offset taken out, predicted), frequency).
@@ -370,13 +448,7 @@ fn pairs(meas: &Measurements, pred: &Measurements, ev: &Metrics) -> Vec<((f64, f
                 (
                     link_distance(m, None),
                     measured_loss(m)? - offset,
-                    // Beyond the floor (or no path): scored as Evaluate scores it.
-                    p.path_loss_db.filter(|v| !v.is_nan()).and_then(|v| {
-                        match ev.get("floor_db") {
-                            Some(f) => Some(v.min(f)),
-                            None => v.is_finite().then_some(v),
-                        }
-                    })?,
+                    scored_prediction(p, ev)?,
                 ),
                 m.freq_hz,
             ))
