@@ -77,7 +77,7 @@ pub(super) fn strides(view: &View, p: &RegistrationParams) -> (u32, u32) {
 }
 
 /// What the view says a pixel shows, or `None` where it says nothing the twin can be held to
-/// (clutter in front, no depth where depth is given).
+/// (clutter in front, a feature standing off the wall, no depth where depth is given).
 pub(super) fn label(view: &View, px: usize, p: &RegistrationParams) -> Option<(Seen, u16, Facade)> {
     let arch = view.arch.as_ref()?;
     if view
@@ -109,6 +109,9 @@ pub(super) fn label(view: &View, px: usize, p: &RegistrationParams) -> Option<(S
         }
     };
     let class = (id != 0).then(|| arch.classes.get(&id)).flatten();
+    if class.is_some_and(|k| p.off_wall_classes.contains(k)) {
+        return None;
+    }
     let facade = match class {
         Some(k) if *k == p.wall_class => Facade::Wall,
         Some(k) if *k == p.roof_class => Facade::None,

@@ -68,6 +68,12 @@ pub struct RegistrationParams {
     pub wall_class: String,
     /// The architectural class of roofs (neither wall nor façade feature). Default "roof".
     pub roof_class: String,
+    /// Architectural classes that stand off the wall, whose pixels say nothing about the pose:
+    /// the twin being registered has no relief yet, so a drainpipe at a corner or a balcony's
+    /// side widens the view's building silhouette where the twin's ends, and matching the two
+    /// would pull the camera along the wall by the feature's depth. Default ["balcony",
+    /// "drainpipe"].
+    pub off_wall_classes: Vec<String>,
     /// Edge of the cells in which the placed views' façade labels are pooled for the second
     /// pass, metres. Default 0.25.
     pub consensus_cell_m: f64,
@@ -85,6 +91,7 @@ impl Default for RegistrationParams {
             max_range_m: 2000.0,
             wall_class: "wall".into(),
             roof_class: "roof".into(),
+            off_wall_classes: vec!["balcony".into(), "drainpipe".into()],
             consensus_cell_m: 0.25,
         }
     }
@@ -132,9 +139,21 @@ impl RegistrationParams {
         range("min_agreement", self.min_agreement, -1.0, 1.0)?;
         range("max_range_m", self.max_range_m, 1.0, 100_000.0)?;
         range("consensus_cell_m", self.consensus_cell_m, 0.01, 10.0)?;
+        if self.off_wall_classes.len() > MAX_OFF_WALL_CLASSES {
+            return Err((
+                "off_wall_classes",
+                format!(
+                    "expected at most {MAX_OFF_WALL_CLASSES} classes, got {}",
+                    self.off_wall_classes.len()
+                ),
+            ));
+        }
         Ok(())
     }
 }
+
+/// Most classes `off_wall_classes` may list (each pixel's class is looked up in it).
+const MAX_OFF_WALL_CLASSES: usize = 64;
 
 /// The outcome for one view.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -173,6 +192,13 @@ const MOVES_AROUND: [(f64, f64, f64); 10] = [
     (-1.0, 0.0, 1.0),
     (-1.0, 0.0, -1.0),
 ];
+
+/// The pattern search stops once its step is under this, metres. A drainpipe is 0.12 m wide:
+/// found at IoU 0.5 only within 4 cm along its wall, and a search that stopped at 6 cm steps
+/// (the 10 cm façade texel's scale) left the views' median position error at 5-7 cm; at 1.6 cm
+/// steps it is 2 cm (BENCHMARKS.md, "View registration"). The two levels past 6 cm, on the
+/// finest lattice, doubled the registration's time.
+const FINEST_STEP_M: f64 = 0.025;
 
 /// How many moves a level of the pattern search may make before its step is halved.
 const MOVES: usize = 3;
@@ -242,7 +268,9 @@ fn refine_view(
         Some(&near((coarse_stride / 2).max(1))),
         p,
     );
-    let by_level: [&[Sample]; 3] = [&mid, &close, &fine];
+    // Past the fine lattice's resolution: every pixel within a fine stride of an edge.
+    let finest = samples(view, 1, Some(&near(fine_stride)), p);
+    let by_level: [&[Sample]; 4] = [&mid, &close, &fine, &finest];
     let at = |smp: &[Sample], c: Candidate| {
         let pos = [
             view.pose.position[0] + c[0],
@@ -265,8 +293,8 @@ fn refine_view(
     // The best few of the coarse grid each start a pattern search on the fine lattice: the
     // `MOVES_AROUND` neighbours, moving while a neighbour is better (at most `MOVES` a level),
     // then half the step; at least three levels, more for a wide window, until the step is
-    // under 7 cm (below the 10 cm texel of the façade charts). Heading and a sideways move
-    // trade off along a narrow valley for a distant wall: one start can stop short in it.
+    // under `FINEST_STEP_M`. Heading and a sideways move trade off along a narrow valley for a
+    // distant wall: one start can stop short in it.
     // A start given (the first pass's pose) skips the grid and searches from a quarter step.
     let starts: Vec<(Candidate, u32)> = match start {
         Some(c) => vec![(c, 2)],
@@ -293,13 +321,14 @@ fn refine_view(
         if n > 1e-9 { [x / n, y / n] } else { [1.0, 0.0] }
     };
     let (right, fwd) = (plan(0), plan(2));
-    let mut best = [0.0; 3];
-    let mut best_score = at(&fine, best) - p.prior(&best);
+    // The metadata, or the first pass's pose, stands unless a search beats it.
+    let mut best = start.unwrap_or([0.0; 3]);
+    let mut best_score = at(&finest, best) - p.prior(&best);
     for (first, from_level) in starts {
         let scale = (1u32 << from_level) as f64;
         let (mut here, mut sm, mut sr) = (first, step_m / scale, step_rad / scale);
         for level in from_level..8 {
-            if level >= 3 && sm <= 0.07 {
+            if level >= 3 && sm <= FINEST_STEP_M {
                 break;
             }
             sm /= 2.0;
@@ -323,12 +352,17 @@ fn refine_view(
                 here = next;
             }
         }
-        let s = at(&fine, here) - p.prior(&here);
+        let s = at(&finest, here) - p.prior(&here);
         if s > best_score {
             (best, best_score) = (here, s);
         }
     }
-    let (before, after) = (at(&fine, [0.0; 3]), at(&fine, best));
+    // The best pose found has the best agreement less the prior; where several poses agree
+    // equally well (a sample lattice cannot tell poses apart finer than its spacing), the prior
+    // picked the one nearest the metadata: the plateau's near edge, up to half a lattice step
+    // off. Its middle is the better estimate.
+    let best = plateau_middle(best, &|c| at(&finest, c), [right, fwd], p);
+    let (before, after) = (at(&finest, [0.0; 3]), at(&finest, best));
     if !before.is_finite() {
         return (view.pose, unchanged);
     }
@@ -356,6 +390,43 @@ fn refine_view(
     }
     (turned(&view.pose, best), refinement)
 }
+
+/// The middle of the plateau of equal agreement around `best`, along each of `axes` in turn
+/// (the camera's right and forward in plan): walked in `FINEST_STEP_M` / 2 steps each way,
+/// at most `PLATEAU_STEPS`, while the agreement stays at its level at `best`.
+fn plateau_middle(
+    best: Candidate,
+    agreement: &dyn Fn(Candidate) -> f64,
+    axes: [[f64; 2]; 2],
+    p: &RegistrationParams,
+) -> Candidate {
+    let top = agreement(best);
+    if !top.is_finite() {
+        return best;
+    }
+    let step = FINEST_STEP_M / 2.0;
+    let at = |from: Candidate, axis: [f64; 2], k: f64| -> Candidate {
+        [
+            (from[0] + axis[0] * step * k).clamp(-p.search_m, p.search_m),
+            (from[1] + axis[1] * step * k).clamp(-p.search_m, p.search_m),
+            from[2],
+        ]
+    };
+    let mut here = best;
+    for axis in axes {
+        let reach = |sign: f64| {
+            (1..=PLATEAU_STEPS)
+                .take_while(|&k| agreement(at(here, axis, sign * k as f64)) >= top)
+                .count() as f64
+        };
+        let (back, ahead) = (reach(-1.0), reach(1.0));
+        here = at(here, axis, (ahead - back) / 2.0);
+    }
+    if agreement(here) >= top { here } else { best }
+}
+
+/// How far `plateau_middle` walks each way along an axis, in its steps.
+const PLATEAU_STEPS: usize = 8;
 
 /// `pose` moved by (dx, dy) and turned by yaw about the vertical through the camera.
 fn turned(pose: &Pose, c: Candidate) -> Pose {

@@ -1,6 +1,6 @@
 //! The registration on small scenes with known answers.
 
-use super::labels::{Rendered, Seen, agreement};
+use super::labels::{Facade, Rendered, Seen, agreement, label};
 use super::*;
 use crate::artifact::ObjectClass;
 use crate::artifact::{Instances, Intrinsics, PodVec, SceneObject};
@@ -50,7 +50,8 @@ fn scene(buildings: &[([f64; 2], [f64; 3])]) -> Scene {
 }
 
 /// What a segmentation and a depth model would give from `pose`: one wall instance per
-/// building, roofs, sky at infinite depth; reported at `reported`.
+/// building, roofs, sky at infinite depth; reported at `reported`. Objects named `balcony-*`
+/// or `drainpipe-*` are labelled by that class.
 fn view(scene: &Scene, pose: Pose, reported: Pose) -> View {
     let (w, h) = (320u32, 240u32);
     let f = 160.0;
@@ -92,7 +93,18 @@ fn view(scene: &Scene, pose: Pose, reported: Pose) -> View {
                 let roof = hit.normal[2] > 0.7;
                 let id = (2 * hit.object + roof as usize) as u16;
                 ids[px] = id;
-                classes.insert(id, if roof { "roof" } else { "wall" }.to_string());
+                let name = &scene.objects[hit.object].id;
+                let class = if let Some(c) = ["balcony", "drainpipe"]
+                    .into_iter()
+                    .find(|c| name.starts_with(c))
+                {
+                    c
+                } else if roof {
+                    "roof"
+                } else {
+                    "wall"
+                };
+                classes.insert(id, class.to_string());
             }
         }
     }
@@ -146,16 +158,72 @@ fn a_view_of_two_houses_is_moved_back_to_where_it_was() {
             + (pose.position[1] - truth.position[1]).powi(2))
         .sqrt();
         let yaw_err = (heading(&pose) - heading(&truth)).to_degrees();
+        println!("two houses: moved ({dx}, {dy}, {dyaw}): {err:.3} m, {yaw_err:.2} deg, {r:?}");
+        // 0.05-0.07 m and up to 0.25 deg while the search stopped at 6 cm steps.
         assert!(
-            err <= 0.15,
+            err <= 0.05,
             "moved ({dx}, {dy}): left {err:.3} m off, {r:?}"
         );
         assert!(
-            yaw_err.abs() <= 0.4,
+            yaw_err.abs() <= 0.15,
             "turned {dyaw}: left {yaw_err:.2} deg off"
         );
         assert!(r.after > r.before);
     }
+}
+
+/// Pixels of a balcony or a drainpipe, which stand off the wall where the twin has none, say
+/// nothing about the pose: neither silhouette nor façade consensus (from one view to the next
+/// a balcony lands on a different patch of the wall behind it). A window's pixels do.
+#[test]
+fn features_off_the_wall_say_nothing_about_the_pose() {
+    let s = scene(&[
+        ([-6.0, 12.0], [8.0, 6.0, 7.0]),
+        ([6.0, 12.0], [9.0, 6.0, 9.0]),
+    ]);
+    let mut with = s.clone();
+    with.objects.push(object(
+        "balcony-0",
+        ObjectClass::Building,
+        cuboid([9.5, 8.4], [2.0, 1.2, 1.1], 0.0, 3.0, Material::Concrete),
+    ));
+    let pose = look([0.0, 0.0, 2.0], 90f64.to_radians());
+    let mut v = view(&with, pose, pose);
+    let arch = v.arch.as_mut().unwrap();
+    let balcony = (0..arch.ids.len())
+        .find(|&px| {
+            arch.classes
+                .get(&arch.ids[px])
+                .is_some_and(|c| c == "balcony")
+        })
+        .expect("the balcony is in view");
+    let wall = (0..arch.ids.len())
+        .find(|&px| arch.classes.get(&arch.ids[px]).is_some_and(|c| c == "wall"))
+        .unwrap();
+    // The same wall pixel relabelled a window: a feature on the wall.
+    let window_id = 1000;
+    arch.classes.insert(window_id, "window".into());
+    let wall_id = arch.ids[wall];
+    arch.ids[wall] = window_id;
+    let p = RegistrationParams::default();
+    assert!(label(&v, balcony, &p).is_none());
+    assert_eq!(
+        label(&v, wall, &p),
+        Some((Seen::Building, 0, Facade::Feature))
+    );
+    let counted = RegistrationParams {
+        off_wall_classes: Vec::new(),
+        ..Default::default()
+    };
+    assert_eq!(
+        label(&v, balcony, &counted).map(|l| (l.0, l.2)),
+        Some((Seen::Building, Facade::Feature))
+    );
+    v.arch.as_mut().unwrap().ids[wall] = wall_id;
+    assert_eq!(
+        label(&v, wall, &p),
+        Some((Seen::Building, wall_id, Facade::Wall))
+    );
 }
 
 /// One long wall filling the frame from edge to edge: nothing says where along it the
@@ -247,6 +315,10 @@ fn a_view_without_labels_is_left_alone_and_bad_knobs_are_refused() {
         },
         RegistrationParams {
             consensus_cell_m: 0.0,
+            ..Default::default()
+        },
+        RegistrationParams {
+            off_wall_classes: vec!["balcony".into(); 65],
             ..Default::default()
         },
     ] {

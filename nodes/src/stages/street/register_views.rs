@@ -12,7 +12,9 @@ pub struct RegisterViews;
 
 impl Stage for RegisterViews {
     const KIND: &'static str = "RegisterViews";
-    const VERSION: u32 = 1;
+    // 2: drainpipes and balconies say nothing about the pose; the pattern search goes on to
+    // steps under 2.5 cm.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "street views with position and heading refined against the twin's building silhouettes (bounded search; a view is left alone when nothing beats its metadata)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
