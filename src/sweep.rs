@@ -565,12 +565,7 @@ fn write_tables(
         header.join(" | "),
         "---|".repeat(header.len())
     );
-    let mut csv = header
-        .iter()
-        .map(|h| csv_text::field(h))
-        .collect::<Vec<_>>()
-        .join(",")
-        + "\n";
+    let mut csv = csv_text::row(&header) + "\n";
     for r in results {
         let row: Vec<String> = r
             .variant
@@ -580,14 +575,7 @@ fn write_tables(
             .chain(r.metrics.iter().map(|&v| fmt(v)))
             .collect();
         md.push_str(&format!("| {} |\n", row.join(" | ")));
-        csv.push_str(
-            &(row
-                .iter()
-                .map(|c| csv_text::field(c))
-                .collect::<Vec<_>>()
-                .join(",")
-                + "\n"),
-        );
+        csv.push_str(&(csv_text::row(&row) + "\n"));
     }
     let tmp = cache.root().join("tmp");
     for (name, text) in [("table.md", md), ("table.csv", csv)] {

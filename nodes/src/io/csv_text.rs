@@ -10,9 +10,18 @@ pub fn field(s: &str) -> String {
     }
 }
 
+/// `cells` as one CSV line (without its line break), each quoted where it has to be.
+pub fn row<S: AsRef<str>>(cells: &[S]) -> String {
+    cells
+        .iter()
+        .map(|c| field(c.as_ref()))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
 #[cfg(test)]
 mod tests {
-    use super::field;
+    use super::{field, row};
 
     #[test]
     fn only_fields_that_need_it_are_quoted() {
@@ -20,5 +29,6 @@ mod tests {
         assert_eq!(field("a,b"), "\"a,b\"");
         assert_eq!(field("say \"hi\""), "\"say \"\"hi\"\"\"");
         assert_eq!(field("two\nlines"), "\"two\nlines\"");
+        assert_eq!(row(&["a", "b,c", ""]), "a,\"b,c\",");
     }
 }

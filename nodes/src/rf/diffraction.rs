@@ -249,13 +249,13 @@ pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool, finite_faces:
     Wedges { list, face }
 }
 
-/// Sets each wedge's size. A face's reach is the farthest any vertex of the flat face lies from the edge's
-/// line. A face that reaches past the edge's ends counts its whole reach, so a reach errs wide
-/// (the UTD as without the bound) rather than narrow; but a face is what [`wedges`] joins
-/// across shared edges, and a wall whose triangles meet at T-junctions is several faces, each
-/// reaching less (the meshes the graph builds share their edges). The farthest point of a flat face
-/// from a line in its plane is a corner of its convex hull, so only those are visited (a
-/// carved wall is thousands of vertices and dozens of wedges, its hull a handful).
+/// Sets each wedge's size. A face's reach is the farthest any vertex of the flat face lies from
+/// the edge's line. A face that reaches past the edge's ends counts its whole reach, so a reach
+/// errs wide (the UTD as without the bound) rather than narrow; but a face is what [`wedges`]
+/// joins across shared edges, and a wall whose triangles meet at T-junctions is several faces,
+/// each reaching less (the meshes the graph builds share their edges). The farthest point of a
+/// flat face from a line in its plane is a corner of its convex hull, so only those are visited
+/// (a carved wall is thousands of vertices and dozens of wedges, its hull a handful).
 fn wedge_sizes(list: &mut [Wedge], scene: &RfScene, face: &[u32]) {
     let mut slot: HashMap<u32, usize> = HashMap::new();
     for w in list.iter() {

@@ -303,10 +303,7 @@ fn link_points(meas: &Measurements, preds: &[&Measurements], evals: &[&Metrics])
         .iter()
         .enumerate()
         .map(|(k, m)| {
-            let offset = evals
-                .first()
-                .and_then(|e| e.get(&format!("offset_db/{}", m.tx.id)))
-                .unwrap_or(0.0);
+            let offset = evals.first().map_or(0.0, |e| tx_offset(e, &m.tx.id));
             let z = match m.rx.z {
                 Height::Absolute(z) => z,
                 Height::AboveGround(_) => 0.0,
@@ -335,7 +332,7 @@ fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
         p.models.join(" | "),
         "---|".repeat(p.models.len())
     );
-    let mut csv = format!("site,metric,{}\n", csv_row(&p.models));
+    let mut csv = format!("site,metric,{}\n", csv_text::row(&p.models));
     for row in table_rows(evals) {
         let shown: Vec<String> = row
             .values
@@ -356,7 +353,7 @@ fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
             shown.join(" | ")
         ));
         let cells = [p.site.clone(), row.label].into_iter().chain(row.values);
-        csv.push_str(&csv_row(&cells.collect::<Vec<_>>()));
+        csv.push_str(&csv_text::row(&cells.collect::<Vec<_>>()));
         csv.push('\n');
     }
     (md, csv)
@@ -389,7 +386,7 @@ fn links_csv(
         header.push(format!("{m} predicted_db"));
         header.push(format!("{m} error_db"));
     }
-    let mut out = csv_row(&header) + "\n";
+    let mut out = csv_text::row(&header) + "\n";
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.3}"));
     for (k, m) in meas.links.iter().enumerate() {
         let measured = measured_loss(m);
@@ -407,12 +404,12 @@ fn links_csv(
         ];
         for (pr, ev) in preds.iter().zip(evals) {
             let predicted = pr.links.get(k).and_then(|l| scored_prediction(l, ev));
-            let offset = ev.get(&format!("offset_db/{}", m.tx.id)).unwrap_or(0.0);
+            let offset = tx_offset(ev, &m.tx.id);
             let error = predicted.zip(measured).map(|(p, q)| p - (q - offset));
             row.push(opt(predicted));
             row.push(opt(error));
         }
-        out += &csv_row(&row);
+        out += &csv_text::row(&row);
         out.push('\n');
     }
     out
@@ -429,12 +426,10 @@ fn scored_prediction(l: &Link, ev: &Metrics) -> Option<f64> {
         })
 }
 
-fn csv_row(cells: &[String]) -> String {
-    cells
-        .iter()
-        .map(|c| csv_text::field(c))
-        .collect::<Vec<_>>()
-        .join(",")
+/// The offset taken out of transmitter `tx`'s measurements while its EIRP is unknown (0 when
+/// Evaluate fitted none).
+fn tx_offset(ev: &Metrics, tx: &str) -> f64 {
+    ev.get(&format!("offset_db/{tx}")).unwrap_or(0.0)
 }
 
 /// Each scored link as ((distance, measured with the offset taken out, predicted), frequency).
@@ -443,7 +438,7 @@ fn pairs(meas: &Measurements, pred: &Measurements, ev: &Metrics) -> Vec<((f64, f
         .iter()
         .zip(&pred.links)
         .filter_map(|(m, p)| {
-            let offset = ev.get(&format!("offset_db/{}", m.tx.id)).unwrap_or(0.0);
+            let offset = tx_offset(ev, &m.tx.id);
             Some((
                 (
                     link_distance(m, None),
