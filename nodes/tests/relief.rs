@@ -509,12 +509,13 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
     // The targets, but for drainpipes: 0.12 m wide, 1.2 texels, seen by one to three
     // views each, and where registration leaves a view's evidence half a texel off, or the
     // segmentation missed the pipe in the one view that saw a stretch of it, IoU 0.5 is out of
-    // reach. Five of the eight observed are found here (three before pipes ran up to the eave,
+    // reach. Six of the eight observed are found here (three before pipes ran up to the eave,
     // the blur came off thin features and protrusions no view measured were dropped; four for
-    // a while after drainpipes took a width within their class's range, five again since they
-    // run up through wall seen too coarsely to show them, and still five with the registration
-    // of 2026-11-27, which on every street finds 28 of 49 against 21); eight pipes are too few
-    // to tell one rule from another, and the test on every street below scores them.
+    // a while after drainpipes took a width within their class's range, five once they ran up
+    // through wall seen too coarsely to show them, six since they run down to the ground too,
+    // through less than a storey of flat wall, and their centre is their whole evidence's);
+    // eight pipes are too few to tell one rule from another, and the test on every street
+    // below scores them.
     for c in ["window", "door", "balcony"] {
         assert!(sc.by_class[c].observed >= 5, "{c}: {:?}", sc.by_class[c]);
         assert!(sc.recall(c) >= 0.8, "{c} recall {}", sc.recall(c));
@@ -526,12 +527,12 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
         sc.by_class["drainpipe"]
     );
     assert!(
-        sc.recall("drainpipe") >= 0.6,
+        sc.recall("drainpipe") >= 0.7,
         "drainpipe recall {}",
         sc.recall("drainpipe")
     );
     assert!(
-        sc.precision("drainpipe") >= 0.5,
+        sc.precision("drainpipe") >= 0.65,
         "drainpipe precision {}",
         sc.precision("drainpipe")
     );
@@ -600,16 +601,19 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
 /// street-level sweep's twin), registered: a sample large enough to score the thin classes (49
 /// observed drainpipes against the 8 above). Windows, doors and balconies meet the 0.8
 /// (balconies 0.75 / 0.71 until their depth step was measured on their fronts: read short, they
-/// were deposited up to half a metre off); drainpipes (0.57 / 0.52) do not, and their asserts
-/// below are the levels measured on 2026-11-27, guards against regressions rather than the
-/// target. Drainpipes were
+/// were deposited up to half a metre off); drainpipes (0.755 / 0.792) do not quite, and their
+/// asserts below are the levels measured on 2026-11-27, guards against regressions rather than
+/// the target. Drainpipes were
 /// 0.29 / 0.23 before a half-peak side toward a chart's end was extrapolated (a pipe 0.1 m from
 /// a corner) and their rectangles took a width within the class's range (a 0.12 m pipe reads
 /// 0.2-0.3 m wide through the kernel and the views' registration scatter): 0.37 / 0.33; then
 /// 0.43 / 0.42 once a pipe ran up through wall no view saw sharply enough to show it; then
 /// 0.57 / 0.52 once the registration left balconies and drainpipes out of its evidence (the
 /// twin it matches has none) and placed the views to 2 cm (1.6 cm steps, every pixel near an
-/// edge).
+/// edge); then 0.755 / 0.792 once a pipe ran down to the terrain as well as up, through less
+/// than a storey of wall seen flat (the one close view whose segmentation missed the pipe no
+/// longer cuts it), and took its centre from its whole evidence rather than from the columns
+/// its rectangle cut (0.4 texel toward the cut side, enough to fall under IoU 0.5).
 #[test]
 fn relief_on_every_street_of_the_demo_city() {
     let s = make_site_in(
@@ -628,10 +632,11 @@ fn relief_on_every_street_of_the_demo_city() {
     let guards = [
         ("window", 0.85, 0.9),
         ("door", 0.8, 0.85),
-        // Balcony precision sits at 0.79-0.80 from one registration to the next: 17 of 83
-        // instances are real balconies found in part (half their width, IoU 0.15-0.45).
+        // Balcony precision sits at 0.79-0.80 from one registration to the next: most of the
+        // wrong instances (16 of 81) are real balconies found in part (half their width, IoU
+        // 0.15-0.45).
         ("balcony", 0.8, 0.78),
-        ("drainpipe", 0.5, 0.5),
+        ("drainpipe", 0.72, 0.75),
     ];
     for (c, recall, precision) in guards {
         assert!(sc.by_class[c].observed >= 20, "{c}: {:?}", sc.by_class[c]);

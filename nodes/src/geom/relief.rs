@@ -42,13 +42,14 @@ pub struct ClassRule {
     pub prior: i8,
     /// Depth range, metres (min, max): an instance's measured depth is clamped into it.
     pub depth_m: (f64, f64),
-    /// The feature runs up the wall to its top (a drainpipe from the ground to its gutter at
-    /// the eave): an instance reaches up through texels the views did not observe, or that hold
-    /// some of its evidence, to the first flat wall the views saw well enough to have resolved
-    /// it (with `width_m`, the exposure of a view that sees its widest across as one pixel) or
-    /// the wall's top, and pieces of it that then overlap are one instance. Default false.
-    #[serde(default)]
-    pub runs_up: bool,
+    /// The feature runs the wall's height (a downpipe, from its gutter at the eave to the
+    /// ground): an instance reaches up to the wall's top and down to the terrain through texels
+    /// the views did not observe or that hold some of its evidence, and through flat wall the
+    /// views saw well enough to have resolved it (with `width_m`, the exposure of a view that
+    /// sees its widest across as one pixel) for less than `run_stop_m`; pieces of it that then
+    /// overlap are one instance. Default false.
+    #[serde(default, alias = "runs_up")]
+    pub runs_full_height: bool,
     /// Width range across the wall, metres (min, max), for a class whose width the evidence
     /// cannot tell: a feature not much wider than a texel reads as wide as the fusion's kernel
     /// plus the views' registration scatter (a 0.12 m drainpipe reads 0.2-0.3 m), so its
@@ -427,15 +428,20 @@ pub struct ReliefParams {
     /// Widest stretch of unobserved texels (or texels with some evidence) across which two
     /// pieces of one feature join, texels. Default 5: a balcony slab's shadow on a drainpipe.
     pub bridge_texels: u32,
+    /// The stretch of flat wall, seen well enough to have resolved it, that stops a feature
+    /// running the wall's height (`ClassRule::runs_full_height`), metres. Default 3, a storey:
+    /// a pipe the one close view's segmentation missed, or far views read flat, over part of
+    /// its run goes on; one that ends stops.
+    pub run_stop_m: f64,
 }
 
 impl Default for ReliefParams {
     fn default() -> Self {
-        let rule = |name: &str, prior, depth_m, runs_up, width_m| ClassRule {
+        let rule = |name: &str, prior, depth_m, runs_full_height, width_m| ClassRule {
             name: name.into(),
             prior,
             depth_m,
-            runs_up,
+            runs_full_height,
             width_m,
         };
         ReliefParams {
@@ -483,6 +489,7 @@ impl Default for ReliefParams {
             close_texels: 1,
             min_texels: 6,
             bridge_texels: 5,
+            run_stop_m: 3.0,
         }
     }
 }
@@ -556,6 +563,7 @@ impl ReliefParams {
         if self.bridge_texels > 1000 {
             return Err(("bridge_texels", "expected 0 to 1000 texels".into()));
         }
+        range("run_stop_m", self.run_stop_m, 0.0, 1000.0)?;
         Ok(())
     }
 
@@ -840,7 +848,8 @@ fn view_relief(
         }))
     };
     let r = p.ring_px as i64;
-    for pixels in members.values() {
+    let mut kept = vec![false; members.len()];
+    for (ri, pixels) in members.values().enumerate() {
         let first = pixels[0] as usize;
         let class = match arch.ids[first] {
             0 => "unknown".to_owned(),
@@ -1064,6 +1073,7 @@ fn view_relief(
         }
         let t = hit.t as f64 - disp / (-dot(nrm, dir)).max(1e-3);
         let at: [f64; 3] = std::array::from_fn(|k| view.pose.position[k] + dir[k] * t);
+        kept[ri] = true;
         out.regions.push(RegionVote {
             view: vi as u32,
             chart: ci,
@@ -1073,6 +1083,17 @@ fn view_relief(
             step_m: step,
             pixels: pixels.len() as u32,
         });
+    }
+    // A labelled region the view could not judge (no wall around it, or its centre ray on no
+    // wall) says nothing about the relief there: its pixels neither vote nor count as exposure,
+    // which as exposure alone they would, for flat wall. Unlabelled pixels stay exposure: most
+    // are wall the segmentation missed.
+    for (ri, pixels) in members.values().enumerate() {
+        if !kept[ri] && arch.ids[pixels[0] as usize] != 0 {
+            for &q in pixels {
+                out.codes[q as usize] = MASKED;
+            }
+        }
     }
     out
 }
@@ -1328,7 +1349,8 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
                 .get(&(ci as u32))
                 .map(Vec::as_slice)
                 .unwrap_or(&[]);
-            let inst = instances(ci as u32, c, &lay, regions, with_mesh, j_ref, p);
+            let ground = |u: f64| ground_row(c, rays, lookup, u);
+            let inst = instances(ci as u32, c, &lay, regions, with_mesh, j_ref, &ground, p);
             (lay.pack(c), inst, observed)
         },
     );
@@ -1415,6 +1437,7 @@ impl DenseLayers {
 /// Threshold, opening, closing and connected components of one chart's posteriors (pieces
 /// joined across unobserved stretches), each component a rectangle (where its evidence falls to
 /// half its peak) with a class, a depth and its evidence.
+#[allow(clippy::too_many_arguments)]
 fn instances(
     ci: u32,
     c: &crate::artifact::Chart,
@@ -1422,6 +1445,7 @@ fn instances(
     regions: &[&RegionVote],
     with_mesh: bool,
     j_ref: f64,
+    ground: &dyn Fn(f64) -> Option<f64>,
     p: &ReliefParams,
 ) -> Vec<ReliefInstance> {
     let (w, h) = (c.width, c.height);
@@ -1523,14 +1547,17 @@ fn instances(
                 .map_or("unknown", |(c, _)| c)
                 .to_owned()
         };
-        // A piece of a class that runs up the wall (a drainpipe, from the ground to its gutter)
-        // reaches up to where observed flat wall or the surface's end stops it, and pieces that
-        // then overlap are one feature. Flat wall stops it only where the views saw it well
-        // enough to have resolved the feature: an exposure over what one view resolving the
+        // A piece of a class that runs the wall's height (a downpipe, from its gutter to the
+        // ground) reaches up and down to where a storey of observed flat wall, the surface's
+        // end or the terrain stops it, and pieces that then overlap are one feature. Flat wall
+        // counts only where the views saw it well enough to have resolved the feature: an exposure over what one view resolving the
         // class's widest (`width_m`) across gives, (1 / (w² J_ref))^(gamma + 1) in exposure
         // units (a far view sees a 0.12 m pipe under a pixel wide and reads the wall flat).
         let stop_exposure = |class: &str| -> Option<f64> {
-            let r = p.classes.iter().find(|r| r.name == class && r.runs_up)?;
+            let r = p
+                .classes
+                .iter()
+                .find(|r| r.name == class && r.runs_full_height)?;
             let resolve = r
                 .width_m
                 .map_or(0.0, |(_, hi)| (1.0 / (hi * hi * j_ref)).powf(p.gamma + 1.0));
@@ -1548,9 +1575,17 @@ fn instances(
             .iter()
             .map(|(_, rect)| stop_exposure(&class_of(&inside(*rect))))
             .collect();
+        let stop_rows = ((p.run_stop_m / c.texel_m).ceil() as usize).max(1);
         let reach = |rect: [f64; 4], stop: f64| {
-            run_up(rect, w, h, |k| {
-                c.triangle_at[k] != u32::MAX && (!(lay.exposure[k] as f64 >= stop) || grown[k])
+            let floor = ground(0.5 * (rect[0] + rect[2])).unwrap_or(0.0);
+            run_full_height(rect, w, h, floor, stop_rows, |k| {
+                if c.triangle_at[k] == u32::MAX {
+                    Row::Off
+                } else if !(lay.exposure[k] as f64 >= stop) || grown[k] {
+                    Row::Passable
+                } else {
+                    Row::Flat
+                }
             })
         };
         let reached: Vec<[f64; 4]> = pieces
@@ -1665,8 +1700,9 @@ fn instances(
 }
 
 /// `rect` narrowed or widened along `u` to a width within `range` (metres; the chart's texels
-/// are `texel_m`) about the centroid of its columns' mean `evidence` (a side the chart's end
-/// bounds leaves the rectangle's middle off the feature's), kept on the chart's `w` texels.
+/// are `texel_m`) about the centroid of the mean `evidence` of its columns and
+/// [`CENTROID_REACH`] more each side (a side the chart's end bounds leaves the rectangle's
+/// middle off the feature's), kept on the chart's `w` texels.
 fn within_width(
     rect: [f64; 4],
     range: (f64, f64),
@@ -1676,13 +1712,24 @@ fn within_width(
 ) -> [f64; 4] {
     let width = (rect[2] - rect[0]).clamp(range.0 / texel_m, range.1 / texel_m);
     let rows = rect[1].floor() as usize..(rect[3].ceil() as usize).min(evidence.len() / w as usize);
+    // The rectangle's own columns cut the blurred evidence's tails unevenly (a 1.2-texel pipe
+    // read as [0.7, 1.7] has its centroid pulled 0.4 texel toward the cut side): the centroid
+    // is taken over CENTROID_REACH more columns each side, above the window's lowest column
+    // mean (the wall's own level, which would pull it toward the window's middle).
+    let lo = (rect[0] - CENTROID_REACH).floor().max(0.0) as usize;
+    let hi = ((rect[2] + CENTROID_REACH).ceil() as usize).min(w as usize);
+    let means: Vec<(usize, f64)> = (lo..hi)
+        .map(|i| {
+            let m = mean_finite(evidence, &mut rows.clone().map(|j| j * w as usize + i));
+            (i, m)
+        })
+        .filter(|m| m.1.is_finite())
+        .collect();
+    let floor = means.iter().map(|m| m.1).fold(f64::INFINITY, f64::min);
     let (mut sum, mut weight) = (0.0, 0.0);
-    for i in rect[0].floor() as usize..(rect[2].ceil() as usize).min(w as usize) {
-        let mean = mean_finite(evidence, &mut rows.clone().map(|j| j * w as usize + i));
-        if mean.is_finite() {
-            sum += mean * (i as f64 + 0.5);
-            weight += mean;
-        }
+    for (i, mean) in means {
+        sum += (mean - floor) * (i as f64 + 0.5);
+        weight += mean - floor;
     }
     let centre = if weight > 0.0 {
         sum / weight
@@ -1693,21 +1740,89 @@ fn within_width(
     [u0, rect[1], (u0 + width).min(w as f64), rect[3]]
 }
 
-/// `rect` with its top raised through every row above it where a texel of its columns is
-/// `passable` (unobserved, or with some evidence), up to the first row of observed flat wall or
-/// off the surface, or the chart's top.
-fn run_up(rect: [f64; 4], w: u32, h: u32, passable: impl Fn(usize) -> bool) -> [f64; 4] {
+/// Columns beyond a thin feature's rectangle its evidence's centroid is taken over: three
+/// times the spread of the fusion's blur (sigma 0.5 texel and the bilinear deposit, 0.65).
+const CENTROID_REACH: f64 = 2.0;
+
+/// What a row of a running feature's columns holds: a texel it may pass (unobserved, or with
+/// some of its evidence), only observed flat wall, or only texels off the surface.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Row {
+    Passable,
+    Flat,
+    Off,
+}
+
+/// `rect` run up to the surface's top and down to row `floor` (the terrain) through its columns:
+/// through every row where one of its columns' texels `passes`, and through fewer than `stop`
+/// rows in a row of observed flat wall; a row off the surface ends the run. A side stays at the
+/// last passable row it reached.
+fn run_full_height(
+    rect: [f64; 4],
+    w: u32,
+    h: u32,
+    floor: f64,
+    stop: usize,
+    passes: impl Fn(usize) -> Row,
+) -> [f64; 4] {
     let (wu, hu) = (w as usize, h as usize);
     let i0 = (rect[0].floor().max(0.0) as usize).min(wu - 1);
     let i1 = (rect[2].ceil() as usize).clamp(i0 + 1, wu);
-    let mut top = rect[3];
-    for j in (rect[3].ceil() as usize)..hu {
-        if !(i0..i1).any(|i| passable(j * wu + i)) {
-            break;
+    let row = |j: usize| {
+        let mut row = Row::Off;
+        for i in i0..i1 {
+            match passes(j * wu + i) {
+                Row::Passable => return Row::Passable,
+                Row::Flat => row = Row::Flat,
+                Row::Off => {}
+            }
         }
-        top = (j + 1) as f64;
-    }
-    [rect[0], rect[1], rect[2], top]
+        row
+    };
+    // The last passable row reached along `rows`, or None.
+    let run = |rows: &mut dyn Iterator<Item = usize>| {
+        let (mut last, mut flat) = (None, 0);
+        for j in rows {
+            match row(j) {
+                Row::Off => break,
+                Row::Flat => {
+                    flat += 1;
+                    if flat >= stop {
+                        break;
+                    }
+                }
+                Row::Passable => {
+                    flat = 0;
+                    last = Some(j);
+                }
+            }
+        }
+        last
+    };
+    let top = run(&mut ((rect[3].ceil() as usize).min(hu)..hu)).map_or(rect[3], |j| (j + 1) as f64);
+    let first_below = (rect[1].floor().max(0.0) as usize).min(hu);
+    let bottom = run(&mut (0..first_below)
+        .rev()
+        .take_while(|&j| (j + 1) as f64 > floor))
+    .map_or(rect[1], |j| (j as f64).max(floor).min(rect[1]));
+    [rect[0], bottom, rect[2], top]
+}
+
+/// The chart row where the terrain meets a wall chart at column `u`: a ray cast straight down
+/// from the chart's top, just outside the wall, that meets the terrain first. None where it
+/// meets something else (a neighbour's roof) or nothing.
+fn ground_row(
+    c: &crate::artifact::Chart,
+    rays: &SceneRays,
+    lookup: &Lookup,
+    u: f64,
+) -> Option<f64> {
+    const OUTSIDE_M: f64 = 0.3;
+    let top = c.world_of(u, c.height as f64);
+    let from: [f64; 3] = std::array::from_fn(|k| top[k] + c.normal[k] * OUTSIDE_M);
+    let hit = rays.cast(from.map(|x| x as f32), [0.0, 0.0, -1.0], 1e-3, 1e5)?;
+    lookup.terrain.get(hit.object).copied().filter(|&t| t)?;
+    Some(c.uv_of([top[0], top[1], from[2] - hit.t as f64]).1)
 }
 
 /// Whether two rectangles are pieces of one upright feature: they overlap along `u` over half
@@ -2077,7 +2192,7 @@ mod tests {
         let at: Vec<(f64, f64)> = (0..h).map(|j| (3.5, j as f64 + 0.5)).collect();
         let votes = measured_out("unknown", &at);
         let votes: Vec<&RegionVote> = votes.iter().collect();
-        let one = instances(0, &c, &lay, &votes, false, 1e12, &p);
+        let one = instances(0, &c, &lay, &votes, false, 1e12, &|_| None, &p);
         assert_eq!(one.len(), 1, "{one:?}");
         // The extent is the core's: one column wide, never grown over the gap to the edge.
         let r = one[0].rect;
@@ -2091,7 +2206,7 @@ mod tests {
         };
         // Without the hysteresis (closing bridges one row, not two): a piece per stretch.
         assert_eq!(
-            instances(0, &c, &lay, &votes, false, 1e12, &without).len(),
+            instances(0, &c, &lay, &votes, false, 1e12, &|_| None, &without).len(),
             11
         );
     }
@@ -2184,6 +2299,7 @@ mod tests {
                 &votes,
                 false,
                 1e12,
+                &|_| None,
                 &p,
             );
             assert_eq!(one.len(), 1, "{one:?}");
@@ -2218,7 +2334,7 @@ mod tests {
         unobserve(&mut hidden, w, 20..24);
         let votes = measured_out("unknown", &[(3.5, 10.0), (3.5, 34.0)]);
         let votes: Vec<&RegionVote> = votes.iter().collect();
-        let one = instances(0, &c, &hidden, &votes, false, 1e12, &p);
+        let one = instances(0, &c, &hidden, &votes, false, 1e12, &|_| None, &p);
         assert_eq!(one.len(), 1, "{one:?}");
         assert!(
             one[0].rect[1] < 0.5 && one[0].rect[3] > 43.5,
@@ -2230,11 +2346,14 @@ mod tests {
             ..p.clone()
         };
         assert_eq!(
-            instances(0, &c, &hidden, &votes, false, 1e12, &narrow).len(),
+            instances(0, &c, &hidden, &votes, false, 1e12, &|_| None, &narrow).len(),
             2
         );
         let flat = seen_layers(w, h, pr, e);
-        assert_eq!(instances(0, &c, &flat, &votes, false, 1e12, &p).len(), 2);
+        assert_eq!(
+            instances(0, &c, &flat, &votes, false, 1e12, &|_| None, &p).len(),
+            2
+        );
     }
 
     #[test]
@@ -2253,18 +2372,18 @@ mod tests {
             let mut votes = measured_out("unknown", &[(3.5, 15.0)]);
             votes[0].step_m = step_m;
             let votes: Vec<&RegionVote> = votes.iter().collect();
-            instances(0, &c, &lay, &votes, false, 1e12, &p).len()
+            instances(0, &c, &lay, &votes, false, 1e12, &|_| None, &p).len()
         };
         assert_eq!(found(0.15), 1);
         assert_eq!(found(0.02), 0);
         assert_eq!(found(f64::NAN), 0);
-        assert!(instances(0, &c, &lay, &[], false, 1e12, &p).is_empty());
+        assert!(instances(0, &c, &lay, &[], false, 1e12, &|_| None, &p).is_empty());
     }
 
     #[test]
-    fn a_drainpipe_runs_up_through_what_the_views_missed_not_through_flat_wall() {
-        // A pipe seen in column 3 on rows 0-9 and 30-34 of a 50-row wall; the rows between and
-        // above are unobserved (`hidden`) or observed flat (`flat_between`).
+    fn a_drainpipe_runs_the_walls_height_unless_a_storey_of_flat_wall_stops_it() {
+        // A pipe seen in column 3 on rows 0-9 and 30-34 of a 50-row wall (0.1 m texels); the
+        // rows between and above are unobserved (`hidden`) or observed flat (`flat_between`).
         let (w, h) = (10u32, 50u32);
         let c = flat_chart(w, h);
         let (pr, e) = pipe_in_column_3(w, c.len(), (0..10).chain(30..35));
@@ -2275,16 +2394,17 @@ mod tests {
         let mut hidden = seen_layers(w, h, pr.clone(), e.clone());
         unobserve(&mut hidden, w, 10..30);
         unobserve(&mut hidden, w, 35..50);
-        let run = |lay: &DenseLayers, class: &str| {
+        let run_with = |lay: &DenseLayers, class: &str, p: &ReliefParams, j_ref: f64| {
             let votes = measured_out(class, &[(3.5, 5.0), (3.5, 32.0)]);
             let votes: Vec<&RegionVote> = votes.iter().collect();
-            let mut r: Vec<[f64; 4]> = instances(0, &c, lay, &votes, false, 1e12, &p)
+            let mut r: Vec<[f64; 4]> = instances(0, &c, lay, &votes, false, j_ref, &|_| None, p)
                 .iter()
                 .map(|i| i.rect)
                 .collect();
             r.sort_by(|a, b| a[1].total_cmp(&b[1]));
             r
         };
+        let run = |lay: &DenseLayers, class: &str| run_with(lay, class, &p, 1e12);
         // A drainpipe: the two pieces are one, up to the wall's top.
         let pipe = run(&hidden, "drainpipe");
         assert_eq!(pipe.len(), 1, "{pipe:?}");
@@ -2294,15 +2414,26 @@ mod tests {
         let other = run(&hidden, "unknown");
         assert_eq!(other.len(), 2, "{other:?}");
         assert!(other[0][3] < 10.5 && other[1][3] < 35.5, "{other:?}");
-        // Observed flat wall between the pieces stops the lower one; the upper still runs up.
+        // 2 m of observed flat wall between the pieces, under the default storey (3 m): one
+        // pipe. With `run_stop_m` at 1 m it stops both: the lower piece stays under it, the
+        // upper runs up only.
         let mut flat_between = seen_layers(w, h, pr, e);
         unobserve(&mut flat_between, w, 35..50);
         let pipe = run(&flat_between, "drainpipe");
+        assert_eq!(pipe.len(), 1, "{pipe:?}");
+        assert!(pipe[0][1] < 0.5 && pipe[0][3] == 50.0, "{pipe:?}");
+        let metre = ReliefParams {
+            run_stop_m: 1.0,
+            ..p.clone()
+        };
+        let pipe = run_with(&flat_between, "drainpipe", &metre, 1e12);
         assert_eq!(pipe.len(), 2, "{pipe:?}");
-        assert!(pipe[0][3] < 10.5 && pipe[1][3] == 50.0, "{pipe:?}");
-        // Flat only to views too far to have resolved a pipe: it runs through. The reference
-        // view sees 28.4 pixels a square metre (f = 160 px at 30 m); resolving 0.15 m across
-        // takes 44.4, (44.4 / 28.4)^3 = 3.8 reference exposures at gamma 2.
+        assert!(pipe[0][3] < 10.5, "{pipe:?}");
+        assert!(pipe[1][1] > 29.5 && pipe[1][3] == 50.0, "{pipe:?}");
+        // Flat only to views too far to have resolved a pipe: it runs through, even a metre of
+        // it. The reference view sees 28.4 pixels a square metre (f = 160 px at 30 m);
+        // resolving 0.15 m across takes 44.4, (44.4 / 28.4)^3 = 3.8 reference exposures at
+        // gamma 2.
         let j_ref = (160.0f64 / 30.0).powi(2);
         let far = |e: f32| {
             let mut lay = flat_between.clone();
@@ -2311,14 +2442,39 @@ mod tests {
                     lay.exposure[(j * w + i) as usize] = e;
                 }
             }
-            let votes = measured_out("drainpipe", &[(3.5, 5.0), (3.5, 32.0)]);
-            let votes: Vec<&RegionVote> = votes.iter().collect();
-            instances(0, &c, &lay, &votes, false, j_ref, &p)
+            run_with(&lay, "drainpipe", &metre, j_ref)
         };
         let through = far(3.0);
         assert_eq!(through.len(), 1, "{through:?}");
-        assert!(through[0].rect[1] < 0.5 && through[0].rect[3] == 50.0);
+        assert!(through[0][1] < 0.5 && through[0][3] == 50.0);
         assert_eq!(far(4.5).len(), 2);
+    }
+
+    #[test]
+    fn a_drainpipe_runs_down_to_the_ground_and_no_further() {
+        // Seen on rows 30-34 only; the wall below runs on underground to row 0, unobserved.
+        let (w, h) = (10u32, 50u32);
+        let c = flat_chart(w, h);
+        let (pr, e) = pipe_in_column_3(w, c.len(), 30..35);
+        let mut lay = seen_layers(w, h, pr, e);
+        unobserve(&mut lay, w, 0..30);
+        unobserve(&mut lay, w, 35..50);
+        let p = ReliefParams {
+            min_texels: 3,
+            ..Default::default()
+        };
+        let votes = measured_out("drainpipe", &[(3.5, 32.0)]);
+        let votes: Vec<&RegionVote> = votes.iter().collect();
+        let at = |ground: &dyn Fn(f64) -> Option<f64>| {
+            let r = instances(0, &c, &lay, &votes, false, 1e12, ground, &p);
+            assert_eq!(r.len(), 1, "{r:?}");
+            r[0].rect
+        };
+        let r = at(&|u| (u > 3.0 && u < 4.0).then_some(12.4));
+        assert!(r[1] == 12.4 && r[3] == 50.0, "{r:?}");
+        // No terrain found under it: down to the wall's foot.
+        let r = at(&|_| None);
+        assert!(r[1] == 0.0 && r[3] == 50.0, "{r:?}");
     }
 
     #[test]
@@ -2395,17 +2551,35 @@ mod tests {
     fn a_drainpipe_takes_its_classs_width_about_the_evidence_centroid() {
         // Evidence over columns 0..3 centred on column 1.5 (texel centres k + 0.5), two rows.
         let w = 6;
-        let row = [0.5f32, 1.0, 1.0, 0.5, 0.0, 0.0];
-        let evidence: Vec<f32> = row.iter().chain(row.iter()).copied().collect();
+        let rows = |row: [f32; 6]| -> Vec<f32> { row.iter().chain(row.iter()).copied().collect() };
+        let evidence = rows([0.5, 1.0, 1.0, 0.5, 0.0, 0.0]);
         let r = within_width([0.0, 0.0, 4.0, 2.0], (0.05, 0.15), 0.1, w, &evidence);
         assert!((r[2] - r[0] - 1.5).abs() < 1e-9, "{r:?}");
         assert!((r[0] + r[2] - 4.0).abs() < 1e-9, "{r:?}");
         assert_eq!((r[1], r[3]), (0.0, 2.0));
-        // Narrower than the class: widened about its one column's centre, and kept on the
-        // chart where that would reach past its end.
-        let r = within_width([0.0, 0.0, 0.2, 2.0], (0.05, 0.15), 0.1, w, &evidence);
-        assert_eq!(r, [0.25, 0.0, 0.75, 2.0]);
-        let r = within_width([0.0, 0.0, 0.2, 2.0], (0.15, 0.3), 0.1, w, &evidence);
+        // A rectangle that cuts the evidence on one side (columns 1-2 of a peak on column 2):
+        // the centroid is the whole peak's, not pulled toward the cut (2.27 within the cut).
+        let peak = rows([0.0, 0.3, 1.0, 0.3, 0.0, 0.0]);
+        let r = within_width([1.6, 0.0, 2.4, 2.0], (0.05, 0.15), 0.1, w, &peak);
+        assert!(
+            (r[0] - 2.1).abs() < 1e-9 && (r[2] - 2.9).abs() < 1e-9,
+            "{r:?}"
+        );
+        // The wall's own level under the peak does not pull it toward the window's middle
+        // (1.83 with it).
+        let raised = rows([0.7, 1.2, 0.7, 0.2, 0.2, 0.2]);
+        let r = within_width([0.0, 0.0, 3.0, 2.0], (0.05, 0.15), 0.1, w, &raised);
+        assert!((r[0] + r[2] - 3.0).abs() < 1e-9, "{r:?}");
+        // Narrower than the class: widened about the centroid, and kept on the chart where that
+        // would reach past its end.
+        let edge = rows([1.0, 0.3, 0.0, 0.0, 0.0, 0.0]);
+        let centre = (0.5 + 0.3 * 1.5) / 1.3; // 0.3 as f32: to 1e-6
+        let r = within_width([0.0, 0.0, 0.2, 2.0], (0.05, 0.15), 0.1, w, &edge);
+        assert!(
+            (r[0] - (centre - 0.25)).abs() < 1e-6 && (r[2] - (centre + 0.25)).abs() < 1e-6,
+            "{r:?} {centre}"
+        );
+        let r = within_width([0.0, 0.0, 0.2, 2.0], (0.15, 0.3), 0.1, w, &edge);
         assert!(r[0] == 0.0 && (r[2] - 1.5).abs() < 1e-9, "{r:?}");
     }
 
@@ -2436,7 +2610,7 @@ mod tests {
     }
 
     #[test]
-    fn plane_tolerance_and_bridge_width_are_refused_out_of_range() {
+    fn plane_tolerance_bridge_width_and_run_stop_are_refused_out_of_range() {
         for t in [f64::NAN, f64::INFINITY, -0.1, 11.0] {
             let p = ReliefParams {
                 plane_tol_m: t,
@@ -2449,6 +2623,13 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(p.validate().map_err(|e| e.0), Err("bridge_texels"));
+        for m in [f64::NAN, f64::NEG_INFINITY, -1.0, 1001.0] {
+            let p = ReliefParams {
+                run_stop_m: m,
+                ..Default::default()
+            };
+            assert_eq!(p.validate().map_err(|e| e.0), Err("run_stop_m"), "{m}");
+        }
     }
 
     #[test]

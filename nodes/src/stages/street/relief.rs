@@ -29,7 +29,10 @@ impl Stage for Relief {
     // 10: a drainpipe runs up through flat wall no view saw sharply enough to resolve it.
     // 11: a region's depth step measured on its faces parallel to the wall where that stands
     // farther out (balconies were read 0.15 m short, and deposited that far off).
-    const VERSION: u32 = 11;
+    // 12: a labelled region a view could not judge neither votes nor counts as exposure; a
+    // drainpipe runs down to the terrain as well as up, through less than a storey
+    // (run_stop_m) of flat wall; a thin feature's centre from its whole blurred evidence.
+    const VERSION: u32 = 12;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),
