@@ -1550,9 +1550,10 @@ fn instances(
         // A piece of a class that runs the wall's height (a downpipe, from its gutter to the
         // ground) reaches up and down to where a storey of observed flat wall, the surface's
         // end or the terrain stops it, and pieces that then overlap are one feature. Flat wall
-        // counts only where the views saw it well enough to have resolved the feature: an exposure over what one view resolving the
-        // class's widest (`width_m`) across gives, (1 / (w² J_ref))^(gamma + 1) in exposure
-        // units (a far view sees a 0.12 m pipe under a pixel wide and reads the wall flat).
+        // counts only where the views saw it well enough to have resolved the feature: an
+        // exposure over what one view resolving the class's widest (`width_m`) across gives,
+        // (1 / (w² J_ref))^(gamma + 1) in exposure units (a far view sees a 0.12 m pipe under a
+        // pixel wide and reads the wall flat).
         let stop_exposure = |class: &str| -> Option<f64> {
             let r = p
                 .classes
