@@ -2452,6 +2452,63 @@ mod tests {
     }
 
     #[test]
+    fn the_ground_under_a_wall_is_the_terrain_not_a_neighbours_roof() {
+        use crate::artifact::{ObjectClass, SceneObject};
+        use crate::geom::charts::{ChartSpec, building_charts};
+        use crate::geom::mesh_build::cuboid;
+        use crate::rf::materials::Material;
+        // A 6 m box standing on its base at z = 0 in a terrain slab whose top is at 0.55 m,
+        // and a 2 m shed against its south wall's west half.
+        let object = |id: &str, class, mesh| SceneObject {
+            id: id.into(),
+            class,
+            mesh,
+        };
+        let scene = Scene {
+            objects: vec![
+                object(
+                    "building-0",
+                    ObjectClass::Building,
+                    cuboid([12.0, 21.5], [4.0, 3.0, 6.0], 0.0, 0.0, Material::Concrete),
+                ),
+                object(
+                    "terrain",
+                    ObjectClass::Terrain,
+                    cuboid(
+                        [12.0, 21.5],
+                        [40.0, 40.0, 1.0],
+                        0.0,
+                        -0.45,
+                        Material::Concrete,
+                    ),
+                ),
+                object(
+                    "shed",
+                    ObjectClass::Building,
+                    cuboid([11.0, 19.0], [2.0, 2.0, 2.0], 0.0, 0.0, Material::Concrete),
+                ),
+            ],
+        };
+        let charts = building_charts(&scene, &ChartSpec::default()).unwrap();
+        let rays = SceneRays::new(&scene);
+        let lookup = Lookup::new(&scene, &charts);
+        let south = charts
+            .charts
+            .iter()
+            .find(|c| c.building == "building-0" && c.kind == ChartKind::Wall && c.normal[1] < -0.9)
+            .unwrap();
+        let row = |x: f64| {
+            let (u, _) = south.uv_of([x, 20.0, 3.0]);
+            ground_row(south, &rays, &lookup, u)
+        };
+        // 0.55 m above the wall's foot (z = 0) on 0.1 m texels.
+        let v = row(13.5).unwrap();
+        assert!((v - 5.5).abs() < 1e-3, "{v}");
+        // Over the shed's roof: no ground there.
+        assert_eq!(row(10.5), None);
+    }
+
+    #[test]
     fn a_drainpipe_runs_down_to_the_ground_and_no_further() {
         // Seen on rows 30-34 only; the wall below runs on underground to row 0, unobserved.
         let (w, h) = (10u32, 50u32);
