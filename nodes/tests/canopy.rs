@@ -167,10 +167,18 @@ fn canopy_envelopes_match_the_true_crowns() {
             })
             .collect();
         let canopy = column(&rays, x, y);
+        // A voxel column counts as inside a building only when the whole of it is: a column
+        // straddling a wall is half street, where a crown beside the wall may stand (the city's
+        // street trees reach their crowns against the walls, and a 0.5 m cell cannot tell).
+        let h = VOXEL / 2.0;
         let building = city
             .buildings
             .iter()
-            .find(|b| b.footprint.contains([x, y]))
+            .find(|b| {
+                [[-h, -h], [h, -h], [h, h], [-h, h]]
+                    .iter()
+                    .all(|d| b.footprint.contains([x + d[0], y + d[1]]))
+            })
             .map(|b| b.ground_z + b.eave_m);
         let inside = |iv: &[(f64, f64)], z: f64| iv.iter().any(|&(a, b)| z >= a && z <= b);
         let zs = crowns.iter().chain(&canopy).flat_map(|p| [p.0, p.1]);
@@ -198,11 +206,11 @@ fn canopy_envelopes_match_the_true_crowns() {
         city.trees.len()
     );
     assert_eq!(in_building, 0, "canopy inside a building");
-    // The target. Measured 0.711 with the widest level and the lower surface read from
-    // the returns and the crowns grown into the fringe beside buildings (0.704 without the
-    // growth, 0.637 with the widest level from the outline's field, 0.53 with an ellipse profile
-    // in the distance from the outline). Most of what is left: crown rims whose cells no pulse's
-    // echo reached, crowns in the LiDAR shadow of a building (no return at all), and the
-    // envelope's top and bottom.
+    // The target. Measured 0.706 (0.711 before the city kept its crossings clear) with
+    // the widest level and the lower surface read from the returns and the crowns grown into the
+    // fringe beside buildings (0.704 without the growth, 0.637 with the widest level from the
+    // outline's field, 0.53 with an ellipse profile in the distance from the outline). Most of
+    // what is left: crown rims whose cells no pulse's echo reached, crowns in the LiDAR shadow of
+    // a building (no return at all), and the envelope's top and bottom.
     assert!(iou >= 0.70, "canopy IoU {iou:.3}");
 }

@@ -240,11 +240,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// off: the synthetic city parks cars in intersections (SynthCity places them at any x along a
 /// street), so the rule drops true cars there.
 /// `recall_below_target` names classes whose recall is guarded at a measured level under 0.8.
-fn assert_targets(
-    s: &BTreeMap<String, ClassScore>,
-    max_median_m: f64,
-    recall_below_target: &[(&str, f64)],
-) {
+fn assert_targets(s: &BTreeMap<String, ClassScore>, max_median_m: f64) {
     let mut all_errors = Vec::new();
     for (class, c) in s {
         if c.expected < 3 {
@@ -252,12 +248,8 @@ fn assert_targets(
         }
         let precision = c.true_pos as f64 / c.predicted.max(1) as f64;
         let recall = c.found as f64 / c.expected as f64;
-        let min_recall = recall_below_target
-            .iter()
-            .find(|(k, _)| k == class)
-            .map_or(0.8, |&(_, r)| r);
         assert!(precision >= 0.8, "{class}: precision {precision:.3}");
-        assert!(recall >= min_recall, "{class}: recall {recall:.3}");
+        assert!(recall >= 0.8, "{class}: recall {recall:.3}");
         all_errors.extend(c.errors.iter().copied());
     }
     let med = median(all_errors);
@@ -333,7 +325,7 @@ fn clutter_recall_and_precision_on_the_demo_site() {
     // the 8 missed trees had a prediction 1.9-2.6 m off along their row). Registration took
     // car recall from 0.76 to 0.79 and the median position error over all classes from 0.59 m
     // to 0.28 m.
-    assert_targets(&scores(&city, &truth, &views, &twin, &terrain), 0.4, &[]);
+    assert_targets(&scores(&city, &truth, &views, &twin, &terrain), 0.4);
 }
 
 /// Every street photographed (416 views, as the street-level sweep's twin has them): the
@@ -341,19 +333,15 @@ fn clutter_recall_and_precision_on_the_demo_site() {
 /// street's axis and 8.5 m from the other's. Read against one axis fitted to the cameras of both
 /// streets, such posts were dropped as standing in the carriageway: recall 0.795 (62 of 78)
 /// for poles, 0.783 (18 of 23) for signs; against the nearest street's axis 0.885 (69) and
-/// 0.826 (19), with car recall 0.893 -> 0.923 and car precision 0.946 -> 0.919. Signs sit on
-/// the target's edge: since the registration of 2026-11-27 (views placed to 2 cm, not 7) sign-14
-/// is placed 1.55 m from where it stands, 5 cm past the match radius: 18 of 23, 0.783. Their
-/// recall is guarded at that level, not at the target.
+/// 0.826 (19), with car recall 0.893 -> 0.923 and car precision 0.946 -> 0.919. The rest of the
+/// posts dropped there stood in a north-south street's carriageway in the truth itself, where the
+/// city put each east-west pavement's posts right across the crossings; since the city keeps its
+/// crossings clear (SynthCity VERSION 2), signs are 17 of 17 and poles 62 of 63.
 #[test]
 fn clutter_on_every_street_with_its_crossings() {
     let (city, truth, views, twin, terrain) = demo_site(1000);
     assert!(views.views.len() > 400, "{} views", views.views.len());
-    assert_targets(
-        &scores(&city, &truth, &views, &twin, &terrain),
-        0.4,
-        &[("sign", 0.78)],
-    );
+    assert_targets(&scores(&city, &truth, &views, &twin, &terrain), 0.4);
 }
 
 /// The stage's scene: checked solids, distinct ids, the same at one and at two threads.

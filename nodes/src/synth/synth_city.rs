@@ -70,7 +70,9 @@ pub struct SynthCity;
 
 impl Stage for SynthCity {
     const KIND: &'static str = "SynthCity";
-    const VERSION: u32 = 1;
+    // 2: no street furniture in the crossings (poles and parked cars stood in the carriageway of
+    // north-south streets).
+    const VERSION: u32 = 2;
     const DOC: &'static str =
         "seeded synthetic city ground truth: terrain, buildings with roof shapes, trees, clutter";
     const INPUTS: &'static [InputSpec] = &[];
@@ -675,10 +677,33 @@ fn item(
     }
 }
 
+/// Pavements are this wide, so a street's carriageway ends this far inside each of its edges.
+const PAVEMENT_M: f64 = 2.5;
+
+/// Parked cars keep this far from a crossing street's kerb line, as traffic codes ask (e.g.
+/// StVO Sec. 12: 5 m before and after a crossing).
+const PARKING_CLEAR_OF_CROSSING_M: f64 = 5.0;
+
+/// Whether something spanning `half_len_m` either side of `x`, along an east-west street,
+/// reaches within `clear_m` of the centre line of any north-south street in `crossings`.
+fn near_crossing(x: f64, half_len_m: f64, crossings: &[f64], clear_m: f64) -> bool {
+    crossings
+        .iter()
+        .any(|xc| (x - xc).abs() < clear_m + half_len_m)
+}
+
 /// Trees on the pavements, cars at the kerbs, poles with some signs, and a few shelters, along
-/// the east-west streets (kerbs 2.5 m inside each street edge).
-fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, _bw: f64, bh: f64) {
+/// the east-west streets (kerbs 2.5 m inside each street edge). Nothing stands where a
+/// north-south street crosses: a pavement's line runs on across the crossing's carriageway, and
+/// a pole there would stand in the traffic (the scene grammar of Sec. 4.2.4 rightly drops such
+/// detections, so the truth must not hold them either).
+fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, bw: f64, bh: f64) {
     let (sx, sy) = p.size_m;
+    let crossings: Vec<f64> = (0..=p.blocks.0)
+        .map(|k| k as f64 * (bw + p.street_m) + p.street_m / 2.0)
+        .collect();
+    let carriageway_half_m = (p.street_m / 2.0 - PAVEMENT_M).max(0.0);
+    let parking_clear_m = p.street_m / 2.0 + PARKING_CLEAR_OF_CROSSING_M;
     for street in 0..=p.blocks.1 {
         let yc = street as f64 * (bh + p.street_m) + p.street_m / 2.0;
         for side in [-1.0, 1.0] {
@@ -688,13 +713,10 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, _bw: f64
             if p.tree_spacing_m > 0.0 {
                 let mut x = 6.0 + d.range(50, k, 0.0, p.tree_spacing_m);
                 while x < sx - 6.0 {
-                    if pavement > 2.0 && pavement < sy - 2.0 {
-                        add_tree(
-                            city,
-                            d,
-                            p,
-                            [x + d.range(51, (k << 20) + x as u64, -1.0, 1.0), pavement],
-                        );
+                    let tx = x + d.range(51, (k << 20) + x as u64, -1.0, 1.0);
+                    let clear = !near_crossing(tx, 0.5, &crossings, carriageway_half_m);
+                    if clear && pavement > 2.0 && pavement < sy - 2.0 {
+                        add_tree(city, d, p, [tx, pavement]);
                     }
                     x += p.tree_spacing_m;
                 }
@@ -703,7 +725,8 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, _bw: f64
             let mut x = 5.0 + d.range(52, k, 0.0, gap);
             let mut i = 0u64;
             while p.cars_per_100m > 0.0 && x < sx - 5.0 {
-                if kerb > 2.0 && kerb < sy - 2.0 {
+                let clear = !near_crossing(x, 4.5 / 2.0, &crossings, parking_clear_m);
+                if clear && kerb > 2.0 && kerb < sy - 2.0 {
                     let heading = if d.u(53, (k << 20) + i) < 0.5 {
                         0.0
                     } else {
@@ -723,7 +746,9 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, _bw: f64
             let mut j = 0u64;
             while x < sx - 10.0 {
                 let py = yc + side * (p.street_m / 2.0 - 0.5);
-                if py > 1.0 && py < sy - 1.0 {
+                // The widest thing on a pole is its 0.9 m sign.
+                let clear = !near_crossing(x, 0.45, &crossings, carriageway_half_m);
+                if clear && py > 1.0 && py < sy - 1.0 {
                     add_clutter(
                         city,
                         p,
@@ -750,7 +775,9 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, _bw: f64
                             ),
                         );
                     }
-                    if d.u(57, (k << 20) + j) < 0.12 {
+                    let shelter_clear =
+                        !near_crossing(x + 4.0, 1.75, &crossings, carriageway_half_m);
+                    if shelter_clear && d.u(57, (k << 20) + j) < 0.12 {
                         add_clutter(
                             city,
                             p,
