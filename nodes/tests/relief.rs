@@ -506,36 +506,21 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
     // Affine depth (0.8 z + 1 m) calibrates on every view (walls and ground spread the depths).
     assert_eq!(r.stats.calibrated, r.stats.views);
     assert!(sc.by_class["window"].observed > 50);
-    // The targets, but for drainpipes: 0.12 m wide, 1.2 texels, seen by one to three
-    // views each, and where registration leaves a view's evidence half a texel off, or the
-    // segmentation missed the pipe in the one view that saw a stretch of it, IoU 0.5 is out of
-    // reach. Six of the eight observed are found here (three before pipes ran up to the eave,
-    // the blur came off thin features and protrusions no view measured were dropped; four for
-    // a while after drainpipes took a width within their class's range, five once they ran up
-    // through wall seen too coarsely to show them, six since they run down to the ground too,
-    // through less than a storey of flat wall, and their centre is their whole evidence's);
-    // eight pipes are too few to tell one rule from another, and the test on every street
-    // below scores them.
-    for c in ["window", "door", "balcony"] {
+    // The targets. Drainpipes are the hard class: 0.12 m wide, 1.2 texels, seen by one to
+    // three views each, and where registration leaves a view's evidence half a texel off, IoU 0.5
+    // is out of reach. Six of the seven observed are found here (three of eight before pipes ran
+    // up to the eave, the blur came off thin features and protrusions no view measured were
+    // dropped; four once they took a width within their class's range, five once they ran up
+    // through wall seen too coarsely to show them, six since they run down to the ground
+    // through less than a storey of flat wall and their centre is their whole evidence's; 5 of
+    // 7 in the city with its crossings clear, six again since a pipe the segmentation missed
+    // is no longer joined to the ground). Seven pipes are few: the test on every street below
+    // scores fifty.
+    for c in ["window", "door", "balcony", "drainpipe"] {
         assert!(sc.by_class[c].observed >= 5, "{c}: {:?}", sc.by_class[c]);
         assert!(sc.recall(c) >= 0.8, "{c} recall {}", sc.recall(c));
         assert!(sc.precision(c) >= 0.8, "{c} precision {}", sc.precision(c));
     }
-    assert!(
-        sc.by_class["drainpipe"].observed >= 6,
-        "{:?}",
-        sc.by_class["drainpipe"]
-    );
-    assert!(
-        sc.recall("drainpipe") >= 0.7,
-        "drainpipe recall {}",
-        sc.recall("drainpipe")
-    );
-    assert!(
-        sc.precision("drainpipe") >= 0.65,
-        "drainpipe precision {}",
-        sc.precision("drainpipe")
-    );
     assert!(
         sc.median_depth_error() <= 0.05,
         "{}",
@@ -636,7 +621,9 @@ fn relief_on_every_street_of_the_demo_city() {
         // wrong instances (16 of 81) are real balconies found in part (half their width, IoU
         // 0.15-0.45).
         ("balcony", 0.8, 0.78),
-        ("drainpipe", 0.72, 0.75),
+        // Drainpipes 40 of 50 (0.80 / 0.83), guarded a pipe below the target: one view's
+        // registration more or less moves one pipe.
+        ("drainpipe", 0.78, 0.8),
     ];
     for (c, recall, precision) in guards {
         assert!(sc.by_class[c].observed >= 20, "{c}: {:?}", sc.by_class[c]);
@@ -704,6 +691,70 @@ fn windows_are_found_where_the_segmentation_missed_the_walls() {
         &blind,
     );
     assert!(none.recall("window") < 0.1, "{}", none.recall("window"));
+}
+
+/// Mean protruding evidence (E+ / W_exp) over the observed texels of the true drainpipes, and
+/// how many texels that is.
+fn drainpipe_evidence(s: &Site, r: &ReliefSet, p: &ReliefParams) -> (f64, usize) {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for t in true_features(&s.city, &s.charts)
+        .iter()
+        .filter(|t| t.class == "drainpipe")
+    {
+        let l = &r.layers[t.chart];
+        for j in t.rect[1].floor() as u32..(t.rect[3].ceil() as u32).min(l.height) {
+            for i in t.rect[0].floor() as u32..(t.rect[2].ceil() as u32).min(l.width) {
+                let k = (j * l.width + i) as usize;
+                if l.exposure.get(k) as f64 >= p.exposure_min {
+                    sum += l.protruding.get(k) as f64;
+                    n += 1;
+                }
+            }
+        }
+    }
+    (sum / n.max(1) as f64, n)
+}
+
+/// The segmentation model missing every drainpipe (each view's pipe pixels unlabelled, as the
+/// demo's missed instances do to one instance in ten): a pipe reaches the ground, and its
+/// unlabelled pixels are kept apart from the ground's by their normals, so the wall encloses
+/// them and their depth step reads the pipe standing out. Joined to the street's surface they
+/// were one region nothing enclosed, whose pixels voted for a flat wall where the pipe stands:
+/// mean protruding evidence over the pipes' texels 0.29, against 0.46 now (0.54 with the pipes
+/// labelled). Found as instances, 2 of 7 (1 joined to the ground): without its class a
+/// protrusion is not run up the wall's height.
+#[test]
+fn drainpipes_are_found_where_the_segmentation_missed_them() {
+    let s = demo_site();
+    let mut views = demo_registered().clone();
+    for v in &mut views.views {
+        if let Some(arch) = v.arch.as_mut() {
+            let pipes: Vec<u16> = arch
+                .classes
+                .iter()
+                .filter(|(_, c)| c.as_str() == "drainpipe")
+                .map(|(&id, _)| id)
+                .collect();
+            for id in arch.ids.iter_mut() {
+                if pipes.contains(id) {
+                    *id = 0;
+                }
+            }
+            arch.classes.retain(|id, _| !pipes.contains(id));
+        }
+    }
+    let p = ReliefParams::default();
+    let r = run_relief(s, &views, None, &p);
+    print_scores(
+        "every drainpipe missed by the segmentation:",
+        &score_against(s, &r, &demo_relief().0, &p),
+    );
+    let (missed, n) = drainpipe_evidence(s, &r, &p);
+    let (labelled, _) = drainpipe_evidence(s, &demo_relief().0, &p);
+    println!(
+        "protruding evidence over {n} observed pipe texels: {missed:.3} missed, {labelled:.3} labelled"
+    );
+    assert!(missed >= 0.4, "{missed}");
 }
 
 /// Registration against the walls, scored against the poses the views were rendered from

@@ -751,7 +751,17 @@ fn calibrate(
     robust_affine(&xs, &ys)
 }
 
+/// Region key of the unlabelled pixels with a depth that face sideways: walls and features the
+/// segmentation missed.
 const UNLABELLED: u32 = 1 << 16;
+
+/// Region key of the unlabelled pixels that face up: the ground, roofs. Kept apart from
+/// [`UNLABELLED`], or a missed drainpipe or door that reaches the ground joins the street's
+/// whole surface in one region that nothing encloses, and its pixels vote for a flat wall.
+const UNLABELLED_LEVEL: u32 = UNLABELLED + 1;
+
+/// A pixel whose normal's upward component is at least this faces up (45 degrees).
+const LEVEL_NZ: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
 /// A region's mean width in pixels (pixels over its longer side) under which its faces are not
 /// told apart by their normals: at a few pixels across every pixel borders a silhouette, where
@@ -816,7 +826,9 @@ fn view_relief(
         if id == 0 {
             let has_depth = depth.is_some_and(|d| d[px].is_finite());
             if has_depth {
-                key[px] = UNLABELLED;
+                let level = normals
+                    .is_some_and(|nm| view.pose.to_site(nm[px].map(|c| c as f64))[2] >= LEVEL_NZ);
+                key[px] = if level { UNLABELLED_LEVEL } else { UNLABELLED };
             }
             continue;
         }

@@ -32,7 +32,9 @@ impl Stage for Relief {
     // 12: a labelled region a view could not judge neither votes nor counts as exposure; a
     // drainpipe runs down to the terrain as well as up, through less than a storey
     // (run_stop_m) of flat wall; a thin feature's centre from its whole blurred evidence.
-    const VERSION: u32 = 12;
+    // 13: unlabelled pixels facing up (the ground) are a region apart from those facing sideways,
+    // so a missed drainpipe or door that reaches the ground is judged on its own.
+    const VERSION: u32 = 13;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),
