@@ -23,6 +23,45 @@ fn scan(scene: &Scene, p: &SynthLidarParams) -> PointSet {
     SynthLidar::run(p, &inputs, &Ctx::new(&site(), &[])).unwrap()
 }
 
+/// The crossings are clear: no post, tree or shelter stands in a north-south street's
+/// carriageway (2.5 m of pavement inside each edge), where the east-west pavements' lines run
+/// on, and no car is parked within 5 m of a crossing street's kerb line.
+#[test]
+fn no_street_furniture_stands_in_a_crossing() {
+    let city = generate(&SynthCityParams::default());
+    let crossings: Vec<(f64, f64)> = city
+        .streets
+        .iter()
+        .filter(|s| s.a[0] == s.b[0])
+        .map(|s| (s.a[0], s.width_m / 2.0))
+        .collect();
+    assert!(crossings.len() > 2);
+    let items = city
+        .clutter
+        .iter()
+        .map(|c| (c.id.as_str(), c.kind.as_str(), c.center))
+        .chain(city.trees.iter().map(|t| (t.id.as_str(), "tree", t.pos)));
+    let mut n = 0;
+    for (id, kind, at) in items {
+        n += 1;
+        for &(xc, half) in &crossings {
+            let clear = if kind == "car" {
+                half + 5.0
+            } else {
+                half - 2.5
+            };
+            assert!(
+                (at[0] - xc).abs() >= clear,
+                "{id} at ({:.1}, {:.1}) stands {:.2} m from the axis x = {xc}",
+                at[0],
+                at[1],
+                (at[0] - xc).abs()
+            );
+        }
+    }
+    assert!(n > 300, "{n} items");
+}
+
 #[test]
 fn the_demo_city_has_every_roof_type_and_closed_buildings() {
     let p = SynthCityParams::default();

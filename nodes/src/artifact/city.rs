@@ -251,7 +251,7 @@ pub struct Street {
     pub a: [f64; 2],
     /// The other end.
     pub b: [f64; 2],
-    /// Kerb-to-kerb width, metres.
+    /// Width from the blocks on one side to those on the other, pavements included, metres.
     pub width_m: f64,
 }
 
