@@ -677,6 +677,9 @@ fn item(
     }
 }
 
+/// A parked car's length, width and height, metres.
+const CAR_M: [f64; 3] = [4.5, 1.8, 1.5];
+
 /// Pavements are this wide, so a street's carriageway ends this far inside each of its edges.
 const PAVEMENT_M: f64 = 2.5;
 
@@ -725,7 +728,7 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, bw: f64,
             let mut x = 5.0 + d.range(52, k, 0.0, gap);
             let mut i = 0u64;
             while p.cars_per_100m > 0.0 && x < sx - 5.0 {
-                let clear = !near_crossing(x, 4.5 / 2.0, &crossings, parking_clear_m);
+                let clear = !near_crossing(x, CAR_M[0] / 2.0, &crossings, parking_clear_m);
                 if clear && kerb > 2.0 && kerb < sy - 2.0 {
                     let heading = if d.u(53, (k << 20) + i) < 0.5 {
                         0.0
@@ -733,11 +736,7 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, bw: f64,
                         std::f64::consts::PI
                     };
                     let mat = Material::Metal;
-                    add_clutter(
-                        city,
-                        p,
-                        item("car", [x, kerb], heading, [4.5, 1.8, 1.5], 0.0, mat),
-                    );
+                    add_clutter(city, p, item("car", [x, kerb], heading, CAR_M, 0.0, mat));
                 }
                 x += gap * d.range(54, (k << 20) + i, 0.6, 1.4);
                 i += 1;
