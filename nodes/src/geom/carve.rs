@@ -160,43 +160,129 @@ pub fn instance_prism(
     )
 }
 
-/// Why an instance cannot become a prism on its wall, if it cannot.
-fn precheck(inst: &ReliefInstance, charts: &ChartSet, p: &CarveParams) -> Option<String> {
+/// The instance as it can become a prism on its wall, or why it cannot. A rectangle reaching
+/// past the wall's outline, or within `margin_m` of it, is trimmed to fit rather than dropped:
+/// a downpipe the relief runs up to the eave and down to the ground ends exactly where the wall
+/// does, and the Boolean needs the prism a margin inside that edge, not the pipe left out.
+fn fit_to_wall(
+    inst: &ReliefInstance,
+    charts: &ChartSet,
+    p: &CarveParams,
+) -> Result<ReliefInstance, String> {
     let Some(c) = charts.charts.get(inst.chart as usize) else {
-        return Some(format!("chart {} is not in the chart set", inst.chart));
+        return Err(format!("chart {} is not in the chart set", inst.chart));
     };
     if c.building != inst.building {
-        return Some(format!(
+        return Err(format!(
             "chart {} is on {}, not {}",
             inst.chart, c.building, inst.building
         ));
     }
-    let [u0, v0, u1, v1] = inst.rect;
-    let (wu, wv) = ((u1 - u0) * c.texel_m, (v1 - v0) * c.texel_m);
-    if !(wu >= p.min_size_m && wv >= p.min_size_m) {
-        return Some(format!(
-            "{wu:.3} x {wv:.3} m is under the {} m minimum",
-            p.min_size_m
-        ));
-    }
     if !(inst.depth_m > 0.0 && inst.depth_m.is_finite()) {
-        return Some(format!("depth {} m", inst.depth_m));
+        return Err(format!("depth {} m", inst.depth_m));
     }
-    // The rectangle, widened by the margin, must lie on the wall: every texel under it covered.
+    let too_small = |rect: [f64; 4]| {
+        let (wu, wv) = (
+            (rect[2] - rect[0]) * c.texel_m,
+            (rect[3] - rect[1]) * c.texel_m,
+        );
+        (!(wu >= p.min_size_m && wv >= p.min_size_m)).then(|| {
+            format!(
+                "{wu:.3} x {wv:.3} m is under the {} m minimum",
+                p.min_size_m
+            )
+        })
+    };
+    if let Some(why) = too_small(inst.rect) {
+        return Err(why);
+    }
+    // Every texel under the rectangle widened by the margin must be covered by the wall.
     let m = p.margin_m / c.texel_m;
-    let (i0, j0) = ((u0 - m).floor(), (v0 - m).floor());
-    let (i1, j1) = ((u1 + m).ceil(), (v1 + m).ceil());
-    if i0 < 0.0 || j0 < 0.0 || i1 > c.width as f64 || j1 > c.height as f64 {
-        return Some("within the margin of the wall's edge".into());
+    let (w, h) = (c.width as i64, c.height as i64);
+    let covered = |i: i64, j: i64| {
+        (0..w).contains(&i)
+            && (0..h).contains(&j)
+            && c.triangle_at[(j * w + i) as usize] != u32::MAX
+    };
+    let span = |lo: f64, hi: f64| ((lo - m).floor() as i64, (hi + m).ceil() as i64);
+    let [u0, v0, u1, v1] = inst.rect;
+    let (u0, u1) = (u0.max(m), u1.min(w as f64 - m));
+    let (v0, v1) = (v0.max(m), v1.min(h as f64 - m));
+    if !(u0 < u1 && v0 < v1) {
+        return Err("it lies within the margin of its wall's edge".into());
     }
-    for j in j0 as u32..j1 as u32 {
-        for i in i0 as u32..i1 as u32 {
-            if c.triangle_at[(j * c.width + i) as usize] == u32::MAX {
-                return Some("reaches off the wall (or within the margin of its edge)".into());
+    // Lines (rows, then columns over the rows kept; or the other way round, whichever keeps
+    // more) whose texels across the rectangle are all covered: the run of good lines that
+    // overlaps the rectangle most, less the margin.
+    let trim = |[u0, v0, u1, v1]: [f64; 4], rows_first: bool| -> Option<[f64; 4]> {
+        let ((a0, a1), (b0, b1)) = if rows_first {
+            ((v0, v1), (u0, u1))
+        } else {
+            ((u0, u1), (v0, v1))
+        };
+        let at = |along: i64, across: i64| {
+            if rows_first {
+                covered(across, along)
+            } else {
+                covered(along, across)
             }
+        };
+        let (i0, i1) = span(b0, b1);
+        let (lo, hi) = best_run(span(a0, a1).0, span(a0, a1).1, |j| {
+            (i0..i1).all(|i| at(j, i))
+        })?;
+        let (a0, a1) = (a0.max(lo as f64 + m), a1.min(hi as f64 - m));
+        let (j0, j1) = span(a0, a1);
+        let (lo, hi) = best_run(i0, i1, |i| (j0..j1).all(|j| at(j, i)))?;
+        let (b0, b1) = (b0.max(lo as f64 + m), b1.min(hi as f64 - m));
+        Some(if rows_first {
+            [b0, a0, b1, a1]
+        } else {
+            [a0, b0, a1, b1]
+        })
+    };
+    let area = |r: &[f64; 4]| (r[2] - r[0]).max(0.0) * (r[3] - r[1]).max(0.0);
+    let Some([u0, v0, u1, v1]) = [true, false]
+        .into_iter()
+        .filter_map(|rows_first| trim([u0, v0, u1, v1], rows_first))
+        .max_by(|a, b| area(a).total_cmp(&area(b)))
+    else {
+        return Err("no part of it lies on the wall".into());
+    };
+    let rect = [u0, v0, u1, v1];
+    if let Some(why) = too_small(rect) {
+        return Err(format!("trimmed to its wall, {why}"));
+    }
+    let mut fitted = inst.clone();
+    if rect != inst.rect {
+        fitted.rect = rect;
+        fitted.corners = [
+            c.world_of(u0, v0),
+            c.world_of(u1, v0),
+            c.world_of(u1, v1),
+            c.world_of(u0, v1),
+        ];
+    }
+    Ok(fitted)
+}
+
+/// Of the lines `lo..hi` where `good` holds, the run `[a, b)` longest (ties to the first).
+fn best_run(lo: i64, hi: i64, good: impl Fn(i64) -> bool) -> Option<(i64, i64)> {
+    let mut best: Option<(i64, i64)> = None;
+    let mut start = None;
+    for k in lo..=hi {
+        match (k < hi && good(k), start) {
+            (true, None) => start = Some(k),
+            (false, Some(a)) => {
+                if best.is_none_or(|(x, y)| k - a > y - x) {
+                    best = Some((a, k));
+                }
+                start = None;
+            }
+            _ => {}
         }
     }
-    None
+    best
 }
 
 /// Carves every relief instance into its building of `scene`: the carved scene and what happened
@@ -210,10 +296,14 @@ pub fn carve_scene(
 ) -> Result<(Scene, CarveReport), String> {
     let mut outcomes: Vec<CarveOutcome> = vec![CarveOutcome::Carved; relief.instances.len()];
     let mut per_object: Vec<Vec<usize>> = vec![Vec::new(); scene.objects.len()];
+    let mut fitted: Vec<Option<ReliefInstance>> = vec![None; relief.instances.len()];
     for (k, inst) in relief.instances.iter().enumerate() {
-        if let Some(why) = precheck(inst, charts, p) {
-            outcomes[k] = CarveOutcome::Dropped(why);
-            continue;
+        match fit_to_wall(inst, charts, p) {
+            Ok(f) => fitted[k] = Some(f),
+            Err(why) => {
+                outcomes[k] = CarveOutcome::Dropped(why);
+                continue;
+            }
         }
         let c = &charts.charts[inst.chart as usize];
         match scene.objects.get(c.object as usize) {
@@ -260,7 +350,9 @@ pub fn carve_scene(
             let mut prisms: Vec<(usize, i8, Manifold)> = Vec::new();
             let mut results: Vec<(usize, CarveOutcome)> = Vec::new();
             for &k in ks {
-                let inst = &relief.instances[k];
+                let Some(inst) = fitted[k].as_ref() else {
+                    continue;
+                };
                 let c = &charts.charts[inst.chart as usize];
                 // The wall's material: that of the chart's triangle under the instance's centre.
                 let (cu, cv) = (
@@ -339,4 +431,86 @@ pub fn carve_scene(
     }
     report.outcomes = outcomes;
     Ok((out, report))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::artifact::{Chart, ChartKind};
+
+    /// A 2 m x 3 m wall of 0.1 m texels, its top right corner off the wall (under a gable's
+    /// slope, say): columns 15 and up from row 25 up.
+    fn wall() -> ChartSet {
+        let (w, h) = (20u32, 30u32);
+        let triangle_at: Vec<u32> = (0..w * h)
+            .map(|k| {
+                if k % w >= 15 && k / w >= 25 {
+                    u32::MAX
+                } else {
+                    0
+                }
+            })
+            .collect();
+        ChartSet {
+            charts: vec![Chart {
+                object: 0,
+                building: "building-0".into(),
+                kind: ChartKind::Wall,
+                origin: [0.0; 3],
+                u_axis: [1.0, 0.0, 0.0],
+                v_axis: [0.0, 0.0, 1.0],
+                normal: [0.0, -1.0, 0.0],
+                texel_m: 0.1,
+                width: w,
+                height: h,
+                triangles: vec![0].into(),
+                triangle_at: triangle_at.into(),
+            }],
+        }
+    }
+
+    fn instance(rect: [f64; 4]) -> ReliefInstance {
+        let c = &wall().charts[0];
+        ReliefInstance {
+            chart: 0,
+            building: "building-0".into(),
+            sign: 1,
+            class: "drainpipe".into(),
+            rect,
+            corners: [
+                c.world_of(rect[0], rect[1]),
+                c.world_of(rect[2], rect[1]),
+                c.world_of(rect[2], rect[3]),
+                c.world_of(rect[0], rect[3]),
+            ],
+            depth_m: 0.12,
+            measured_depth_m: Some(0.12),
+            posterior: 0.8,
+            exposure: 5.0,
+            texels: 300,
+            views: 2,
+            delta_agreement: None,
+        }
+    }
+
+    #[test]
+    fn an_instance_past_its_wall_is_trimmed_to_it_not_dropped() {
+        let (charts, p) = (wall(), CarveParams::default());
+        // A downpipe the relief runs from the ground to the eave: the margin off each end.
+        let f = fit_to_wall(&instance([5.0, 0.0, 6.2, 30.0]), &charts, &p).unwrap();
+        assert_eq!(f.rect, [5.0, 0.5, 6.2, 29.5]);
+        let top = f.corners[2];
+        assert!((top[0] - 0.62).abs() < 1e-12 && (top[2] - 2.95).abs() < 1e-12);
+        // Into the corner off the wall: cut below it (4 x 4.5 texels) rather than beside it
+        // (0.5 x 9.5).
+        let f = fit_to_wall(&instance([14.0, 20.0, 18.0, 30.0]), &charts, &p).unwrap();
+        assert_eq!(f.rect, [14.0, 20.0, 18.0, 24.5]);
+        // Inside the wall: untouched.
+        let inside = instance([3.0, 3.0, 8.0, 9.0]);
+        assert_eq!(fit_to_wall(&inside, &charts, &p).unwrap(), inside);
+        // Wholly off it, or trimmed under the minimum size: dropped.
+        assert!(fit_to_wall(&instance([16.0, 26.0, 19.0, 29.0]), &charts, &p).is_err());
+        let sliver = fit_to_wall(&instance([0.0, 5.0, 0.8, 9.0]), &charts, &p);
+        assert!(sliver.is_err_and(|e| e.contains("under the 0.05 m minimum")));
+    }
 }

@@ -12,7 +12,9 @@ pub struct CarveRelief;
 impl Stage for CarveRelief {
     const KIND: &'static str = "CarveRelief";
     // 2: unions merged in a balanced tree (geom::boolean): the same solids, other triangles.
-    const VERSION: u32 = 2;
+    // 3: an instance reaching past its wall's outline (a downpipe run to the eave) is trimmed
+    // to the wall, no longer dropped.
+    const VERSION: u32 = 3;
     const DOC: &'static str = "façade relief carved into the building solids by Booleans (recesses subtracted, protrusions added), every result a checked solid";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
