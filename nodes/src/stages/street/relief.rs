@@ -34,7 +34,9 @@ impl Stage for Relief {
     // (run_stop_m) of flat wall; a thin feature's centre from its whole blurred evidence.
     // 13: unlabelled pixels facing up (the ground) are a region apart from those facing sideways,
     // so a missed drainpipe or door that reaches the ground is judged on its own.
-    const VERSION: u32 = 13;
+    // 14: a protruding feature a view sees past the twin's silhouette (a corner downpipe from
+    // the street round the corner) votes, by its label, on the wall it stands by.
+    const VERSION: u32 = 14;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),
