@@ -48,6 +48,28 @@ pub struct Chart {
     pub triangle_at: PodVec<u32>,
 }
 
+#[cfg(test)]
+impl Chart {
+    /// For tests: a wall chart of `w` x `h` texels of 0.1 m, all on the surface, its origin at
+    /// the site's origin, `u` along +x, `v` up, facing -y.
+    pub(crate) fn flat_wall(w: u32, h: u32) -> Chart {
+        Chart {
+            object: 0,
+            building: "building-0".into(),
+            kind: ChartKind::Wall,
+            origin: [0.0; 3],
+            u_axis: [1.0, 0.0, 0.0],
+            v_axis: [0.0, 0.0, 1.0],
+            normal: [0.0, -1.0, 0.0],
+            texel_m: 0.1,
+            width: w,
+            height: h,
+            triangles: PodVec(vec![0]),
+            triangle_at: PodVec(vec![0; (w * h) as usize]),
+        }
+    }
+}
+
 impl Chart {
     /// Texel count.
     pub fn len(&self) -> usize {

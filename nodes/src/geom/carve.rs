@@ -436,37 +436,18 @@ pub fn carve_scene(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::artifact::{Chart, ChartKind};
+    use crate::artifact::Chart;
 
     /// A 2 m x 3 m wall of 0.1 m texels, its top right corner off the wall (under a gable's
     /// slope, say): columns 15 and up from row 25 up.
     fn wall() -> ChartSet {
-        let (w, h) = (20u32, 30u32);
-        let triangle_at: Vec<u32> = (0..w * h)
-            .map(|k| {
-                if k % w >= 15 && k / w >= 25 {
-                    u32::MAX
-                } else {
-                    0
-                }
-            })
-            .collect();
-        ChartSet {
-            charts: vec![Chart {
-                object: 0,
-                building: "building-0".into(),
-                kind: ChartKind::Wall,
-                origin: [0.0; 3],
-                u_axis: [1.0, 0.0, 0.0],
-                v_axis: [0.0, 0.0, 1.0],
-                normal: [0.0, -1.0, 0.0],
-                texel_m: 0.1,
-                width: w,
-                height: h,
-                triangles: vec![0].into(),
-                triangle_at: triangle_at.into(),
-            }],
+        let mut c = Chart::flat_wall(20, 30);
+        for (k, t) in c.triangle_at.0.iter_mut().enumerate() {
+            if k % 20 >= 15 && k / 20 >= 25 {
+                *t = u32::MAX;
+            }
         }
+        ChartSet { charts: vec![c] }
     }
 
     fn instance(rect: [f64; 4]) -> ReliefInstance {

@@ -2301,31 +2301,10 @@ mod tests {
         assert!(robust_affine(&vec![10.0; 100], &vec![9.0; 100]).is_none());
     }
 
-    /// A wall chart of `w` x `h` texels of 0.1 m, all on the surface.
-    fn flat_chart(w: u32, h: u32) -> crate::artifact::Chart {
-        crate::artifact::Chart {
-            object: 0,
-            building: "building-0".into(),
-            kind: ChartKind::Wall,
-            origin: [0.0; 3],
-            u_axis: [1.0, 0.0, 0.0],
-            v_axis: [0.0, 0.0, 1.0],
-            normal: [0.0, -1.0, 0.0],
-            texel_m: 0.1,
-            width: w,
-            height: h,
-            triangles: PodVec(vec![0]),
-            triangle_at: PodVec(vec![0; (w * h) as usize]),
-        }
-    }
-
-    /// A 10 m wall facing south (-y) from x = 0 to 10: a view from the street round its east
-    /// end (north of the wall's plane, so it sees the wall from behind) looks at a pipe standing
-    /// just past that end on the wall's outer side.
     #[test]
     fn a_feature_past_a_corner_stands_on_the_wall_seen_from_behind() {
         let charts = ChartSet {
-            charts: vec![flat_chart(100, 100)],
+            charts: vec![crate::artifact::Chart::flat_wall(100, 100)],
         };
         let ray = |eye: [f64; 3], to: [f64; 3]| {
             let d: [f64; 3] = std::array::from_fn(|k| to[k] - eye[k]);
@@ -2356,7 +2335,7 @@ mod tests {
         // A pipe down column 3, one texel from the chart's edge: two rows in every six its
         // evidence dips to "some votes" (0.35), as when it straddles two texel columns.
         let (w, h) = (12u32, 64u32);
-        let c = flat_chart(w, h);
+        let c = crate::artifact::Chart::flat_wall(w, h);
         let n = c.len();
         let mut pr = vec![0.03f32; n];
         for j in 0..h {
@@ -2451,7 +2430,7 @@ mod tests {
         // and 4 (a pipe on their common edge): the posterior clears the threshold in column 3
         // alone both times, the rectangle follows the evidence.
         let (w, h) = (10u32, 30u32);
-        let c = flat_chart(w, h);
+        let c = crate::artifact::Chart::flat_wall(w, h);
         let n = c.len();
         let mut pr = vec![0.03f32; n];
         for j in 0..h {
@@ -2503,7 +2482,7 @@ mod tests {
         // A pipe down column 3, rows 0-19 and 24-43; rows 20-23 between them unobserved (a
         // balcony slab hid them), then observed and flat.
         let (w, h) = (10u32, 44u32);
-        let c = flat_chart(w, h);
+        let c = crate::artifact::Chart::flat_wall(w, h);
         let (pr, e) = pipe_in_column_3(w, c.len(), (0..20).chain(24..44));
         let p = ReliefParams {
             min_texels: 3,
@@ -2540,7 +2519,7 @@ mod tests {
         // The pipe of `pieces_join_...`, seen whole: found when a view measured it 0.15 m out,
         // dropped with no step or a step under `min_step_m` (the class in the image alone).
         let (w, h) = (10u32, 30u32);
-        let c = flat_chart(w, h);
+        let c = crate::artifact::Chart::flat_wall(w, h);
         let (pr, e) = pipe_in_column_3(w, c.len(), 0..h);
         let lay = seen_layers(w, h, pr, e);
         let p = ReliefParams {
@@ -2564,7 +2543,7 @@ mod tests {
         // A pipe seen in column 3 on rows 0-9 and 30-34 of a 50-row wall (0.1 m texels); the
         // rows between and above are unobserved (`hidden`) or observed flat (`flat_between`).
         let (w, h) = (10u32, 50u32);
-        let c = flat_chart(w, h);
+        let c = crate::artifact::Chart::flat_wall(w, h);
         let (pr, e) = pipe_in_column_3(w, c.len(), (0..10).chain(30..35));
         let p = ReliefParams {
             min_texels: 3,
@@ -2690,7 +2669,7 @@ mod tests {
     fn a_drainpipe_runs_down_to_the_ground_and_no_further() {
         // Seen on rows 30-34 only; the wall below runs on underground to row 0, unobserved.
         let (w, h) = (10u32, 50u32);
-        let c = flat_chart(w, h);
+        let c = crate::artifact::Chart::flat_wall(w, h);
         let (pr, e) = pipe_in_column_3(w, c.len(), 30..35);
         let mut lay = seen_layers(w, h, pr, e);
         unobserve(&mut lay, w, 0..30);
