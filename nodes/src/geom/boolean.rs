@@ -41,7 +41,8 @@ pub fn to_manifold(m: &Mesh) -> Result<Manifold, String> {
 /// Positions are rounded to f32 (the scene's precision): two vertices the Boolean made closer
 /// than an f32 step apart (6e-5 m a kilometre from the origin) become one, and the triangles
 /// between them, now with a repeated corner, are dropped: the collapse of an edge shorter than
-/// the scene can represent. Whether what remains is still a solid is for the caller's check.
+/// the scene can represent. Slivers whose three corners the rounding leaves on one line are
+/// mended ([`mend_slivers`]). Whether what remains is still a solid is for the caller's check.
 pub fn from_manifold(m: &Manifold, fallback: Material) -> Mesh {
     let gl = m.get_mesh_gl64(-1);
     let np = gl.num_prop as usize;
@@ -75,11 +76,113 @@ pub fn from_manifold(m: &Manifold, fallback: Material) -> Mesh {
                 .unwrap_or(fallback as u8),
         );
     }
+    mend_slivers(&positions, &mut triangles, &mut materials);
     Mesh {
         positions: PodVec(positions),
         triangles: PodVec(triangles),
         materials: PodVec(materials),
     }
+}
+
+/// Whether the triangle's corners lie on one line: [`check_solid`]'s test, in the same f32
+/// arithmetic.
+fn is_sliver(positions: &[[f32; 3]], t: [u32; 3]) -> bool {
+    let [a, b, c] = t.map(|i| positions[i as usize]);
+    let (u, v) = (
+        [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
+        [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
+    );
+    let n = [
+        u[1] * v[2] - u[2] * v[1],
+        u[2] * v[0] - u[0] * v[2],
+        u[0] * v[1] - u[1] * v[0],
+    ];
+    (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt() < 1e-9
+}
+
+/// Removes the slivers the Boolean leaves at T-junctions, whose three corners lie on one line
+/// once rounded to f32, keeping the surface closed: the neighbour across a sliver's longest edge
+/// is split at its middle corner, and the sliver goes. A sliver whose neighbour is another
+/// sliver, or has none, stays for the caller's check to report.
+fn mend_slivers(positions: &[[f32; 3]], triangles: &mut Vec<[u32; 3]>, materials: &mut Vec<u8>) {
+    // A sliver beside another is mended once that one is: pass again while a pass mends any.
+    for _ in 0..MEND_PASSES {
+        if !mend_pass(positions, triangles, materials) {
+            break;
+        }
+    }
+}
+
+/// Passes of [`mend_slivers`] at most: a chain of slivers side by side takes one pass each.
+const MEND_PASSES: usize = 8;
+
+/// One pass of [`mend_slivers`]: whether it mended any sliver.
+fn mend_pass(
+    positions: &[[f32; 3]],
+    triangles: &mut Vec<[u32; 3]>,
+    materials: &mut Vec<u8>,
+) -> bool {
+    let mut owner: std::collections::HashMap<(u32, u32), usize> = Default::default();
+    for (k, t) in triangles.iter().enumerate() {
+        for e in 0..3 {
+            owner.insert((t[e], t[(e + 1) % 3]), k);
+        }
+    }
+    let len2 = |p: u32, q: u32| {
+        let (a, b) = (positions[p as usize], positions[q as usize]);
+        (0..3).map(|k| ((a[k] - b[k]) as f64).powi(2)).sum::<f64>()
+    };
+    let mut gone = vec![false; triangles.len()];
+    for k in 0..triangles.len() {
+        let t = triangles[k];
+        if gone[k] || !is_sliver(positions, t) {
+            continue;
+        }
+        // The longest edge (x, y), in the sliver's order; m the corner between them.
+        let e = (0..3)
+            .max_by(|&i, &j| len2(t[i], t[(i + 1) % 3]).total_cmp(&len2(t[j], t[(j + 1) % 3])))
+            .unwrap_or(0);
+        let (x, y, m) = (t[e], t[(e + 1) % 3], t[(e + 2) % 3]);
+        let Some(&nk) = owner.get(&(y, x)) else {
+            continue;
+        };
+        let n = triangles[nk];
+        if gone[nk] || nk == k || is_sliver(positions, n) {
+            continue;
+        }
+        let Some(i) = (0..3).find(|&i| n[i] == y && n[(i + 1) % 3] == x) else {
+            continue;
+        };
+        let r = n[(i + 2) % 3];
+        let (first, second) = ([y, m, r], [m, x, r]);
+        if is_sliver(positions, first) || is_sliver(positions, second) {
+            continue;
+        }
+        for (p, q) in [(x, y), (y, m), (m, x), (y, x), (x, r), (r, y)] {
+            owner.remove(&(p, q));
+        }
+        triangles[nk] = first;
+        triangles.push(second);
+        materials.push(materials[nk]);
+        gone.push(false);
+        gone[k] = true;
+        let added = triangles.len() - 1;
+        for (p, q, o) in [
+            (y, m, nk),
+            (m, r, nk),
+            (r, y, nk),
+            (m, x, added),
+            (x, r, added),
+            (r, m, added),
+        ] {
+            owner.insert((p, q), o);
+        }
+    }
+    let mut keep = gone.iter().map(|g| !g);
+    let mut keep2 = gone.iter().map(|g| !g);
+    triangles.retain(|_| keep.next().unwrap_or(true));
+    materials.retain(|_| keep2.next().unwrap_or(true));
+    gone.contains(&true)
 }
 
 fn op(a: &Manifold, b: &Manifold, o: OpType) -> Result<Manifold, String> {
@@ -143,6 +246,45 @@ mod tests {
                 a.dot(b.cross(c)) / 6.0
             })
             .sum()
+    }
+
+    /// A tetrahedron whose bottom face has its edge P1-P0 split at M while the side face across
+    /// it keeps the whole edge, closed by the sliver (P0, M, P1): the T-junction a Boolean
+    /// leaves. Mended, the side face is split at M instead and the sliver is gone.
+    #[test]
+    fn a_sliver_at_a_t_junction_is_mended_into_its_neighbour() {
+        let positions: Vec<[f32; 3]> = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [0.5, 0.0, 0.0],
+        ];
+        let (p0, p1, p2, p3, m) = (0, 1, 2, 3, 4);
+        let mut triangles = vec![
+            [p0, p2, m],
+            [m, p2, p1],
+            [p0, p1, p3],
+            [p0, p3, p2],
+            [p1, p2, p3],
+            [p0, m, p1],
+        ];
+        let mut materials = vec![0, 0, 1, 0, 0, 0];
+        let mesh = |t: &Vec<[u32; 3]>, mt: &Vec<u8>| Mesh {
+            positions: PodVec(positions.clone()),
+            triangles: PodVec(t.clone()),
+            materials: PodVec(mt.clone()),
+        };
+        assert!(
+            check_solid(&mesh(&triangles, &materials)).is_err_and(|e| e.contains("degenerate"))
+        );
+        mend_slivers(&positions, &mut triangles, &mut materials);
+        let mended = mesh(&triangles, &materials);
+        check_solid(&mended).unwrap();
+        assert_eq!(triangles.len(), 6);
+        assert!((volume(&mended) - 1.0 / 6.0).abs() < 1e-9);
+        // The split side face keeps its material.
+        assert_eq!(materials.iter().filter(|&&x| x == 1).count(), 2);
     }
 
     /// A 4 m cube less a 1 m notch at one corner and a 2 m one through the middle of a face, plus

@@ -14,7 +14,9 @@ impl Stage for CarveRelief {
     // 2: unions merged in a balanced tree (geom::boolean): the same solids, other triangles.
     // 3: an instance reaching past its wall's outline (a downpipe run to the eave) is trimmed
     // to the wall, no longer dropped.
-    const VERSION: u32 = 3;
+    // 4: slivers the Boolean leaves at T-junctions are mended (geom::boolean), not a reason to
+    // drop the instance.
+    const VERSION: u32 = 4;
     const DOC: &'static str = "façade relief carved into the building solids by Booleans (recesses subtracted, protrusions added), every result a checked solid";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
