@@ -8,7 +8,7 @@ use manifold_rust::manifold::Manifold;
 use manifold_rust::types::{BooleanEngine, Error, MeshGL64, OpType};
 
 use crate::artifact::{Mesh, PodVec};
-use crate::geom::mesh_check::check_solid;
+use crate::geom::mesh_check::{check_solid, is_degenerate};
 use crate::rf::materials::Material;
 
 /// `m` as a Manifold, its materials as face IDs; an error when it is not a closed 2-manifold.
@@ -84,20 +84,9 @@ pub fn from_manifold(m: &Manifold, fallback: Material) -> Mesh {
     }
 }
 
-/// Whether the triangle's corners lie on one line: [`check_solid`]'s test, in the same f32
-/// arithmetic.
+/// Whether triangle `t` of `positions` is a sliver: [`check_solid`]'s degenerate test.
 fn is_sliver(positions: &[[f32; 3]], t: [u32; 3]) -> bool {
-    let [a, b, c] = t.map(|i| positions[i as usize]);
-    let (u, v) = (
-        [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
-        [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
-    );
-    let n = [
-        u[1] * v[2] - u[2] * v[1],
-        u[2] * v[0] - u[0] * v[2],
-        u[0] * v[1] - u[1] * v[0],
-    ];
-    (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt() < 1e-9
+    is_degenerate(t.map(|i| positions[i as usize]))
 }
 
 /// Removes the slivers the Boolean leaves at T-junctions, whose three corners lie on one line

@@ -16,6 +16,20 @@ pub struct SolidReport {
     pub triangles: usize,
 }
 
+/// Whether a triangle's corners lie on one line (near-zero area), in the scene's f32.
+pub fn is_degenerate([a, b, c]: [[f32; 3]; 3]) -> bool {
+    let (u, v) = (
+        [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
+        [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
+    );
+    let n = [
+        u[1] * v[2] - u[2] * v[1],
+        u[2] * v[0] - u[0] * v[2],
+        u[0] * v[1] - u[1] * v[0],
+    ];
+    (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt() < 1e-9
+}
+
 /// Checks that `mesh` is a closed, oriented 2-manifold with positive volume: every directed edge
 /// appears exactly once and its reverse exactly once, no triangle has (near-)zero area.
 pub fn check_closed_solid(mesh: &Mesh) -> Result<SolidReport, String> {
@@ -25,16 +39,7 @@ pub fn check_closed_solid(mesh: &Mesh) -> Result<SolidReport, String> {
         let (Some(a), Some(b), Some(c)) = (a, b, c) else {
             return Err(format!("triangle {k} indexes a missing vertex"));
         };
-        let (u, v) = (
-            [b[0] - a[0], b[1] - a[1], b[2] - a[2]],
-            [c[0] - a[0], c[1] - a[1], c[2] - a[2]],
-        );
-        let n = [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ];
-        if (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt() < 1e-9 {
+        if is_degenerate([a, b, c]) {
             return Err(format!("triangle {k} is degenerate"));
         }
         for (p, q) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
