@@ -167,10 +167,10 @@ fn mend_pass(
             owner.insert((p, q), o);
         }
     }
-    let mut keep = gone.iter().map(|g| !g);
-    let mut keep2 = gone.iter().map(|g| !g);
-    triangles.retain(|_| keep.next().unwrap_or(true));
-    materials.retain(|_| keep2.next().unwrap_or(true));
+    let mut k = 0..;
+    triangles.retain(|_| !gone[k.next().unwrap_or(0)]);
+    let mut k = 0..;
+    materials.retain(|_| !gone[k.next().unwrap_or(0)]);
     gone.contains(&true)
 }
 

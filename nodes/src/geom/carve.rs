@@ -228,9 +228,8 @@ fn fit_to_wall(
             }
         };
         let (i0, i1) = span(b0, b1);
-        let (lo, hi) = best_run(span(a0, a1).0, span(a0, a1).1, |j| {
-            (i0..i1).all(|i| at(j, i))
-        })?;
+        let (j0, j1) = span(a0, a1);
+        let (lo, hi) = best_run(j0, j1, |j| (i0..i1).all(|i| at(j, i)))?;
         let (a0, a1) = (a0.max(lo as f64 + m), a1.min(hi as f64 - m));
         let (j0, j1) = span(a0, a1);
         let (lo, hi) = best_run(i0, i1, |i| (j0..j1).all(|j| at(j, i)))?;
