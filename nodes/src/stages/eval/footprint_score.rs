@@ -33,12 +33,17 @@ impl Default for FootprintScoreParams {
 /// summarised as `building_iou_mean`, `building_iou_median`, `buildings_scored`,
 /// `buildings_found` (IoU >= 0.5) and `buildings_cut_by_region`; merge-tolerant, over blocks of
 /// overlapping references and predictions, `block_iou_mean`, `blocks_scored` and `iou` (all cells of
-/// the scored blocks); `iou_all` (every cell of the region); `predicted_footprints`.
+/// the scored blocks); `iou_all` (every cell of the region); `predicted_footprints`. Given the
+/// building returns, `iou_returns`: the same blocks scored with the cells the returns reach in
+/// place of the predicted footprints. It is what an outline that follows the returns exactly
+/// would score, so it tells the method's share of the error from the data's: a reference drawn
+/// along the walls misses the eaves and the annexes the returns show.
 pub struct FootprintScore;
 
 impl Stage for FootprintScore {
     const KIND: &'static str = "FootprintScore";
-    const VERSION: u32 = 2;
+    // 3: `iou_returns` when the building returns are given.
+    const VERSION: u32 = 3;
     const DOC: &'static str =
         "footprint IoU against reference footprints, overall and per building";
     const INPUTS: &'static [InputSpec] = &[
@@ -56,6 +61,11 @@ impl Stage for FootprintScore {
             "region",
             ArtifactType::Raster,
             "where the data reaches (cells with data); default: everywhere",
+        ),
+        InputSpec::optional(
+            "returns",
+            ArtifactType::Raster,
+            "cells the building returns reach (finite values), scored over the same blocks",
         ),
     ];
     type Params = FootprintScoreParams;
@@ -76,6 +86,7 @@ impl Stage for FootprintScore {
         let predicted: &Footprints = inputs.one("predicted")?;
         let reference: &Footprints = inputs.one("reference")?;
         let region: Option<&Raster> = inputs.optional("region")?;
+        let returns: Option<&Raster> = inputs.optional("returns")?;
         let grid = match region {
             Some(r) => Grid {
                 cell_m: p.cell_m,
@@ -86,17 +97,25 @@ impl Stage for FootprintScore {
             None => extent(&[predicted, reference], p.cell_m)
                 .ok_or_else(|| StageError::Failed("neither footprint set has a polygon".into()))?,
         };
+        let finite_at = |r: &Raster, i: usize| {
+            let (x, y) = grid.center(i as u32 % grid.width, i as u32 / grid.width);
+            r.grid
+                .cell_of(x, y)
+                .is_some_and(|(c, row)| r.at(c, row).is_finite())
+        };
         let in_region: Vec<bool> = (0..grid.len())
-            .map(|i| {
-                let (x, y) = grid.center(i as u32 % grid.width, i as u32 / grid.width);
-                region.is_none_or(|r| {
-                    r.grid
-                        .cell_of(x, y)
-                        .is_some_and(|(c, row)| r.at(c, row).is_finite())
-                })
-            })
+            .map(|i| region.is_none_or(|r| finite_at(r, i)))
             .collect();
-        Ok(score(predicted, reference, &grid, &in_region, p.min_inside))
+        let returns: Option<Vec<bool>> =
+            returns.map(|r| (0..grid.len()).map(|i| finite_at(r, i)).collect());
+        Ok(score(
+            predicted,
+            reference,
+            &grid,
+            &in_region,
+            returns.as_deref(),
+            p.min_inside,
+        ))
     }
 }
 
@@ -125,12 +144,14 @@ fn extent(sets: &[&Footprints], cell_m: f64) -> Option<Grid> {
     })
 }
 
-/// The scores on `grid`, counting only cells `in_region`.
+/// The scores on `grid`, counting only cells `in_region`; `returns`, if given, marks the cells
+/// the building returns reach.
 pub fn score(
     predicted: &Footprints,
     reference: &Footprints,
     grid: &Grid,
     in_region: &[bool],
+    returns: Option<&[bool]>,
     min_inside: f64,
 ) -> Metrics {
     let pred = predicted.rasterize(grid);
@@ -183,7 +204,7 @@ pub fn score(
         m.set(format!("building_iou/{}", f.id), iou);
         ious.push(iou);
     }
-    block_scores(&mut m, &refs, &pred, in_region, &overlap, &scored);
+    block_scores(&mut m, &refs, &pred, in_region, returns, &overlap, &scored);
     m.set("buildings_scored", ious.len() as f64);
     m.set("buildings_cut_by_region", cut as f64);
     m.set(
@@ -208,12 +229,14 @@ pub fn score(
 /// predictions' union. Party walls are invisible from the air and do not change how radio sees the
 /// building mass; a missing, extra or misshapen building still costs. Blocks holding a reference
 /// cut by the region are left out, as are predictions overlapping no reference (the reference may
-/// not cover the whole region): `iou` is over the scored blocks.
+/// not cover the whole region): `iou` is over the scored blocks. `iou_returns` scores the cells
+/// of `returns` against the references over the same cells: those of the scored blocks.
 fn block_scores(
     m: &mut Metrics,
     refs: &[u32],
     pred: &[u32],
     in_region: &[bool],
+    returns: Option<&[bool]>,
     overlap: &std::collections::BTreeMap<(u32, u32), usize>,
     scored: &[bool],
 ) {
@@ -230,9 +253,17 @@ fn block_scores(
         valid[c] = Some(valid[c].unwrap_or(true) && ok);
     }
     let mut acc = std::collections::BTreeMap::<usize, (usize, usize)>::new();
+    let (mut inter_returns, mut union_returns) = (0usize, 0usize);
     for i in (0..refs.len()).filter(|&i| in_region[i]) {
         let cr = (refs[i] > 0).then(|| sets.root(refs[i]) as usize);
         let cp = (pred[i] > 0).then(|| sets.root((n_ref + pred[i] as usize) as u32) as usize);
+        let in_block = |c: Option<usize>| c.is_some_and(|c| valid[c] == Some(true));
+        if let Some(returns) = returns
+            && (in_block(cr) || in_block(cp))
+        {
+            inter_returns += (returns[i] && in_block(cr)) as usize;
+            union_returns += (returns[i] || in_block(cr)) as usize;
+        }
         let mut blocks = [cr, cp];
         if cr == cp {
             blocks[1] = None;
@@ -255,6 +286,16 @@ fn block_scores(
         },
     );
     m.set("blocks_scored", acc.len() as f64);
+    if returns.is_some() {
+        m.set(
+            "iou_returns",
+            if union_returns > 0 {
+                inter_returns as f64 / union_returns as f64
+            } else {
+                0.0
+            },
+        );
+    }
     if !acc.is_empty() {
         let ious: Vec<f64> = acc.values().map(|&(i, u)| i as f64 / u as f64).collect();
         m.set(
@@ -308,7 +349,8 @@ mod tests {
             ],
         };
         let grid = extent(&[&predicted, &reference], 0.25).unwrap();
-        let m = score(&predicted, &reference, &grid, &vec![true; grid.len()], 0.9);
+        let all = vec![true; grid.len()];
+        let m = score(&predicted, &reference, &grid, &all, None, 0.9);
         let close = |k: &str, v: f64| assert!((m.get(k).unwrap() - v).abs() < 1e-9, "{k}: {m:?}");
         close("building_iou/a", 80.0 / 120.0);
         close("building_iou/b", 0.0);
@@ -320,6 +362,21 @@ mod tests {
         // Blocks: {a, p}, {b}, {c, d, q}.
         close("blocks_scored", 3.0);
         close("block_iou_mean", (80.0 / 120.0 + 0.0 + 1.0) / 3.0);
+        close("iou", (80.0 + 50.0) / (120.0 + 16.0 + 50.0));
+        assert!(m.get("iou_returns").is_none(), "no returns, no iou_returns");
+
+        // Returns over a with a 1 m eave strip (inside the block {a, p}), and a shed far from
+        // any block, which no block counts.
+        let returns: Vec<bool> = (0..grid.len())
+            .map(|i| {
+                let (x, y) = grid.center(i as u32 % grid.width, i as u32 / grid.width);
+                ((0.0..11.0).contains(&x) && (0.0..10.0).contains(&y))
+                    || ((40.0..42.0).contains(&x) && (0.0..2.0).contains(&y))
+            })
+            .collect();
+        let m = score(&predicted, &reference, &grid, &all, Some(&returns), 0.9);
+        let close = |k: &str, v: f64| assert!((m.get(k).unwrap() - v).abs() < 1e-9, "{k}: {m:?}");
+        close("iou_returns", 100.0 / (110.0 + 16.0 + 50.0));
         close("iou", (80.0 + 50.0) / (120.0 + 16.0 + 50.0));
     }
 }
