@@ -83,6 +83,7 @@ macro_rules! for_each_stage {
             $crate::stages::street::register_views::RegisterViews,
             $crate::stages::street::relief::Relief,
             $crate::stages::street::carve_relief::CarveRelief,
+            $crate::stages::street::carve_relief::CarveOutcomes,
             $crate::stages::street::fuse_materials::FuseMaterials,
             $crate::stages::street::apply_materials::ApplyMaterials,
             $crate::stages::street::place_clutter::PlaceClutter,

@@ -18,7 +18,7 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use kodama_nodes::artifact::{ChartKind, ChartSet, City, FeatureKind, ReliefSet, Scene, ViewSet};
-use kodama_nodes::geom::carve::{CarveOutcome, CarveParams, carve_scene};
+use kodama_nodes::geom::carve::{CarveOutcome, CarveParams, DropKind, carve_scene};
 use kodama_nodes::geom::mesh_check::check_solid;
 use kodama_nodes::geom::relief::{
     Cpt, CptRow, DeltaParams, MeshState, ReliefParams, level, mesh_state_probabilities,
@@ -963,7 +963,7 @@ fn carved_solids_pass_the_solid_check_and_read_back_closed_from_the_glb() {
         .outcomes
         .iter()
         .filter_map(|o| match o {
-            CarveOutcome::Dropped(w) => Some(w),
+            CarveOutcome::Dropped(_, w) => Some(w),
             CarveOutcome::Carved => None,
         })
         .collect();
@@ -979,6 +979,17 @@ fn carved_solids_pass_the_solid_check_and_read_back_closed_from_the_glb() {
         *reasons.entry(d.chars().take(60).collect()).or_default() += 1;
     }
     println!("  dropped because: {reasons:?}");
+    let m = report.metrics(r);
+    assert_eq!(m.get("carved"), Some(n_carved as f64));
+    let by_kind: f64 = DropKind::ALL
+        .iter()
+        .map(|k| m.get(&format!("dropped/{}", k.name())).unwrap())
+        .sum();
+    assert_eq!(by_kind, dropped.len() as f64, "{m:?}");
+    println!(
+        "  by kind: {:?}",
+        DropKind::ALL.map(|k| (k.name(), m.get(&format!("dropped/{}", k.name())).unwrap()))
+    );
     for b in &report.buildings {
         println!(
             "  {:12} triangles {:6} -> {:6} ({} carved, {} dropped)",

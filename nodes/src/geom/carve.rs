@@ -10,7 +10,7 @@ use manifold_rust::manifold::Manifold;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ChartSet, Mesh, ObjectClass, ReliefInstance, ReliefSet, Scene};
+use crate::artifact::{ChartSet, Mesh, Metrics, ObjectClass, ReliefInstance, ReliefSet, Scene};
 use crate::geom::boolean::{subtract_then_add as apply, to_manifold};
 use crate::geom::mesh_build::quad_prism;
 use crate::rf::materials::Material;
@@ -103,8 +103,45 @@ impl CarveParams {
 pub enum CarveOutcome {
     /// Carved into (or added to) its building.
     Carved,
-    /// Left out, and why.
-    Dropped(String),
+    /// Left out: the step that refused it, and why.
+    Dropped(DropKind, String),
+}
+
+/// The step of the carve that left an instance out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum DropKind {
+    /// Fitting it to its wall: off the wall, or trimmed under the minimum size.
+    Fit,
+    /// Its building is not in the scene.
+    Scene,
+    /// The building solid itself is not one the Booleans take.
+    Solid,
+    /// Its prism is not a solid the Booleans take.
+    Prism,
+    /// The carved building failed the solid check (intersecting or degenerate triangles).
+    Check,
+}
+
+impl DropKind {
+    /// Every kind, in order.
+    pub const ALL: [DropKind; 5] = [
+        DropKind::Fit,
+        DropKind::Scene,
+        DropKind::Solid,
+        DropKind::Prism,
+        DropKind::Check,
+    ];
+
+    /// The kind's name in metrics.
+    pub fn name(self) -> &'static str {
+        match self {
+            DropKind::Fit => "fit",
+            DropKind::Scene => "scene",
+            DropKind::Solid => "solid",
+            DropKind::Prism => "prism",
+            DropKind::Check => "check",
+        }
+    }
 }
 
 /// Per building: triangles before and after.
@@ -129,6 +166,44 @@ pub struct CarveReport {
     pub outcomes: Vec<CarveOutcome>,
     /// One per building with at least one instance.
     pub buildings: Vec<CarvedBuilding>,
+}
+
+impl CarveReport {
+    /// The report as metrics, `relief` being the instances it reports on: `instances`, `carved`,
+    /// `dropped` and `dropped/<kind>` for every [`DropKind`]; per relief class `instances/<class>`
+    /// and `carved/<class>`; `buildings` carved into and their `triangles_before` and
+    /// `triangles_after`.
+    pub fn metrics(&self, relief: &ReliefSet) -> Metrics {
+        let mut m = Metrics::default();
+        let carved = |o: &CarveOutcome| *o == CarveOutcome::Carved;
+        m.set("instances", self.outcomes.len() as f64);
+        let n_carved = self.outcomes.iter().filter(|o| carved(o)).count();
+        m.set("carved", n_carved as f64);
+        m.set("dropped", (self.outcomes.len() - n_carved) as f64);
+        for kind in DropKind::ALL {
+            let n = self
+                .outcomes
+                .iter()
+                .filter(|o| matches!(o, CarveOutcome::Dropped(k, _) if *k == kind))
+                .count();
+            m.set(format!("dropped/{}", kind.name()), n as f64);
+        }
+        let mut per_class = std::collections::BTreeMap::<&str, (usize, usize)>::new();
+        for (inst, o) in relief.instances.iter().zip(&self.outcomes) {
+            let e = per_class.entry(inst.class.as_str()).or_default();
+            e.0 += 1;
+            e.1 += carved(o) as usize;
+        }
+        for (class, (n, c)) in per_class {
+            m.set(format!("instances/{class}"), n as f64);
+            m.set(format!("carved/{class}"), c as f64);
+        }
+        m.set("buildings", self.buildings.len() as f64);
+        let sum = |f: fn(&CarvedBuilding) -> usize| self.buildings.iter().map(f).sum::<usize>();
+        m.set("triangles_before", sum(|b| b.triangles_before) as f64);
+        m.set("triangles_after", sum(|b| b.triangles_after) as f64);
+        m
+    }
 }
 
 /// The prism of one instance as a closed, outward-oriented box mesh, its faces' materials set:
@@ -300,7 +375,7 @@ pub fn carve_scene(
         match fit_to_wall(inst, charts, p) {
             Ok(f) => fitted[k] = Some(f),
             Err(why) => {
-                outcomes[k] = CarveOutcome::Dropped(why);
+                outcomes[k] = CarveOutcome::Dropped(DropKind::Fit, why);
                 continue;
             }
         }
@@ -310,10 +385,13 @@ pub fn carve_scene(
                 per_object[c.object as usize].push(k)
             }
             _ => {
-                outcomes[k] = CarveOutcome::Dropped(format!(
-                    "the scene has no building {} at object {}: give CarveRelief the scene its charts were made from",
-                    c.building, c.object
-                ))
+                outcomes[k] = CarveOutcome::Dropped(
+                    DropKind::Scene,
+                    format!(
+                        "the scene has no building {} at object {}: give CarveRelief the scene its charts were made from",
+                        c.building, c.object
+                    ),
+                )
             }
         }
     }
@@ -334,7 +412,7 @@ pub fn carve_scene(
                     let why = format!("{}: the building solid: {e}", obj.id);
                     let results = ks
                         .iter()
-                        .map(|&k| (k, CarveOutcome::Dropped(why.clone())))
+                        .map(|&k| (k, CarveOutcome::Dropped(DropKind::Solid, why.clone())))
                         .collect();
                     let b = CarvedBuilding {
                         id: obj.id.clone(),
@@ -370,7 +448,10 @@ pub fn carve_scene(
                 let prism = instance_prism(inst, c.normal, wall, p);
                 match to_manifold(&prism) {
                     Ok(m) => prisms.push((k, inst.sign, m)),
-                    Err(e) => results.push((k, CarveOutcome::Dropped(format!("prism: {e}")))),
+                    Err(e) => results.push((
+                        k,
+                        CarveOutcome::Dropped(DropKind::Prism, format!("prism: {e}")),
+                    )),
                 }
             }
             let recess: Vec<&Manifold> = prisms.iter().filter(|p| p.1 < 0).map(|p| &p.2).collect();
@@ -396,7 +477,7 @@ pub fn carve_scene(
                                 mesh = m;
                                 results.push((*k, CarveOutcome::Carved));
                             }
-                            Err(e) => results.push((*k, CarveOutcome::Dropped(e))),
+                            Err(e) => results.push((*k, CarveOutcome::Dropped(DropKind::Check, e))),
                         }
                     }
                     mesh
@@ -492,5 +573,52 @@ mod tests {
         assert!(fit_to_wall(&instance([16.0, 26.0, 19.0, 29.0]), &charts, &p).is_err());
         let sliver = fit_to_wall(&instance([0.0, 5.0, 0.8, 9.0]), &charts, &p);
         assert!(sliver.is_err_and(|e| e.contains("under the 0.05 m minimum")));
+    }
+
+    #[test]
+    fn the_report_counts_each_outcome_by_kind_and_class() {
+        let mut window = instance([3.0, 3.0, 8.0, 9.0]);
+        (window.class, window.sign) = ("window".into(), -1);
+        let relief = ReliefSet {
+            instances: vec![
+                instance([5.0, 0.0, 6.2, 30.0]),
+                window,
+                instance([16.0, 26.0, 19.0, 29.0]),
+            ],
+            ..ReliefSet::default()
+        };
+        let report = CarveReport {
+            outcomes: vec![
+                CarveOutcome::Carved,
+                CarveOutcome::Dropped(DropKind::Check, "intersecting triangles".into()),
+                CarveOutcome::Dropped(DropKind::Fit, "no part of it lies on the wall".into()),
+            ],
+            buildings: vec![CarvedBuilding {
+                id: "building-0".into(),
+                triangles_before: 12,
+                triangles_after: 40,
+                carved: 1,
+                dropped: 1,
+            }],
+        };
+        let m = report.metrics(&relief);
+        let get = |k: &str| m.get(k).unwrap_or_else(|| panic!("{k} missing: {m:?}"));
+        assert_eq!(
+            [get("instances"), get("carved"), get("dropped")],
+            [3.0, 1.0, 2.0]
+        );
+        assert_eq!(
+            DropKind::ALL.map(|k| get(&format!("dropped/{}", k.name()))),
+            [1.0, 0.0, 0.0, 0.0, 1.0]
+        );
+        assert_eq!(
+            [get("instances/drainpipe"), get("carved/drainpipe")],
+            [2.0, 1.0]
+        );
+        assert_eq!([get("instances/window"), get("carved/window")], [1.0, 0.0]);
+        assert_eq!(
+            [get("buildings"), get("triangles_before"), get("triangles_after")],
+            [1.0, 12.0, 40.0]
+        );
     }
 }

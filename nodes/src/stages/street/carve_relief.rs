@@ -1,9 +1,10 @@
 //! CarveRelief: the relief instances carved into the building solids by Booleans (paper Sec.
 //! 4.2.2): recesses subtracted, protrusions added, carved faces given their materials; every
-//! carved solid passes the solid check or its instance is dropped.
+//! carved solid passes the solid check or its instance is dropped. CarveOutcomes reports, as
+//! metrics, what the same carve kept and dropped, and why.
 
-use crate::artifact::{ArtifactType, ChartSet, ReliefSet, Scene};
-use crate::geom::carve::{CarveParams, carve_scene};
+use crate::artifact::{ArtifactType, ChartSet, Metrics, ReliefSet, Scene};
+use crate::geom::carve::{CarveParams, CarveReport, carve_scene};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Relief instances carved into the scene's buildings.
@@ -18,23 +19,7 @@ impl Stage for CarveRelief {
     // drop the instance.
     const VERSION: u32 = 4;
     const DOC: &'static str = "façade relief carved into the building solids by Booleans (recesses subtracted, protrusions added), every result a checked solid";
-    const INPUTS: &'static [InputSpec] = &[
-        InputSpec::one(
-            "scene",
-            ArtifactType::Scene,
-            "the scene to carve (the charts' scene)",
-        ),
-        InputSpec::one(
-            "charts",
-            ArtifactType::Charts,
-            "the charts made from that scene",
-        ),
-        InputSpec::one(
-            "relief",
-            ArtifactType::Relief,
-            "the relief instances on those charts",
-        ),
-    ];
+    const INPUTS: &'static [InputSpec] = INPUTS;
     type Params = CarveParams;
     type Output = Scene;
 
@@ -43,18 +28,65 @@ impl Stage for CarveRelief {
     }
 
     fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Scene, StageError> {
-        let scene: &Scene = inputs.one("scene")?;
-        let charts: &ChartSet = inputs.one("charts")?;
-        let relief: &ReliefSet = inputs.one("relief")?;
-        if relief.layers.len() != charts.charts.len() {
-            return Err(StageError::Failed(format!(
-                "the relief has layers for {} charts, the chart set {}: give CarveRelief the charts its Relief node read",
-                relief.layers.len(),
-                charts.charts.len()
-            )));
-        }
-        let (carved, _report) =
-            carve_scene(scene, charts, relief, p).map_err(StageError::Failed)?;
-        Ok(carved)
+        Ok(carve(p, inputs)?.0)
     }
+}
+
+/// What CarveRelief keeps and drops with the same inputs and params, as metrics
+/// ([`CarveReport::metrics`]): instances carved and dropped, by the step that dropped them and by
+/// relief class, and the carved buildings' triangles. It carves again: the carve's scene is
+/// CarveRelief's one output.
+pub struct CarveOutcomes;
+
+impl Stage for CarveOutcomes {
+    const KIND: &'static str = "CarveOutcomes";
+    const VERSION: u32 = 1;
+    const DOC: &'static str =
+        "what CarveRelief carves and drops (and at which step), per relief class, as metrics";
+    const INPUTS: &'static [InputSpec] = INPUTS;
+    type Params = CarveParams;
+    type Output = Metrics;
+
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        p.validate().map_err(|(f, m)| ParamError::new(f, m))
+    }
+
+    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Metrics, StageError> {
+        let relief: &ReliefSet = inputs.one("relief")?;
+        Ok(carve(p, inputs)?.1.metrics(relief))
+    }
+}
+
+/// The inputs of both stages.
+const INPUTS: &[InputSpec] = &[
+    InputSpec::one(
+        "scene",
+        ArtifactType::Scene,
+        "the scene to carve (the charts' scene)",
+    ),
+    InputSpec::one(
+        "charts",
+        ArtifactType::Charts,
+        "the charts made from that scene",
+    ),
+    InputSpec::one(
+        "relief",
+        ArtifactType::Relief,
+        "the relief instances on those charts",
+    ),
+];
+
+/// The carve of the inputs' scene by their relief.
+fn carve(p: &CarveParams, inputs: &Inputs) -> Result<(Scene, CarveReport), StageError> {
+    let scene: &Scene = inputs.one("scene")?;
+    let charts: &ChartSet = inputs.one("charts")?;
+    let relief: &ReliefSet = inputs.one("relief")?;
+    if relief.layers.len() != charts.charts.len() {
+        return Err(StageError::Failed(format!(
+            "the relief has layers for {} charts, the chart set {}: give CarveRelief the charts its Relief node read",
+            relief.layers.len(),
+            charts.charts.len()
+        )));
+    }
+    carve_scene(scene, charts, relief, p).map_err(StageError::Failed)
 }
