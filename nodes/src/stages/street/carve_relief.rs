@@ -17,7 +17,9 @@ impl Stage for CarveRelief {
     // to the wall, no longer dropped.
     // 4: slivers the Boolean leaves at T-junctions are mended (geom::boolean), not a reason to
     // drop the instance.
-    const VERSION: u32 = 4;
+    // 5: an instance whose carve fails the solid check is tried again drawn in by 3 mm, then
+    // 10 mm, before it is dropped.
+    const VERSION: u32 = 5;
     const DOC: &'static str = "façade relief carved into the building solids by Booleans (recesses subtracted, protrusions added), every result a checked solid";
     const INPUTS: &'static [InputSpec] = INPUTS;
     type Params = CarveParams;
@@ -40,7 +42,8 @@ pub struct CarveOutcomes;
 
 impl Stage for CarveOutcomes {
     const KIND: &'static str = "CarveOutcomes";
-    const VERSION: u32 = 1;
+    // 2: as CarveRelief 5.
+    const VERSION: u32 = 2;
     const DOC: &'static str =
         "what CarveRelief carves and drops (and at which step), per relief class, as metrics";
     const INPUTS: &'static [InputSpec] = INPUTS;
