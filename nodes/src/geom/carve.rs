@@ -509,7 +509,10 @@ pub fn carve_scene(
                             if tried.is_ok() {
                                 break;
                             }
-                            let inst = fitted[*k].as_ref().expect("prisms are of fitted instances");
+                            // Prisms are made of fitted instances only.
+                            let Some(inst) = fitted[*k].as_ref() else {
+                                break;
+                            };
                             let c = &charts.charts[inst.chart as usize];
                             let Some(inset) = drawn_in(inst, c, nudge, p) else {
                                 break;
@@ -518,11 +521,11 @@ pub fn carve_scene(
                                 overshoot_m: p.overshoot_m + nudge,
                                 ..p.clone()
                             };
-                            if let Ok(m) = to_manifold(&instance_prism(&inset, c.normal, *wall, &q))
+                            let prism = instance_prism(&inset, c.normal, *wall, &q);
+                            if let Ok(m) = to_manifold(&prism)
+                                && let Ok(r) = one(&m)
                             {
-                                if let Ok(r) = one(&m) {
-                                    tried = Ok(r);
-                                }
+                                tried = Ok(r);
                             }
                         }
                         match tried {

@@ -26,7 +26,7 @@ impl Stage for CarveRelief {
     type Output = Scene;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        p.validate().map_err(|(f, m)| ParamError::new(f, m))
+        validate(p)
     }
 
     fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Scene, StageError> {
@@ -51,7 +51,7 @@ impl Stage for CarveOutcomes {
     type Output = Metrics;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        p.validate().map_err(|(f, m)| ParamError::new(f, m))
+        validate(p)
     }
 
     fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Metrics, StageError> {
@@ -78,6 +78,11 @@ const INPUTS: &[InputSpec] = &[
         "the relief instances on those charts",
     ),
 ];
+
+/// The params' check, for both stages.
+fn validate(p: &CarveParams) -> Result<(), ParamError> {
+    p.validate().map_err(|(f, m)| ParamError::new(f, m))
+}
 
 /// The carve of the inputs' scene by their relief.
 fn carve(p: &CarveParams, inputs: &Inputs) -> Result<(Scene, CarveReport), StageError> {
