@@ -76,7 +76,7 @@ pub fn from_manifold(m: &Manifold, fallback: Material) -> Mesh {
                 .unwrap_or(fallback as u8),
         );
     }
-    mend_slivers(&positions, &mut triangles, &mut materials);
+    mend_slivers(&positions, &mut triangles, &mut materials, 0.0);
     Mesh {
         positions: PodVec(positions),
         triangles: PodVec(triangles),
@@ -84,19 +84,43 @@ pub fn from_manifold(m: &Manifold, fallback: Material) -> Mesh {
     }
 }
 
-/// Whether triangle `t` of `positions` is a sliver: [`check_solid`]'s degenerate test.
-fn is_sliver(positions: &[[f32; 3]], t: [u32; 3]) -> bool {
-    is_degenerate(t.map(|i| positions[i as usize]))
+/// Whether triangle `t` of `positions` is a sliver: [`check_solid`]'s degenerate test, or a
+/// corner within `thin_m` of the opposite edge (0: the degenerate test alone).
+fn is_sliver(positions: &[[f32; 3]], t: [u32; 3], thin_m: f64) -> bool {
+    let p = t.map(|i| positions[i as usize]);
+    if is_degenerate(p) {
+        return true;
+    }
+    if thin_m <= 0.0 {
+        return false;
+    }
+    let p = p.map(|v| glam::DVec3::from(v.map(f64::from)));
+    let twice_area = (p[1] - p[0]).cross(p[2] - p[0]).length();
+    let longest = (0..3)
+        .map(|i| p[i].distance(p[(i + 1) % 3]))
+        .fold(0.0, f64::max);
+    twice_area < thin_m * longest
 }
+
+/// How far off its longest edge a sliver's middle corner may lie for [`subtract_then_add`] to
+/// mend it when the result fails the check: a few f32 steps a kilometre out (6e-5 m each). The
+/// Boolean's exact result rounded to f32 can leave a T-junction's sliver just off its line,
+/// folded over its neighbour, and the check then reports the two as intersecting.
+const THIN_SLIVER_M: f64 = 2e-4;
 
 /// Removes the slivers the Boolean leaves at T-junctions, whose three corners lie on one line
 /// once rounded to f32, keeping the surface closed: the neighbour across a sliver's longest edge
 /// is split at its middle corner, and the sliver goes. A sliver whose neighbour is another
 /// sliver, or has none, stays for the caller's check to report.
-fn mend_slivers(positions: &[[f32; 3]], triangles: &mut Vec<[u32; 3]>, materials: &mut Vec<u8>) {
+fn mend_slivers(
+    positions: &[[f32; 3]],
+    triangles: &mut Vec<[u32; 3]>,
+    materials: &mut Vec<u8>,
+    thin_m: f64,
+) {
     // A sliver beside another is mended once that one is: pass again while a pass mends any.
     for _ in 0..MEND_PASSES {
-        if !mend_pass(positions, triangles, materials) {
+        if !mend_pass(positions, triangles, materials, thin_m) {
             break;
         }
     }
@@ -110,6 +134,7 @@ fn mend_pass(
     positions: &[[f32; 3]],
     triangles: &mut Vec<[u32; 3]>,
     materials: &mut Vec<u8>,
+    thin_m: f64,
 ) -> bool {
     let mut owner: std::collections::HashMap<(u32, u32), usize> = Default::default();
     for (k, t) in triangles.iter().enumerate() {
@@ -124,7 +149,7 @@ fn mend_pass(
     let mut gone = vec![false; triangles.len()];
     for k in 0..triangles.len() {
         let t = triangles[k];
-        if gone[k] || !is_sliver(positions, t) {
+        if gone[k] || !is_sliver(positions, t, thin_m) {
             continue;
         }
         // The longest edge (x, y), in the sliver's order; m the corner between them.
@@ -136,7 +161,7 @@ fn mend_pass(
             continue;
         };
         let n = triangles[nk];
-        if gone[nk] || nk == k || is_sliver(positions, n) {
+        if gone[nk] || nk == k || is_sliver(positions, n, thin_m) {
             continue;
         }
         let Some(i) = (0..3).find(|&i| n[i] == y && n[(i + 1) % 3] == x) else {
@@ -144,7 +169,7 @@ fn mend_pass(
         };
         let r = n[(i + 2) % 3];
         let (first, second) = ([y, m, r], [m, x, r]);
-        if is_sliver(positions, first) || is_sliver(positions, second) {
+        if is_sliver(positions, first, thin_m) || is_sliver(positions, second, thin_m) {
             continue;
         }
         for (p, q) in [(x, y), (y, m), (m, x), (y, x), (x, r), (r, y)] {
@@ -216,7 +241,18 @@ pub fn subtract_then_add(
     if let Some(pr) = union_all(protrusions)? {
         out = op(&out, &pr, OpType::Add)?;
     }
-    let mesh = from_manifold(&out, fallback);
+    let mut mesh = from_manifold(&out, fallback);
+    if check_solid(&mesh).is_err() {
+        // Only then: a mesh that passes keeps its bytes.
+        let (mut triangles, mut materials) = (mesh.triangles.0.clone(), mesh.materials.0.clone());
+        mend_slivers(
+            &mesh.positions,
+            &mut triangles,
+            &mut materials,
+            THIN_SLIVER_M,
+        );
+        (mesh.triangles, mesh.materials) = (PodVec(triangles), PodVec(materials));
+    }
     check_solid(&mesh).map_err(|e| format!("the result fails the solid check: {e}"))?;
     Ok(mesh)
 }
@@ -235,6 +271,45 @@ mod tests {
                 a.dot(b.cross(c)) / 6.0
             })
             .sum()
+    }
+
+    /// The same T-junction with M rounded 0.02 mm off the edge, outside it: the sliver folds
+    /// back over the bottom face, and the check reports the two as intersecting. The exact test
+    /// leaves it; mended as thin as [`THIN_SLIVER_M`], the tetrahedron is a solid again.
+    #[test]
+    fn a_sliver_folded_just_off_its_line_is_mended_when_thin_ones_are() {
+        let positions: Vec<[f32; 3]> = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [0.5, -2e-5, 0.0],
+        ];
+        let (p0, p1, p2, p3, m) = (0, 1, 2, 3, 4);
+        let triangles = vec![
+            [p0, p2, m],
+            [m, p2, p1],
+            [p0, p1, p3],
+            [p0, p3, p2],
+            [p1, p2, p3],
+            [p0, m, p1],
+        ];
+        let materials = vec![0; 6];
+        let mesh = |t: &Vec<[u32; 3]>| Mesh {
+            positions: PodVec(positions.clone()),
+            triangles: PodVec(t.clone()),
+            materials: PodVec(vec![0; t.len()]),
+        };
+        let err = check_solid(&mesh(&triangles)).unwrap_err();
+        assert!(err.contains("intersect"), "{err}");
+        let (mut exact, mut mat) = (triangles.clone(), materials.clone());
+        mend_slivers(&positions, &mut exact, &mut mat, 0.0);
+        assert_eq!(exact, triangles);
+        let (mut thin, mut mat) = (triangles.clone(), materials);
+        mend_slivers(&positions, &mut thin, &mut mat, THIN_SLIVER_M);
+        check_solid(&mesh(&thin)).unwrap();
+        assert_eq!(thin.len(), 6);
+        assert!((volume(&mesh(&thin)) - 1.0 / 6.0).abs() < 1e-5);
     }
 
     /// A tetrahedron whose bottom face has its edge P1-P0 split at M while the side face across
@@ -267,7 +342,7 @@ mod tests {
         assert!(
             check_solid(&mesh(&triangles, &materials)).is_err_and(|e| e.contains("degenerate"))
         );
-        mend_slivers(&positions, &mut triangles, &mut materials);
+        mend_slivers(&positions, &mut triangles, &mut materials, 0.0);
         let mended = mesh(&triangles, &materials);
         check_solid(&mended).unwrap();
         assert_eq!(triangles.len(), 6);
