@@ -273,17 +273,16 @@ mod tests {
             .sum()
     }
 
-    /// The same T-junction with M rounded 0.02 mm off the edge, outside it: the sliver folds
-    /// back over the bottom face, and the check reports the two as intersecting. The exact test
-    /// leaves it; mended as thin as [`THIN_SLIVER_M`], the tetrahedron is a solid again.
-    #[test]
-    fn a_sliver_folded_just_off_its_line_is_mended_when_thin_ones_are() {
-        let positions: Vec<[f32; 3]> = vec![
+    /// A tetrahedron whose bottom face has its edge P1-P0 split at `m` while the side face
+    /// across it keeps the whole edge, closed by the sliver (P0, M, P1): the T-junction a
+    /// Boolean leaves. Positions, then triangles (the sliver last).
+    fn t_junction(m: [f32; 3]) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let positions = vec![
             [0.0, 0.0, 0.0],
             [1.0, 0.0, 0.0],
             [0.0, 1.0, 0.0],
             [0.0, 0.0, 1.0],
-            [0.5, -2e-5, 0.0],
+            m,
         ];
         let (p0, p1, p2, p3, m) = (0, 1, 2, 3, 4);
         let triangles = vec![
@@ -294,6 +293,15 @@ mod tests {
             [p1, p2, p3],
             [p0, m, p1],
         ];
+        (positions, triangles)
+    }
+
+    /// The T-junction with M rounded 0.02 mm off the edge, outside it: the sliver folds
+    /// back over the bottom face, and the check reports the two as intersecting. The exact test
+    /// leaves it; mended as thin as [`THIN_SLIVER_M`], the tetrahedron is a solid again.
+    #[test]
+    fn a_sliver_folded_just_off_its_line_is_mended_when_thin_ones_are() {
+        let (positions, triangles) = t_junction([0.5, -2e-5, 0.0]);
         let materials = vec![0; 6];
         let mesh = |t: &Vec<[u32; 3]>| Mesh {
             positions: PodVec(positions.clone()),
@@ -312,27 +320,11 @@ mod tests {
         assert!((volume(&mesh(&thin)) - 1.0 / 6.0).abs() < 1e-5);
     }
 
-    /// A tetrahedron whose bottom face has its edge P1-P0 split at M while the side face across
-    /// it keeps the whole edge, closed by the sliver (P0, M, P1): the T-junction a Boolean
-    /// leaves. Mended, the side face is split at M instead and the sliver is gone.
+    /// The T-junction with M on the edge: mended, the side face is split at M instead and the
+    /// sliver is gone.
     #[test]
     fn a_sliver_at_a_t_junction_is_mended_into_its_neighbour() {
-        let positions: Vec<[f32; 3]> = vec![
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [0.0, 0.0, 1.0],
-            [0.5, 0.0, 0.0],
-        ];
-        let (p0, p1, p2, p3, m) = (0, 1, 2, 3, 4);
-        let mut triangles = vec![
-            [p0, p2, m],
-            [m, p2, p1],
-            [p0, p1, p3],
-            [p0, p3, p2],
-            [p1, p2, p3],
-            [p0, m, p1],
-        ];
+        let (positions, mut triangles) = t_junction([0.5, 0.0, 0.0]);
         let mut materials = vec![0, 0, 1, 0, 0, 0];
         let mesh = |t: &Vec<[u32; 3]>, mt: &Vec<u8>| Mesh {
             positions: PodVec(positions.clone()),
