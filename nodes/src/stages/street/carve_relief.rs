@@ -101,3 +101,50 @@ fn carve(p: &CarveParams, inputs: &Inputs) -> Result<(Scene, CarveReport), Stage
     }
     carve_scene(scene, charts, relief, p).map_err(StageError::Failed)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Both stages refuse the same bad knobs, naming the field.
+    #[test]
+    fn both_stages_refuse_bad_params() {
+        for (field, p) in [
+            (
+                "overshoot_m",
+                CarveParams {
+                    overshoot_m: -1.0,
+                    ..CarveParams::default()
+                },
+            ),
+            (
+                "overshoot_m",
+                CarveParams {
+                    overshoot_m: 0.0,
+                    ..CarveParams::default()
+                },
+            ),
+            (
+                "min_size_m",
+                CarveParams {
+                    min_size_m: f64::NAN,
+                    ..CarveParams::default()
+                },
+            ),
+            (
+                "margin_m",
+                CarveParams {
+                    margin_m: 1e9,
+                    ..CarveParams::default()
+                },
+            ),
+        ] {
+            for e in [CarveRelief::validate(&p), CarveOutcomes::validate(&p)] {
+                let e = e.expect_err(field);
+                assert!(format!("{e:?}").contains(field), "{e:?}");
+            }
+        }
+        assert!(CarveRelief::validate(&CarveParams::default()).is_ok());
+        assert!(CarveOutcomes::validate(&CarveParams::default()).is_ok());
+    }
+}
