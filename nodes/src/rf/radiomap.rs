@@ -14,13 +14,13 @@ use crate::rng::{mix, unit};
 
 use super::antenna::Antenna;
 use super::antenna::spherical_basis;
-use super::fibonacci::fibonacci_run;
+use super::fibonacci::{PATCH, fibonacci_run, patch_order};
 use super::field::{self, CVec};
 use super::foliage::{FoliageDepth, loss_amplitude};
 use super::paths::TraceOptions;
 use super::radiomap_diffraction::{EdgeSampler, lit_wedges};
 use super::scattering::pattern;
-use super::scene::{EPS, RfScene};
+use super::scene::{EPS, RfScene, SurfaceHit};
 use super::slab_table::SlabTable;
 
 /// Where a map is measured: the cells of `grid` on the horizontal plane at height `z`, or on a
@@ -170,19 +170,27 @@ pub fn radio_map(
         foliage,
         slabs: SlabTable::new(scene),
     };
-    // Fixed chunks, summed in chunk order: the same bytes at any thread count.
-    const CHUNK: u32 = 8192;
+    // Fixed chunks, summed in chunk order and within a chunk in ray order: the same bytes at
+    // any thread count, and whatever the chunks' length.
+    let chunk = chunk_len(opt.rays);
     let diffraction = opt.diffraction && opt.max_depth > 0;
-    let chunks: Vec<(Vec<CellPower>, Vec<u32>)> = (0..opt.rays.div_ceil(CHUNK))
+    let chunks: Vec<(Vec<CellPower>, Vec<u32>)> = (0..opt.rays.div_ceil(chunk))
         .into_par_iter()
         .map(|k| {
             let (mut hits, mut crossings) = (Vec::new(), Vec::new());
             let mut first = diffraction.then(Vec::new);
-            let start = k * CHUNK;
-            for (i, d) in (start..).zip(fibonacci_run(opt.rays, start, CHUNK)) {
+            let start = k * chunk;
+            let dirs: Vec<DVec3> = fibonacci_run(opt.rays, start, chunk).collect();
+            // Every first bounce leaves the transmitter, and the lattice's neighbours lie side by
+            // side: cast as packets of a patch each, these rays cost a fraction of a lone ray
+            // (BENCHMARKS.md, issue 16). The map is the same to the bit.
+            let order = patch_order(opt.rays, start, chunk);
+            let landed = scene.cast_fan(tx, &dirs, &order, EPS, f64::INFINITY);
+            for ((i, &d0), &land) in (start..).zip(&dirs).zip(&landed) {
                 let ray = Ray {
-                    d0: d,
+                    d0,
                     index: i as u64,
+                    land,
                 };
                 shooter.shoot(ray, (&mut hits, &mut crossings), first.as_mut());
             }
@@ -222,12 +230,21 @@ pub fn radio_map(
     }
 }
 
-/// A ray leaving the transmitter: its direction and its index on the Fibonacci sphere (the seed of
-/// its event draws).
+/// Rays a chunk of a map traces together: about a band of the lattice [`PATCH`] rays high
+/// (`patch_order` then makes square patches), at least 8,192 so that a chunk's set-up stays
+/// small, at most 65,536 so that its buffers stay in the cache.
+fn chunk_len(rays: u32) -> u32 {
+    let band = 8.0 * (std::f64::consts::PI * rays as f64).sqrt();
+    ((band / PATCH as f64).ceil() as u32 * PATCH).clamp(8192, 65_536)
+}
+
+/// A ray leaving the transmitter: its direction, its index on the Fibonacci sphere (the seed of
+/// its event draws), and where it first lands.
 #[derive(Clone, Copy)]
 struct Ray {
     d0: DVec3,
     index: u64,
+    land: Option<SurfaceHit>,
 }
 
 /// The foliage a map's rays start in, and its loss.
@@ -260,7 +277,11 @@ impl Shooter<'_> {
     /// first lands on (foliage aside): the faces whose edges can diffract.
     fn shoot(
         &self,
-        Ray { d0, index: ray }: Ray,
+        Ray {
+            d0,
+            index: ray,
+            land,
+        }: Ray,
         (out, crossings): (&mut Vec<CellPower>, &mut Vec<Crossing>),
         mut first: Option<&mut Vec<u32>>,
     ) {
@@ -278,8 +299,12 @@ impl Shooter<'_> {
         let mut e: CVec = field::real(DVec3::from(antenna.field(d0.to_array())));
         let (mut o, mut d) = (tx, d0);
         let (mut depth, mut foliage_depth) = (0u32, foliage.at_tx);
+        let mut land = Some(land);
         loop {
-            let hit = scene.cast(o, d, EPS, f64::INFINITY);
+            let hit = match land.take() {
+                Some(hit) => hit,
+                None => scene.cast(o, d, EPS, f64::INFINITY),
+            };
             let t_end = hit.map_or(f64::INFINITY, |h| h.t);
             let foliage_amp = |len: f64| {
                 if foliage_depth.inside() {
