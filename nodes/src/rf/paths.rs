@@ -201,7 +201,7 @@ pub(super) struct Tracer<'a> {
 /// What the links from one transmitter share.
 struct FromTx {
     /// The ray-found surface sequences, each with the transmitter's images in its surfaces.
-    sequences: Vec<(Vec<u32>, Vec<DVec3>)>,
+    sequences: image_method::Candidates,
     /// The candidate diffracted paths (empty without diffraction).
     diffractions: Vec<DiffractionSequence>,
     /// How deep in foliage the transmitter stands.
@@ -248,13 +248,7 @@ pub fn trace_links(
             let seqs = sequences::reflection_sequences(scene, tx, opt);
             let diffractions = diffraction_sequences(scene, &all_wedges, tx, &seqs, opt);
             FromTx {
-                sequences: seqs
-                    .into_iter()
-                    .map(|seq| {
-                        let images = image_method::images_of(scene, tx, &seq);
-                        (seq, images)
-                    })
-                    .collect(),
+                sequences: image_method::Candidates::new(scene, tx, seqs),
                 diffractions,
                 foliage: FoliageDepth::at(scene, tx),
             }
@@ -304,10 +298,8 @@ fn link_paths(tracer: &Tracer, tx: DVec3, rx: DVec3, shared: &FromTx) -> Vec<Pat
     {
         paths.push(p);
     }
-    for (seq, images) in &shared.sequences {
-        if let Some(points) = image_method::image_points(tracer.scene, tx, rx, seq, images)
-            && let Some(p) = path_field::evaluate(tracer, &points, seq, shared.foliage)
-        {
+    for (seq, points) in shared.sequences.solve(tracer.scene, tx, rx) {
+        if let Some(p) = path_field::evaluate(tracer, &points, seq, shared.foliage) {
             paths.push(p);
         }
     }
