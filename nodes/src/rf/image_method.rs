@@ -183,45 +183,16 @@ fn inside_triangle(t: &[DVec3; 3], n: DVec3, p: DVec3) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
-    use crate::geom::mesh_build::cuboid;
-    use crate::rf::materials::Material;
     use crate::rf::paths::TraceOptions;
     use crate::rf::sequences::reflection_sequences;
+    use crate::rf::test_scenes::street_grid;
 
     /// The sphere test turns receivers away, never a path: over a street grid with its ground,
     /// every receiver gets exactly the paths of the exact walk over every sequence, in order
     /// and to the bit, while most sequences never reach the walk.
     #[test]
     fn candidates_solve_as_the_exact_walk_over_every_sequence() {
-        let mut objects: Vec<SceneObject> = (0..36)
-            .map(|k| SceneObject {
-                id: format!("b{k}"),
-                class: ObjectClass::Building,
-                mesh: cuboid(
-                    [(k % 6) as f64 * 30.0 - 75.0, (k / 6) as f64 * 28.0 - 70.0],
-                    [18.0 + (k % 4) as f64, 16.0, 8.0 + (k % 5) as f64 * 4.0],
-                    (k % 3) as f64 * 0.1,
-                    0.0,
-                    Material::Concrete,
-                ),
-            })
-            .collect();
-        objects.push(SceneObject {
-            id: "ground".into(),
-            class: ObjectClass::Terrain,
-            mesh: Mesh {
-                positions: PodVec(vec![
-                    [-200.0, -200.0, 0.0],
-                    [200.0, -200.0, 0.0],
-                    [200.0, 200.0, 0.0],
-                    [-200.0, 200.0, 0.0],
-                ]),
-                triangles: PodVec(vec![[0, 1, 2], [0, 2, 3]]),
-                materials: PodVec(vec![Material::MediumDryGround as u8; 2]),
-            },
-        });
-        let scene = RfScene::new(&Scene { objects }, 3.5e9, false).unwrap();
+        let scene = street_grid();
         let tx = DVec3::new(-60.0, -56.0, 12.0);
         let opt = TraceOptions {
             max_depth: 3,

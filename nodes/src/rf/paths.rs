@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::antenna::Antenna;
-use super::diffraction_search::{DiffractionSequence, diffraction_sequences};
+use super::diffraction_search::diffraction_sequences;
 use super::foliage::{FoliageDepth, specific_attenuation_db_per_m};
 use super::scattering::ScatteringPattern;
 use super::scene::RfScene;
@@ -203,7 +203,7 @@ struct FromTx {
     /// The ray-found surface sequences, each with the transmitter's images in its surfaces.
     sequences: image_method::Candidates,
     /// The candidate diffracted paths (empty without diffraction).
-    diffractions: Vec<DiffractionSequence>,
+    diffractions: diffracted::DiffractionCandidates,
     /// How deep in foliage the transmitter stands.
     foliage: FoliageDepth,
 }
@@ -249,7 +249,7 @@ pub fn trace_links(
             let diffractions = diffraction_sequences(scene, &all_wedges, tx, &seqs, opt);
             FromTx {
                 sequences: image_method::Candidates::new(scene, tx, seqs),
-                diffractions,
+                diffractions: diffracted::DiffractionCandidates::new(scene, tx, diffractions),
                 foliage: FoliageDepth::at(scene, tx),
             }
         })
@@ -277,13 +277,11 @@ pub fn trace_links(
             let (tx, rx) = (DVec3::from(link.0), DVec3::from(link.1));
             let mut paths = link_paths(&tracer, tx, rx, shared);
             if !shared.diffractions.is_empty() {
-                paths.extend(diffracted::diffracted_paths(
-                    &tracer,
-                    &shared.diffractions,
-                    tx,
-                    rx,
-                    shared.foliage,
-                ));
+                paths.extend(
+                    shared
+                        .diffractions
+                        .paths(&tracer, tx, rx, shared.foliage),
+                );
             }
             summarize(paths, freq_hz, diffuse_power)
         })

@@ -256,30 +256,16 @@ impl RfScene {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::artifact::{ObjectClass, Scene, SceneObject};
-    use crate::geom::mesh_build::cuboid;
     use crate::rf::fibonacci::{fibonacci_run, patch_order};
+    use crate::rf::test_scenes::street_grid;
 
-    /// A fan cast in packets lands where each ray cast alone does, to the bit: among 200 boxes
-    /// of a street grid, from a point between them, in patch order and in the lattice's own
-    /// (scattered) order.
+    /// A fan cast in packets lands where each ray cast alone does, to the bit: in a street grid,
+    /// from a point between its blocks, in patch order and in the lattice's own (scattered)
+    /// order.
     #[test]
     fn a_fan_lands_where_each_ray_does() {
-        let objects = (0..200)
-            .map(|k| SceneObject {
-                id: format!("b{k}"),
-                class: ObjectClass::Building,
-                mesh: cuboid(
-                    [(k % 20) as f64 * 13.0 - 120.0, (k / 20) as f64 * 17.0 - 80.0],
-                    [9.0 + (k % 3) as f64, 11.0, 6.0 + (k % 7) as f64 * 3.0],
-                    (k % 5) as f64 * 0.2,
-                    0.0,
-                    Material::Concrete,
-                ),
-            })
-            .collect();
-        let scene = RfScene::new(&Scene { objects }, 3.5e9, false).unwrap();
-        let tx = DVec3::new(3.0, 1.5, 4.5);
+        let scene = street_grid();
+        let tx = DVec3::new(-60.0, -56.0, 4.5);
         // Patches of 1.1 degrees: packets, not rays cast alone.
         let (n, start, len) = (2_000_000, 950_000, 30_000);
         let dirs: Vec<DVec3> = fibonacci_run(n, start, len).collect();

@@ -1,0 +1,39 @@
+//! Scenes the tracer's unit tests share.
+
+use crate::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
+use crate::geom::mesh_build::cuboid;
+use crate::rf::materials::Material;
+use crate::rf::scene::RfScene;
+
+/// 36 concrete blocks of 8 to 24 m, some turned, on a 6 x 6 street grid over x, y in about
+/// [-85, 85], standing on a 400 m ground of two triangles.
+pub fn street_grid() -> RfScene {
+    let mut objects: Vec<SceneObject> = (0..36)
+        .map(|k| SceneObject {
+            id: format!("b{k}"),
+            class: ObjectClass::Building,
+            mesh: cuboid(
+                [(k % 6) as f64 * 30.0 - 75.0, (k / 6) as f64 * 28.0 - 70.0],
+                [18.0 + (k % 4) as f64, 16.0, 8.0 + (k % 5) as f64 * 4.0],
+                (k % 3) as f64 * 0.1,
+                0.0,
+                Material::Concrete,
+            ),
+        })
+        .collect();
+    objects.push(SceneObject {
+        id: "ground".into(),
+        class: ObjectClass::Terrain,
+        mesh: Mesh {
+            positions: PodVec(vec![
+                [-200.0, -200.0, 0.0],
+                [200.0, -200.0, 0.0],
+                [200.0, 200.0, 0.0],
+                [-200.0, 200.0, 0.0],
+            ]),
+            triangles: PodVec(vec![[0, 1, 2], [0, 2, 3]]),
+            materials: PodVec(vec![Material::MediumDryGround as u8; 2]),
+        },
+    });
+    RfScene::new(&Scene { objects }, 3.5e9, false).unwrap()
+}
