@@ -69,6 +69,7 @@ impl Antenna {
     /// The transmitted field direction and amplitude for the unit direction `k` (site frame, away
     /// from the antenna): √G times θ̂ or φ̂ of the site frame (the polarisation stays vertical or
     /// horizontal in the site frame; the pattern is evaluated in the antenna's rotated frame).
+    #[inline]
     pub fn field(&self, k: [f64; 3]) -> [f64; 3] {
         let g = match self.pattern {
             Pattern::Isotropic => 1.0,
@@ -102,6 +103,7 @@ impl Antenna {
 }
 
 /// (θ̂, φ̂) at direction `k`; at the poles φ̂ is taken as +y and θ̂ = φ̂ × k.
+#[inline]
 pub fn spherical_basis(k: [f64; 3]) -> ([f64; 3], [f64; 3]) {
     // `k` is a unit vector: no overflow for hypot's slower care to guard against.
     let rho = (k[0] * k[0] + k[1] * k[1]).sqrt();
