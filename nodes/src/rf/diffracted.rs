@@ -66,7 +66,10 @@ impl Probe {
     #[inline]
     fn may_diffract(&self, rx: DVec3) -> bool {
         let sink = self.mirror * rx + self.shift;
-        let (u1, u2) = ((self.source - self.a).dot(self.e), (sink - self.a).dot(self.e));
+        let (u1, u2) = (
+            (self.source - self.a).dot(self.e),
+            (sink - self.a).dot(self.e),
+        );
         let r1 = (self.source - self.a - self.e * u1).length();
         let r2 = (sink - self.a - self.e * u2).length();
         if r1 + r2 < 1e-3 {
@@ -252,7 +255,11 @@ mod tests {
                 .collect();
             assert_eq!(fast, exact, "rx {rx}");
             paths += exact.len();
-            solved += candidates.probes.iter().filter(|p| p.may_diffract(rx)).count();
+            solved += candidates
+                .probes
+                .iter()
+                .filter(|p| p.may_diffract(rx))
+                .count();
             tried += candidates.list.len();
         }
         assert!(paths > 500, "{paths}");

@@ -31,7 +31,8 @@ pub fn fibonacci_sphere(n: u32) -> impl IndexedParallelIterator<Item = DVec3> {
 /// points; the two agree within 1e-8 (test below).
 pub fn fibonacci_run(n: u32, start: u32, len: u32) -> impl Iterator<Item = DVec3> {
     let golden = (1.0 + 5f64.sqrt()) / 2.0;
-    let azimuth = move |i: u32| (2.0 * std::f64::consts::PI * (i as f64 / golden).fract()).sin_cos();
+    let azimuth =
+        move |i: u32| (2.0 * std::f64::consts::PI * (i as f64 / golden).fract()).sin_cos();
     let (ds, dc) = (2.0 * std::f64::consts::PI / golden).sin_cos();
     // Walked up from the last restart, as a run starting there would.
     let (mut s, mut c) = azimuth(start - start % RESTART);
@@ -156,7 +157,11 @@ mod tests {
     /// at the lattice sizes a map uses.
     #[test]
     fn patches_cover_the_run_once_and_stay_small() {
-        for (n, len) in [(1_000_000u32, 14_208u32), (10_000_000, 44_864), (100_000, 8192)] {
+        for (n, len) in [
+            (1_000_000u32, 14_208u32),
+            (10_000_000, 44_864),
+            (100_000, 8192),
+        ] {
             let points: Vec<DVec3> = fibonacci_sphere(n).collect();
             let side = 8.0 * (4.0 * std::f64::consts::PI / n as f64).sqrt();
             for start in [0, n / 3, n / 2 - len / 2, n - len] {

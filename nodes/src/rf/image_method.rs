@@ -215,11 +215,21 @@ mod tests {
                 .filter_map(|(seq, images)| {
                     image_points(&scene, tx, rx, seq, images).map(|p| (seq.as_slice(), p))
                 })
-                .map(|(seq, p)| (seq, p.iter().map(|v| v.to_array().map(f64::to_bits)).collect()))
+                .map(|(seq, p)| {
+                    (
+                        seq,
+                        p.iter().map(|v| v.to_array().map(f64::to_bits)).collect(),
+                    )
+                })
                 .collect();
             let fast: Vec<(&[u32], Vec<[u64; 3]>)> = candidates
                 .solve(&scene, tx, rx)
-                .map(|(seq, p)| (seq, p.iter().map(|v| v.to_array().map(f64::to_bits)).collect()))
+                .map(|(seq, p)| {
+                    (
+                        seq,
+                        p.iter().map(|v| v.to_array().map(f64::to_bits)).collect(),
+                    )
+                })
                 .collect();
             assert_eq!(fast, exact, "rx {rx}");
             paths += exact.len();

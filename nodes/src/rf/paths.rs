@@ -277,11 +277,7 @@ pub fn trace_links(
             let (tx, rx) = (DVec3::from(link.0), DVec3::from(link.1));
             let mut paths = link_paths(&tracer, tx, rx, shared);
             if !shared.diffractions.is_empty() {
-                paths.extend(
-                    shared
-                        .diffractions
-                        .paths(&tracer, tx, rx, shared.foliage),
-                );
+                paths.extend(shared.diffractions.paths(&tracer, tx, rx, shared.foliage));
             }
             summarize(paths, freq_hz, diffuse_power)
         })
