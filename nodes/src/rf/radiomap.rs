@@ -18,7 +18,7 @@ use super::fibonacci::{PATCH, fibonacci_run, patch_order};
 use super::field::{self, CVec};
 use super::foliage::{FoliageDepth, loss_amplitude};
 use super::paths::TraceOptions;
-use super::radiomap_diffraction::{EdgeSampler, lit_wedges};
+use super::radiomap_diffraction::{EdgeSampler, all_wedges, lit_wedges};
 use super::scattering::pattern;
 use super::scene::{EPS, RfScene, SurfaceHit};
 use super::slab_table::SlabTable;
@@ -174,32 +174,36 @@ pub fn radio_map(
     // any thread count, and whatever the chunks' length.
     let chunk = chunk_len(opt.rays);
     let diffraction = opt.diffraction && opt.max_depth > 0;
-    let chunks: Vec<(Vec<CellPower>, Vec<u32>)> = (0..opt.rays.div_ceil(chunk))
-        .into_par_iter()
-        .map(|k| {
-            let (mut hits, mut crossings) = (Vec::new(), Vec::new());
-            let mut first = diffraction.then(Vec::new);
-            let start = k * chunk;
-            let dirs: Vec<DVec3> = fibonacci_run(opt.rays, start, chunk).collect();
-            // Every first bounce leaves the transmitter, and the lattice's neighbours lie side by
-            // side: cast as packets of a patch each, these rays cost a fraction of a lone ray
-            // (BENCHMARKS.md, issue 16). The map is the same to the bit.
-            let order = patch_order(opt.rays, start, chunk);
-            let landed = scene.cast_fan(tx, &dirs, &order, EPS, f64::INFINITY);
-            for ((i, &d0), &land) in (start..).zip(&dirs).zip(&landed) {
-                let ray = Ray {
-                    d0,
-                    index: i as u64,
-                    land,
-                };
-                shooter.shoot(ray, (&mut hits, &mut crossings), first.as_mut());
-            }
-            let mut first = first.unwrap_or_default();
-            first.sort_unstable();
-            first.dedup();
-            (hits, first)
-        })
-        .collect();
+    let shoot = || -> Vec<(Vec<CellPower>, Vec<u32>)> {
+        (0..opt.rays.div_ceil(chunk))
+            .into_par_iter()
+            .map(|k| {
+                let (mut hits, mut crossings) = (Vec::new(), Vec::new());
+                let mut first = diffraction.then(Vec::new);
+                let start = k * chunk;
+                let dirs: Vec<DVec3> = fibonacci_run(opt.rays, start, chunk).collect();
+                // Every first bounce leaves the transmitter, and the lattice's neighbours lie side by
+                // side: cast as packets of a patch each, these rays cost a fraction of a lone ray
+                // (BENCHMARKS.md, issue 16). The map is the same to the bit.
+                let order = patch_order(opt.rays, start, chunk);
+                let landed = scene.cast_fan(tx, &dirs, &order, EPS, f64::INFINITY);
+                for ((i, &d0), &land) in (start..).zip(&dirs).zip(&landed) {
+                    let ray = Ray {
+                        d0,
+                        index: i as u64,
+                        land,
+                    };
+                    shooter.shoot(ray, (&mut hits, &mut crossings), first.as_mut());
+                }
+                let mut first = first.unwrap_or_default();
+                first.sort_unstable();
+                first.dedup();
+                (hits, first)
+            })
+            .collect()
+    };
+    // The scene's wedges do not depend on the rays: built on one thread while the rest shoot.
+    let (chunks, all) = rayon::join(shoot, || diffraction.then(|| all_wedges(scene, opt)));
     let mut acc = vec![0.0f64; g.len()];
     let mut seen = Vec::new();
     for (hits, first) in chunks {
@@ -208,10 +212,10 @@ pub fn radio_map(
         }
         seen.extend(first);
     }
-    if diffraction {
+    if let Some(all) = all {
         seen.sort_unstable();
         seen.dedup();
-        let wedges = lit_wedges(scene, opt, &seen, tx);
+        let wedges = lit_wedges(all, &seen, tx);
         let sampler = EdgeSampler {
             scene,
             tx,

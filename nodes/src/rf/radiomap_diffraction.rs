@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use crate::rng::{mix, unit};
 
 use super::antenna::Antenna;
-use super::diffraction::{Wedge, diffracted_field, keller_cone, wedges};
+use super::diffraction::{Wedge, Wedges, diffracted_field, keller_cone, wedges};
 use super::field;
 use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
 use super::paths::TraceOptions;
@@ -44,20 +44,20 @@ pub(super) struct EdgeSampler<'a> {
     pub foliage: (FoliageDepth, f64),
 }
 
-/// The wedges (those `opt` allows) that can diffract the wave from `tx`, whose rays first land
-/// on the sorted triangles `seen` ([`Wedge::diffracts_from`]).
-pub(super) fn lit_wedges(
-    scene: &RfScene,
-    opt: &TraceOptions,
-    seen: &[u32],
-    tx: DVec3,
-) -> Vec<Wedge> {
-    let all = wedges(
+/// The wedges (those `opt` allows) over `scene`: what [`lit_wedges`] chooses from. Built while
+/// the map's rays are shot, which they do not depend on.
+pub(super) fn all_wedges(scene: &RfScene, opt: &TraceOptions) -> Wedges {
+    wedges(
         scene,
         opt.min_wedge_deg,
         opt.wedges_across_objects,
         opt.finite_faces,
-    );
+    )
+}
+
+/// The wedges of `all` that can diffract the wave from `tx`, whose rays first land on the sorted
+/// triangles `seen` ([`Wedge::diffracts_from`]).
+pub(super) fn lit_wedges(all: Wedges, seen: &[u32], tx: DVec3) -> Vec<Wedge> {
     let mut lit: Vec<u32> = seen.iter().map(|&t| all.face[t as usize]).collect();
     lit.sort_unstable();
     lit.dedup();
