@@ -231,21 +231,35 @@ pub fn trace_links(
         txs.binary_search(&l.0.map(f64::to_bits))
             .expect("every tx was listed")
     };
-    let all_wedges = if opt.diffraction && opt.max_depth > 0 {
-        super::diffraction::wedges(
-            scene,
-            opt.min_wedge_deg,
-            opt.wedges_across_objects,
-            opt.finite_faces,
-        )
-    } else {
-        super::diffraction::Wedges::default()
-    };
-    let from_tx: Vec<FromTx> = txs
+    let tx_points: Vec<DVec3> = txs
         .iter()
-        .map(|t| {
-            let tx = DVec3::from(t.map(f64::from_bits));
-            let seqs = sequences::reflection_sequences(scene, tx, opt);
+        .map(|t| DVec3::from(t.map(f64::from_bits)))
+        .collect();
+    // The scene's wedges do not depend on the rays: built on one thread while the rest search.
+    let (all_wedges, found) = rayon::join(
+        || {
+            if opt.diffraction && opt.max_depth > 0 {
+                super::diffraction::wedges(
+                    scene,
+                    opt.min_wedge_deg,
+                    opt.wedges_across_objects,
+                    opt.finite_faces,
+                )
+            } else {
+                super::diffraction::Wedges::default()
+            }
+        },
+        || {
+            tx_points
+                .iter()
+                .map(|&tx| sequences::reflection_sequences(scene, tx, opt))
+                .collect::<Vec<_>>()
+        },
+    );
+    let from_tx: Vec<FromTx> = tx_points
+        .iter()
+        .zip(found)
+        .map(|(&tx, seqs)| {
             let diffractions = diffraction_sequences(scene, &all_wedges, tx, &seqs, opt);
             FromTx {
                 sequences: image_method::Candidates::new(scene, tx, seqs),
