@@ -60,12 +60,13 @@ impl Reach {
 
     /// False only when the line from the image through `rx` passes outside the sphere: no
     /// point of the last surface lies on it. |w × v|² / |v|² is the squared distance of the
-    /// centre from the line, written without a division or a root.
+    /// centre from the line, written without a division or a root. A receiver on the image
+    /// itself has no line: it passes (and the exact walk decides).
     #[inline]
     fn may_reach(&self, rx: DVec3) -> bool {
         let (v, w) = (rx - self.image, self.centre - self.image);
         let (vv, wv) = (v.length_squared(), w.dot(v));
-        w.length_squared() * vv - wv * wv <= self.radius2 * vv
+        vv == 0.0 || w.length_squared() * vv - wv * wv <= self.radius2 * vv
     }
 }
 
@@ -186,6 +187,19 @@ mod tests {
     use crate::rf::paths::TraceOptions;
     use crate::rf::sequences::reflection_sequences;
     use crate::rf::test_scenes::street_grid;
+
+    /// An empty sequence is the direct path, for every receiver: the transmitter's own point
+    /// included, where the line from the image has no direction.
+    #[test]
+    fn an_empty_sequence_reaches_every_receiver() {
+        let scene = street_grid();
+        let tx = DVec3::new(-60.0, -56.0, 12.0);
+        let candidates = Candidates::new(&scene, tx, vec![Vec::new()]);
+        for rx in [tx, DVec3::new(10.0, 3.0, 1.5)] {
+            let got: Vec<(&[u32], Vec<DVec3>)> = candidates.solve(&scene, tx, rx).collect();
+            assert_eq!(got, vec![(&[][..], vec![tx, rx])], "rx {rx}");
+        }
+    }
 
     /// The sphere test turns receivers away, never a path: over a street grid with its ground,
     /// every receiver gets exactly the paths of the exact walk over every sequence, in order
