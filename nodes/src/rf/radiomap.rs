@@ -236,7 +236,7 @@ pub fn radio_map(
 
 /// Rays a chunk of a map traces together: about a band of the lattice [`PATCH`] rays high
 /// (`patch_order` then makes square patches), at least 8,192 so that a chunk's set-up stays
-/// small, at most 65,536 so that its buffers stay in the cache.
+/// small, at most 65,536, which bounds its buffers (directions, first hits, order: a few MB).
 fn chunk_len(rays: u32) -> u32 {
     let band = 8.0 * (std::f64::consts::PI * rays as f64).sqrt();
     ((band / PATCH as f64).ceil() as u32 * PATCH).clamp(8192, 65_536)
