@@ -244,16 +244,14 @@ pub fn subtract_then_add(
     let mut mesh = from_manifold(&out, fallback);
     if check_solid(&mesh).is_err() {
         // Only then: a mesh that passes keeps its bytes.
-        let (mut triangles, mut materials) = (mesh.triangles.0.clone(), mesh.materials.0.clone());
         mend_slivers(
             &mesh.positions,
-            &mut triangles,
-            &mut materials,
+            &mut mesh.triangles.0,
+            &mut mesh.materials.0,
             THIN_SLIVER_M,
         );
-        (mesh.triangles, mesh.materials) = (PodVec(triangles), PodVec(materials));
+        check_solid(&mesh).map_err(|e| format!("the result fails the solid check: {e}"))?;
     }
-    check_solid(&mesh).map_err(|e| format!("the result fails the solid check: {e}"))?;
     Ok(mesh)
 }
 
