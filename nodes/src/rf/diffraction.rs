@@ -11,6 +11,7 @@ use glam::DVec3;
 use num_complex::Complex64 as C64;
 
 use super::field::{self, CVec};
+use super::paths::TraceOptions;
 use super::scene::RfScene;
 use super::utd::wedge_coefficients;
 use crate::geom::polygon::convex_hull;
@@ -117,6 +118,17 @@ impl Wedge {
             ..*self
         }
     }
+}
+
+/// The wedges of `scene` that `opt` allows ([`wedges`] with its minimum angle, whether edges
+/// between objects count, and finite faces).
+pub fn wedges_for(scene: &RfScene, opt: &TraceOptions) -> Wedges {
+    wedges(
+        scene,
+        opt.min_wedge_deg,
+        opt.wedges_across_objects,
+        opt.finite_faces,
+    )
 }
 
 /// The edges of `scene` that can diffract: edges shared by exactly two triangles (matched by

@@ -239,12 +239,7 @@ pub fn trace_links(
     let (all_wedges, found) = rayon::join(
         || {
             if opt.diffraction && opt.max_depth > 0 {
-                super::diffraction::wedges(
-                    scene,
-                    opt.min_wedge_deg,
-                    opt.wedges_across_objects,
-                    opt.finite_faces,
-                )
+                super::diffraction::wedges_for(scene, opt)
             } else {
                 super::diffraction::Wedges::default()
             }

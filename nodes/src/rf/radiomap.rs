@@ -14,11 +14,12 @@ use crate::rng::{mix, unit};
 
 use super::antenna::Antenna;
 use super::antenna::spherical_basis;
+use super::diffraction::wedges_for;
 use super::fibonacci::{PATCH, fibonacci_run, patch_order};
 use super::field::{self, CVec};
 use super::foliage::{FoliageDepth, loss_amplitude};
 use super::paths::TraceOptions;
-use super::radiomap_diffraction::{EdgeSampler, all_wedges, lit_wedges};
+use super::radiomap_diffraction::{EdgeSampler, lit_wedges};
 use super::scattering::pattern;
 use super::scene::{EPS, RfScene, SurfaceHit};
 use super::slab_table::SlabTable;
@@ -203,7 +204,7 @@ pub fn radio_map(
             .collect()
     };
     // The scene's wedges do not depend on the rays: built on one thread while the rest shoot.
-    let (chunks, all) = rayon::join(shoot, || diffraction.then(|| all_wedges(scene, opt)));
+    let (chunks, all) = rayon::join(shoot, || diffraction.then(|| wedges_for(scene, opt)));
     let mut acc = vec![0.0f64; g.len()];
     let mut seen = Vec::new();
     for (hits, first) in chunks {

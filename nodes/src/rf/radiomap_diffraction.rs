@@ -18,10 +18,9 @@ use rayon::prelude::*;
 use crate::rng::{mix, unit};
 
 use super::antenna::Antenna;
-use super::diffraction::{Wedge, Wedges, diffracted_field, keller_cone, wedges};
+use super::diffraction::{Wedge, Wedges, diffracted_field, keller_cone};
 use super::field;
 use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
-use super::paths::TraceOptions;
 use super::radiomap::{Crossing, MapPlane};
 use super::scene::RfScene;
 
@@ -42,17 +41,6 @@ pub(super) struct EdgeSampler<'a> {
     pub plane: &'a MapPlane,
     /// Foliage depth at the transmitter, and the loss inside foliage, dB/m.
     pub foliage: (FoliageDepth, f64),
-}
-
-/// The wedges (those `opt` allows) over `scene`: what [`lit_wedges`] chooses from. Built while
-/// the map's rays are shot, which they do not depend on.
-pub(super) fn all_wedges(scene: &RfScene, opt: &TraceOptions) -> Wedges {
-    wedges(
-        scene,
-        opt.min_wedge_deg,
-        opt.wedges_across_objects,
-        opt.finite_faces,
-    )
 }
 
 /// The wedges of `all` that can diffract the wave from `tx`, whose rays first land on the sorted
