@@ -206,7 +206,7 @@ mod tests {
     use crate::rf::diffraction_search::diffraction_sequences;
     use crate::rf::paths::TraceOptions;
     use crate::rf::sequences::reflection_sequences;
-    use crate::rf::test_scenes::street_grid;
+    use crate::rf::test_scenes::{STREET_TX, street_grid};
 
     /// The probe turns receivers away, never a path: over a street grid, every receiver gets
     /// exactly the paths of `diffracted_path` over every candidate, in order and to the bit,
@@ -214,7 +214,7 @@ mod tests {
     #[test]
     fn candidates_give_the_paths_of_every_candidate_solved() {
         let scene = street_grid();
-        let tx = DVec3::new(-60.0, -56.0, 12.0);
+        let tx = STREET_TX;
         let opt = TraceOptions {
             max_depth: 2,
             rays: 20_000,

@@ -186,14 +186,14 @@ mod tests {
     use super::*;
     use crate::rf::paths::TraceOptions;
     use crate::rf::sequences::reflection_sequences;
-    use crate::rf::test_scenes::street_grid;
+    use crate::rf::test_scenes::{STREET_TX, street_grid};
 
     /// An empty sequence is the direct path, for every receiver: the transmitter's own point
     /// included, where the line from the image has no direction.
     #[test]
     fn an_empty_sequence_reaches_every_receiver() {
         let scene = street_grid();
-        let tx = DVec3::new(-60.0, -56.0, 12.0);
+        let tx = STREET_TX;
         let candidates = Candidates::new(&scene, tx, vec![Vec::new()]);
         for rx in [tx, DVec3::new(10.0, 3.0, 1.5)] {
             let got: Vec<(&[u32], Vec<DVec3>)> = candidates.solve(&scene, tx, rx).collect();
@@ -207,7 +207,7 @@ mod tests {
     #[test]
     fn candidates_solve_as_the_exact_walk_over_every_sequence() {
         let scene = street_grid();
-        let tx = DVec3::new(-60.0, -56.0, 12.0);
+        let tx = STREET_TX;
         let opt = TraceOptions {
             max_depth: 3,
             rays: 20_000,

@@ -419,7 +419,7 @@ fn hemisphere(n: DVec3, u1: f64, u2: f64) -> DVec3 {
 mod tests {
     use super::*;
     use crate::artifact::Scene;
-    use crate::rf::test_scenes::street_grid;
+    use crate::rf::test_scenes::{STREET_TX, street_grid};
 
     /// Casting the first bounces in packets and in patch order changes nothing: the map is the
     /// bytes of tracing ray after ray, each cast alone, summed in ray order. In a street grid,
@@ -438,7 +438,7 @@ mod tests {
             },
             1.5,
         );
-        let tx = DVec3::new(-60.0, -56.0, 12.0);
+        let tx = STREET_TX;
         let opt = TraceOptions {
             rays: 1_000_000,
             diffuse: true,

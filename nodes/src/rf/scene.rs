@@ -257,7 +257,7 @@ impl RfScene {
 mod tests {
     use super::*;
     use crate::rf::fibonacci::{fibonacci_run, patch_order};
-    use crate::rf::test_scenes::street_grid;
+    use crate::rf::test_scenes::{STREET_TX, street_grid};
 
     /// A fan cast in packets lands where each ray cast alone does, to the bit: in a street grid,
     /// from a point between its blocks, in patch order and in the lattice's own (scattered)
@@ -265,7 +265,8 @@ mod tests {
     #[test]
     fn a_fan_lands_where_each_ray_does() {
         let scene = street_grid();
-        let tx = DVec3::new(-60.0, -56.0, 4.5);
+        // Down at 4.5 m, among the blocks.
+        let tx = DVec3::new(STREET_TX.x, STREET_TX.y, 4.5);
         // Patches of 1.1 degrees: packets, not rays cast alone.
         let (n, start, len) = (2_000_000, 950_000, 30_000);
         let dirs: Vec<DVec3> = fibonacci_run(n, start, len).collect();

@@ -1,9 +1,14 @@
 //! Scenes the tracer's unit tests share.
 
+use glam::DVec3;
+
 use crate::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
 use crate::geom::mesh_build::cuboid;
 use crate::rf::materials::Material;
 use crate::rf::scene::RfScene;
+
+/// A transmitter 12 m up at the crossing of [`street_grid`]'s first streets.
+pub const STREET_TX: DVec3 = DVec3::new(-60.0, -56.0, 12.0);
 
 /// 36 concrete blocks of 8 to 24 m, some turned, on a 6 x 6 street grid over x, y in about
 /// [-85, 85], standing on a 400 m ground of two triangles.
