@@ -28,16 +28,29 @@ const WIDTH: usize = 8;
 
 /// A node: its children's boxes as structure of arrays, so one load fetches an axis bound of all
 /// eight. A child is a node (`count` 0, `index` the node) or a leaf (`count` triangle packets
-/// from `index`).
+/// from `index`). An unused slot's box is empty (lower bounds +inf, upper -inf), which no ray
+/// enters.
 #[repr(C, align(32))]
 #[derive(Clone, Copy)]
 struct Node {
-    lo: [[f32; WIDTH]; 3],
-    hi: [[f32; WIDTH]; 3],
+    /// Rows 0-2: the lower bounds on x, y, z; rows 3-5: the upper bounds.
+    planes: [[f32; WIDTH]; 6],
     index: [u32; WIDTH],
     count: [u8; WIDTH],
     /// Bit i set when child slot i is used.
     used: u32,
+}
+
+impl Node {
+    #[inline(always)]
+    fn lo(&self, axis: usize) -> &[f32; WIDTH] {
+        &self.planes[axis]
+    }
+
+    #[inline(always)]
+    fn hi(&self, axis: usize) -> &[f32; WIDTH] {
+        &self.planes[3 + axis]
+    }
 }
 
 /// The wide BVH over a triangle list.
@@ -64,6 +77,13 @@ pub struct WideHit {
 struct Slabs {
     o: [f32; 3],
     inv: [f32; 3],
+    /// `inv` scaled away from zero by 1 + `PAD`: a box's exit distance comes out padded with
+    /// no extra operation on the chain from one node to the next.
+    inv_far: [f32; 3],
+    /// The row of [`Node::planes`] a ray enters each axis's slab by (the lower bound when the
+    /// direction is positive), and the row it leaves by.
+    near_row: [usize; 3],
+    far_row: [usize; 3],
 }
 
 impl Slabs {
@@ -79,40 +99,59 @@ impl Slabs {
             };
             1.0 / c
         });
+        Slabs::from_inv(o.to_array(), inv)
+    }
+
+    #[inline(always)]
+    fn from_inv(o: [f32; 3], inv: [f32; 3]) -> Slabs {
+        let positive = inv.map(|c| c > 0.0);
         Slabs {
-            o: o.to_array(),
+            o,
             inv,
+            inv_far: inv.map(|c| c * (1.0 + PAD)),
+            near_row: [0, 1, 2].map(|a| if positive[a] { a } else { 3 + a }),
+            far_row: [0, 1, 2].map(|a| if positive[a] { 3 + a } else { a }),
         }
     }
 }
 
-/// Eight box tests: a bit per child whose box the ray enters within [tmin, tfar], and the
-/// entry distances.
+/// `t` padded by `PAD` away from zero: the limit a box's entry distance is held to.
+#[inline(always)]
+fn padded(t: f32) -> f32 {
+    t + t.abs() * PAD
+}
+
+/// Eight box tests: a bit per child whose box the ray enters within [tmin, `far`], and the
+/// entry distances. `far` is already padded ([`padded`]); the boxes' exit distances are padded
+/// by [`Slabs::inv_far`]. Rounding is monotone, so a zero-thickness box (a wall on an axis
+/// plane) enters and leaves at the same unpadded distance and is kept.
 trait Lanes {
-    fn boxes(node: &Node, s: &Slabs, tmin: f32, tfar: f32) -> (u32, [f32; WIDTH]);
+    fn boxes(node: &Node, s: &Slabs, tmin: f32, far: f32) -> (u32, [f32; WIDTH]);
 }
 
 struct Scalar;
 
 impl Lanes for Scalar {
     #[inline(always)]
-    fn boxes(node: &Node, s: &Slabs, tmin: f32, tfar: f32) -> (u32, [f32; WIDTH]) {
+    fn boxes(node: &Node, s: &Slabs, tmin: f32, far: f32) -> (u32, [f32; WIDTH]) {
         let mut near = [0.0f32; WIDTH];
         let mut mask = 0u32;
         for i in 0..WIDTH {
-            let (mut tn, mut tf) = (tmin, tfar);
-            for a in 0..3 {
-                let t1 = (node.lo[a][i] - s.o[a]) * s.inv[a];
-                let t2 = (node.hi[a][i] - s.o[a]) * s.inv[a];
-                tn = max(tn, min(t1, t2));
-                tf = min(tf, max(t1, t2));
-            }
+            let t = |a: usize| {
+                (
+                    (node.planes[s.near_row[a]][i] - s.o[a]) * s.inv[a],
+                    (node.planes[s.far_row[a]][i] - s.o[a]) * s.inv_far[a],
+                )
+            };
+            let ((nx, fx), (ny, fy), (nz, fz)) = (t(0), t(1), t(2));
+            let tn = max(max(nx, ny), max(nz, tmin));
+            let tf = min(min(fx, fy), min(fz, far));
             near[i] = tn;
-            if tn <= tf + tf.abs() * PAD {
+            if tn <= tf {
                 mask |= 1 << i;
             }
         }
-        (mask & node.used, near)
+        (mask, near)
     }
 }
 
@@ -134,31 +173,36 @@ struct Avx2;
 #[cfg(target_arch = "x86_64")]
 impl Lanes for Avx2 {
     #[inline(always)]
-    fn boxes(node: &Node, s: &Slabs, tmin: f32, tfar: f32) -> (u32, [f32; WIDTH]) {
+    fn boxes(node: &Node, s: &Slabs, tmin: f32, far: f32) -> (u32, [f32; WIDTH]) {
         use std::arch::x86_64::*;
         // SAFETY: only reached from `closest_avx2` / `any_avx2`, which run after
-        // `is_x86_feature_detected!("avx2")`; `Node` is 32-byte aligned, so are its arrays.
+        // `is_x86_feature_detected!("avx2")`; `Node` is 32-byte aligned, so are its rows.
         unsafe {
-            let mut tn = _mm256_set1_ps(tmin);
-            let mut tf = _mm256_set1_ps(tfar);
+            // A loop, not a closure: closures do not inherit `target_feature`, and the
+            // intrinsics would become calls.
+            let mut tn = [_mm256_setzero_ps(); 3];
+            let mut tf = [_mm256_setzero_ps(); 3];
             for a in 0..3 {
                 let o = _mm256_set1_ps(s.o[a]);
-                let inv = _mm256_set1_ps(s.inv[a]);
-                let lo = _mm256_load_ps(node.lo[a].as_ptr());
-                let hi = _mm256_load_ps(node.hi[a].as_ptr());
-                let t1 = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
-                let t2 = _mm256_mul_ps(_mm256_sub_ps(hi, o), inv);
-                // min_ps(a, b) = a < b ? a : b and max_ps(a, b) = a > b ? a : b: the scalar
-                // `min` and `max`.
-                tn = _mm256_max_ps(tn, _mm256_min_ps(t1, t2));
-                tf = _mm256_min_ps(tf, _mm256_max_ps(t1, t2));
+                let near = _mm256_load_ps(node.planes[s.near_row[a]].as_ptr());
+                let far = _mm256_load_ps(node.planes[s.far_row[a]].as_ptr());
+                tn[a] = _mm256_mul_ps(_mm256_sub_ps(near, o), _mm256_set1_ps(s.inv[a]));
+                tf[a] = _mm256_mul_ps(_mm256_sub_ps(far, o), _mm256_set1_ps(s.inv_far[a]));
             }
-            let abs = _mm256_andnot_ps(_mm256_set1_ps(-0.0), tf);
-            let lim = _mm256_add_ps(tf, _mm256_mul_ps(abs, _mm256_set1_ps(PAD)));
-            let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(tn, lim);
+            // min_ps(a, b) = a < b ? a : b and max_ps(a, b) = a > b ? a : b: the scalar
+            // `min` and `max`.
+            let tn = _mm256_max_ps(
+                _mm256_max_ps(tn[0], tn[1]),
+                _mm256_max_ps(tn[2], _mm256_set1_ps(tmin)),
+            );
+            let tf = _mm256_min_ps(
+                _mm256_min_ps(tf[0], tf[1]),
+                _mm256_min_ps(tf[2], _mm256_set1_ps(far)),
+            );
+            let hit = _mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf);
             let mut near = [0.0f32; WIDTH];
             _mm256_storeu_ps(near.as_mut_ptr(), tn);
-            (_mm256_movemask_ps(hit) as u32 & node.used, near)
+            (_mm256_movemask_ps(hit) as u32, near)
         }
     }
 }
@@ -208,8 +252,14 @@ impl WideBvh {
     fn collapse(&mut self, bvh: &Bvh2, tris: &[Triangle], id: usize, level: usize) -> usize {
         let me = self.nodes.len();
         self.nodes.push(Node {
-            lo: [[f32::INFINITY; WIDTH]; 3],
-            hi: [[f32::NEG_INFINITY; WIDTH]; 3],
+            planes: [
+                [f32::INFINITY; WIDTH],
+                [f32::INFINITY; WIDTH],
+                [f32::INFINITY; WIDTH],
+                [f32::NEG_INFINITY; WIDTH],
+                [f32::NEG_INFINITY; WIDTH],
+                [f32::NEG_INFINITY; WIDTH],
+            ],
             index: [0; WIDTH],
             count: [0; WIDTH],
             used: 0,
@@ -263,8 +313,8 @@ impl WideBvh {
             };
             let node = &mut self.nodes[me];
             for a in 0..3 {
-                node.lo[a][slot] = lo[a];
-                node.hi[a][slot] = hi[a];
+                node.planes[a][slot] = lo[a];
+                node.planes[3 + a][slot] = hi[a];
             }
             node.index[slot] = index;
             node.count[slot] = count;
@@ -395,10 +445,11 @@ fn closest_from<L: Lanes>(
         count: 0,
         near: tmin,
     };
+    // Padded like the box test: the entry distance of a box and the distance of a triangle
+    // on its face round differently.
+    let mut limit = padded(best_t);
     loop {
-        // Padded like the box test: the entry distance of a box and the distance of a triangle
-        // on its face round differently.
-        if cur.near <= best_t + best_t.abs() * PAD {
+        if cur.near <= limit {
             if cur.count != 0 {
                 let first = cur.index as usize;
                 for packet in &bvh.packets[first..first + cur.count as usize] {
@@ -408,9 +459,10 @@ fn closest_from<L: Lanes>(
                         }
                     }
                 }
+                limit = padded(best_t);
             } else {
                 let node = &bvh.nodes[cur.index as usize];
-                let (mut mask, near) = L::boxes(node, slabs, tmin, best_t);
+                let (mut mask, near) = L::boxes(node, slabs, tmin, limit);
                 if mask != 0 {
                     let entry = |i: usize| Entry {
                         index: node.index[i],
@@ -486,6 +538,7 @@ fn any<L: Lanes>(
 ) -> bool {
     let mut top = 0usize;
     let (mut cur, mut count) = (0u32, 0u32);
+    let limit = padded(tmax);
     loop {
         if count != 0 {
             let first = cur as usize;
@@ -496,7 +549,7 @@ fn any<L: Lanes>(
             }
         } else {
             let node = &bvh.nodes[cur as usize];
-            let (mut mask, _) = L::boxes(node, slabs, tmin, tmax);
+            let (mut mask, _) = L::boxes(node, slabs, tmin, limit);
             if mask != 0 {
                 let i = mask.trailing_zeros() as usize;
                 mask &= mask - 1;

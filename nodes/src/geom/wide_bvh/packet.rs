@@ -219,7 +219,7 @@ fn wider_than_box(bvh: &WideBvh, r: &Rays, e: &Entry) -> bool {
     let parent = &bvh.nodes[e.parent as usize];
     let i = e.slot as usize;
     let size = (0..3)
-        .map(|a| parent.hi[a][i] - parent.lo[a][i])
+        .map(|a| parent.hi(a)[i] - parent.lo(a)[i])
         .fold(0.0f32, max);
     r.spread * e.near.max(0.0) + r.offset > SPLIT_RATIO * size
 }
@@ -240,8 +240,8 @@ fn frustum_boxes(node: &super::Node, r: &Rays, tmin: f32, far: f32) -> (u32, [f3
                 let (p, q, s, t) = (d0 * i0, d0 * i1, d1 * i0, d1 * i1);
                 (min(min(p, q), min(s, t)), max(max(p, q), max(s, t)))
             };
-            let (lo_min, lo_max) = bound(node.lo[a][i]);
-            let (hi_min, hi_max) = bound(node.hi[a][i]);
+            let (lo_min, lo_max) = bound(node.lo(a)[i]);
+            let (hi_min, hi_max) = bound(node.hi(a)[i]);
             tn[i] = max(tn[i], min(lo_min, hi_min));
             tf[i] = min(tf[i], max(lo_max, hi_max));
         }
@@ -268,7 +268,7 @@ fn leaf_rays(node: &super::Node, slot: usize, r: &Rays, g: usize, tmin: f32) -> 
     let mut tn = [tmin; GROUP];
     let mut tf = r.best_t[g];
     for a in 0..3 {
-        let (lo, hi) = (node.lo[a][slot], node.hi[a][slot]);
+        let (lo, hi) = (node.lo(a)[slot], node.hi(a)[slot]);
         for l in 0..GROUP {
             let t1 = (lo - r.o[g][a][l]) * r.inv[g][a][l];
             let t2 = (hi - r.o[g][a][l]) * r.inv[g][a][l];
@@ -331,10 +331,10 @@ fn traverse<L: Lanes>(bvh: &WideBvh, r: &mut Rays, tmin: f32, tmax: f32, (stack,
                         }
                         // SAFETY: as above, a live lane.
                         let ray = unsafe { r.sheared[g * GROUP + l].assume_init_ref() };
-                        let slabs = Slabs {
-                            o: [0, 1, 2].map(|a| r.o[g][a][l]),
-                            inv: [0, 1, 2].map(|a| r.inv[g][a][l]),
-                        };
+                        let slabs = Slabs::from_inv(
+                            [0, 1, 2].map(|a| r.o[g][a][l]),
+                            [0, 1, 2].map(|a| r.inv[g][a][l]),
+                        );
                         let best = (r.best_t[g][l], r.best_p[g][l]);
                         (r.best_t[g][l], r.best_p[g][l]) = closest_from::<L>(
                             bvh, ray, &slabs, tmin, tmax, single, cur.index, best,
