@@ -23,6 +23,7 @@ mod consensus;
 mod labels;
 mod twin;
 
+use std::cell::RefCell;
 use std::collections::HashMap;
 
 use rayon::prelude::*;
@@ -270,14 +271,27 @@ fn refine_view(
     );
     // Past the fine lattice's resolution: every pixel within a fine stride of an edge.
     let finest = samples(view, 1, Some(&near(fine_stride)), p);
-    let by_level: [&[Sample]; 4] = [&mid, &close, &fine, &finest];
-    let at = |smp: &[Sample], c: Candidate| {
+    // The lattices by level: the coarse grid's, then the pattern search's from level 0 on,
+    // its last one for every level past it.
+    let lattices: [&[Sample]; 5] = [&coarse, &mid, &close, &fine, &finest];
+    let (on_coarse, on_finest) = (0, lattices.len() - 1);
+    // A pattern search comes back to poses it has scored (the pose it stands on, the one it
+    // came from, the best at the end): a fifth of the rays of the demo's registration were
+    // such repeats. Looked up, never iterated: the order of evaluation stays the search's.
+    let scored = RefCell::new(HashMap::<(usize, [u64; 3]), f64>::new());
+    let at = |lattice: usize, c: Candidate| {
+        let key = (lattice, c.map(f64::to_bits));
+        if let Some(&s) = scored.borrow().get(&key) {
+            return s;
+        }
         let pos = [
             view.pose.position[0] + c[0],
             view.pose.position[1] + c[1],
             view.pose.position[2],
         ];
-        score(smp, twin, consensus, pos, c[2])
+        let s = score(lattices[lattice], twin, consensus, pos, c[2]);
+        scored.borrow_mut().insert(key, s);
+        s
     };
     let search_rad = p.search_deg.to_radians();
     // Coarse: 7 x 7 positions, 5 headings.
@@ -302,7 +316,7 @@ fn refine_view(
             let mut ranked: Vec<(f64, usize)> = grid
                 .iter()
                 .enumerate()
-                .map(|(k, c)| (at(&coarse, *c) - p.prior(c), k))
+                .map(|(k, c)| (at(on_coarse, *c) - p.prior(c), k))
                 .filter(|(s, _)| s.is_finite())
                 .collect();
             ranked.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
@@ -323,7 +337,7 @@ fn refine_view(
     let (right, fwd) = (plan(0), plan(2));
     // The metadata, or the first pass's pose, stands unless a search beats it.
     let mut best = start.unwrap_or([0.0; 3]);
-    let mut best_score = at(&finest, best) - p.prior(&best);
+    let mut best_score = at(on_finest, best) - p.prior(&best);
     for (first, from_level) in starts {
         let scale = (1u32 << from_level) as f64;
         let (mut here, mut sm, mut sr) = (first, step_m / scale, step_rad / scale);
@@ -344,15 +358,15 @@ fn refine_view(
                         (here[2] + k * sr).clamp(-search_rad, search_rad),
                     ]);
                 }
-                let smp = by_level[(level as usize).min(by_level.len() - 1)];
-                let next = best_of(&around, &|c| at(smp, c), p).0;
+                let lattice = (level as usize + 1).min(on_finest);
+                let next = best_of(&around, &|c| at(lattice, c), p).0;
                 if next == here {
                     break;
                 }
                 here = next;
             }
         }
-        let s = at(&finest, here) - p.prior(&here);
+        let s = at(on_finest, here) - p.prior(&here);
         if s > best_score {
             (best, best_score) = (here, s);
         }
@@ -361,8 +375,8 @@ fn refine_view(
     // equally well (a sample lattice cannot tell poses apart finer than its spacing), the prior
     // picked the one nearest the metadata: the plateau's near edge, up to half a lattice step
     // off. Its middle is the better estimate.
-    let best = plateau_middle(best, &|c| at(&finest, c), [right, fwd], p);
-    let (before, after) = (at(&finest, [0.0; 3]), at(&finest, best));
+    let best = plateau_middle(best, &|c| at(on_finest, c), [right, fwd], p);
+    let (before, after) = (at(on_finest, [0.0; 3]), at(on_finest, best));
     if !before.is_finite() {
         return (view.pose, unchanged);
     }
