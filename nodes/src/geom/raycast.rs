@@ -210,6 +210,41 @@ impl SceneRays {
         out
     }
 
+    /// [`SceneRays::cast_coherent_index`] with the packets cut where the caller says: `runs`
+    /// are the lengths of consecutive runs of `rays` (a longer one is cut every [`PACKET`];
+    /// rays past them go in runs of [`PACKET`]), each cast as packets of one octant. For rays whose natural groups are smaller
+    /// than a packet (the pixels of a tile near an edge), so that a packet does not span two.
+    pub fn cast_runs_index(
+        &self,
+        rays: &[([f32; 3], [f32; 3])],
+        runs: &[u32],
+        tmin: f32,
+        tmax: f32,
+    ) -> Vec<Option<(f32, u32)>> {
+        let mut out = vec![None; rays.len()];
+        let mut ranges = Vec::with_capacity(runs.len());
+        let mut start = 0usize;
+        for &n in runs {
+            let end = (start + n as usize).min(rays.len());
+            ranges.extend(
+                (start..end)
+                    .step_by(PACKET)
+                    .map(|a| a..(a + PACKET).min(end)),
+            );
+            start = end;
+        }
+        // Rays past the runs go in plain packets of PACKET.
+        ranges.extend(
+            (start..rays.len())
+                .step_by(PACKET)
+                .map(|a| a..(a + PACKET).min(rays.len())),
+        );
+        self.packets_in(rays, ranges.into_iter(), tmin, tmax, |i, h| {
+            out[i] = h.map(|h| (h.t, h.prim))
+        });
+        out
+    }
+
     /// Casts `rays` in packets of one octant within each run of [`PACKET`], telling `found`
     /// each ray's index and hit.
     fn packets(
@@ -217,12 +252,30 @@ impl SceneRays {
         rays: &[([f32; 3], [f32; 3])],
         tmin: f32,
         tmax: f32,
+        found: impl FnMut(usize, Option<WideHit>),
+    ) {
+        let ranges = (0..rays.len())
+            .step_by(PACKET)
+            .map(|s| s..(s + PACKET).min(rays.len()));
+        self.packets_in(rays, ranges, tmin, tmax, found);
+    }
+
+    /// Casts the rays of each range (at most [`PACKET`] long) in packets of one octant.
+    fn packets_in(
+        &self,
+        rays: &[([f32; 3], [f32; 3])],
+        ranges: impl Iterator<Item = std::ops::Range<usize>>,
+        tmin: f32,
+        tmax: f32,
         mut found: impl FnMut(usize, Option<WideHit>),
     ) {
         let mut hits = [None; PACKET];
         let mut origins = [Vec3A::ZERO; PACKET];
         let mut dirs = [Vec3A::ZERO; PACKET];
-        for (c, chunk) in rays.chunks(PACKET).enumerate() {
+        for range in ranges {
+            let c0 = range.start;
+            let chunk = &rays[range];
+            debug_assert!(chunk.len() <= PACKET);
             // A packet's rays share their directions' signs: a tile across an axis splits into up
             // to eight, by a stable counting sort on the octant. Non-finite rays (octant 8) are
             // cast alone; they hit nothing.
@@ -252,10 +305,7 @@ impl SceneRays {
                 if o == 8 || run.len() < MIN_PACKET || !narrow(chunk, run) {
                     for &k in run {
                         let (origin, dir) = chunk[k as usize];
-                        found(
-                            c * PACKET + k as usize,
-                            self.closest(origin, dir, tmin, tmax),
-                        );
+                        found(c0 + k as usize, self.closest(origin, dir, tmin, tmax));
                     }
                     continue;
                 }
@@ -268,7 +318,7 @@ impl SceneRays {
                 self.bvh
                     .closest_packet(&origins[..n], &dirs[..n], tmin, tmax, &mut hits[..n]);
                 for (&k, h) in run.iter().zip(&hits[..n]) {
-                    found(c * PACKET + k as usize, *h);
+                    found(c0 + k as usize, *h);
                 }
             }
         }

@@ -877,7 +877,7 @@ mod tests {
 
     /// `cast_coherent` splits a run across octants and casts the non-finite alone.
     #[test]
-    fn cast_coherent_is_cast_for_any_run() {
+    fn cast_coherent_and_cast_runs_are_cast_for_any_run() {
         let tris = messy_triangles();
         let n = tris.len() as u32;
         let scene = Scene {
@@ -908,6 +908,15 @@ mod tests {
         let got = rays_.cast_coherent(&list, 1e-3, 100.0);
         for ((o, d), g) in list.iter().zip(&got) {
             assert_eq!(*g, rays_.cast(*o, *d, 1e-3, 100.0));
+        }
+        // Cut into runs of every length from 1 to past a packet, ending short of the rays (the
+        // rest in plain packets), and cut only at the end.
+        let runs = vec![1, 2, 3, 63, 64, 65, 130, 5, 0, 200];
+        for cut in [runs, vec![], vec![list.len() as u32 + 7]] {
+            let got = rays_.cast_runs_index(&list, &cut, 1e-3, 100.0);
+            for ((o, d), g) in list.iter().zip(&got) {
+                assert_eq!(*g, rays_.cast_index(*o, *d, 1e-3, 100.0));
+            }
         }
     }
 }

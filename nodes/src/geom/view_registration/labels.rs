@@ -3,6 +3,7 @@
 //! edges between labels near which a small move changes the score.
 
 use crate::artifact::View;
+use crate::geom::raycast::tile_order;
 
 use super::RegistrationParams;
 
@@ -46,8 +47,8 @@ pub(super) fn agreement(seen: Seen, rendered: Rendered) -> i32 {
 }
 
 /// A sampled pixel: its camera-frame unit direction turned into the site frame by the reported
-/// rotation, what the view says is there, the wall instance it shows (0 if not a wall), and the
-/// next sample right of it and below it on the lattice (`u32::MAX`: none).
+/// rotation, what the view says is there, the wall instance it shows (0 if not a wall), the
+/// next sample right of it and below it on the lattice (`u32::MAX`: none), and its tile.
 pub(super) struct Sample {
     pub(super) dir: [f64; 3],
     pub(super) seen: Seen,
@@ -55,6 +56,8 @@ pub(super) struct Sample {
     pub(super) facade: Facade,
     pub(super) right: u32,
     pub(super) down: u32,
+    /// The 8 x 8 tile of the lattice it lies in, counted in the order the samples come.
+    pub(super) tile: u32,
 }
 
 /// What a building pixel shows of its façade.
@@ -169,26 +172,32 @@ pub(super) fn samples(
     let cols = xs.len();
     let mut at = vec![u32::MAX; cols * ys.len()];
     let mut out: Vec<Sample> = Vec::new();
-    for (r, &y) in ys.iter().enumerate() {
-        for (c, &x) in xs.iter().enumerate() {
-            let px = (y * view.width + x) as usize;
-            if keep.is_some_and(|k| !k[px]) {
-                continue;
-            }
-            let Some((seen, wall, facade)) = label(view, px, p) else {
-                continue;
-            };
-            let (dir, _) = view.pixel_ray(x as f64 + 0.5, y as f64 + 0.5);
-            at[r * cols + c] = out.len() as u32;
-            out.push(Sample {
-                dir,
-                seen,
-                wall,
-                facade,
-                right: u32::MAX,
-                down: u32::MAX,
-            });
+    // In 8 x 8 tiles of the lattice, each tile's samples a run: their rays run side by side and
+    // are cast as one packet. A score sums over the samples: their order does not change it.
+    for (k, cell) in tile_order(cols as u32, ys.len() as u32)
+        .into_iter()
+        .enumerate()
+    {
+        let (r, c) = (cell as usize / cols, cell as usize % cols);
+        let (x, y) = (xs[c], ys[r]);
+        let px = (y * view.width + x) as usize;
+        if keep.is_some_and(|k| !k[px]) {
+            continue;
         }
+        let Some((seen, wall, facade)) = label(view, px, p) else {
+            continue;
+        };
+        let (dir, _) = view.pixel_ray(x as f64 + 0.5, y as f64 + 0.5);
+        at[r * cols + c] = out.len() as u32;
+        out.push(Sample {
+            dir,
+            seen,
+            wall,
+            facade,
+            right: u32::MAX,
+            down: u32::MAX,
+            tile: (k / 64) as u32,
+        });
     }
     for r in 0..ys.len() {
         for c in 0..cols {

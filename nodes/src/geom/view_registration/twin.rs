@@ -37,12 +37,23 @@ pub(super) fn score(
     let (s, c) = yaw.sin_cos();
     let origin = position.map(|v| v as f32);
     let (mut total, mut counted) = (0i64, 0i64);
+    let rays: Vec<([f32; 3], [f32; 3])> = samples
+        .iter()
+        .map(|smp| (origin, turned_dir(smp.dir, (s, c)).map(|v| v as f32)))
+        .collect();
+    // A tile's samples are a packet: near an edge a tile holds a fraction of a packet, and a
+    // packet of several tiles spreads too wide to be cast as one.
+    let runs: Vec<u32> = samples
+        .chunk_by(|a, b| a.tile == b.tile)
+        .map(|run| run.len() as u32)
+        .collect();
+    let hits = twin
+        .rays
+        .cast_runs_index(&rays, &runs, 1e-3, twin.max_range);
     let shown: Vec<Shown> = samples
         .iter()
-        .map(|smp| {
-            let d = smp.dir;
-            let dir = turned_dir(d, (s, c)).map(|v| v as f32);
-            let hit = twin.rays.cast_index(origin, dir, 1e-3, twin.max_range);
+        .zip(rays.iter().zip(hits))
+        .map(|(smp, (&(_, dir), hit))| {
             let sh = match hit {
                 None => Shown {
                     rendered: Rendered::Sky,
