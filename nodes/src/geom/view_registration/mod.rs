@@ -521,7 +521,7 @@ pub fn register_views(
         .collect();
     let mut consensus = Consensus {
         cell_m: p.consensus_cell_m,
-        cells: HashMap::new(),
+        cells: Default::default(),
     };
     for pool in pools.iter().flatten() {
         consensus.add(pool);
