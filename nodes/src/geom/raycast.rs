@@ -43,12 +43,18 @@ fn narrow(chunk: &[([f32; 3], [f32; 3])], run: &[u8]) -> bool {
 /// The pixels of a `width` x `height` image in tiles of 8 x 8, row by row within a tile: the
 /// order in which neighbouring pixels' rays form packets for [`SceneRays::cast_coherent`].
 pub fn tile_order(width: u32, height: u32) -> Vec<u32> {
-    const TILE: u32 = 8;
+    tiles_of(width, height, 8)
+}
+
+/// The cells of a `width` x `height` grid in tiles of `side` x `side` (at least 1), row by row
+/// within a tile, the tiles row by row.
+pub fn tiles_of(width: u32, height: u32, side: u32) -> Vec<u32> {
+    let side = side.max(1);
     let mut order = Vec::with_capacity((width as usize) * (height as usize));
-    for ty in (0..height).step_by(TILE as usize) {
-        for tx in (0..width).step_by(TILE as usize) {
-            for v in ty..(ty + TILE).min(height) {
-                for u in tx..(tx + TILE).min(width) {
+    for ty in (0..height).step_by(side as usize) {
+        for tx in (0..width).step_by(side as usize) {
+            for v in ty..(ty + side).min(height) {
+                for u in tx..(tx + side).min(width) {
                     order.push(v * width + u);
                 }
             }
@@ -429,6 +435,29 @@ mod tests {
     use crate::artifact::{ObjectClass, SceneObject};
     use crate::geom::mesh_build::cuboid;
     use crate::rf::materials::Material;
+
+    /// Every cell once and each tile's cells together, for sizes
+    /// the tiles do not divide (and a side of 0, taken as 1).
+    #[test]
+    fn tiles_cover_the_grid_once_each_tile_together() {
+        for (w, h, side) in [(20, 15, 4), (7, 3, 8), (5, 5, 1), (3, 4, 0), (0, 4, 2)] {
+            let order = tiles_of(w, h, side);
+            let mut seen = order.clone();
+            seen.sort_unstable();
+            assert_eq!(seen, (0..w * h).collect::<Vec<_>>(), "{w} x {h} by {side}");
+            let side = side.max(1);
+            let tile = |k: u32| (k / w / side, k % w / side);
+            for pair in order.windows(2) {
+                let (a, b) = (tile(pair[0]), tile(pair[1]));
+                // A tile's cells come together: the order moves to a later tile, never back.
+                assert!(
+                    a == b || (b.0, b.1) > (a.0, a.1),
+                    "{w} x {h} by {side}: {pair:?}"
+                );
+            }
+        }
+        assert_eq!(tile_order(16, 8), tiles_of(16, 8, 8));
+    }
 
     #[test]
     fn hits_the_nearest_face_with_an_outward_normal() {
