@@ -436,8 +436,8 @@ mod tests {
     use crate::geom::mesh_build::cuboid;
     use crate::rf::materials::Material;
 
-    /// Every cell once and each tile's cells together, for sizes
-    /// the tiles do not divide (and a side of 0, taken as 1).
+    /// Every cell once and each tile's cells together, for sizes the tiles do not divide (and a
+    /// side of 0, taken as 1).
     #[test]
     fn tiles_cover_the_grid_once_each_tile_together() {
         for (w, h, side) in [(20, 15, 4), (7, 3, 8), (5, 5, 1), (3, 4, 0), (0, 4, 2)] {
