@@ -218,8 +218,9 @@ impl SceneRays {
 
     /// [`SceneRays::cast_coherent_index`] with the packets cut where the caller says: `runs`
     /// are the lengths of consecutive runs of `rays` (a longer one is cut every [`PACKET`];
-    /// rays past them go in runs of [`PACKET`]), each cast as packets of one octant. For rays whose natural groups are smaller
-    /// than a packet (the pixels of a tile near an edge), so that a packet does not span two.
+    /// rays past them go in runs of [`PACKET`]), each cast as packets of one octant. For rays
+    /// whose natural groups are smaller than a packet (the samples of a tile near an edge), so
+    /// that a packet does not span two.
     pub fn cast_runs_index(
         &self,
         rays: &[([f32; 3], [f32; 3])],
