@@ -147,7 +147,7 @@ fn diffracted_path(
             }
             continue;
         }
-        let hits = scene.hits_between(a, b, eps);
+        let hits = scene.hits_between_until(a, b, eps, 0);
         if hits.iter().any(|h| !scene.is_foliage(h.triangle)) {
             return None;
         }

@@ -67,7 +67,7 @@ pub(super) fn diffuse_power(t: &Tracer, tx: DVec3, at_tx: FoliageDepth, rxs: &[D
                         if f <= 0.0 {
                             continue;
                         }
-                        let hits = scene.hits_between(q, *rx, EPS);
+                        let hits = scene.hits_between_until(q, *rx, EPS, 0);
                         if hits.iter().any(|h| !scene.is_foliage(h.triangle)) {
                             continue;
                         }

@@ -175,6 +175,41 @@ mod tests {
         RfScene::new(&scene, 3.5e9, false).unwrap()
     }
 
+    /// Along x: foliage, a wall, foliage, two walls (boxes 2 m deep, 4 m apart), each entered
+    /// and left. Stopping past `walls` non-foliage surfaces gives the full list up to the next
+    /// non-foliage surface, foliage not counted; the full list when there is none.
+    #[test]
+    fn hits_stop_at_the_first_wall_past_the_count() {
+        let object = |id: &str, x: f64, m: Material| SceneObject {
+            id: id.into(),
+            class: crate::artifact::ObjectClass::Building,
+            mesh: cuboid([x, 0.0], [2.0, 10.0, 10.0], 0.0, -5.0, m),
+        };
+        let scene = Scene {
+            objects: vec![
+                object("leaves", 0.0, Material::Foliage),
+                object("one", 6.0, Material::Concrete),
+                object("more leaves", 12.0, Material::Foliage),
+                object("two", 18.0, Material::Concrete),
+                object("three", 24.0, Material::Brick),
+            ],
+        };
+        let rf = RfScene::new(&scene, 3.5e9, false).unwrap();
+        let (a, b) = (DVec3::new(-10.0, 0.3, 0.2), DVec3::new(40.0, 0.3, 0.2));
+        let all = rf.hits_between(a, b, EPS);
+        assert_eq!(all.len(), 10);
+        // Each box is entered and left: surfaces 0-1 foliage, 2-3 wall one, 4-5 foliage, ...
+        for (walls, ends_at) in [(0, 3), (1, 4), (2, 7), (3, 8), (5, 10), (6, 10), (9, 10)] {
+            let some = rf.hits_between_until(a, b, EPS, walls);
+            assert_eq!(some.len(), ends_at, "{walls} walls");
+            let same = |x: &SurfaceHit, y: &SurfaceHit| (x.t, x.triangle) == (y.t, y.triangle);
+            assert!(
+                some.iter().zip(&all).all(|(x, y)| same(x, y)),
+                "{walls} walls"
+            );
+        }
+    }
+
     #[test]
     fn overlapping_volumes_count_once() {
         let rf = two_boxes();

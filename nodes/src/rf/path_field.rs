@@ -31,7 +31,14 @@ pub(super) fn evaluate(
         let (a, b) = (points[s], points[s + 1]);
         let d = (b - a).normalize();
         length += (b - a).length();
-        let hits = scene.hits_between(a, b, EPS);
+        // The walls this segment may still cross: past them the path is given up below, so
+        // the surfaces beyond are not looked for.
+        let walls = if opt.transmission {
+            opt.max_depth.saturating_sub(depth) as usize
+        } else {
+            0
+        };
+        let hits = scene.hits_between_until(a, b, EPS, walls);
         let (inside, at_b) = foliage_length(scene, a, b, &hits, foliage);
         foliage_m += inside;
         foliage = at_b;

@@ -196,16 +196,36 @@ impl RfScene {
     /// Every surface crossed strictly between `a` and `b` (`eps` metres kept clear at each end),
     /// in order.
     pub fn hits_between(&self, a: DVec3, b: DVec3, eps: f64) -> Vec<SurfaceHit> {
+        self.hits_between_until(a, b, eps, usize::MAX)
+    }
+
+    /// [`RfScene::hits_between`] up to the first surface other than foliage past `walls` of
+    /// them: the same list for a caller that gives a path up once it crosses more walls than
+    /// that, for fewer casts.
+    pub fn hits_between_until(
+        &self,
+        a: DVec3,
+        b: DVec3,
+        eps: f64,
+        walls: usize,
+    ) -> Vec<SurfaceHit> {
         let len = (b - a).length();
         let d = (b - a) / len;
         let mut out = Vec::new();
         let mut tmin = eps;
+        let mut solid = 0usize;
         while let Some(h) = self.cast(a, d, tmin, len - eps) {
             if h.t >= len - eps {
                 break;
             }
             tmin = h.t.max(tmin) + eps;
             out.push(h);
+            if !self.is_foliage(h.triangle) {
+                solid += 1;
+                if solid > walls {
+                    break;
+                }
+            }
             if out.len() > 10_000 {
                 break;
             }
