@@ -154,9 +154,11 @@ pub fn wedges_for(scene: &RfScene, opt: &TraceOptions) -> Wedges {
 pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool, finite_faces: bool) -> Wedges {
     let max_cos = (1.0 - 1e-6f64).min(min_deg.to_radians().cos());
     let key = |p: DVec3| [p.x, p.y, p.z].map(|c| (c * 1e6).round() as i64);
-    // Edge (by its ends' quantised positions) -> the triangles on it, with the edge's ends.
+    // Every triangle's edges by their ends' quantised positions, sorted (stably, so each edge's
+    // triangles stay in triangle order): an edge's triangles are a run. A sort, not a hash map
+    // of lists: the map's hashing and its list per edge were most of the time.
     type EdgeKey = ([i64; 3], [i64; 3]);
-    let mut edges: HashMap<EdgeKey, Vec<(u32, DVec3, DVec3)>> = HashMap::new();
+    let mut sides: Vec<(EdgeKey, (u32, DVec3, DVec3))> = Vec::with_capacity(3 * scene.tris.len());
     for (t, tri) in scene.tris.iter().enumerate() {
         if scene.normals[t] == DVec3::ZERO || scene.is_foliage(t as u32) {
             continue;
@@ -169,21 +171,18 @@ pub fn wedges(scene: &RfScene, min_deg: f64, across_objects: bool, finite_faces:
             } else {
                 (kq, kp, q, p)
             };
-            edges.entry((lo, hi)).or_default().push((t as u32, a, b));
+            sides.push(((lo, hi), (t as u32, a, b)));
         }
     }
-    let mut keys: Vec<_> = edges.keys().copied().collect();
-    keys.sort_unstable();
+    sides.sort_by_key(|s| s.0);
     // (t0, t1, a, b, n0, nn, cos of the bend) per edge that bends.
     let mut bends = Vec::new();
     let mut faces = UnionFind::new(scene.tris.len());
-    for k in keys {
-        let on_edge = &edges[&k];
-        if on_edge.len() != 2 {
+    for run in sides.chunk_by(|x, y| x.0 == y.0) {
+        // An edge of two triangles, or none that can bend.
+        let [(_, (t0, a, b)), (_, (t1, _, _))] = *run else {
             continue;
-        }
-        let (t0, a, b) = on_edge[0];
-        let t1 = on_edge[1].0;
+        };
         let third = |t: u32| {
             scene.tris[t as usize]
                 .iter()
