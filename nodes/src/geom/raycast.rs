@@ -143,17 +143,20 @@ impl SceneRays {
     }
 
     /// The closest hit of the ray from `origin` along the unit vector `dir` within (`tmin`, `tmax`).
+    #[inline(always)]
     pub fn cast(&self, origin: [f32; 3], dir: [f32; 3], tmin: f32, tmax: f32) -> Option<Hit> {
         self.closest(origin, dir, tmin, tmax).map(|h| self.hit(h))
     }
 
     /// The BVH's closest hit. -0.0 and +0.0 must cast alike (computed directions carry either).
+    #[inline(always)]
     fn closest(&self, origin: [f32; 3], dir: [f32; 3], tmin: f32, tmax: f32) -> Option<WideHit> {
         let dir = dir.map(|c| c + 0.0);
         self.bvh
             .closest(Vec3A::from(origin), Vec3A::from(dir), tmin, tmax)
     }
 
+    #[inline(always)]
     fn hit(&self, hit: WideHit) -> Hit {
         let prim = hit.prim as usize;
         let tri = &self.tris[prim];

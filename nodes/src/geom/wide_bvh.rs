@@ -324,6 +324,7 @@ impl WideBvh {
     }
 
     /// The closest hit of `origin + t dir`, t in (`tmin`, `tmax`).
+    #[inline(always)]
     pub fn closest(&self, origin: Vec3A, dir: Vec3A, tmin: f32, tmax: f32) -> Option<WideHit> {
         if self.nodes.is_empty() {
             return None;

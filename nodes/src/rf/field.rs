@@ -45,6 +45,7 @@ pub fn mirror(k: DVec3, n: DVec3) -> DVec3 {
 }
 
 /// The field after a reflection with coefficients (r_TE, r_TM): returns it and the new direction.
+#[inline(always)]
 pub fn reflect(e: &CVec, k: DVec3, n: DVec3, r: (C64, C64)) -> (CVec, DVec3) {
     let (perp, par_i) = basis(k, n);
     let kr = mirror(k, n);
@@ -56,6 +57,7 @@ pub fn reflect(e: &CVec, k: DVec3, n: DVec3, r: (C64, C64)) -> (CVec, DVec3) {
 }
 
 /// The field after a straight-through transmission with coefficients (T_TE, T_TM).
+#[inline(always)]
 pub fn transmit(e: &CVec, k: DVec3, n: DVec3, t: (C64, C64)) -> CVec {
     let (perp, par) = basis(k, n);
     combine(t.0 * dot(e, perp), perp, t.1 * dot(e, par), par)

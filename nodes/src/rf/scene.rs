@@ -118,6 +118,7 @@ impl RfScene {
     }
 
     /// The closest surface along `o + t d` for t in (`tmin`, `tmax`).
+    #[inline(always)]
     pub fn cast(&self, o: DVec3, d: DVec3, tmin: f64, tmax: f64) -> Option<SurfaceHit> {
         let hit = self.rays.cast_index(
             o.as_vec3().into(),
