@@ -118,6 +118,8 @@ impl RfScene {
     }
 
     /// The closest surface along `o + t d` for t in (`tmin`, `tmax`).
+    // Always inlined: left to the inliner, the radio map's bounce loop came to call it out as
+    // the crate grew, and the map took 15 % longer (BENCHMARKS.md, "the inliner").
     #[inline(always)]
     pub fn cast(&self, o: DVec3, d: DVec3, tmin: f64, tmax: f64) -> Option<SurfaceHit> {
         let hit = self.rays.cast_index(
