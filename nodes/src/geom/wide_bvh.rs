@@ -89,17 +89,7 @@ struct Slabs {
 impl Slabs {
     #[inline(always)]
     fn new(o: Vec3A, d: Vec3A) -> Slabs {
-        // A zero component would give inf * 0 = NaN on a box face through the origin; a tiny one
-        // of the same sign keeps every distance finite and the box test exact in its sign.
-        let inv = d.to_array().map(|c| {
-            let c = if c.abs() < 1e-20 {
-                1e-20f32.copysign(c + 0.0)
-            } else {
-                c
-            };
-            1.0 / c
-        });
-        Slabs::from_inv(o.to_array(), inv)
+        Slabs::from_inv(o.to_array(), inverse(d))
     }
 
     #[inline(always)]
@@ -113,6 +103,21 @@ impl Slabs {
             far_row: [0, 1, 2].map(|a| if positive[a] { 3 + a } else { a }),
         }
     }
+}
+
+/// 1 / each component of `d`. A zero component would give inf * 0 = NaN on a box face through
+/// the origin; a tiny one of the same sign keeps every distance finite and the box test exact in
+/// its sign.
+#[inline(always)]
+fn inverse(d: Vec3A) -> [f32; 3] {
+    d.to_array().map(|c| {
+        let c = if c.abs() < 1e-20 {
+            1e-20f32.copysign(c + 0.0)
+        } else {
+            c
+        };
+        1.0 / c
+    })
 }
 
 /// `t` padded by `PAD` away from zero: the limit a box's entry distance is held to.

@@ -18,7 +18,7 @@ use std::mem::MaybeUninit;
 use glam::Vec3A;
 
 use super::{
-    Lanes, PAD, Scalar, Slabs, WIDTH, WideBvh, WideHit, closest_from, max, min, with_stack,
+    Lanes, PAD, Scalar, Slabs, WIDTH, WideBvh, WideHit, closest_from, inverse, max, min, with_stack,
 };
 use crate::geom::raycast::ShearedRay;
 
@@ -133,13 +133,14 @@ impl Rays {
         let (mut o_lo, mut o_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
         let (mut inv_lo, mut inv_hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
         for (i, (&o, &d)) in origins.iter().zip(dirs).enumerate() {
-            let s = Slabs::new(o, d);
+            // Only the inverse: the lone ray's near and far rows are chosen if it goes on alone.
+            let inv = inverse(d);
             let (g, l) = (i / GROUP, i % GROUP);
             for a in 0..3 {
-                r.o[g][a][l] = s.o[a];
-                r.inv[g][a][l] = s.inv[a];
+                r.o[g][a][l] = o[a];
+                r.inv[g][a][l] = inv[a];
             }
-            let inv = Vec3A::from(s.inv);
+            let inv = Vec3A::from(inv);
             (o_lo, o_hi) = (o_lo.min(o), o_hi.max(o));
             (inv_lo, inv_hi) = (inv_lo.min(inv), inv_hi.max(inv));
             (d_lo, d_hi) = (d_lo.min(d), d_hi.max(d));
