@@ -3,8 +3,12 @@
 //! threads. Every figure is the best of `--n` runs (default 5): the machine is shared.
 //!
 //! `cargo bench --bench raycast -- [cast] [map] [--n N] [--threads 1,2] [--rays 1e6,1e7]
-//! [--depth 3,5] [--no-city]` (both parts by default; `--no-city` casts on munich only). Needs ../shared/data (munich). Figures go in
-//! BENCHMARKS.md.
+//! [--depth 3,5] [--no-city] [--shuffle] [--dump-rays FILE]` (both parts by default; `--no-city`
+//! casts on munich only; `--shuffle` casts the closest-hit rays in a random order, where
+//! consecutive rays share no path through the tree; `--dump-rays` writes munich's closest-hit rays,
+//! in their own order, as little-endian f32 rows of origin, direction and tmin, for
+//! `scripts/embree_rays_bench.py` to cast with Embree). Needs ../shared/data (munich). Figures go
+//! in BENCHMARKS.md.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -35,6 +39,8 @@ struct Args {
     rays: Vec<u32>,
     depth: Vec<u32>,
     city: bool,
+    shuffle: bool,
+    dump_rays: Option<PathBuf>,
 }
 
 fn list<T: std::str::FromStr>(s: &str) -> Vec<T> {
@@ -53,6 +59,8 @@ fn args() -> Args {
         rays: vec![1_000_000, 10_000_000],
         depth: vec![3, 5],
         city: true,
+        shuffle: false,
+        dump_rays: None,
     };
     let v: Vec<String> = std::env::args().skip(1).collect();
     let mut i = 0;
@@ -66,6 +74,8 @@ fn args() -> Args {
             "--rays" => (a.rays, i) = (list(&next), i + 1),
             "--depth" => (a.depth, i) = (list(&next), i + 1),
             "--no-city" => a.city = false,
+            "--shuffle" => a.shuffle = true,
+            "--dump-rays" => (a.dump_rays, i) = (Some(PathBuf::from(&next)), i + 1),
             _ => {}
         }
         i += 1;
@@ -135,7 +145,7 @@ fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
     let t = Instant::now();
     let rays = SceneRays::new(scene);
     let build = t.elapsed().as_secs_f64();
-    let (closest, shadow) = bounce_rays(&rays, tx, 1_000_000, 3);
+    let (mut closest, shadow) = bounce_rays(&rays, tx, 1_000_000, 3);
     println!(
         "{name}: {} triangles, wide BVH built in {:.0} ms ({}), {} closest-hit rays (10^6 \
          from the tx + specular to depth 3), {} shadow rays",
@@ -145,6 +155,30 @@ fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
         closest.len(),
         shadow.len()
     );
+    if let Some(path) = a.dump_rays.as_ref().filter(|_| name == "munich") {
+        let bytes: Vec<u8> = closest
+            .iter()
+            .flat_map(|(o, d, tmin)| {
+                o.iter()
+                    .chain(d)
+                    .chain([tmin])
+                    .flat_map(|v| v.to_le_bytes())
+            })
+            .collect();
+        std::fs::write(path, bytes).expect("writing the rays");
+        println!("  {} rays written to {}", closest.len(), path.display());
+    }
+    if a.shuffle {
+        // Fisher-Yates from a fixed xorshift: the same order every run.
+        let mut x = 0x9E37_79B9_7F4A_7C15u64;
+        for i in (1..closest.len()).rev() {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            closest.swap(i, (x % (i as u64 + 1)) as usize);
+        }
+        println!("  closest-hit rays cast in a random order");
+    }
     for &threads in &a.threads {
         let secs = best_of(a.n, threads, || {
             let hits: usize = closest

@@ -8,6 +8,7 @@ use std::time::Duration;
 use glam::Vec3A;
 use obvhs::BvhBuildParams;
 use obvhs::bvh2::builder::build_bvh2_from_tris;
+use obvhs::ploc::PlocSearchDistance;
 use obvhs::triangle::Triangle;
 
 pub use super::wide_bvh::PACKET;
@@ -104,11 +105,19 @@ impl SceneRays {
             WideBvh::empty()
         } else {
             // Leaves of one packet: four triangles cost one SSE test.
-            // Pre-splitting large triangles and a more thorough build cut the instructions per
-            // cast on munich by a tenth for a build that costs about 10^4 casts; past
-            // `THOROUGH_BUILD_MAX` triangles the build time would outweigh it.
+            // A more thorough build cuts the time per cast for a build that costs about 10^4
+            // casts; past `THOROUGH_BUILD_MAX` triangles the build time would outweigh it.
+            // Measured on munich's bounce rays (BENCHMARKS.md, "the BVH's build"): PLOC's
+            // search over 14 neighbours from the second level down, without pre-splitting, casts
+            // a tenth faster than obvhs's `slow_build` (24 neighbours, pre-split), in the same
+            // build time. The hits are the same whatever the tree.
             let base = if tris.len() <= THOROUGH_BUILD_MAX {
-                BvhBuildParams::slow_build()
+                BvhBuildParams {
+                    pre_split: false,
+                    ploc_search_distance: PlocSearchDistance::Medium,
+                    search_depth_threshold: 1,
+                    ..BvhBuildParams::slow_build()
+                }
             } else {
                 BvhBuildParams::medium_build()
             };
