@@ -165,7 +165,10 @@ fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
                     .flat_map(|v| v.to_le_bytes())
             })
             .collect();
-        std::fs::write(path, bytes).expect("writing the rays");
+        if let Err(e) = std::fs::write(path, bytes) {
+            eprintln!("error: writing the rays to {}: {e}", path.display());
+            std::process::exit(2);
+        }
         println!("  {} rays written to {}", closest.len(), path.display());
     }
     if a.shuffle {

@@ -32,7 +32,11 @@ ap.add_argument("--shuffle", action="store_true",
 args = ap.parse_args()
 dr.set_thread_count(args.threads)
 
-rows = np.fromfile(args.rays, dtype="<f4").reshape(-1, 7)
+rows = np.fromfile(args.rays, dtype="<f4")
+if rows.size == 0 or rows.size % 7:
+    raise SystemExit(f"{args.rays}: expected rows of 7 little-endian f32 (origin, direction, tmin), "
+                     f"found {rows.size} values")
+rows = rows.reshape(-1, 7)
 a, b = (int(v) if v else None for v in args.rows.split(":"))
 rows = rows[a:b]
 if args.shuffle:
