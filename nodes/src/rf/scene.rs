@@ -158,6 +158,29 @@ impl RfScene {
         hits
     }
 
+    /// [`RfScene::cast`] of each (origin, direction) of `rays`, the same hits bit for bit.
+    /// Consecutive rays that lie close together traverse the BVH as one packet
+    /// ([`crate::geom::raycast::SceneRays::cast_coherent`]).
+    pub fn cast_coherent(
+        &self,
+        rays: &[(DVec3, DVec3)],
+        tmin: f64,
+        tmax: f64,
+    ) -> Vec<Option<SurfaceHit>> {
+        let narrow: Vec<([f32; 3], [f32; 3])> = rays
+            .iter()
+            .map(|(o, d)| (o.as_vec3().to_array(), d.as_vec3().to_array()))
+            .collect();
+        let found =
+            self.rays
+                .cast_coherent_index(&narrow, tmin as f32, tmax.min(f32::MAX as f64) as f32);
+        found
+            .into_iter()
+            .zip(rays)
+            .map(|(hit, &(o, d))| hit.map(|h| self.refine(o, d, tmin, h)))
+            .collect()
+    }
+
     /// Recomputes an f32 hit's distance in f64 against the triangle's plane: the BVH works in
     /// f32. A ray grazing the plane makes that division worse than the f32 hit (it once put a hit
     /// 1 mm ahead at t = 0, and a walk stepping from hit to hit stood still), so it refines only
