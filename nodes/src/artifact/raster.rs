@@ -37,8 +37,10 @@ impl Grid {
     }
     /// The cell containing site-frame point (`x`, `y`), if inside the grid.
     pub fn cell_of(&self, x: f64, y: f64) -> Option<(u32, u32)> {
-        let c = ((x - self.x0) / self.cell_m).floor();
-        let r = ((self.y0 - y) / self.cell_m).floor();
+        // Truncation is the floor on [0, width): no call to libm's `floor` (the default x86-64
+        // target has no rounding instruction), and the radio map asks once per crossing.
+        let c = (x - self.x0) / self.cell_m;
+        let r = (self.y0 - y) / self.cell_m;
         (c >= 0.0 && r >= 0.0 && c < self.width as f64 && r < self.height as f64)
             .then_some((c as u32, r as u32))
     }

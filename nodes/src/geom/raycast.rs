@@ -227,8 +227,20 @@ impl SceneRays {
         tmax: f32,
     ) -> Vec<Option<(f32, u32)>> {
         let mut out = vec![None; rays.len()];
-        self.packets(rays, tmin, tmax, |i, h| out[i] = h.map(|h| (h.t, h.prim)));
+        self.cast_coherent_each(rays, tmin, tmax, |i, h| out[i] = h);
         out
+    }
+
+    /// [`SceneRays::cast_coherent_index`] telling `found` each ray's index and answer as it
+    /// comes (in no set order), for callers that keep hits in their own form.
+    pub fn cast_coherent_each(
+        &self,
+        rays: &[([f32; 3], [f32; 3])],
+        tmin: f32,
+        tmax: f32,
+        mut found: impl FnMut(usize, Option<(f32, u32)>),
+    ) {
+        self.packets(rays, tmin, tmax, |i, h| found(i, h.map(|h| (h.t, h.prim))));
     }
 
     /// [`SceneRays::cast_coherent_index`] with the packets cut where the caller says: `runs`

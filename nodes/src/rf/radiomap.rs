@@ -295,7 +295,7 @@ impl Shooter<'_> {
     }
 
     /// The rays `dirs` (the lattice's from `start`), each from its launch to the end of its
-    /// bounces, `landed` being where each first lands. Taken in `order` in batches of [`BATCH`]
+    /// bounces, `landed[i]` being where ray `order[i]` first lands. Taken in `order` in batches of [`BATCH`]
     /// that go one segment at a time, each segment's casts together: neighbours on the lattice
     /// that reflect off one plane still travel side by side and go as packets
     /// ([`RfScene::cast_coherent`], the same hits as one by one). The crossings come out
@@ -312,18 +312,20 @@ impl Shooter<'_> {
     ) {
         let mut flights = Vec::with_capacity(BATCH);
         let mut next = Vec::with_capacity(BATCH);
-        for batch in order.chunks(BATCH) {
+        for (batch, landed) in order.chunks(BATCH).zip(landed.chunks(BATCH)) {
             flights.clear();
             flights.extend(batch.iter().map(|&k| {
                 let k = k as usize;
                 self.launch(dirs[k], start + k as u64)
             }));
-            let mut hits: Vec<_> = batch.iter().map(|&k| landed[k as usize]).collect();
+            let mut hits = landed.to_vec();
             loop {
                 let mut live = 0;
+                next.clear();
                 for (r, hit) in hits.into_iter().enumerate() {
                     let mut f = flights[r];
                     if self.segment(&mut f, hit, (out, crossings), first.as_deref_mut()) {
+                        next.push((f.o, f.d));
                         flights[live] = f;
                         live += 1;
                     }
@@ -332,8 +334,6 @@ impl Shooter<'_> {
                 if flights.is_empty() {
                     break;
                 }
-                next.clear();
-                next.extend(flights.iter().map(|f| (f.o, f.d)));
                 hits = self.scene.cast_coherent(&next, EPS, f64::INFINITY);
             }
         }

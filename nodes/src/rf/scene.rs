@@ -132,9 +132,10 @@ impl RfScene {
     }
 
     /// [`RfScene::cast`] from `o` along each of `dirs`, the same hits bit for bit, taken in the
-    /// order `order` (indices into `dirs`, each once) so that consecutive directions that lie
-    /// close together traverse the BVH as one packet
-    /// ([`crate::geom::raycast::SceneRays::cast_coherent`]). The hits come back in `dirs`'s order.
+    /// order `order` (indices into `dirs`) so that consecutive directions that lie close
+    /// together traverse the BVH as one packet
+    /// ([`crate::geom::raycast::SceneRays::cast_coherent`]). The hits come back in `order`'s
+    /// order: the i-th is that of `dirs[order[i]]`.
     pub fn cast_fan(
         &self,
         o: DVec3,
@@ -148,13 +149,13 @@ impl RfScene {
             .iter()
             .map(|&k| (origin, dirs[k as usize].as_vec3().to_array()))
             .collect();
-        let found =
-            self.rays
-                .cast_coherent_index(&rays, tmin as f32, tmax.min(f32::MAX as f64) as f32);
-        let mut hits = vec![None; dirs.len()];
-        for (&k, hit) in order.iter().zip(found) {
-            hits[k as usize] = hit.map(|h| self.refine(o, dirs[k as usize], tmin, h));
-        }
+        let mut hits = vec![None; order.len()];
+        self.rays.cast_coherent_each(
+            &rays,
+            tmin as f32,
+            tmax.min(f32::MAX as f64) as f32,
+            |i, hit| hits[i] = hit.map(|h| self.refine(o, dirs[order[i] as usize], tmin, h)),
+        );
         hits
     }
 
@@ -171,14 +172,17 @@ impl RfScene {
             .iter()
             .map(|(o, d)| (o.as_vec3().to_array(), d.as_vec3().to_array()))
             .collect();
-        let found =
-            self.rays
-                .cast_coherent_index(&narrow, tmin as f32, tmax.min(f32::MAX as f64) as f32);
-        found
-            .into_iter()
-            .zip(rays)
-            .map(|(hit, &(o, d))| hit.map(|h| self.refine(o, d, tmin, h)))
-            .collect()
+        let mut hits = vec![None; rays.len()];
+        self.rays.cast_coherent_each(
+            &narrow,
+            tmin as f32,
+            tmax.min(f32::MAX as f64) as f32,
+            |i, hit| {
+                let (o, d) = rays[i];
+                hits[i] = hit.map(|h| self.refine(o, d, tmin, h));
+            },
+        );
+        hits
     }
 
     /// Recomputes an f32 hit's distance in f64 against the triangle's plane: the BVH works in
@@ -319,7 +323,8 @@ mod tests {
         let mut landed = 0;
         for order in [patch_order(n, start, len), (0..len).collect()] {
             let fan = scene.cast_fan(tx, &dirs, &order, EPS, 400.0);
-            for (d, hit) in dirs.iter().zip(&fan) {
+            for (&k, hit) in order.iter().zip(&fan) {
+                let d = &dirs[k as usize];
                 let alone = scene.cast(tx, *d, EPS, 400.0);
                 assert_eq!(
                     hit.map(|h| (h.t.to_bits(), h.triangle)),
