@@ -3,12 +3,14 @@
 //! threads. Every figure is the best of `--n` runs (default 5): the machine is shared.
 //!
 //! `cargo bench --bench raycast -- [cast] [map] [--n N] [--threads 1,2] [--rays 1e6,1e7]
-//! [--depth 3,5] [--no-city] [--shuffle] [--dump-rays FILE]` (both parts by default; `--no-city`
-//! casts on munich only; `--shuffle` casts the closest-hit rays in a random order, where
-//! consecutive rays share no path through the tree; `--dump-rays` writes munich's closest-hit rays,
-//! in their own order, as little-endian f32 rows of origin, direction and tmin, for
-//! `scripts/embree_rays_bench.py` to cast with Embree). Needs ../shared/data (munich). Figures go
-//! in BENCHMARKS.md.
+//! [--depth 3,5] [--no-city] [--shuffle] [--patch-order] [--dump-rays FILE]` (both parts by
+//! default; `--no-city` casts on munich only; `--shuffle` casts the closest-hit rays in a random
+//! order, where consecutive rays share no path through the tree; `--patch-order` takes the
+//! primary rays in the radio map's order, patches of neighbours on the lattice, each bounce's
+//! rays in their parents' order, and casts them also as the map does, as packets where they run
+//! side by side; `--dump-rays` writes munich's closest-hit rays, in the order cast, as
+//! little-endian f32 rows of origin, direction and tmin, for `scripts/embree_rays_bench.py` to
+//! cast with Embree). Needs ../shared/data (munich). Figures go in BENCHMARKS.md.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -19,7 +21,7 @@ use kodama_nodes::artifact::TerrainModel;
 use kodama_nodes::geom::raycast::SceneRays;
 use kodama_nodes::io::sionna_xml::read_scene_with_thickness;
 use kodama_nodes::rf::antenna::Antenna;
-use kodama_nodes::rf::fibonacci::fibonacci_sphere;
+use kodama_nodes::rf::fibonacci::{fibonacci_sphere, patch_order};
 use kodama_nodes::rf::paths::TraceOptions;
 use kodama_nodes::rf::radiomap::{default_plane, radio_map};
 use kodama_nodes::rf::scene::RfScene;
@@ -40,6 +42,7 @@ struct Args {
     depth: Vec<u32>,
     city: bool,
     shuffle: bool,
+    patch_order: bool,
     dump_rays: Option<PathBuf>,
 }
 
@@ -60,6 +63,7 @@ fn args() -> Args {
         depth: vec![3, 5],
         city: true,
         shuffle: false,
+        patch_order: false,
         dump_rays: None,
     };
     let v: Vec<String> = std::env::args().skip(1).collect();
@@ -75,6 +79,7 @@ fn args() -> Args {
             "--depth" => (a.depth, i) = (list(&next), i + 1),
             "--no-city" => a.city = false,
             "--shuffle" => a.shuffle = true,
+            "--patch-order" => a.patch_order = true,
             "--dump-rays" => (a.dump_rays, i) = (Some(PathBuf::from(&next)), i + 1),
             _ => {}
         }
@@ -110,13 +115,30 @@ type Ray = ([f32; 3], [f32; 3], f32);
 /// The radio map's kind of rays: a Fibonacci sphere from `tx` and its specular continuations
 /// to `depth` bounces (about half the primary rays go to the sky), and shadow rays from every
 /// first hit to a street-level point.
-fn bounce_rays(rays: &SceneRays, tx: [f32; 3], n: u32, depth: u32) -> (Vec<Ray>, Vec<Ray>) {
+/// `patch` takes the primary rays in patches of neighbours ([`patch_order`]), as the radio map
+/// does. Also returns where each bounce's rays start in the closest-hit list.
+fn bounce_rays(
+    rays: &SceneRays,
+    tx: [f32; 3],
+    n: u32,
+    depth: u32,
+    patch: bool,
+) -> (Vec<Ray>, Vec<Ray>, Vec<usize>) {
     let mut all = Vec::new();
-    let mut live: Vec<Ray> = fibonacci_sphere(n)
-        .map(|d| (tx, d.as_vec3().to_array(), 0.0))
+    let mut starts = Vec::new();
+    let dirs: Vec<DVec3> = fibonacci_sphere(n).collect();
+    let order = if patch {
+        patch_order(n, 0, n)
+    } else {
+        (0..n).collect()
+    };
+    let mut live: Vec<Ray> = order
+        .iter()
+        .map(|&k| (tx, dirs[k as usize].as_vec3().to_array(), 0.0))
         .collect();
     let mut shadow = Vec::new();
     for level in 0..depth {
+        starts.push(all.len());
         all.extend_from_slice(&live);
         let next: Vec<(Ray, Option<Ray>)> = live
             .par_iter()
@@ -138,21 +160,26 @@ fn bounce_rays(rays: &SceneRays, tx: [f32; 3], n: u32, depth: u32) -> (Vec<Ray>,
         live = next.iter().map(|r| r.0).collect();
         shadow.extend(next.iter().filter_map(|r| r.1));
     }
-    (all, shadow)
+    (all, shadow, starts)
 }
 
 fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
     let t = Instant::now();
     let rays = SceneRays::new(scene);
     let build = t.elapsed().as_secs_f64();
-    let (mut closest, shadow) = bounce_rays(&rays, tx, 1_000_000, 3);
+    let (mut closest, shadow, starts) = bounce_rays(&rays, tx, 1_000_000, 3, a.patch_order);
     println!(
         "{name}: {} triangles, wide BVH built in {:.0} ms ({}), {} closest-hit rays (10^6 \
-         from the tx + specular to depth 3), {} shadow rays",
+         from the tx + specular to depth 3{}), {} shadow rays",
         rays.len(),
         build * 1e3,
         if rays.uses_simd() { "AVX2" } else { "scalar" },
         closest.len(),
+        if a.patch_order {
+            ", in patch order"
+        } else {
+            ""
+        },
         shadow.len()
     );
     if let Some(path) = a.dump_rays.as_ref().filter(|_| name == "munich") {
@@ -206,6 +233,53 @@ fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
             std::hint::black_box(hits);
         });
         let per_core = |n: usize, s: f64| n as f64 / s / 1e6 / threads as f64;
+        if a.patch_order && !a.shuffle {
+            // As the map casts: each bounce's rays together (one tmin), packets where narrow.
+            let levels: Vec<(usize, usize)> = starts
+                .iter()
+                .zip(starts.iter().skip(1).chain([&closest.len()]))
+                .map(|(&s, &e)| (s, e))
+                .collect();
+            let cast_level = |&(s, e): &(usize, usize)| -> usize {
+                let level: Vec<([f32; 3], [f32; 3])> =
+                    closest[s..e].iter().map(|r| (r.0, r.1)).collect();
+                let tmin = closest[s].2;
+                level
+                    .par_chunks(4096)
+                    .map(|c| {
+                        let mut hits = 0;
+                        rays.cast_coherent_each(c, tmin, f32::INFINITY, |_, h| {
+                            hits += h.is_some() as usize
+                        });
+                        hits
+                    })
+                    .sum()
+            };
+            let secs: Vec<f64> = levels
+                .iter()
+                .map(|l| {
+                    best_of(a.n, threads, || {
+                        std::hint::black_box(cast_level(l));
+                    })
+                })
+                .collect();
+            let hits: usize = levels.iter().map(cast_level).sum();
+            let alone = closest
+                .par_iter()
+                .filter(|(o, d, tmin)| rays.cast(*o, *d, *tmin, f32::INFINITY).is_some())
+                .count();
+            assert_eq!(hits, alone, "packets and lone rays hit differently");
+            let total: f64 = secs.iter().sum();
+            let bounces = closest.len() - levels[0].1;
+            println!(
+                "  {threads} thread(s): closest-hit as packets where narrow {total:.3} s = {:.1} M \
+                 rays/s per core ({hits} hits, as one by one); the primary rays {:.1}, the \
+                 bounces' {:.1}",
+                per_core(closest.len(), total),
+                per_core(levels[0].1, secs[0]),
+                per_core(bounces, total - secs[0]),
+            );
+        }
         println!(
             "  {threads} thread(s): closest-hit {:.3} s = {:.1} M rays/s per core; any-hit {:.3} s \
              = {:.1} M rays/s per core",
