@@ -183,12 +183,16 @@ pub fn radio_map(
                 let (mut hits, mut crossings) = (Vec::new(), Vec::new());
                 let mut first = diffraction.then(Vec::new);
                 let start = k * chunk;
-                let dirs: Vec<DVec3> = fibonacci_run(opt.rays, start, chunk).collect();
                 // Every first bounce leaves the transmitter, and the lattice's neighbours lie side by
                 // side: cast as packets of a patch each, these rays cost a fraction of a lone ray
                 // (BENCHMARKS.md, issue 16). The map is the same to the bit.
                 let order = patch_order(opt.rays, start, chunk);
-                let landed = scene.cast_fan(tx, &dirs, &order, EPS, f64::INFINITY);
+                // Put in patch order once: every later pass reads them in sequence, where
+                // the lattice's order would scatter each patch over the chunk.
+                let lattice: Vec<DVec3> = fibonacci_run(opt.rays, start, chunk).collect();
+                let dirs: Vec<DVec3> = order.iter().map(|&k| lattice[k as usize]).collect();
+                drop(lattice);
+                let landed = scene.cast_fan(tx, &dirs, EPS, f64::INFINITY);
                 let bufs = (&mut hits, &mut crossings);
                 shooter.shoot_batches(&dirs, start as u64, &order, &landed, bufs, first.as_mut());
                 let mut first = first.unwrap_or_default();
@@ -294,8 +298,8 @@ impl Shooter<'_> {
         }
     }
 
-    /// The rays `dirs` (the lattice's from `start`), each from its launch to the end of its
-    /// bounces, `landed[i]` being where ray `order[i]` first lands. Taken in `order` in batches of [`BATCH`]
+    /// The rays `dirs`, the lattice's `start + order[i]`-th, each from its launch to the end of
+    /// its bounces, `landed[i]` being where it first lands. Taken in batches of [`BATCH`]
     /// that go one segment at a time, each segment's casts together: neighbours on the lattice
     /// that reflect off one plane still travel side by side and go as packets
     /// ([`RfScene::cast_coherent`], the same hits as one by one). The crossings come out
@@ -312,12 +316,11 @@ impl Shooter<'_> {
     ) {
         let mut flights = Vec::with_capacity(BATCH);
         let mut next = Vec::with_capacity(BATCH);
-        for (batch, landed) in order.chunks(BATCH).zip(landed.chunks(BATCH)) {
+        let batches = order.chunks(BATCH).zip(dirs.chunks(BATCH));
+        for ((batch, dirs), landed) in batches.zip(landed.chunks(BATCH)) {
             flights.clear();
-            flights.extend(batch.iter().map(|&k| {
-                let k = k as usize;
-                self.launch(dirs[k], start + k as u64)
-            }));
+            flights
+                .extend((batch.iter().zip(dirs)).map(|(&k, &d)| self.launch(d, start + k as u64)));
             let mut hits = landed.to_vec();
             loop {
                 let mut live = 0;

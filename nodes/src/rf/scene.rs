@@ -131,30 +131,28 @@ impl RfScene {
         Some(self.refine(o, d, tmin, hit))
     }
 
-    /// [`RfScene::cast`] from `o` along each of `dirs`, the same hits bit for bit, taken in the
-    /// order `order` (indices into `dirs`) so that consecutive directions that lie close
-    /// together traverse the BVH as one packet
-    /// ([`crate::geom::raycast::SceneRays::cast_coherent`]). The hits come back in `order`'s
-    /// order: the i-th is that of `dirs[order[i]]`.
+    /// [`RfScene::cast`] from `o` along each of `dirs`, the same hits bit for bit, in order.
+    /// Consecutive directions that lie close together (a patch of the launch lattice,
+    /// [`crate::rf::fibonacci::patch_order`]) traverse the BVH as one packet
+    /// ([`crate::geom::raycast::SceneRays::cast_coherent`]).
     pub fn cast_fan(
         &self,
         o: DVec3,
         dirs: &[DVec3],
-        order: &[u32],
         tmin: f64,
         tmax: f64,
     ) -> Vec<Option<SurfaceHit>> {
         let origin = o.as_vec3().to_array();
-        let rays: Vec<([f32; 3], [f32; 3])> = order
+        let rays: Vec<([f32; 3], [f32; 3])> = dirs
             .iter()
-            .map(|&k| (origin, dirs[k as usize].as_vec3().to_array()))
+            .map(|d| (origin, d.as_vec3().to_array()))
             .collect();
-        let mut hits = vec![None; order.len()];
+        let mut hits = vec![None; dirs.len()];
         self.rays.cast_coherent_each(
             &rays,
             tmin as f32,
             tmax.min(f32::MAX as f64) as f32,
-            |i, hit| hits[i] = hit.map(|h| self.refine(o, dirs[order[i] as usize], tmin, h)),
+            |i, hit| hits[i] = hit.map(|h| self.refine(o, dirs[i], tmin, h)),
         );
         hits
     }
@@ -321,10 +319,10 @@ mod tests {
         let (n, start, len) = (2_000_000, 950_000, 30_000);
         let dirs: Vec<DVec3> = fibonacci_run(n, start, len).collect();
         let mut landed = 0;
-        for order in [patch_order(n, start, len), (0..len).collect()] {
-            let fan = scene.cast_fan(tx, &dirs, &order, EPS, 400.0);
-            for (&k, hit) in order.iter().zip(&fan) {
-                let d = &dirs[k as usize];
+        for order in [patch_order(n, start, len), (0..len).collect::<Vec<u32>>()] {
+            let ordered: Vec<DVec3> = order.iter().map(|&k| dirs[k as usize]).collect();
+            let fan = scene.cast_fan(tx, &ordered, EPS, 400.0);
+            for (d, hit) in ordered.iter().zip(&fan) {
                 let alone = scene.cast(tx, *d, EPS, 400.0);
                 assert_eq!(
                     hit.map(|h| (h.t.to_bits(), h.triangle)),
