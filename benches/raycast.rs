@@ -271,13 +271,30 @@ fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
             assert_eq!(hits, alone, "packets and lone rays hit differently");
             let total: f64 = secs.iter().sum();
             let bounces = closest.len() - levels[0].1;
+            let lone = |range: &[Ray]| {
+                best_of(a.n, threads, || {
+                    let hits = range
+                        .par_chunks(4096)
+                        .map(|c| {
+                            c.iter()
+                                .filter(|(o, d, t)| rays.cast(*o, *d, *t, f32::INFINITY).is_some())
+                                .count()
+                        })
+                        .sum::<usize>();
+                    std::hint::black_box(hits);
+                })
+            };
+            let (lone_primary, lone_bounces) =
+                (lone(&closest[..levels[0].1]), lone(&closest[levels[0].1..]));
             println!(
                 "  {threads} thread(s): closest-hit as packets where narrow {total:.3} s = {:.1} M \
-                 rays/s per core ({hits} hits, as one by one); the primary rays {:.1}, the \
-                 bounces' {:.1}",
+                 rays/s per core ({hits} hits, as one by one); the primary rays {:.1} (one by \
+                 one {:.1}), the bounces' {:.1} (one by one {:.1})",
                 per_core(closest.len(), total),
                 per_core(levels[0].1, secs[0]),
+                per_core(levels[0].1, lone_primary),
                 per_core(bounces, total - secs[0]),
+                per_core(bounces, lone_bounces),
             );
         }
         println!(
