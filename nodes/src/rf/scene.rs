@@ -143,18 +143,11 @@ impl RfScene {
         tmax: f64,
     ) -> Vec<Option<SurfaceHit>> {
         let origin = o.as_vec3().to_array();
-        let rays: Vec<([f32; 3], [f32; 3])> = dirs
+        let narrow: Vec<_> = dirs
             .iter()
             .map(|d| (origin, d.as_vec3().to_array()))
             .collect();
-        let mut hits = vec![None; dirs.len()];
-        self.rays.cast_coherent_each(
-            &rays,
-            tmin as f32,
-            tmax.min(f32::MAX as f64) as f32,
-            |i, hit| hits[i] = hit.map(|h| self.refine(o, dirs[i], tmin, h)),
-        );
-        hits
+        self.cast_each(&narrow, |i| (o, dirs[i]), tmin, tmax)
     }
 
     /// [`RfScene::cast`] of each (origin, direction) of `rays`, the same hits bit for bit.
@@ -166,17 +159,28 @@ impl RfScene {
         tmin: f64,
         tmax: f64,
     ) -> Vec<Option<SurfaceHit>> {
-        let narrow: Vec<([f32; 3], [f32; 3])> = rays
+        let narrow: Vec<_> = rays
             .iter()
             .map(|(o, d)| (o.as_vec3().to_array(), d.as_vec3().to_array()))
             .collect();
-        let mut hits = vec![None; rays.len()];
+        self.cast_each(&narrow, |i| rays[i], tmin, tmax)
+    }
+
+    /// The coherent cast of `narrow`, ray i being `ray(i)` in f32, each hit refined.
+    fn cast_each(
+        &self,
+        narrow: &[([f32; 3], [f32; 3])],
+        ray: impl Fn(usize) -> (DVec3, DVec3),
+        tmin: f64,
+        tmax: f64,
+    ) -> Vec<Option<SurfaceHit>> {
+        let mut hits = vec![None; narrow.len()];
         self.rays.cast_coherent_each(
-            &narrow,
+            narrow,
             tmin as f32,
             tmax.min(f32::MAX as f64) as f32,
             |i, hit| {
-                let (o, d) = rays[i];
+                let (o, d) = ray(i);
                 hits[i] = hit.map(|h| self.refine(o, d, tmin, h));
             },
         );
