@@ -60,6 +60,8 @@ pub struct WideBvh {
     packets: Vec<TriPacket>,
     /// Stack entries a traversal can need.
     stack_need: usize,
+    /// The median over the leaves of a leaf box's longest side: the scale of the scene's detail.
+    leaf_size: f32,
     simd: bool,
 }
 
@@ -227,6 +229,7 @@ impl WideBvh {
             nodes: Vec::new(),
             packets: Vec::new(),
             stack_need: 1,
+            leaf_size: 0.0,
             simd: simd_available(),
         }
     }
@@ -240,7 +243,30 @@ impl WideBvh {
         let depth = w.collapse(bvh, tris, 0, 1);
         // Each level pushes at most WIDTH - 1 entries beyond the one it pops.
         w.stack_need = depth * (WIDTH - 1) + 2;
+        w.leaf_size = w.median_leaf_side();
         w
+    }
+
+    /// The median over the leaves of a leaf box's longest side (0 for an empty tree).
+    pub fn leaf_size(&self) -> f32 {
+        self.leaf_size
+    }
+
+    fn median_leaf_side(&self) -> f32 {
+        let mut sides: Vec<f32> = self
+            .nodes
+            .iter()
+            .flat_map(|n| {
+                (0..WIDTH)
+                    .filter(move |&i| n.used >> i & 1 != 0 && n.count[i] != 0)
+                    .map(move |i| (0..3).map(|a| n.hi(a)[i] - n.lo(a)[i]).fold(0.0f32, max))
+            })
+            .collect();
+        if sides.is_empty() {
+            return 0.0;
+        }
+        let mid = sides.len() / 2;
+        *sides.select_nth_unstable_by(mid, f32::total_cmp).1
     }
 
     /// Uses the scalar box test even where AVX2 is available (to compare the two).
@@ -816,6 +842,8 @@ mod tests {
             v2: Vec3A::new(5.0, 0.0, 1.0),
         }];
         let bvh = build(&one);
+        // One leaf, 2 m across on its longest sides.
+        assert_eq!((none.leaf_size(), bvh.leaf_size()), (0.0, 2.0));
         let h = bvh.closest(Vec3A::ZERO, Vec3A::X, 0.0, 10.0).unwrap();
         assert_eq!((h.t, h.prim), (5.0, 0));
         assert!(bvh.any(Vec3A::ZERO, Vec3A::X, 0.0, 10.0));
