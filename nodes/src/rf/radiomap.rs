@@ -190,7 +190,7 @@ pub fn radio_map(
                 // Put in patch order once: every later pass reads them in sequence, where
                 // the lattice's order would scatter each patch over the chunk.
                 let lattice: Vec<DVec3> = fibonacci_run(opt.rays, start, chunk).collect();
-                let dirs: Vec<DVec3> = order.iter().map(|&k| lattice[k as usize]).collect();
+                let dirs: Vec<DVec3> = order.iter().map(|&i| lattice[i as usize]).collect();
                 drop(lattice);
                 let landed = scene.cast_fan(tx, &dirs, EPS, f64::INFINITY);
                 let bufs = (&mut hits, &mut crossings);
