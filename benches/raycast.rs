@@ -163,6 +163,17 @@ fn bounce_rays(
     (all, shadow, starts)
 }
 
+/// How many of `rs` hit something, each cast alone, in chunks over the thread pool.
+fn hits_alone(rays: &SceneRays, rs: &[Ray]) -> usize {
+    rs.par_chunks(4096)
+        .map(|c| {
+            c.iter()
+                .filter(|(o, d, tmin)| rays.cast(*o, *d, *tmin, f32::INFINITY).is_some())
+                .count()
+        })
+        .sum()
+}
+
 fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
     let t = Instant::now();
     let rays = SceneRays::new(scene);
@@ -211,15 +222,7 @@ fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
     }
     for &threads in &a.threads {
         let secs = best_of(a.n, threads, || {
-            let hits: usize = closest
-                .par_chunks(4096)
-                .map(|c| {
-                    c.iter()
-                        .filter(|(o, d, tmin)| rays.cast(*o, *d, *tmin, f32::INFINITY).is_some())
-                        .count()
-                })
-                .sum();
-            std::hint::black_box(hits);
+            std::hint::black_box(hits_alone(&rays, &closest));
         });
         let any = best_of(a.n, threads, || {
             let hits: usize = shadow
@@ -240,22 +243,29 @@ fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
                 .zip(starts.iter().skip(1).chain([&closest.len()]))
                 .map(|(&s, &e)| (s, e))
                 .collect();
-            let cast_level = |&(s, e): &(usize, usize)| -> usize {
-                let level: Vec<([f32; 3], [f32; 3])> =
-                    closest[s..e].iter().map(|r| (r.0, r.1)).collect();
-                let tmin = closest[s].2;
+            // Each level's rays as the coherent caster takes them, built once, outside the timing.
+            let level_rays: Vec<(Vec<([f32; 3], [f32; 3])>, f32)> = levels
+                .iter()
+                .map(|&(s, e)| {
+                    (
+                        closest[s..e].iter().map(|r| (r.0, r.1)).collect(),
+                        closest[s].2,
+                    )
+                })
+                .collect();
+            let cast_level = |(level, tmin): &(Vec<([f32; 3], [f32; 3])>, f32)| -> usize {
                 level
                     .par_chunks(4096)
                     .map(|c| {
                         let mut hits = 0;
-                        rays.cast_coherent_each(c, tmin, f32::INFINITY, |_, h| {
+                        rays.cast_coherent_each(c, *tmin, f32::INFINITY, |_, h| {
                             hits += h.is_some() as usize
                         });
                         hits
                     })
                     .sum()
             };
-            let secs: Vec<f64> = levels
+            let secs: Vec<f64> = level_rays
                 .iter()
                 .map(|l| {
                     best_of(a.n, threads, || {
@@ -263,25 +273,17 @@ fn cast_case(name: &str, scene: &Scene, tx: [f32; 3], a: &Args) {
                     })
                 })
                 .collect();
-            let hits: usize = levels.iter().map(cast_level).sum();
-            let alone = closest
-                .par_iter()
-                .filter(|(o, d, tmin)| rays.cast(*o, *d, *tmin, f32::INFINITY).is_some())
-                .count();
-            assert_eq!(hits, alone, "packets and lone rays hit differently");
+            let hits: usize = level_rays.iter().map(cast_level).sum();
+            assert_eq!(
+                hits,
+                hits_alone(&rays, &closest),
+                "packets and lone rays hit differently"
+            );
             let total: f64 = secs.iter().sum();
             let bounces = closest.len() - levels[0].1;
             let lone = |range: &[Ray]| {
                 best_of(a.n, threads, || {
-                    let hits = range
-                        .par_chunks(4096)
-                        .map(|c| {
-                            c.iter()
-                                .filter(|(o, d, t)| rays.cast(*o, *d, *t, f32::INFINITY).is_some())
-                                .count()
-                        })
-                        .sum::<usize>();
-                    std::hint::black_box(hits);
+                    std::hint::black_box(hits_alone(&rays, range));
                 })
             };
             let (lone_primary, lone_bounces) =
