@@ -58,9 +58,7 @@ fn raster_4m_encode_hash_and_store(b: Bencher) {
         })
         .bench_local_values(|a| {
             let bytes = rmp_serde::to_vec(&a).unwrap();
-            let d = digest_bytes(&bytes);
-            cache.put_blob(&d, &bytes).unwrap();
-            d
+            cache.put_blob_with(|w| w.write_all(&bytes)).unwrap().0
         });
 }
 
@@ -68,8 +66,7 @@ fn raster_4m_encode_hash_and_store(b: Bencher) {
 fn raster_4m_load_verify_decode(b: Bencher) {
     let cache = Cache::open(&TMP.path().join("load")).unwrap();
     let bytes = rmp_serde::to_vec(&raster_4m(7)).unwrap();
-    let d = digest_bytes(&bytes);
-    cache.put_blob(&d, &bytes).unwrap();
+    let (d, _) = cache.put_blob_with(|w| w.write_all(&bytes)).unwrap();
     b.counter(BytesCount::new(RASTER_BYTES)).bench(|| {
         let bytes = cache.get_blob(&d).unwrap();
         rmp_serde::from_slice::<Artifact>(&bytes).unwrap()

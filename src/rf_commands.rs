@@ -12,8 +12,10 @@ use kodama_nodes::io::export::{Encoded, encode};
 use kodama_nodes::io::sionna_xml::read_scene_with_thickness;
 use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::links_csv::{read_links, write_results};
-use kodama_nodes::rf::paths::{LinkEnds, LinkPaths, TraceOptions, trace_links};
-use kodama_nodes::rf::radiomap::{default_plane, radio_map};
+use kodama_nodes::rf::map_plane::default_plane;
+use kodama_nodes::rf::path::{LinkEnds, LinkPaths, TraceOptions};
+use kodama_nodes::rf::paths::trace_links;
+use kodama_nodes::rf::radiomap::radio_map;
 use kodama_nodes::rf::scene::RfScene;
 use kodama_nodes::{Artifact, Site, StageError};
 

@@ -18,6 +18,7 @@ compile_error!(
 );
 
 pub mod artifact;
+pub mod buildings;
 pub mod geom;
 pub mod io;
 pub mod params;
@@ -26,6 +27,7 @@ pub mod rf;
 pub mod rng;
 pub mod site;
 pub mod stage;
+pub mod street;
 
 pub mod stages;
 pub mod synth;

@@ -4,8 +4,24 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::io::crs::Crs;
-use crate::stage::ParamError;
+/// A parameter value that is well-formed but not acceptable.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamError {
+    /// The params field at fault.
+    pub field: &'static str,
+    /// What was expected, and what was found.
+    pub message: String,
+}
+
+impl ParamError {
+    /// An error on `field`.
+    pub fn new(field: &'static str, message: impl Into<String>) -> Self {
+        ParamError {
+            field,
+            message: message.into(),
+        }
+    }
+}
 
 /// An optional cell size must be positive (rejects NaN too).
 pub fn check_cell(cell_m: Option<f64>) -> Result<(), ParamError> {
@@ -18,14 +34,6 @@ pub fn check_cell(cell_m: Option<f64>) -> Result<(), ParamError> {
     }
 }
 
-/// An optional CRS must be one we can build (`EPSG:<code>` or a `+proj` string).
-pub fn check_crs(crs: &Option<String>) -> Result<(), ParamError> {
-    if let Some(c) = crs {
-        Crs::from_user(c).map_err(|m| ParamError::new("crs", m))?;
-    }
-    Ok(())
-}
-
 /// The folder holding `path` (`.` for a bare file name): what a node whose data is a folder of
 /// files (a tileset, a view set) declares as its input.
 pub fn folder_of(path: &str) -> String {
@@ -34,24 +42,6 @@ pub fn folder_of(path: &str) -> String {
         .map(|f| f.to_string_lossy().into_owned())
         .filter(|f| !f.is_empty())
         .unwrap_or_else(|| ".".into())
-}
-
-/// An antenna's boresight must be finite (RON writes `NaN` and `inf`): a NaN azimuth would make
-/// every gain NaN without an error.
-pub fn check_antenna(
-    field: &'static str,
-    a: &crate::rf::antenna::Antenna,
-) -> Result<(), ParamError> {
-    if !(a.azimuth_deg.is_finite() && a.tilt_deg.is_finite()) {
-        return Err(ParamError::new(
-            field,
-            format!(
-                "expected a finite azimuth_deg and tilt_deg, found {} and {}",
-                a.azimuth_deg, a.tilt_deg
-            ),
-        ));
-    }
-    Ok(())
 }
 
 /// The params of a stage that takes none.

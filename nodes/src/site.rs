@@ -28,10 +28,10 @@ impl Site {
             .map_err(|_| format!("expected a numeric EPSG code, found {code:?}"))
     }
 
-    /// Checks the values a user wrote; the message names the offending field.
+    /// Checks the values a user wrote, but for the projection itself (`io::crs::check_site` checks
+    /// both); the message names the offending field.
     pub fn validate(&self) -> Result<(), (&'static str, String)> {
         self.epsg().map_err(|m| ("crs", m))?;
-        crate::io::crs::check_site_crs(&self.crs).map_err(|m| ("crs", m))?;
         if !(self.cell_m.is_finite() && self.cell_m > 0.0) {
             return Err((
                 "cell_m",

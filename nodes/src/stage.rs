@@ -17,6 +17,7 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use crate::artifact::{Artifact, ArtifactType, Typed};
+pub use crate::params::ParamError;
 use crate::site::Site;
 
 /// How many upstream nodes an input takes.
@@ -80,25 +81,6 @@ pub struct FileRef {
     pub field: &'static str,
     /// The path as written in the graph (relative to the data folder or the graph file).
     pub path: String,
-}
-
-/// A parameter value that is well-formed but not acceptable.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ParamError {
-    /// The params field at fault.
-    pub field: &'static str,
-    /// What was expected, and what was found.
-    pub message: String,
-}
-
-impl ParamError {
-    /// An error on `field`.
-    pub fn new(field: &'static str, message: impl Into<String>) -> Self {
-        ParamError {
-            field,
-            message: message.into(),
-        }
-    }
 }
 
 /// Why a stage did not produce its output.

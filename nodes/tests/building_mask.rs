@@ -7,7 +7,7 @@ use common::*;
 use std::sync::Arc;
 
 use kodama_nodes::artifact::Raster;
-use kodama_nodes::geom::polygon::point_in_ring;
+use kodama_nodes::artifact::point_in_ring;
 use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::buildings::building_mask::{BuildingMask, BuildingMaskParams};
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};

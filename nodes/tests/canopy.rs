@@ -7,13 +7,13 @@ use common::*;
 
 use std::collections::BTreeMap;
 
+use kodama_nodes::artifact::Material;
 use kodama_nodes::artifact::{ObjectClass, Raster};
-use kodama_nodes::geom::canopy::{CanopyConfig, canopies};
 use kodama_nodes::geom::raycast::SceneRays;
-use kodama_nodes::rf::materials::Material;
 use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::buildings::building_mask::{BuildingMask, BuildingMaskParams};
 use kodama_nodes::stages::buildings::unassigned::{UnassignedAbove, UnassignedAboveParams};
+use kodama_nodes::street::canopy::{CanopyConfig, canopies};
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
 

@@ -10,14 +10,14 @@ use std::collections::BTreeMap;
 
 use kodama_nodes::artifact::height_at;
 use kodama_nodes::artifact::{City, Grid, PodVec, Raster, Scene, ViewSet};
-use kodama_nodes::geom::assets::ASSET_KINDS;
-use kodama_nodes::geom::clutter::{ClutterConfig, calibrate, place_clutter};
 use kodama_nodes::geom::mesh_check::check_solid;
 use kodama_nodes::geom::raycast::SceneRays;
 use kodama_nodes::geom::theil_sen::{least_squares, theil_sen};
 use kodama_nodes::rng::{gaussian, mix, unit};
 use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::street::place_clutter::{PlaceClutter, PlaceClutterParams};
+use kodama_nodes::street::clutter::assets::ASSET_KINDS;
+use kodama_nodes::street::clutter::{ClutterConfig, calibrate, place_clutter};
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
 use kodama_nodes::synth::truth_scene::wall_prisms;

@@ -306,7 +306,7 @@ fn cube_scene(half: f32) -> Scene {
         [half as f64 * 2.0, half as f64 * 2.0, 10.0],
         0.0,
         0.0,
-        kodama_nodes::rf::materials::Material::Concrete,
+        kodama_nodes::artifact::Material::Concrete,
     );
     Scene {
         objects: vec![kodama_nodes::artifact::SceneObject {

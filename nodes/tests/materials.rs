@@ -14,11 +14,11 @@ use common::*;
 
 use std::collections::BTreeMap;
 
+use kodama_nodes::artifact::Material;
 use kodama_nodes::artifact::{
     ChartKind, ChartSet, City, FeatureKind, MaterialLayers, MaterialSource, Scene, ViewSet,
 };
 use kodama_nodes::geom::mesh_check::check_solid;
-use kodama_nodes::rf::materials::Material;
 use kodama_nodes::stages::street::apply_materials::{ApplyMaterials, ApplyMaterialsParams};
 use kodama_nodes::stages::street::fuse_materials::{FuseMaterials, FuseMaterialsParams};
 use kodama_nodes::stages::street::surface_charts::{SurfaceCharts, SurfaceChartsParams};

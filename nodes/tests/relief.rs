@@ -18,15 +18,15 @@ use std::sync::OnceLock;
 use std::time::Instant;
 
 use kodama_nodes::artifact::{ChartKind, ChartSet, City, FeatureKind, ReliefSet, Scene, ViewSet};
-use kodama_nodes::geom::carve::{CarveOutcome, CarveParams, DropKind, carve_scene};
 use kodama_nodes::geom::mesh_check::check_solid;
-use kodama_nodes::geom::relief::{
-    Cpt, CptRow, DeltaParams, MeshState, ReliefParams, level, mesh_state_probabilities,
-    relief_posterior,
-};
 use kodama_nodes::io::export::write_glb;
 use kodama_nodes::stages::street::relief::Relief;
 use kodama_nodes::stages::street::surface_charts::{SurfaceCharts, SurfaceChartsParams};
+use kodama_nodes::street::relief::carve::{CarveOutcome, CarveParams, DropKind, carve_scene};
+use kodama_nodes::street::relief::{
+    Cpt, CptRow, DeltaParams, MeshState, ReliefParams, level, mesh_state_probabilities,
+    relief_posterior,
+};
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
 use kodama_nodes::synth::truth_scene::wall_prisms;
@@ -1011,7 +1011,7 @@ fn carved_solids_pass_the_solid_check_and_read_back_closed_from_the_glb() {
     // Carved faces took their materials: glass at the back of windows, wood for doors,
     // metal or concrete for protrusions, where the relief found them.
     let has = |m: u8| carved.objects.iter().any(|o| o.mesh.materials.contains(&m));
-    use kodama_nodes::rf::materials::Material;
+    use kodama_nodes::artifact::Material;
     assert!(has(Material::Glass as u8));
     if r.instances.iter().any(|i| i.class == "door") {
         assert!(has(Material::Wood as u8));

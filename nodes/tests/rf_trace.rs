@@ -8,12 +8,13 @@ use common::diffraction_only;
 use glam::DVec3;
 use num_complex::Complex64 as C64;
 
+use kodama_nodes::artifact::Material;
 use kodama_nodes::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
 use kodama_nodes::geom::mesh_build::cuboid;
 use kodama_nodes::rf::antenna::{Antenna, Pattern, Polarization};
 use kodama_nodes::rf::em::{fspl_db, permittivity, slab};
-use kodama_nodes::rf::materials::Material;
-use kodama_nodes::rf::paths::{InteractionKind, LinkEnds, LinkPaths, TraceOptions, trace_links};
+use kodama_nodes::rf::path::{InteractionKind, LinkEnds, LinkPaths, TraceOptions};
+use kodama_nodes::rf::paths::trace_links;
 use kodama_nodes::rf::scene::RfScene;
 use kodama_nodes::rf::wavelength;
 
@@ -426,7 +427,8 @@ fn a_link_through_overlapping_canopies_loses_their_union_once() {
 #[test]
 fn a_radio_map_cell_behind_overlapping_canopies_loses_their_union_once() {
     use kodama_nodes::artifact::Grid;
-    use kodama_nodes::rf::radiomap::{MapPlane, radio_map};
+    use kodama_nodes::rf::map_plane::MapPlane;
+    use kodama_nodes::rf::radiomap::radio_map;
     let plane = MapPlane::plane(
         Grid {
             x0: -5.0,
@@ -585,7 +587,8 @@ fn min_wedge_deg_drops_shallow_bends_and_keeps_corners() {
 /// and the link tracer's diffracted paths to the cell's centre, in dB.
 fn diffracted_map_and_links(extra: Vec<SceneObject>) -> Vec<(f64, f64)> {
     use kodama_nodes::artifact::Grid;
-    use kodama_nodes::rf::radiomap::{MapPlane, radio_map};
+    use kodama_nodes::rf::map_plane::MapPlane;
+    use kodama_nodes::rf::radiomap::radio_map;
     let mut objects = vec![SceneObject {
         id: "box".into(),
         class: ObjectClass::Building,

@@ -10,7 +10,8 @@ use std::collections::BTreeMap;
 
 use kodama_nodes::io::sionna_xml::read_scene;
 use kodama_nodes::rf::antenna::Antenna;
-use kodama_nodes::rf::paths::{TraceOptions, trace_links};
+use kodama_nodes::rf::path::TraceOptions;
+use kodama_nodes::rf::paths::trace_links;
 use kodama_nodes::rf::scene::RfScene;
 
 struct Row {
@@ -380,9 +381,9 @@ type LinkEndsRow = ([f64; 3], [f64; 3]);
 /// The box of scripts/sionna_wedge_fixture.py (x, y in [0, 20], z in [0, 30]) in the fixture's
 /// material `name`, at 3.5 GHz.
 fn fixture_box(name: &str) -> RfScene {
+    use kodama_nodes::artifact::Material;
     use kodama_nodes::artifact::{ObjectClass, Scene, SceneObject};
     use kodama_nodes::geom::mesh_build::cuboid;
-    use kodama_nodes::rf::materials::Material;
     let material = match name {
         "marble" => Material::Marble,
         "metal" => Material::Metal,
@@ -404,7 +405,8 @@ fn fixture_box(name: &str) -> RfScene {
 #[test]
 fn radio_map_diffraction_over_one_box_against_sionna_rt() {
     use kodama_nodes::artifact::Grid;
-    use kodama_nodes::rf::radiomap::{MapPlane, radio_map};
+    use kodama_nodes::rf::map_plane::MapPlane;
+    use kodama_nodes::rf::radiomap::radio_map;
     let mut r = csv::Reader::from_path(fixture("sionna_wedge_map.csv")).unwrap();
     let mut groups: BTreeMap<String, Vec<(u32, u32, f64)>> = BTreeMap::new();
     for rec in r.records() {

@@ -7,9 +7,9 @@ use common::*;
 
 use std::sync::Arc;
 
+use kodama_nodes::artifact::point_in_ring;
 use kodama_nodes::artifact::{Metrics, ObjectClass, PointSet, Raster, Scene};
 use kodama_nodes::geom::mesh_check::check_solid;
-use kodama_nodes::geom::polygon::point_in_ring;
 use kodama_nodes::geom::raycast::SceneRays;
 use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::buildings::building_mask::{BuildingMask, BuildingMaskParams};

@@ -7,9 +7,9 @@ use common::*;
 use std::sync::Arc;
 
 use kodama_nodes::artifact::height_at;
+use kodama_nodes::artifact::point_in_ring;
 use kodama_nodes::artifact::{ObjectClass, PointSet, Roof, Scene};
 use kodama_nodes::geom::mesh_check::{check_closed_solid, check_solid};
-use kodama_nodes::geom::polygon::point_in_ring;
 use kodama_nodes::io::export::{write_glb, write_las};
 use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::heights::rasterize_scene::{RasterizeScene, RasterizeSceneParams};
@@ -403,8 +403,8 @@ fn glb_loads_in_the_gltf_crate_with_a_node_per_object() {
 #[test]
 fn facade_relief_is_where_the_city_says() {
     use kodama_nodes::artifact::FeatureKind;
+    use kodama_nodes::artifact::Material;
     use kodama_nodes::geom::raycast::SceneRays;
-    use kodama_nodes::rf::materials::Material;
     let city = generate(&SynthCityParams::default());
     let count = |k: FeatureKind| {
         city.buildings

@@ -5,8 +5,8 @@ mod common;
 use common::*;
 
 use kodama_nodes::artifact::TerrainModel;
+use kodama_nodes::artifact::point_in_ring;
 use kodama_nodes::artifact::{ObjectClass, Roof};
-use kodama_nodes::geom::polygon::point_in_ring;
 use kodama_nodes::stages::heights::rasterize_scene::{RasterizeScene, RasterizeSceneParams};
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};

@@ -142,7 +142,9 @@ fn check(
                 diags.push(de_diag(e, a.span, None));
                 None
             }
-            Ok(site) => match site.validate().and_then(|()| check_site_cell(&site)) {
+            Ok(site) => match kodama_nodes::io::crs::check_site(&site)
+                .and_then(|()| check_site_cell(&site))
+            {
                 Err((field, msg)) => {
                     diags.push(Diagnostic::at(
                         field_span(a, field).unwrap_or(a.span),

@@ -3,8 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::Polygon;
+use crate::artifact::Material;
 use crate::artifact::TerrainModel;
-use crate::rf::materials::Material;
 
 /// Depth of the synthetic city's window and door recesses: the thickness of the outer wall
 /// layer, metres.

@@ -3,7 +3,6 @@
 use serde::{Deserialize, Serialize};
 
 use super::Grid;
-use crate::geom::polygon::{point_in_ring, ring_area};
 
 /// A polygon in the site frame: exterior counter-clockwise, holes clockwise, rings open (the
 /// closing vertex is not repeated).
@@ -113,4 +112,31 @@ impl Footprints {
         }
         out
     }
+}
+
+/// Even-odd point-in-polygon test.
+pub fn point_in_ring(p: [f64; 2], ring: &[[f64; 2]]) -> bool {
+    let mut inside = false;
+    let n = ring.len();
+    for i in 0..n {
+        let (a, b) = (ring[i], ring[(i + n - 1) % n]);
+        if (a[1] > p[1]) != (b[1] > p[1])
+            && p[0] < (b[0] - a[0]) * (p[1] - a[1]) / (b[1] - a[1]) + a[0]
+        {
+            inside = !inside;
+        }
+    }
+    inside
+}
+
+/// Signed area of a ring (positive when counter-clockwise), m².
+pub fn ring_area(ring: &[[f64; 2]]) -> f64 {
+    let n = ring.len();
+    (0..n)
+        .map(|i| {
+            let (a, b) = (ring[i], ring[(i + 1) % n]);
+            a[0] * b[1] - b[0] * a[1]
+        })
+        .sum::<f64>()
+        / 2.0
 }

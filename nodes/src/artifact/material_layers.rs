@@ -42,7 +42,7 @@ impl MaterialSource {
 /// The materials of one chart, per texel (row-major, `v` rows, as its grid).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ChartMaterials {
-    /// [`crate::rf::materials::Material`] discriminant per texel; [`NO_MATERIAL`] off the surface.
+    /// [`crate::artifact::Material`] discriminant per texel; [`NO_MATERIAL`] off the surface.
     pub material: PodVec<u8>,
     /// [`MaterialSource`] discriminant per texel.
     pub source: PodVec<u8>,

@@ -4,6 +4,7 @@ mod array;
 mod charts;
 mod city;
 mod footprints;
+mod material;
 mod material_layers;
 mod measurements;
 mod metrics;
@@ -24,7 +25,8 @@ pub use city::{
     BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, RECESS_M, Rect, Roof, RoofBox,
     Street, TreeSpec,
 };
-pub use footprints::{Footprint, Footprints, Polygon};
+pub use footprints::{Footprint, Footprints, Polygon, point_in_ring, ring_area};
+pub use material::{Material, default_material};
 pub use material_layers::{
     ChartMaterials, MaterialLayers, MaterialSource, MaterialStats, NO_MATERIAL,
 };

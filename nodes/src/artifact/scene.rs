@@ -16,7 +16,7 @@ pub struct Mesh {
     pub positions: PodVec<[f32; 3]>,
     /// Vertex indices, three per triangle.
     pub triangles: PodVec<[u32; 3]>,
-    /// [`crate::rf::materials::Material`] discriminant per triangle.
+    /// [`crate::artifact::Material`] discriminant per triangle.
     pub materials: PodVec<u8>,
 }
 

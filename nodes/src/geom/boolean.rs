@@ -7,9 +7,9 @@
 use manifold_rust::manifold::Manifold;
 use manifold_rust::types::{BooleanEngine, Error, MeshGL64, OpType};
 
+use crate::artifact::Material;
 use crate::artifact::{Mesh, PodVec};
 use crate::geom::mesh_check::{check_solid, is_degenerate};
-use crate::rf::materials::Material;
 
 /// `m` as a Manifold, its materials as face IDs; an error when it is not a closed 2-manifold.
 pub fn to_manifold(m: &Mesh) -> Result<Manifold, String> {

@@ -257,9 +257,9 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::artifact::Material;
     use crate::artifact::SceneObject;
     use crate::geom::mesh_build::cuboid;
-    use crate::rf::materials::Material;
 
     fn box_scene() -> Scene {
         Scene {

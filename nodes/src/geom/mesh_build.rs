@@ -6,9 +6,9 @@ use std::collections::HashMap;
 use spade::handles::FixedVertexHandle;
 use spade::{ConstrainedDelaunayTriangulation, HasPosition, Point2, Triangulation};
 
+use crate::artifact::Material;
+use crate::artifact::point_in_ring;
 use crate::artifact::{Mesh, PodVec, Polygon, Rect};
-use crate::geom::polygon::point_in_ring;
-use crate::rf::materials::Material;
 
 /// A mesh under construction.
 #[derive(Default)]

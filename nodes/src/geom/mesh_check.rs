@@ -297,9 +297,9 @@ fn faces_intersect(mesh: &Mesh, tris: &[[P3; 3]], i: usize, j: usize) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::artifact::Material;
     use crate::artifact::Polygon;
     use crate::geom::mesh_build::{cuboid, dome, gabled, prism};
-    use crate::rf::materials::Material;
 
     fn two(a: &Mesh, b: &Mesh) -> Mesh {
         let mut m = a.clone();

@@ -1,39 +1,12 @@
-//! Polygon operations: point in ring, ring area, convex hull, outlines traced from label
+//! Polygon operations (a ring's area and point test are the artifact's own): convex hull, outlines traced from label
 //! rasters, and Douglas-Peucker simplification of closed rings.
 
 use std::collections::BTreeMap;
 
-use crate::artifact::{Polygon, Raster};
+use crate::artifact::{Polygon, Raster, point_in_ring, ring_area};
 
 /// A cell corner on the raster's integer lattice (column, row).
 type Vertex = (i64, i64);
-
-/// Even-odd point-in-polygon test.
-pub fn point_in_ring(p: [f64; 2], ring: &[[f64; 2]]) -> bool {
-    let mut inside = false;
-    let n = ring.len();
-    for i in 0..n {
-        let (a, b) = (ring[i], ring[(i + n - 1) % n]);
-        if (a[1] > p[1]) != (b[1] > p[1])
-            && p[0] < (b[0] - a[0]) * (p[1] - a[1]) / (b[1] - a[1]) + a[0]
-        {
-            inside = !inside;
-        }
-    }
-    inside
-}
-
-/// Signed area of a ring (positive when counter-clockwise), m².
-pub fn ring_area(ring: &[[f64; 2]]) -> f64 {
-    let n = ring.len();
-    (0..n)
-        .map(|i| {
-            let (a, b) = (ring[i], ring[(i + 1) % n]);
-            a[0] * b[1] - b[0] * a[1]
-        })
-        .sum::<f64>()
-        / 2.0
-}
 
 /// Polygons per label, from the boundary edges of each label's cells with the label on the left.
 pub fn trace(labels: &Raster) -> BTreeMap<u32, Vec<Polygon>> {

@@ -1,9 +1,9 @@
 //! The terrain raster as a triangle mesh.
 
+use crate::artifact::Material;
 use crate::artifact::{Mesh, Raster};
 use crate::geom::mesh_build::height_surface;
 use crate::raster::gap_fill::fill_gaps;
-use crate::rf::materials::Material;
 
 /// The terrain raster as a regular triangulated surface over its whole extent, vertices every
 /// `step` metres (bilinear between cell centres, clamped at the rim); no-data cells are filled

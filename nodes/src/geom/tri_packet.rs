@@ -8,7 +8,7 @@
 use glam::Vec3A;
 use obvhs::triangle::Triangle;
 
-use super::raycast::ShearedRay;
+use super::sheared_ray::ShearedRay;
 
 /// Triangles per packet.
 pub const LANES: usize = 4;

@@ -396,6 +396,20 @@ impl ToSite {
     }
 }
 
+/// An optional CRS must be one we can build (`EPSG:<code>` or a `+proj` string).
+pub fn check_crs_param(crs: &Option<String>) -> Result<(), ParamError> {
+    if let Some(c) = crs {
+        Crs::from_user(c).map_err(|m| ParamError::new("crs", m))?;
+    }
+    Ok(())
+}
+
+/// A site as a user wrote it: its own checks ([`Site::validate`]) and a projection in metres.
+pub fn check_site(site: &Site) -> Result<(), (&'static str, String)> {
+    site.validate()?;
+    check_site_crs(&site.crs).map_err(|m| ("crs", m))
+}
+
 /// The site frame's projection, checked to be projected and metric.
 pub fn check_site_crs(crs: &str) -> Result<(), String> {
     let c = Crs::from_user(crs)?;

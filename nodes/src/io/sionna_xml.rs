@@ -5,8 +5,8 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use crate::artifact::Material;
 use crate::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
-use crate::rf::materials::Material;
 use crate::stage::StageError;
 
 /// Sionna's default slab thickness, metres. Our scenes write each material's thickness from

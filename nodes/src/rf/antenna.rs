@@ -3,6 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::stage::ParamError;
+
 /// A radiation pattern.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Pattern {
@@ -115,6 +117,21 @@ pub fn spherical_basis(k: [f64; 3]) -> ([f64; 3], [f64; 3]) {
     let (cp, sp) = (k[0] / rho, k[1] / rho);
     let (ct, st) = (k[2], rho);
     ([ct * cp, ct * sp, -st], [-sp, cp, 0.0])
+}
+
+/// An antenna's boresight must be finite (RON writes `NaN` and `inf`): a NaN azimuth would make
+/// every gain NaN without an error.
+pub fn check_antenna(field: &'static str, a: &Antenna) -> Result<(), ParamError> {
+    if !(a.azimuth_deg.is_finite() && a.tilt_deg.is_finite()) {
+        return Err(ParamError::new(
+            field,
+            format!(
+                "expected a finite azimuth_deg and tilt_deg, found {} and {}",
+                a.azimuth_deg, a.tilt_deg
+            ),
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -12,8 +12,8 @@ use super::diffraction_search::DiffractionSequence;
 use super::field::{self, CVec};
 use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
 use super::image_method::{image_points, images_of, mirrored};
+use super::path::{Interaction, InteractionKind, Path, Tracer};
 use super::path_field::specular;
-use super::paths::{Interaction, InteractionKind, Path, Tracer};
 use super::scene::{EPS, RfScene};
 
 /// Clearance kept at a diffraction point when testing its legs: the edge's own faces meet there.
@@ -204,7 +204,7 @@ mod tests {
     use crate::rf::antenna::Antenna;
     use crate::rf::diffraction::wedges;
     use crate::rf::diffraction_search::diffraction_sequences;
-    use crate::rf::paths::TraceOptions;
+    use crate::rf::path::TraceOptions;
     use crate::rf::sequences::reflection_sequences;
     use crate::rf::test_scenes::{STREET_TX, street_grid};
 

@@ -11,7 +11,7 @@ use glam::DVec3;
 use num_complex::Complex64 as C64;
 
 use super::field::{self, CVec};
-use super::paths::TraceOptions;
+use super::path::TraceOptions;
 use super::scene::RfScene;
 use super::utd::wedge_coefficients;
 use crate::geom::polygon::convex_hull;
@@ -543,9 +543,9 @@ pub fn diffracted_field(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::artifact::Material;
     use crate::artifact::{ObjectClass, Scene, SceneObject};
     use crate::geom::mesh_build::cuboid;
-    use crate::rf::materials::Material;
 
     fn concrete_box() -> RfScene {
         one_box([10.0, 10.0, 10.0], Material::Concrete)

@@ -22,7 +22,7 @@ use super::diffraction::{Wedge, Wedges, keller_cone};
 use super::fibonacci::fibonacci_sphere;
 use super::field;
 use super::image_method::images_of;
-use super::paths::TraceOptions;
+use super::path::TraceOptions;
 use super::scene::{EPS, RfScene};
 
 /// A diffracted path to solve: the surfaces it reflects off before the edge, the wedge, and

@@ -10,7 +10,7 @@ use super::antenna::spherical_basis;
 use super::fibonacci::fibonacci_sphere;
 use super::field;
 use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
-use super::paths::Tracer;
+use super::path::Tracer;
 use super::scattering::pattern;
 use super::scene::EPS;
 

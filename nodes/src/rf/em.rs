@@ -3,7 +3,7 @@
 
 use num_complex::Complex64 as C64;
 
-use crate::rf::materials::Material;
+use crate::artifact::Material;
 
 /// Vacuum permittivity, F/m.
 const EPS0: f64 = 8.854_187_812_8e-12;

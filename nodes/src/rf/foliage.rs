@@ -134,9 +134,9 @@ pub fn foliage_length(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::artifact::Material;
     use crate::artifact::{Scene, SceneObject};
     use crate::geom::mesh_build::cuboid;
-    use crate::rf::materials::Material;
 
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() < 1e-9 * b.abs().max(1.0)

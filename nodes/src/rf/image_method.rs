@@ -184,7 +184,7 @@ fn inside_triangle(t: &[DVec3; 3], n: DVec3, p: DVec3) -> bool {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rf::paths::TraceOptions;
+    use crate::rf::path::TraceOptions;
     use crate::rf::sequences::reflection_sequences;
     use crate::rf::test_scenes::{STREET_TX, street_grid};
 

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use crate::stage::StageError;
 
-use super::paths::{LinkEnds, LinkPaths};
+use super::path::{LinkEnds, LinkPaths};
 
 /// The (tx, rx) pairs of a links CSV.
 pub fn read_links(path: &Path) -> Result<Vec<LinkEnds>, StageError> {

@@ -7,7 +7,7 @@ use glam::DVec3;
 
 use super::field::{self, CVec};
 use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
-use super::paths::{Interaction, InteractionKind, Path, Tracer};
+use super::path::{Interaction, InteractionKind, Path, Tracer};
 use super::scene::EPS;
 
 /// The path along the polyline `points` whose inner points are reflections off `seq`, from a

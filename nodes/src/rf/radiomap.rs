@@ -9,7 +9,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::artifact::{Grid, PodVec, Raster};
+use crate::artifact::{PodVec, Raster};
 use crate::rng::{mix, unit};
 
 use super::antenna::Antenna;
@@ -18,129 +18,12 @@ use super::diffraction::wedges_for;
 use super::fibonacci::{PATCH, fibonacci_run, patch_order};
 use super::field::{self, CVec};
 use super::foliage::{FoliageDepth, loss_amplitude};
-use super::paths::TraceOptions;
+use super::map_plane::{Crossing, MapPlane};
+use super::path::TraceOptions;
 use super::radiomap_diffraction::{EdgeSampler, lit_wedges};
 use super::scattering::pattern;
 use super::scene::{EPS, RfScene, SurfaceHit};
 use super::slab_table::SlabTable;
-
-/// Where a map is measured: the cells of `grid` on the horizontal plane at height `z`, or on a
-/// surface following the terrain (`lifted`, e.g. 1.5 m above it), which rays cross transparently.
-pub struct MapPlane {
-    /// The cells (north-up).
-    pub grid: Grid,
-    /// Height of the plane, metres (site frame); unused with a lifted surface.
-    pub z: f64,
-    /// The terrain-following measurement surface, if any.
-    pub lifted: Option<crate::geom::raycast::SceneRays>,
-}
-
-impl MapPlane {
-    /// A horizontal plane at `z` over `grid`.
-    pub fn plane(grid: Grid, z: f64) -> MapPlane {
-        MapPlane {
-            grid,
-            z,
-            lifted: None,
-        }
-    }
-
-    /// The surface `height_m` above `terrain`, over `grid`: the terrain meshed at the grid's
-    /// cell size and lifted.
-    pub fn above_terrain(grid: Grid, terrain: &Raster, height_m: f64) -> Result<MapPlane, String> {
-        let mut mesh = crate::geom::terrain_mesh::terrain_mesh(
-            terrain,
-            grid.cell_m,
-            crate::rf::materials::Material::MediumDryGround,
-        )?;
-        for p in mesh.positions.iter_mut() {
-            p[2] += height_m as f32;
-        }
-        let scene = crate::artifact::Scene {
-            objects: vec![crate::artifact::SceneObject {
-                id: "measurement-surface".into(),
-                class: crate::artifact::ObjectClass::Unsegmented,
-                mesh,
-            }],
-        };
-        Ok(MapPlane {
-            grid,
-            z: f64::NAN,
-            lifted: Some(crate::geom::raycast::SceneRays::new(&scene)),
-        })
-    }
-
-    /// Each crossing of the surface by the segment `o + t d`, t in (EPS, t_end), in order.
-    pub(super) fn crossings(&self, o: DVec3, d: DVec3, t_end: f64, out: &mut Vec<Crossing>) {
-        let g = self.grid;
-        let mut add = |t: f64, normal: DVec3| {
-            let p = o + d * t;
-            if let Some((c, r)) = g.cell_of(p.x, p.y) {
-                out.push(Crossing {
-                    t,
-                    cell: r * g.width + c,
-                    normal,
-                });
-            }
-        };
-        match &self.lifted {
-            None => {
-                if d.z != 0.0 {
-                    let t = (self.z - o.z) / d.z;
-                    if t > EPS && t < t_end {
-                        add(t, DVec3::Z);
-                    }
-                }
-            }
-            Some(rays) => {
-                let mut tmin = EPS;
-                while let Some(h) = rays.cast(
-                    o.as_vec3().into(),
-                    d.as_vec3().into(),
-                    tmin as f32,
-                    t_end.min(f32::MAX as f64) as f32,
-                ) {
-                    let t = h.t as f64;
-                    add(t, DVec3::from(h.normal.map(f64::from)));
-                    tmin = t + EPS;
-                }
-            }
-        }
-    }
-
-    /// The area of the surface over one cell where its normal is `n`: a tilted patch over a cell
-    /// of area A has area A / n_z.
-    pub(super) fn patch_area(&self, n: DVec3) -> f64 {
-        self.grid.cell_m * self.grid.cell_m / n.z.abs().max(1e-6)
-    }
-}
-
-/// Where a ray crosses a map's surface: how far along, in which cell, and the surface's normal
-/// there.
-pub(super) struct Crossing {
-    pub t: f64,
-    pub cell: u32,
-    pub normal: DVec3,
-}
-
-/// Sionna's default plane: the scene's horizontal extent in cells of `cell_m`, centred on it,
-/// at height `z`.
-pub fn default_plane(scene: &RfScene, cell_m: f64, z: f64) -> MapPlane {
-    let (lo, hi) = scene.bounds;
-    let (cx, cy) = ((lo.x + hi.x) / 2.0, (lo.y + hi.y) / 2.0);
-    let nx = ((hi.x - lo.x) / cell_m).ceil().max(1.0) as u32;
-    let ny = ((hi.y - lo.y) / cell_m).ceil().max(1.0) as u32;
-    MapPlane::plane(
-        Grid {
-            x0: cx - nx as f64 * cell_m / 2.0,
-            y0: cy + ny as f64 * cell_m / 2.0,
-            cell_m,
-            width: nx,
-            height: ny,
-        },
-        z,
-    )
-}
 
 /// The mean path gain (linear) of every cell of `plane` from a transmitter at `tx`; 0 where no
 /// ray arrived. `opt.rays` rays, interactions as `opt` enables them, foliage crossed at
@@ -474,7 +357,7 @@ fn hemisphere(n: DVec3, u1: f64, u2: f64) -> DVec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::artifact::Scene;
+    use crate::artifact::{Grid, Scene};
     use crate::rf::test_scenes::{STREET_TX, street_grid};
 
     /// Casting in packets, in patch order and segment by segment changes nothing: the map is the

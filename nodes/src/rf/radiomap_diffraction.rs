@@ -21,7 +21,7 @@ use super::antenna::Antenna;
 use super::diffraction::{Wedge, Wedges, diffracted_field, keller_cone};
 use super::field;
 use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
-use super::radiomap::{Crossing, MapPlane};
+use super::map_plane::{Crossing, MapPlane};
 use super::scene::RfScene;
 
 /// Sionna's offset of the visibility point outside the corner, metres.

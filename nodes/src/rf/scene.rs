@@ -4,9 +4,9 @@
 use glam::DVec3;
 use num_complex::Complex64 as C64;
 
+use crate::artifact::Material;
 use crate::artifact::Scene;
 use crate::geom::raycast::SceneRays;
-use crate::rf::materials::Material;
 
 use super::em::{permittivity, slab};
 

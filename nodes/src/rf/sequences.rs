@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use super::fibonacci::fibonacci_sphere;
 use super::field;
-use super::paths::TraceOptions;
+use super::path::TraceOptions;
 use super::scene::{EPS, RfScene};
 
 /// The distinct sequences of triangles that rays from `tx` reflect off, up to the depth, sorted.

@@ -111,9 +111,9 @@ fn tabulate(eta: C64, d: f64, wavelength: f64) -> Table {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::artifact::Material;
     use crate::artifact::{Mesh, ObjectClass, Scene, SceneObject};
     use crate::geom::mesh_build::cuboid;
-    use crate::rf::materials::Material;
 
     fn scene_of(materials: &[Material], freq_hz: f64) -> RfScene {
         let objects = materials

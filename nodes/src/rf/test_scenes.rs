@@ -2,9 +2,9 @@
 
 use glam::DVec3;
 
+use crate::artifact::Material;
 use crate::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
 use crate::geom::mesh_build::cuboid;
-use crate::rf::materials::Material;
 use crate::rf::scene::RfScene;
 
 /// A transmitter 12 m up at the crossing of [`street_grid`]'s first streets.

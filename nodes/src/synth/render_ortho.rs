@@ -3,11 +3,11 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::Material;
 use crate::artifact::{ArtifactType, Ortho, PodVec, Scene};
 use crate::geom::from_above::{BAND_ROWS, down_rows, scene_grid, top_z};
 use crate::geom::raycast::{Hit, SceneRays, tile_order};
 use crate::io::export::material_color;
-use crate::rf::materials::Material;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`RenderOrtho`].

@@ -8,13 +8,13 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::Material;
 use crate::artifact::RECESS_M;
 use crate::artifact::{
     BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, Polygon, Rect, Roof, RoofBox,
     Street, TreeSpec,
 };
 use crate::artifact::{TerrainModel, height_at};
-use crate::rf::materials::Material;
 use crate::rng::{mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -539,7 +539,7 @@ fn roof_furniture(
 }
 
 fn fits_on_roof(corners: &[[f64; 2]], footprint: &Polygon, roof: &Roof) -> bool {
-    use crate::geom::polygon::point_in_ring;
+    use crate::artifact::point_in_ring;
     let inside = corners.iter().all(|q| {
         point_in_ring(*q, &footprint.exterior)
             && !footprint.holes.iter().any(|h| point_in_ring(*q, h))

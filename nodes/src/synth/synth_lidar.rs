@@ -11,9 +11,9 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::Material;
 use crate::artifact::{ArtifactType, ObjectClass, PointSet, Scene};
 use crate::geom::raycast::SceneRays;
-use crate::rf::materials::Material;
 use crate::rng::{gaussian, mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 

@@ -8,6 +8,7 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::Material;
 use crate::artifact::height_at;
 use crate::artifact::{
     ArtifactType, BuildingSpec, City, FeatureKind, Instances, Intrinsics, ObjectClass, PodVec,
@@ -15,7 +16,6 @@ use crate::artifact::{
 };
 use crate::geom::raycast::SceneRays;
 use crate::io::export::material_color;
-use crate::rf::materials::Material;
 use crate::rng::{gaussian, mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 

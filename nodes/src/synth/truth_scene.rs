@@ -5,6 +5,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::Material;
 use crate::artifact::RECESS_M;
 use crate::artifact::height_at;
 use crate::artifact::{
@@ -15,7 +16,6 @@ use crate::geom::boolean::{subtract_then_add, to_manifold};
 use crate::geom::mesh_build::{
     cuboid, dome, ellipsoid, gabled, height_surface, hipped, prism, quad_prism,
 };
-use crate::rf::materials::Material;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`TruthScene`].

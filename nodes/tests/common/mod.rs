@@ -7,7 +7,6 @@ use std::sync::Arc;
 
 use kodama_nodes::artifact::TerrainModel;
 use kodama_nodes::artifact::{City, PointSet, Raster, Scene, ViewSet};
-use kodama_nodes::geom::view_registration::RegistrationParams;
 use kodama_nodes::stage::Slot;
 use kodama_nodes::stages::buildings::above_ground::{AboveGround, AboveGroundParams};
 use kodama_nodes::stages::buildings::terrain_pass::{TerrainPass, TerrainPassParams};
@@ -15,6 +14,7 @@ use kodama_nodes::stages::heights::rasterize_surface::{
     CellMode, RasterizeSurface, RasterizeSurfaceParams,
 };
 use kodama_nodes::stages::street::register_views::RegisterViews;
+use kodama_nodes::street::registration::RegistrationParams;
 use kodama_nodes::synth::synth_city::SynthCityParams;
 use kodama_nodes::synth::synth_lidar::{SynthLidar, SynthLidarParams};
 use kodama_nodes::synth::truth_scene::{TruthScene, TruthSceneParams};
@@ -22,8 +22,8 @@ use kodama_nodes::{Artifact, Ctx, Inputs, Site, Stage};
 
 /// First-order diffraction alone (no line of sight, reflection or transmission), `rays` shot
 /// (or, in a radio map, diffraction samples drawn).
-pub fn diffraction_only(rays: u32) -> kodama_nodes::rf::paths::TraceOptions {
-    kodama_nodes::rf::paths::TraceOptions {
+pub fn diffraction_only(rays: u32) -> kodama_nodes::rf::path::TraceOptions {
+    kodama_nodes::rf::path::TraceOptions {
         max_depth: 1,
         los: false,
         reflection: false,

@@ -20,7 +20,7 @@ use glam::Vec3A;
 use super::{
     Lanes, PAD, Scalar, Slabs, WIDTH, WideBvh, WideHit, closest_from, inverse, max, min, with_stack,
 };
-use crate::geom::raycast::ShearedRay;
+use crate::geom::sheared_ray::ShearedRay;
 
 /// The most rays in one packet.
 pub const PACKET: usize = 64;

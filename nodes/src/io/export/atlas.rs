@@ -184,7 +184,7 @@ pub(super) fn png(img: &RgbaImage) -> Result<Vec<u8>, String> {
     Ok(buf.into_inner())
 }
 
-/// The atlas folder of `t`.
+/// The atlas folder of `t` (the export adds `charts.glb` beside it: `super::texel_atlas`).
 pub fn write_atlas(t: &TexelLayers) -> Result<Vec<(String, Vec<u8>)>, String> {
     let layout = AtlasLayout::of(t)?;
     let (w, h) = (layout.width, layout.height);
@@ -247,7 +247,7 @@ pub fn write_atlas(t: &TexelLayers) -> Result<Vec<(String, Vec<u8>)>, String> {
             "masked": t.stats.masked,
         },
     });
-    let mut files = vec![
+    let files = vec![
         (
             "atlas.json".into(),
             serde_json::to_vec_pretty(&index).map_err(|e| e.to_string())?,
@@ -263,9 +263,6 @@ pub fn write_atlas(t: &TexelLayers) -> Result<Vec<(String, Vec<u8>)>, String> {
         ("w_exp.png".into(), exposure_png),
         ("label.png".into(), png(&label)?),
     ];
-    if !t.frames.is_empty() {
-        files.push(("charts.glb".into(), super::chart_glb::write_chart_glb(t)?));
-    }
     Ok(files)
 }
 

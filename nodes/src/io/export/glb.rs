@@ -6,8 +6,8 @@
 
 use serde_json::{Value, json};
 
+use crate::artifact::Material;
 use crate::artifact::{Scene, SceneObject};
-use crate::rf::materials::Material;
 
 /// A display colour per material (linear RGB), so classes are told apart at a glance.
 pub fn material_color(m: Material) -> [f32; 3] {

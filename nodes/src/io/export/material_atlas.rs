@@ -7,10 +7,10 @@ use image::{ImageBuffer, Rgba, RgbaImage};
 use serde_json::json;
 
 use super::atlas::png;
+use crate::artifact::Material;
 use crate::artifact::{MaterialLayers, MaterialSource, NO_MATERIAL};
 use crate::io::export::material_color;
 use crate::io::exr_io::write_exr;
-use crate::rf::materials::Material;
 
 /// Colours of `source.png`, by [`MaterialSource`] discriminant.
 const SOURCE_COLOURS: [[u8; 4]; 5] = [

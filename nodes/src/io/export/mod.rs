@@ -14,7 +14,7 @@ mod relief_json;
 pub mod report_html;
 mod tiles;
 
-use crate::artifact::{Artifact, ArtifactType};
+use crate::artifact::{Artifact, ArtifactType, TexelLayers};
 use crate::io::geotiff::{write_geotiff, write_geotiff_rgb};
 use crate::io::safe_name::{check_file_name, check_folder};
 use crate::site::Site;
@@ -154,7 +154,7 @@ fn encode_unchecked(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, 
         (Artifact::Relief(r), "json") => file(relief_json::relief_json(r)?),
         (Artifact::Relief(r), "geojson") => file(relief_json::relief_geojson(r, site)?),
         (Artifact::Relief(r), "atlas") => Ok(Encoded::Folder(relief_atlas::write_relief_atlas(r)?)),
-        (Artifact::Texels(t), "atlas") => Ok(Encoded::Folder(atlas::write_atlas(t)?)),
+        (Artifact::Texels(t), "atlas") => Ok(Encoded::Folder(texel_atlas(t)?)),
         (Artifact::Texels(t), "glb") => file(chart_glb::write_chart_glb(t)?),
         (a, f) => Err(format!(
             "{} cannot be written as {f:?}; formats: {}",
@@ -239,4 +239,13 @@ fn measurements_csv(m: &crate::artifact::Measurements) -> String {
         );
     }
     s
+}
+/// The texel layers' atlas (`atlas`) and, when the layers carry their charts' frames,
+/// `charts.glb`: every chart as a textured quad in its world position (`chart_glb`).
+fn texel_atlas(t: &TexelLayers) -> Result<Vec<(String, Vec<u8>)>, String> {
+    let mut files = atlas::write_atlas(t)?;
+    if !t.frames.is_empty() {
+        files.push(("charts.glb".into(), chart_glb::write_chart_glb(t)?));
+    }
+    Ok(files)
 }

@@ -13,9 +13,9 @@ use serde_json::{Value, json};
 
 use super::colormap::viridis;
 use super::glb::material_color;
+use crate::artifact::Material;
 use crate::artifact::{ObjectClass, Raster, Scene};
 use crate::geom::raycast::SceneRays;
-use crate::rf::materials::Material;
 
 /// three.js (MIT; `nodes/assets/three/`, fetched by `scripts/vendor_three.sh`).
 const THREE_JS: &str = include_str!("../../../assets/three/three.module.min.js");

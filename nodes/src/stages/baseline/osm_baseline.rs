@@ -7,9 +7,9 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{
     ArtifactType, Footprint, Footprints, ObjectClass, Raster, Scene, SceneObject,
 };
+use crate::artifact::{Material, default_material};
 use crate::geom::mesh_build::prism;
 use crate::geom::mesh_check::check_solid;
-use crate::rf::materials::{Material, default_material};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`OsmBaseline`].

@@ -7,9 +7,9 @@ use std::collections::BTreeSet;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, ObjectClass, Raster, Scene, SceneObject};
+use crate::artifact::{Material, default_material};
 use crate::geom::mesh_check::check_solid;
 use crate::geom::terrain_mesh::terrain_mesh;
-use crate::rf::materials::{Material, default_material};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`AssembleScene`].

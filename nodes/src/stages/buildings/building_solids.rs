@@ -17,16 +17,17 @@ use spade::{
     ConstrainedDelaunayTriangulation, HasPosition, Point2, PositionInTriangulation, Triangulation,
 };
 
+use crate::artifact::point_in_ring;
 use crate::artifact::{
     ArtifactType, Grid, ObjectClass, PodVec, PointSet, Polygon, Raster, Scene, SceneObject,
 };
+use crate::artifact::{Material, default_material};
+use crate::buildings::regularize::{RegularizeConfig, regularize_polygon};
+use crate::buildings::roof_planes::{PlaneConfig, PlaneFit, fit_planes, meeting_lines};
 use crate::geom::mesh_build::{Builder, insert_rings, triangulate};
 use crate::geom::mesh_check::check_solid;
-use crate::geom::polygon::{point_in_ring, segment_distance, simplify_polygon, trace};
-use crate::geom::regularize::{RegularizeConfig, regularize_polygon};
-use crate::geom::roof_planes::{PlaneConfig, PlaneFit, fit_planes, meeting_lines};
+use crate::geom::polygon::{segment_distance, simplify_polygon, trace};
 use crate::raster::label::label_ids;
-use crate::rf::materials::{Material, default_material};
 use crate::rng::mix;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -40,7 +41,7 @@ pub struct BuildingSolidsParams {
     /// walls that run diagonally to the grid. Default 0.5. Where simplifying would make the solid
     /// invalid, the exact cell outline is used.
     pub outline_tolerance_m: f64,
-    /// Outline regularization (`geom::regularize`): walls within this angle of the building's
+    /// Outline regularization (`buildings::regularize`): walls within this angle of the building's
     /// dominant orientation or its right angle are turned to it, straight runs become one wall,
     /// corners meet square, degrees; 0 turns it off. Default 12. Where the regularized outline
     /// fails its checks or makes an invalid solid, the simplified one is used.
@@ -51,7 +52,7 @@ pub struct BuildingSolidsParams {
     /// Material of walls and roofs until the material stages assign per-surface ones. Default the
     /// building class's ([`default_material`]): concrete.
     pub material: Material,
-    /// Roof planes (`geom::roof_planes`): the roof cells that lie on a plane fitted to them take
+    /// Roof planes (`buildings::roof_planes`): the roof cells that lie on a plane fitted to them take
     /// its height, and where two planes meet (a ridge, a hip, a valley) their line is an edge of
     /// the roof mesh: one straight, sharp ridge where the cells' noise made a zigzag of small
     /// edges, so a ray diffracts over it as over the real one. Cells on no plane (units,
@@ -77,7 +78,7 @@ pub struct BuildingSolids;
 
 impl Stage for BuildingSolids {
     const KIND: &'static str = "BuildingSolids";
-    // 3: a cut corner beside a spike, or a spike of several edges, is squared (geom::regularize).
+    // 3: a cut corner beside a spike, or a spike of several edges, is squared (buildings::regularize).
     // 4: roof cells snapped to fitted planes, planes meeting at an edge (roof_planes).
     const VERSION: u32 = 4;
     const DOC: &'static str = "watertight building solids: cleaned roofs extruded to the terrain, remeshed to a tolerance and checked, Sec. 4.1";

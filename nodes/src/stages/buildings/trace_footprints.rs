@@ -6,8 +6,8 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Footprint, Footprints, Polygon, Raster};
+use crate::buildings::regularize::{RegularizeConfig, regularize_polygon};
 use crate::geom::polygon::{simplify_polygon, trace};
-use crate::geom::regularize::{RegularizeConfig, regularize_polygon};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`TraceFootprints`].
@@ -17,7 +17,7 @@ pub struct TraceFootprintsParams {
     /// Douglas-Peucker tolerance for the traced outlines, metres; 0 keeps the exact cell
     /// boundaries (collinear vertices are always merged). Default 0.
     pub simplify_m: f64,
-    /// Outline regularization (`geom::regularize`, after simplification at `simplify_m`, or one
+    /// Outline regularization (`buildings::regularize`, after simplification at `simplify_m`, or one
     /// and a half cells when that is smaller): walls within this angle of the building's dominant orientation
     /// or its right angle are turned to it and meet square, degrees; 0 turns it off. The traced
     /// outline is kept where regularizing fails its checks. Default 0 (the traced outline, as
@@ -42,7 +42,7 @@ pub struct TraceFootprints;
 
 impl Stage for TraceFootprints {
     const KIND: &'static str = "TraceFootprints";
-    // 3: a cut corner beside a spike, or a spike of several edges, is squared (geom::regularize).
+    // 3: a cut corner beside a spike, or a spike of several edges, is squared (buildings::regularize).
     const VERSION: u32 = 3;
     const DOC: &'static str = "footprint polygons (outlines and courtyards) traced from a building label raster, Sec. 4.1";
     const INPUTS: &'static [InputSpec] = &[

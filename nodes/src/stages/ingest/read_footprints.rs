@@ -37,7 +37,7 @@ impl Stage for ReadFootprints {
     type Output = Footprints;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        crate::params::check_crs(&p.crs)?;
+        crate::io::crs::check_crs_param(&p.crs)?;
         Ok(())
     }
 

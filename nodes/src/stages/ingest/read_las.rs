@@ -35,7 +35,7 @@ impl Stage for ReadLas {
     type Output = PointSet;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        crate::params::check_crs(&p.crs)?;
+        crate::io::crs::check_crs_param(&p.crs)?;
         Ok(())
     }
 

@@ -7,8 +7,8 @@ use std::path::Path;
 use osmpbf::{Element, ElementReader, RelMemberType};
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::point_in_ring;
 use crate::artifact::{Footprint, Footprints, Polygon};
-use crate::geom::polygon::point_in_ring;
 use crate::io::crs::{Crs, ToSite};
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, Stage, StageError};
 

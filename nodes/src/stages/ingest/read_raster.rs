@@ -55,7 +55,7 @@ impl Stage for ReadRaster {
     type Output = Raster;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        crate::params::check_crs(&p.crs)?;
+        crate::io::crs::check_crs_param(&p.crs)?;
         if p.band == 0 {
             return Err(ParamError::new("band", "bands count from 1"));
         }

@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use crate::artifact::Material;
 use crate::artifact::{Mesh, ObjectClass, Scene, SceneObject};
 use crate::io::crs::{Crs, ToSite};
 use crate::io::ecef::from_ecef;
-use crate::rf::materials::Material;
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`ReadTileset`].
@@ -38,7 +38,7 @@ impl Stage for ReadTileset {
     type Output = Scene;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        crate::params::check_crs(&p.crs)?;
+        crate::io::crs::check_crs_param(&p.crs)?;
         if !p.path.ends_with(".json") {
             return Err(ParamError::new("path", "expected the tileset's .json file"));
         }

@@ -5,8 +5,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Grid, Raster, Scene};
 use crate::rf::antenna::Antenna;
-use crate::rf::paths::TraceOptions;
-use crate::rf::radiomap::{MapPlane, default_plane, radio_map};
+use crate::rf::map_plane::{MapPlane, default_plane};
+use crate::rf::path::TraceOptions;
+use crate::rf::radiomap::radio_map;
 use crate::rf::scattering::ScatteringPattern;
 use crate::rf::scene::RfScene;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
@@ -167,7 +168,7 @@ impl Stage for RadioMap {
                 "expected a finite height in metres",
             ));
         }
-        crate::params::check_antenna("antenna", &p.antenna)?;
+        crate::rf::antenna::check_antenna("antenna", &p.antenna)?;
         crate::params::check_cell(Some(p.cell_m))?;
         if !p.cell_m.is_finite() {
             return Err(ParamError::new(

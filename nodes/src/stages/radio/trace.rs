@@ -7,7 +7,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Endpoint, Measurements, Raster, Scene};
 use crate::rf::antenna::Antenna;
-use crate::rf::paths::{TraceOptions, trace_links};
+use crate::rf::path::TraceOptions;
+use crate::rf::paths::trace_links;
 use crate::rf::scattering::ScatteringPattern;
 use crate::rf::scene::RfScene;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
@@ -138,8 +139,8 @@ impl Stage for Trace {
     type Output = Measurements;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        crate::params::check_antenna("tx_antenna", &p.tx_antenna)?;
-        crate::params::check_antenna("rx_antenna", &p.rx_antenna)?;
+        crate::rf::antenna::check_antenna("tx_antenna", &p.tx_antenna)?;
+        crate::rf::antenna::check_antenna("rx_antenna", &p.rx_antenna)?;
         p.options
             .trace_options()
             .check()

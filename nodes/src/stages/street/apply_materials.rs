@@ -5,9 +5,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, ChartSet, MaterialLayers, ObjectClass, Scene};
-use crate::geom::material_apply::{ApplySpec, apply_materials};
 use crate::geom::mesh_check::check_solid;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::street::materials::apply::{ApplySpec, apply_materials};
 
 /// Params of [`ApplyMaterials`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

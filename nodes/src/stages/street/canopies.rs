@@ -6,8 +6,8 @@
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, PointSet, Raster, Scene};
-use crate::geom::canopy::{CanopyConfig, canopies};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::street::canopy::{CanopyConfig, canopies};
 
 /// Params of [`Canopies`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -4,8 +4,8 @@
 //! metrics, what the same carve kept and dropped, and why.
 
 use crate::artifact::{ArtifactType, ChartSet, Metrics, ReliefSet, Scene};
-use crate::geom::carve::{CarveParams, CarveReport, carve_scene};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::street::relief::carve::{CarveParams, CarveReport, carve_scene};
 
 /// Relief instances carved into the scene's buildings.
 pub struct CarveRelief;

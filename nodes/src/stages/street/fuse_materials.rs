@@ -8,16 +8,16 @@ use std::collections::BTreeMap;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::Material;
 use crate::artifact::{
     ArtifactType, ChartSet, MaterialLayers, MaterialStats, NO_MATERIAL, Scene, ViewSet,
 };
-use crate::geom::fusion::{FusionParams, Vote, fuse_views};
-use crate::geom::material_fusion::{
+use crate::geom::raycast::SceneRays;
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::street::fusion::{FusionParams, Vote, fuse_views};
+use crate::street::materials::fusion::{
     Extension, MASKED, SEEN, assign_materials, class_table, parse_target, refine_view, vote_classes,
 };
-use crate::geom::raycast::SceneRays;
-use crate::rf::materials::Material;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`FuseMaterials`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -79,7 +79,7 @@ impl Default for FuseMaterialsParams {
 /// A building-surface P.2040 class by name (not ground, not foliage).
 fn surface_material(name: &str) -> Option<Material> {
     match parse_target(name)? {
-        crate::geom::material_fusion::PixelTarget::Surface(m) => Some(m),
+        crate::street::materials::fusion::PixelTarget::Surface(m) => Some(m),
         _ => None,
     }
 }

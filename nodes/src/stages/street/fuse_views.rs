@@ -5,9 +5,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, ChartSet, Scene, TexelLayers, View, ViewSet};
-use crate::geom::fusion::{FusionParams, Vote, fuse_views};
 use crate::geom::raycast::SceneRays;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::street::fusion::{FusionParams, Vote, fuse_views};
 
 /// Which per-pixel labels vote.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

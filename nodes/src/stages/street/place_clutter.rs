@@ -10,10 +10,10 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Metrics, Raster, Scene, ViewSet};
-use crate::geom::assets::AssetKind;
-use crate::geom::clutter::{ClutterConfig, Placed, default_classes, instantiate, place_clutter};
 use crate::geom::mesh_check::check_solid;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::street::clutter::assets::AssetKind;
+use crate::street::clutter::{ClutterConfig, Placed, default_classes, instantiate, place_clutter};
 
 /// Params of [`PlaceClutter`] and [`ClutterMetrics`].
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -1,11 +1,11 @@
 //! RegisterViews: each street view's reported position and heading refined against the twin's
 //! building silhouettes (an addition to the paper's metadata-only registration of Sec. 4.2; see
-//! `geom::view_registration` for why and how). Every view keeps its images; only its pose moves,
+//! `street::registration` for why and how). Every view keeps its images; only its pose moves,
 //! and its `pose_source` says by how much and on what evidence.
 
 use crate::artifact::{ArtifactType, Scene, ViewSet};
-use crate::geom::view_registration::{RegistrationParams, register_views};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::street::registration::{RegistrationParams, register_views};
 
 /// Street views with their poses refined against the twin.
 pub struct RegisterViews;

@@ -5,8 +5,8 @@
 //! extracted from it, each with its evidence.
 
 use crate::artifact::{ArtifactType, ChartSet, ReliefSet, Scene, ViewSet};
-use crate::geom::relief::{ReliefParams, relief};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::street::relief::{ReliefParams, relief};
 
 /// Façade relief instances with their evidence, eq. (4).
 pub struct Relief;

@@ -8,10 +8,10 @@ use plotters::prelude::*;
 use rayon::prelude::*;
 
 use super::{Background, Draw, FONT, plot_err, rgb};
+use crate::artifact::Material;
 use crate::artifact::Scene;
 use crate::geom::raycast::SceneRays;
 use crate::io::export::material_color;
-use crate::rf::materials::Material;
 
 const IMAGE: (u32, u32) = (1300, 940);
 const TOP: u32 = 60;

@@ -1,11 +1,12 @@
 //! The twin as the registration sees it: what each triangle is, and the agreement between a
 //! view's labels and the twin rendered from a candidate pose.
 
-use crate::artifact::{ObjectClass, Scene};
+use crate::artifact::{ObjectClass, Scene, View};
 use crate::geom::raycast::SceneRays;
 
-use super::consensus::OthersSay;
-use super::labels::{Facade, Rendered, Sample, agreement};
+use super::RegistrationParams;
+use super::consensus::{Consensus, OthersSay, Pool};
+use super::labels::{Facade, Rendered, Sample, agreement, samples, strides};
 
 /// What the twin shows along a ray: the class and, for a building, its object.
 #[derive(Clone, Copy)]
@@ -121,6 +122,41 @@ pub(super) fn shown_by_triangle(scene: &Scene) -> Vec<Shown> {
             std::iter::repeat_n(shown, o.mesh.triangles.len())
         })
         .collect()
+}
+
+impl Twin<'_> {
+    /// For the consensus: `view`'s façade samples as seen from `position`, turned by `yaw` radians about the
+    /// vertical from its reported heading, pooled in cells.
+    pub(super) fn pool(
+        &self,
+        cell_m: f64,
+        view: &View,
+        position: [f64; 3],
+        yaw: f64,
+        p: &RegistrationParams,
+    ) -> Pool {
+        let origin = position.map(|v| v as f32);
+        let turn = yaw.sin_cos();
+        let mut cells = Pool::default();
+        let (_, fine_stride) = strides(view, p);
+        for smp in samples(view, fine_stride, None, p) {
+            if smp.facade == Facade::None {
+                continue;
+            }
+            let d = turned_dir(smp.dir, turn);
+            let dir = d.map(|c| c as f32);
+            let Some((t, prim)) = self.rays.cast_index(origin, dir, 1e-3, self.max_range) else {
+                continue;
+            };
+            if self.shown_by_triangle[prim as usize].rendered != Rendered::Building {
+                continue;
+            }
+            let at = std::array::from_fn(|k| position[k] + d[k] * t as f64);
+            let cell = cells.entry(Consensus::key(cell_m, at)).or_default();
+            cell[(smp.facade == Facade::Wall) as usize] += 1;
+        }
+        cells
+    }
 }
 
 /// Direction `d` turned about the vertical by the angle whose (sine, cosine) is `turn`.

@@ -737,11 +737,11 @@ fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::artifact::Material;
     use crate::artifact::{MaterialSource, ObjectClass, SceneObject};
     use crate::geom::charts::{ChartSpec, building_charts};
     use crate::geom::mesh_build::cuboid;
     use crate::geom::mesh_check::check_solid;
-    use crate::rf::materials::Material;
 
     fn box_scene() -> Scene {
         Scene {

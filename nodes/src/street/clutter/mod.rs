@@ -3,16 +3,18 @@
 //! clustered across views, non-maximum suppression by class and distance, a scene grammar whose
 //! every rule's effect is counted, and the survivors instantiated from the asset library.
 
+pub mod assets;
+
 use std::collections::BTreeMap;
 
 use rayon::prelude::*;
 
 use crate::artifact::{Metrics, ObjectClass, Raster, Scene, SceneObject, View};
-use crate::geom::assets::AssetKind;
 use crate::geom::from_above::{down, top_z};
 use crate::geom::polygon::convex_hull;
 use crate::geom::raycast::SceneRays;
 use crate::geom::theil_sen::{LineFit, median, theil_sen};
+use crate::street::clutter::assets::AssetKind;
 
 /// Knobs of the clutter chain.
 #[derive(Clone, Debug)]
@@ -847,7 +849,7 @@ impl<'a> Ground<'a> {
     fn in_canopy(&self, p: [f64; 2]) -> bool {
         self.canopies
             .iter()
-            .any(|h| h.len() >= 3 && crate::geom::polygon::point_in_ring(p, h))
+            .any(|h| h.len() >= 3 && crate::artifact::point_in_ring(p, h))
     }
 }
 
@@ -1209,7 +1211,7 @@ mod tests {
             [0.0, 1.0],
         ]);
         assert_eq!(h.len(), 4);
-        assert!(crate::geom::polygon::ring_area(&h) > 0.99);
+        assert!(crate::artifact::ring_area(&h) > 0.99);
         let mut m = vec![false; 25];
         m[12] = true;
         let d = distance_transform(&m, 5, 5, 1.0);

@@ -11,6 +11,8 @@
 //! plane fitted around it, the flow of its normals (side faces point toward the centre of a
 //! recess and away from a protrusion's), and its semantic class as a prior.
 
+pub mod carve;
+
 use std::collections::{BTreeMap, BTreeSet};
 
 use rayon::prelude::*;
@@ -20,13 +22,13 @@ use crate::artifact::{
     ChartKind, ChartLayers, ChartSet, PodVec, ReliefInstance, ReliefLayers, ReliefSet, ReliefStats,
     Scene, SparseLayer, View,
 };
-use crate::geom::fusion::{ChartLookup, FusionParams, Vote, fuse_views_each};
 use crate::geom::raycast::SceneRays;
 use crate::geom::union_find::UnionFind;
 use crate::raster::label::label_components;
 use crate::raster::label::label_regions;
 use crate::raster::morph::{close_within, dilate, erode, on_support};
 use crate::stage::Progress;
+use crate::street::fusion::{ChartLookup, FusionParams, Vote, fuse_views_each};
 
 /// The displacement classes Y, in the order every probability triple uses.
 pub const RELIEF_CLASSES: [&str; 3] = ["recessed", "neutral", "protruding"];
@@ -2610,10 +2612,10 @@ mod tests {
 
     #[test]
     fn the_ground_under_a_wall_is_the_terrain_not_a_neighbours_roof() {
+        use crate::artifact::Material;
         use crate::artifact::{ObjectClass, SceneObject};
         use crate::geom::charts::{ChartSpec, building_charts};
         use crate::geom::mesh_build::cuboid;
-        use crate::rf::materials::Material;
         // A 6 m box standing on its base at z = 0 in a terrain slab whose top is at 0.55 m,
         // and a 2 m shed against its south wall's west half.
         let object = |id: &str, class, mesh| SceneObject {

@@ -4,12 +4,9 @@
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
-use crate::artifact::View;
 use crate::rng::mix;
 
-use super::RegistrationParams;
-use super::labels::{Facade, Rendered, samples, strides};
-use super::twin::{Twin, turned_dir};
+use super::labels::Facade;
 
 /// The façade labels of the views already placed, pooled in cells on the twin's walls: the
 /// second pass places a view whose silhouettes could not (a street front seen whole, one wall
@@ -50,39 +47,6 @@ impl Hasher for CellHasher {
 impl Consensus {
     pub(super) fn key(cell_m: f64, at: [f64; 3]) -> [i64; 3] {
         at.map(|v| (v / cell_m).floor() as i64)
-    }
-
-    /// `view`'s façade samples as seen from `position`, turned by `yaw` radians about the
-    /// vertical from its reported heading, pooled in cells.
-    pub(super) fn pool(
-        cell_m: f64,
-        view: &View,
-        position: [f64; 3],
-        yaw: f64,
-        twin: &Twin,
-        p: &RegistrationParams,
-    ) -> Pool {
-        let origin = position.map(|v| v as f32);
-        let turn = yaw.sin_cos();
-        let mut cells = Pool::default();
-        let (_, fine_stride) = strides(view, p);
-        for smp in samples(view, fine_stride, None, p) {
-            if smp.facade == Facade::None {
-                continue;
-            }
-            let d = turned_dir(smp.dir, turn);
-            let dir = d.map(|c| c as f32);
-            let Some((t, prim)) = twin.rays.cast_index(origin, dir, 1e-3, twin.max_range) else {
-                continue;
-            };
-            if twin.shown_by_triangle[prim as usize].rendered != Rendered::Building {
-                continue;
-            }
-            let at = std::array::from_fn(|k| position[k] + d[k] * t as f64);
-            let cell = cells.entry(Self::key(cell_m, at)).or_default();
-            cell[(smp.facade == Facade::Wall) as usize] += 1;
-        }
-        cells
     }
 
     pub(super) fn add(&mut self, pool: &Pool) {

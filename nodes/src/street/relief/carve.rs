@@ -10,12 +10,12 @@ use manifold_rust::manifold::Manifold;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::Material;
 use crate::artifact::{
     Chart, ChartSet, Mesh, Metrics, ObjectClass, ReliefInstance, ReliefSet, Scene,
 };
 use crate::geom::boolean::{subtract_then_add as apply, to_manifold};
 use crate::geom::mesh_build::quad_prism;
-use crate::rf::materials::Material;
 
 /// The material a carved face of a class takes.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

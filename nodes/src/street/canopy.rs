@@ -15,13 +15,13 @@
 
 use std::collections::BTreeMap;
 
+use crate::artifact::Material;
 use crate::artifact::{Grid, Metrics, ObjectClass, PodVec, PointSet, Raster, Scene, SceneObject};
 use crate::geom::mesh_build::prism;
 use crate::geom::mesh_check::check_solid;
 use crate::geom::polygon::{simplify_polygon, trace};
 use crate::raster::label::label_components;
 use crate::raster::morph::close_within;
-use crate::rf::materials::Material;
 
 /// Knobs of the canopy extraction.
 #[derive(Clone, Debug)]

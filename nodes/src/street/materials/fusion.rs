@@ -4,11 +4,11 @@
 
 use std::collections::BTreeMap;
 
+use crate::artifact::Material;
 use crate::artifact::{
     Chart, ChartKind, ChartLayers, ChartMaterials, ChartSet, MaterialSource, NO_MATERIAL, PodVec,
     View,
 };
-use crate::rf::materials::Material;
 
 /// What a pixel labelled with a segmentation class says about a building surface.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -2,10 +2,10 @@
 
 use super::labels::{Facade, Rendered, Seen, agreement, label};
 use super::*;
+use crate::artifact::Material;
 use crate::artifact::ObjectClass;
 use crate::artifact::{Instances, Intrinsics, PodVec, SceneObject};
 use crate::geom::mesh_build::cuboid;
-use crate::rf::materials::Material;
 use crate::stage::NoProgress;
 
 /// A camera at `position` looking level along `heading` (radians from east).

@@ -5,9 +5,9 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::artifact::Material;
 use crate::artifact::{Mesh, ObjectClass, Polygon};
 use crate::geom::mesh_build::{Builder, ellipsoid, prism, triangulate};
-use crate::rf::materials::Material;
 
 /// The asset classes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize)]

@@ -23,7 +23,8 @@
 //! more than `max_area_change`.
 
 use crate::artifact::Polygon;
-use crate::geom::polygon::{douglas_peucker, ring_area, segment_distance};
+use crate::artifact::ring_area;
+use crate::geom::polygon::{douglas_peucker, segment_distance};
 
 /// Knobs of [`regularize_polygon`].
 #[derive(Clone, Copy, Debug)]
@@ -443,8 +444,9 @@ fn distance_to_ring(p: [f64; 2], ring: &[[f64; 2]]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::artifact::point_in_ring;
     use crate::artifact::{Grid, PodVec, Raster};
-    use crate::geom::polygon::{point_in_ring, trace};
+    use crate::geom::polygon::trace;
 
     /// The cells of a 0.5 m raster whose centres fall in `ring`, traced.
     fn traced(ring: &[[f64; 2]]) -> Polygon {

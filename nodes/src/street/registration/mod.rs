@@ -515,7 +515,7 @@ pub fn register_views(
                     v.pose.position[1] + r.shift_m[1],
                     v.pose.position[2],
                 ];
-                Consensus::pool(p.consensus_cell_m, v, at, r.yaw_deg.to_radians(), &twin, p)
+                twin.pool(p.consensus_cell_m, v, at, r.yaw_deg.to_radians(), p)
             })
         })
         .collect();
