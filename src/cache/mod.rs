@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
 pub use atomic::write_atomic;
-pub use files::{check_folder, describe_file_type, folder_files, hash_file};
+pub use files::{InputStamp, check_folder, describe_file_type, folder_files, hash_file};
 pub use gc::{GcReport, gc};
 
 /// A blake3 digest (of artifact bytes, file contents, or an action).
