@@ -1,11 +1,12 @@
-//! What the cache trusts (issue 55, class 1): an input that moves while a run reads it never
-//! lands in the cache under its old content's key.
+//! What the cache trusts (issue 55, classes 1 and 2): an input that moves while a run reads it
+//! never lands in the cache under its old content's key, and gc deletes only from a folder that
+//! is a kodama-dag cache, only files the engine named.
 
 mod common;
 use common::*;
 
 use std::collections::BTreeSet;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
@@ -157,4 +158,135 @@ fn an_input_that_keeps_moving_fails_the_node_and_stores_nothing() {
         std::fs::read(env.out().join("stats.json")).unwrap(),
         stats_c
     );
+}
+
+/// Every file below `dir`, relative, with its bytes.
+fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().to_path_buf();
+                out.push((rel, std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+fn gc(env: &Env, cache: &Path) -> Run {
+    env.cli(&["gc", "--cache", cache.to_str().unwrap(), "--max-bytes", "0"])
+}
+
+/// Class 2. gc on a folder that is not a cache (here one with tmp/, cas/ and ac/ of its own)
+/// refuses it with exit 2, naming the folder and what was expected, and touches nothing; nor
+/// does a run make it a cache.
+#[test]
+fn gc_refuses_a_folder_that_is_not_a_cache() {
+    let env = Env::new();
+    let photos = env.path("photos");
+    env.write("photos/tmp/draft.txt", "unsaved work");
+    env.write("photos/cas/a.jpg", "a photo");
+    env.write("photos/ac/b.txt", "notes");
+    env.write("photos/readme.txt", "mine");
+    let before = snapshot(&photos);
+
+    let r = gc(&env, &photos);
+    assert_eq!(r.code, 2, "{}\n{}", r.stdout, r.stderr);
+    assert!(
+        r.stderr
+            .contains(&format!("{} is not a kodama-dag cache", photos.display()))
+            && r.stderr
+                .contains("expected a folder made by `kodama-dag run --cache`"),
+        "{}",
+        r.stderr
+    );
+    assert_eq!(snapshot(&photos), before, "nothing deleted or created");
+
+    // A run refuses to adopt it as well (it would write the marker over foreign files).
+    env.write("pts.xyz", A);
+    let g = env.write("g.ron", GRAPH);
+    let r = env.cli(&[
+        "run",
+        g.to_str().unwrap(),
+        "--cache",
+        photos.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("is not a kodama-dag cache") && r.stderr.contains("cas/a.jpg"),
+        "{}",
+        r.stderr
+    );
+    assert_eq!(snapshot(&photos), before);
+
+    // A folder that does not exist is not created, and an empty one is not a cache.
+    let missing = env.path("nowhere");
+    let r = gc(&env, &missing);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("does not exist"), "{}", r.stderr);
+    assert!(!missing.exists());
+    std::fs::create_dir(&missing).unwrap();
+    assert_eq!(gc(&env, &missing).code, 2);
+    assert!(snapshot(&missing).is_empty());
+}
+
+/// Class 2. A cache without its marker (FORMAT lost) is recognised by its exact layout and the
+/// engine's names, marked, and collected; one foreign file in it makes it a folder gc refuses.
+/// In a marked cache, gc deletes only what the engine named and says what it left.
+#[test]
+fn gc_collects_only_caches_and_only_what_the_engine_named() {
+    let env = Env::new();
+    let g = env.write("chain.ron", CHAIN);
+    let clean = env.run(&g, &[]).ok();
+    let format = std::fs::read(env.cache().join("FORMAT")).unwrap();
+
+    // One foreign file beside the blobs of an unmarked cache: refused, nothing deleted.
+    std::fs::remove_file(env.cache().join("FORMAT")).unwrap();
+    env.write("cache/cas/notes.txt", "mine");
+    let blobs = named_blobs(&env);
+    let r = gc(&env, &env.cache());
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("cas/notes.txt"), "{}", r.stderr);
+    assert_eq!(named_blobs(&env), blobs);
+
+    // Without it: recognised, marked again, collected.
+    std::fs::remove_file(env.cache().join("cas/notes.txt")).unwrap();
+    let r = gc(&env, &env.cache()).ok();
+    assert!(r.stdout.contains("removed"), "{}", r.stdout);
+    assert_eq!(std::fs::read(env.cache().join("FORMAT")).unwrap(), format);
+    assert!(named_blobs(&env).is_empty());
+    let again = env.run(&g, &[]).ok();
+    assert_eq!(again.with_status("ran").len(), 8);
+    assert_eq!(again.digests(), clean.digests());
+
+    // Marked: files the engine did not name are left, and reported.
+    env.write("cache/cas/ab/notes.txt", "mine");
+    env.write("cache/tmp/keep.txt", "mine");
+    let r = gc(&env, &env.cache()).ok();
+    assert!(r.stderr.contains("left alone 2 entries"), "{}", r.stderr);
+    assert_eq!(
+        std::fs::read_to_string(env.cache().join("cas/ab/notes.txt")).unwrap(),
+        "mine"
+    );
+    assert_eq!(
+        std::fs::read_to_string(env.cache().join("tmp/keep.txt")).unwrap(),
+        "mine"
+    );
+    assert!(named_blobs(&env).is_empty());
+}
+
+/// The blobs the engine named (64 hex digits) in `env`'s cache, ignoring anything planted.
+fn named_blobs(env: &Env) -> Vec<PathBuf> {
+    snapshot(&env.cache().join("cas"))
+        .into_iter()
+        .map(|(p, _)| p)
+        .filter(|p| p.file_name().is_some_and(|n| n.len() == 64))
+        .collect()
 }
