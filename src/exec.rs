@@ -5,6 +5,9 @@
 //! - a node runs at most once per run, after all its inputs are done (rebuilding a corrupt
 //!   blob re-executes the producing node once more, which is the point);
 //! - a failure is never cached, and stops only the failed node's descendants;
+//! - an output is stored under a key (and exported) only if the node's files are still what the
+//!   key's digests say after its stage read them: a moved input drops the output and reruns the
+//!   node once on fresh digests, then fails it;
 //! - the state mutex is never held while a slot mutex is taken or a stage runs; slot mutexes are
 //!   taken in ancestor-before-descendant order only, so there is no lock cycle.
 
@@ -19,7 +22,7 @@ use kodama_nodes::stage::{Arity, Slot};
 use kodama_nodes::{Artifact, Ctx, Inputs, StageError};
 use rayon::prelude::*;
 
-use crate::cache::{Cache, Digest, write_atomic};
+use crate::cache::{Cache, Digest, InputStamp, write_atomic};
 use crate::graph::Graph;
 use crate::key::{action_key, site_digest};
 use crate::progress::Reporter;
@@ -96,29 +99,57 @@ pub fn file_digests(
     cache: &Cache,
     need: &[bool],
 ) -> Result<Vec<Vec<Digest>>, RunError> {
+    Ok(stamped_file_digests(graph, cache, need)?
+        .into_iter()
+        .map(|f| f.digests)
+        .collect())
+}
+
+/// The digests of one node's declared files, with how each looked when it was digested.
+#[derive(Clone, Default)]
+struct NodeFiles {
+    digests: Vec<Digest>,
+    stamps: Vec<InputStamp>,
+}
+
+/// [`file_digests`] with the stamps the post-run re-check compares against.
+fn stamped_file_digests(
+    graph: &Graph,
+    cache: &Cache,
+    need: &[bool],
+) -> Result<Vec<NodeFiles>, RunError> {
     graph
         .nodes
         .par_iter()
         .zip(need)
         .map(|(n, &needed)| {
             if !needed {
-                return Ok(Vec::new());
+                return Ok(NodeFiles::default());
             }
-            n.files
-                .iter()
-                .map(|f| {
-                    cache.file_digest(&f.path).map_err(|e| {
-                        RunError::Usage(format!(
-                            "node \"{}\": cannot read `{}` ({}): {e}",
-                            n.id,
-                            f.field,
-                            f.path.display()
-                        ))
-                    })
-                })
-                .collect()
+            node_files(n, cache).map_err(|(f, e)| {
+                RunError::Usage(format!(
+                    "node \"{}\": cannot read `{}` ({}): {e}",
+                    n.id,
+                    f.field,
+                    f.path.display()
+                ))
+            })
         })
         .collect()
+}
+
+/// Digests and stamps of `node`'s files; on failure, the file and the error.
+fn node_files<'n>(
+    node: &'n crate::graph::Node,
+    cache: &Cache,
+) -> Result<NodeFiles, (&'n crate::graph::InputFile, std::io::Error)> {
+    let mut files = NodeFiles::default();
+    for f in &node.files {
+        let (d, stamp) = cache.file_digest_stamped(&f.path).map_err(|e| (f, e))?;
+        files.digests.push(d);
+        files.stamps.push(stamp);
+    }
+    Ok(files)
 }
 
 /// Worker threads per available core at most: more only adds memory and contention, and an
@@ -175,7 +206,7 @@ pub fn run(
     let pool = pool(opts.jobs, reporter)?;
     let (records, snapshots, outputs, output_errors) =
         pool.install(|| -> Result<_, RunError> {
-            let files = file_digests(graph, cache, &need)?;
+            let files = stamped_file_digests(graph, cache, &need)?;
             let exec = Exec::new(graph, cache, &last, reporter, files, need.clone());
             rayon::scope(|s| {
                 let exec = &exec;
@@ -231,6 +262,8 @@ struct Executed {
     artifact: Arc<Artifact>,
     digest: Digest,
     snapshot: Snapshot,
+    /// Why the stage ran twice: an input moved while it ran the first time.
+    rerun: Option<String>,
 }
 
 struct Exec<'a> {
@@ -239,7 +272,8 @@ struct Exec<'a> {
     last: &'a LastRun,
     reporter: &'a Reporter,
     site: Digest,
-    files: Vec<Vec<Digest>>,
+    /// Each node's files: digested before any node runs, refreshed when a stage saw one move.
+    files: Vec<Mutex<NodeFiles>>,
     need: Vec<bool>,
     consumers: Vec<Vec<usize>>,
     is_output: Vec<bool>,
@@ -260,7 +294,7 @@ impl<'a> Exec<'a> {
         cache: &'a Cache,
         last: &'a LastRun,
         reporter: &'a Reporter,
-        files: Vec<Vec<Digest>>,
+        files: Vec<NodeFiles>,
         need: Vec<bool>,
     ) -> Self {
         let n = graph.nodes.len();
@@ -284,7 +318,7 @@ impl<'a> Exec<'a> {
             last,
             reporter,
             site: site_digest(&graph.site),
-            files,
+            files: files.into_iter().map(Mutex::new).collect(),
             need,
             consumers,
             is_output,
@@ -393,7 +427,8 @@ impl<'a> Exec<'a> {
             }
             deps.iter().any(|o| o.ran_upstream)
         };
-        let (key, snapshot) = action_key(node, &self.site, &self.input_digests(i), &self.files[i]);
+        let files = lock(&self.files[i]).digests.clone();
+        let (key, snapshot) = action_key(node, &self.site, &self.input_digests(i), &files);
         let last = self.last.nodes.get(&node.id);
         let mut reason = None;
         if let Some((digest, size)) = self.cache.get_action(&key) {
@@ -435,6 +470,10 @@ impl<'a> Exec<'a> {
         match self.execute(i) {
             Ok(ex) => {
                 *lock(&self.slots[i]) = Some(ex.artifact);
+                let reason = match ex.rerun {
+                    Some(why) => format!("{reason}; {why}"),
+                    None => reason,
+                };
                 Outcome {
                     record: self.record(i, Status::Ran, reason, Some(ex.digest)),
                     digest: Some(ex.digest),
@@ -472,20 +511,58 @@ impl<'a> Exec<'a> {
             };
             inputs.push(spec.name, slot);
         }
-        // Inputs are loaded now; a rebuilt input may have changed its digest, so key afresh.
-        let (key, mut snapshot) =
-            action_key(node, &self.site, &self.input_digests(i), &self.files[i]);
         let paths: Vec<PathBuf> = node.files.iter().map(|f| f.path.clone()).collect();
-        let progress = self.reporter.started(&node.id, node.kind.name);
-        let ctx = Ctx {
-            site: &self.graph.site,
-            files: &paths,
-            progress: &progress,
-            seed: *key.as_bytes(),
+        // The stage reads its files while it runs, after they were digested: if one moved in
+        // between, its output belongs to other bytes than its key says. It is dropped and the
+        // node runs once more on fresh digests; if they move again, the node fails. Nothing of a
+        // moved input is ever stored under a key.
+        let mut moved_once: Option<String> = None;
+        let (artifact, key, mut snapshot) = loop {
+            let files = lock(&self.files[i]).clone();
+            // Inputs are loaded now; a rebuilt input may have changed its digest, so key afresh.
+            let (key, snapshot) =
+                action_key(node, &self.site, &self.input_digests(i), &files.digests);
+            let progress = self.reporter.started(&node.id, node.kind.name);
+            let ctx = Ctx {
+                site: &self.graph.site,
+                files: &paths,
+                progress: &progress,
+                seed: *key.as_bytes(),
+            };
+            let result = catch_unwind(AssertUnwindSafe(|| node.params.run(&inputs, &ctx)));
+            drop(progress);
+            // A failure is re-checked too: a file caught half-saved fails a stage that the saved
+            // file would not.
+            let moved = node
+                .files
+                .iter()
+                .zip(&files.stamps)
+                .find_map(|(f, s)| s.moved().map(|why| format!("input `{}`: {why}", f.field)));
+            let Some(why) = moved else {
+                break (result, key, snapshot);
+            };
+            if let Some(first) = moved_once {
+                return Err(StageError::Failed(format!(
+                    "{first} while the node ran, and {why} while it ran again; its output was \
+                     not kept. Run again once the input is settled"
+                )));
+            }
+            self.reporter.warn(&format!(
+                "node \"{}\": {why} while it ran; its output was dropped and it runs again on \
+                 the new content",
+                node.id
+            ));
+            let fresh = node_files(node, self.cache).map_err(|(f, e)| {
+                StageError::bad_input(
+                    &f.path,
+                    format!("`{}`", f.field),
+                    format!("a readable input; it changed while the node ran and now: {e}"),
+                )
+            })?;
+            *lock(&self.files[i]) = fresh;
+            moved_once = Some(why);
         };
-        let result = catch_unwind(AssertUnwindSafe(|| node.params.run(&inputs, &ctx)));
-        drop(progress);
-        let artifact = match result {
+        let artifact = match artifact {
             Ok(r) => r?,
             Err(panic) => {
                 let msg = panic
@@ -534,6 +611,7 @@ impl<'a> Exec<'a> {
             artifact: Arc::new(artifact),
             digest,
             snapshot,
+            rerun: moved_once.map(|why| format!("{why} while it ran, so it ran again")),
         })
     }
 
@@ -576,6 +654,9 @@ impl<'a> Exec<'a> {
             o.snapshot = Some(ex.snapshot);
             o.record.status = Status::Ran;
             o.record.reason = format!("stored output was {problem}; rebuilt");
+            if let Some(why) = ex.rerun {
+                o.record.reason = format!("{}; {why}", o.record.reason);
+            }
             o.record.digest = Some(ex.digest.to_hex().to_string());
             o.record.ms += t0.elapsed().as_secs_f64() * 1e3;
         }

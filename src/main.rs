@@ -249,16 +249,26 @@ fn load_graph(args: &GraphArgs) -> Result<Graph, Fail> {
     load(&args.graph, &opts).map_err(|e| Fail(2, e.to_string()))
 }
 
-fn open_cache(dir: Option<PathBuf>) -> Result<Cache, Fail> {
-    let dir = dir
-        .or_else(|| std::env::var_os("KODAMA_DAG_CACHE").map(PathBuf::from))
-        .unwrap_or_else(|| PathBuf::from("cache"));
-    Cache::open(&dir).map_err(|e| {
-        Fail(
+fn cache_dir(dir: Option<PathBuf>) -> PathBuf {
+    dir.or_else(|| std::env::var_os("KODAMA_DAG_CACHE").map(PathBuf::from))
+        .unwrap_or_else(|| PathBuf::from("cache"))
+}
+
+/// A cache error as the CLI reports it: a folder that is not a cache is the user's (exit 2).
+fn cache_fail(dir: &std::path::Path, e: std::io::Error) -> Fail {
+    match kodama_dag::cache::NotACache::of(&e) {
+        Some(n) => Fail(2, format!("error: {n}")),
+        None => Fail(
             1,
             format!("error: cannot open the cache at {}: {e}", dir.display()),
-        )
-    })
+        ),
+    }
+}
+
+/// Opens the cache, creating it if needed (run, sweep, watch, explain).
+fn open_cache(dir: Option<PathBuf>) -> Result<Cache, Fail> {
+    let dir = cache_dir(dir);
+    Cache::open(&dir).map_err(|e| cache_fail(&dir, e))
 }
 
 /// Runs `g` once and reports it as `run` does; the exit code.
@@ -536,7 +546,9 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             data,
             allow_outside,
         } => {
-            let cache = open_cache(cache)?;
+            // gc deletes: it opens only a folder that is a cache, and creates none.
+            let dir = cache_dir(cache);
+            let cache = Cache::open_existing(&dir).map_err(|e| cache_fail(&dir, e))?;
             let mut pinned = BTreeSet::new();
             for g in keep {
                 let graph = load_graph(&GraphArgs {
@@ -564,6 +576,14 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
                 report.actions_removed,
                 report.blobs_pinned
             );
+            if let Some(first) = report.foreign.first() {
+                eprintln!(
+                    "warning: left alone {} entries under cas/, ac/ and tmp/ that kodama-dag did \
+                     not name (first: {}); gc never deletes them",
+                    report.foreign.len(),
+                    first.display()
+                );
+            }
             Ok(0)
         }
         Command::Graph { graph, format } => {

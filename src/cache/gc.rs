@@ -1,12 +1,16 @@
 //! Bounding the cache: evict least recently used artifacts down to a size.
+//!
+//! **Invariant:** gc deletes only files the engine names (`cas/<2 hex>/<64 hex>`,
+//! `ac/<2 hex>/<64 hex>`, `tmp/.kodama-<pid>-<...>.tmp`), only in a folder that is a cache
+//! ([`Cache::open_existing`]). Anything else found there is left alone and reported.
 
 use std::collections::BTreeSet;
 use std::fs;
 use std::io;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
-use super::{Cache, Digest, parse_action};
+use super::{Cache, Digest, is_entry_name, is_shard_name, is_temp_name, parse_action};
 
 /// What a gc did.
 #[derive(Debug, Default, Clone, PartialEq, Eq)]
@@ -21,15 +25,32 @@ pub struct GcReport {
     pub blobs_pinned: usize,
     /// Action entries removed because their blob is gone.
     pub actions_removed: usize,
+    /// Entries under `cas/`, `ac/` or `tmp/` that the engine did not name: left alone.
+    pub foreign: Vec<PathBuf>,
 }
 
-fn list(dir: &std::path::Path) -> io::Result<Vec<PathBuf>> {
+/// The files under the sharded folder `dir` that the engine named; anything else goes to
+/// `foreign`. Symlinks are neither followed nor removed.
+fn list(dir: &Path, foreign: &mut Vec<PathBuf>) -> io::Result<Vec<PathBuf>> {
     let mut out = Vec::new();
     for shard in fs::read_dir(dir)? {
-        let shard = shard?.path();
-        if shard.is_dir() {
-            for f in fs::read_dir(&shard)? {
-                out.push(f?.path());
+        let shard = shard?;
+        let shard_name = shard.file_name();
+        let shard_name = shard_name.to_str().unwrap_or_default();
+        if !shard.file_type()?.is_dir() || !is_shard_name(shard_name) {
+            foreign.push(shard.path());
+            continue;
+        }
+        for f in fs::read_dir(shard.path())? {
+            let f = f?;
+            let named = f.file_type()?.is_file()
+                && f.file_name()
+                    .to_str()
+                    .is_some_and(|n| is_entry_name(shard_name, n));
+            if named {
+                out.push(f.path());
+            } else {
+                foreign.push(f.path());
             }
         }
     }
@@ -39,6 +60,7 @@ fn list(dir: &std::path::Path) -> io::Result<Vec<PathBuf>> {
 /// Evicts least recently used blobs until the store holds at most `max_bytes`, never one in
 /// `keep`. Takes the cache's exclusive lock first, so it waits for running jobs and never removes
 /// what a live run needs. Then drops action entries whose blob is gone and stale temp files.
+/// Open the cache with [`Cache::open_existing`]: gc must not adopt a folder that is not one.
 pub fn gc(
     cache: &Cache,
     max_bytes: u64,
@@ -50,9 +72,12 @@ pub fn gc(
         on_wait();
         lock.lock()?;
     }
+    let mut report = GcReport::default();
     let mut blobs: Vec<(SystemTime, u64, PathBuf, bool)> = Vec::new();
-    for p in list(&cache.root.join("cas"))? {
-        let Ok(m) = fs::metadata(&p) else { continue };
+    for p in list(&cache.root.join("cas"), &mut report.foreign)? {
+        let Ok(m) = fs::symlink_metadata(&p) else {
+            continue;
+        };
         let pinned = p
             .file_name()
             .and_then(|n| Digest::from_hex(n.to_string_lossy().as_ref()).ok())
@@ -65,10 +90,7 @@ pub fn gc(
         ));
     }
     blobs.sort();
-    let mut report = GcReport {
-        bytes_before: blobs.iter().map(|b| b.1).sum(),
-        ..Default::default()
-    };
+    report.bytes_before = blobs.iter().map(|b| b.1).sum();
     report.blobs_pinned = blobs.iter().filter(|b| b.3).count();
     let mut total = report.bytes_before;
     for (_, size, path, pinned) in &blobs {
@@ -83,7 +105,7 @@ pub fn gc(
         report.blobs_removed += 1;
     }
     report.bytes_after = total;
-    for p in list(&cache.root.join("ac"))? {
+    for p in list(&cache.root.join("ac"), &mut report.foreign)? {
         let stale = match fs::read_to_string(&p).ok().and_then(|t| parse_action(&t)) {
             Some((d, size)) => !fs::metadata(cache.blob_path(&d)).is_ok_and(|m| m.len() == size),
             None => true,
@@ -95,7 +117,13 @@ pub fn gc(
     }
     // With the exclusive lock held no writer is active, so every temp file is a leftover.
     for f in fs::read_dir(cache.tmp())? {
-        let _ = fs::remove_file(f?.path());
+        let f = f?;
+        let named = f.file_type()?.is_file() && f.file_name().to_str().is_some_and(is_temp_name);
+        if named {
+            let _ = fs::remove_file(f.path());
+        } else {
+            report.foreign.push(f.path());
+        }
     }
     drop(lock);
     Ok(report)

@@ -5,7 +5,8 @@
 //! content store can stand in for it; blake3 is one of REAPI's digest functions):
 //!
 //! ```text
-//! FORMAT                 layout version
+//! FORMAT                 layout version; the marker that makes a folder a cache (gc opens
+//!                        nothing else, see `Cache::open_existing`)
 //! lock                   runs hold it shared, gc exclusive
 //! cas/<2 hex>/<64 hex>   artifact bytes, named by their blake3 digest
 //! ac/<2 hex>/<64 hex>    "blake3:<digest hex> <size>\n" for an action key
@@ -28,7 +29,7 @@ use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
 pub use atomic::write_atomic;
-pub use files::{check_folder, describe_file_type, folder_files, hash_file};
+pub use files::{InputStamp, check_folder, describe_file_type, folder_files, hash_file};
 pub use gc::{GcReport, gc};
 
 /// A blake3 digest (of artifact bytes, file contents, or an action).
@@ -100,30 +101,239 @@ fn shard(dir: &Path, hex: &str) -> PathBuf {
     dir.join(&hex[..2]).join(hex)
 }
 
-impl Cache {
-    /// Opens (creating if needed) the cache at `root`.
-    pub fn open(root: &Path) -> io::Result<Cache> {
-        for d in ["cas", "ac", "stat", "runs", "tmp"] {
-            fs::create_dir_all(root.join(d))?;
-        }
-        let fmt = root.join("FORMAT");
-        match fs::read_to_string(&fmt) {
-            Ok(s) if s == FORMAT => {}
-            Ok(s) => {
-                return Err(io::Error::other(format!(
-                    "{} is a cache of another format ({:?}); use another --cache or delete it",
-                    root.display(),
-                    s.trim()
-                )));
-            }
+/// A folder that is not a kodama-dag cache, where one was expected: commands that delete from a
+/// cache refuse it (exit 2), and no command marks it as a cache. Carried inside an
+/// [`io::Error`] (kind `InvalidData`); [`NotACache::of`] finds it.
+#[derive(Debug)]
+pub struct NotACache {
+    /// The folder.
+    pub root: PathBuf,
+    /// Why it is not one.
+    pub why: String,
+}
+
+impl std::fmt::Display for NotACache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} is not a kodama-dag cache: {}; expected a folder made by `kodama-dag run --cache` \
+             (a FORMAT file reading \"{}\", and cas/ and ac/ holding only files named by their \
+             blake3 digest)",
+            self.root.display(),
+            self.why,
+            FORMAT.trim()
+        )
+    }
+}
+
+impl std::error::Error for NotACache {}
+
+impl NotACache {
+    fn error(root: &Path, why: String) -> io::Error {
+        io::Error::new(
+            io::ErrorKind::InvalidData,
+            NotACache {
+                root: root.to_path_buf(),
+                why,
+            },
+        )
+    }
+
+    /// The [`NotACache`] inside `e`, if that is what it is.
+    pub fn of(e: &io::Error) -> Option<&NotACache> {
+        e.get_ref()?.downcast_ref::<NotACache>()
+    }
+}
+
+/// Whether `name` is `n` lowercase hex digits, as [`Digest::to_hex`] writes them.
+fn is_hex(name: &str, n: usize) -> bool {
+    name.len() == n && name.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f'))
+}
+
+/// Whether `name` is a shard folder's name: two hex digits.
+pub(crate) fn is_shard_name(name: &str) -> bool {
+    is_hex(name, 2)
+}
+
+/// Whether `name` (in a shard folder called `shard`) is the name the engine gives a blob or an
+/// action entry: its 64 hex digits, the first two of which name the shard.
+pub(crate) fn is_entry_name(shard: &str, name: &str) -> bool {
+    is_shard_name(shard) && is_hex(name, 64) && name.starts_with(shard)
+}
+
+/// Whether `name` is a temp file name the engine gives (`.kodama-<pid>-<...>.tmp`).
+pub(crate) fn is_temp_name(name: &str) -> bool {
+    name.strip_prefix(".kodama-")
+        .and_then(|n| n.strip_suffix(".tmp"))
+        .and_then(|n| n.split_once('-'))
+        .is_some_and(|(pid, _)| !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// What a folder holds where the engine keeps the files it deletes (`cas/`, `ac/`, `tmp/`).
+#[derive(Debug, PartialEq, Eq)]
+enum Layout {
+    /// `cas/` and `ac/` exist, and they and `tmp/` hold only names the engine gives.
+    Engine,
+    /// Nothing foreign there, but not both `cas/` and `ac/` (a new or empty folder).
+    Incomplete,
+    /// Something the engine would never have written there.
+    Foreign(String),
+}
+
+/// Reads (without following symlinks or opening any file) what `root` holds under `cas/`,
+/// `ac/` and `tmp/`.
+fn layout(root: &Path) -> io::Result<Layout> {
+    let foreign = |what: String| Ok(Layout::Foreign(what));
+    let mut both = true;
+    for dir in ["cas", "ac", "tmp"] {
+        let path = root.join(dir);
+        let meta = match fs::symlink_metadata(&path) {
+            Ok(m) => m,
             Err(e) if e.kind() == io::ErrorKind::NotFound => {
-                write_atomic(&root.join("tmp"), &fmt, FORMAT.as_bytes())?;
+                both &= dir == "tmp";
+                continue;
             }
             Err(e) => return Err(e),
+        };
+        if !meta.is_dir() {
+            return foreign(format!("{dir} is not a folder"));
+        }
+        for entry in fs::read_dir(&path)? {
+            let entry = entry?;
+            let name = entry.file_name();
+            let Some(name) = name.to_str() else {
+                return foreign(format!("{dir}/{} is not a name it gives", name.display()));
+            };
+            let t = entry.file_type()?;
+            if dir == "tmp" {
+                if !(t.is_file() && is_temp_name(name)) {
+                    return foreign(format!("{dir}/{name} is not a temp file it names"));
+                }
+                continue;
+            }
+            if !(t.is_dir() && is_shard_name(name)) {
+                return foreign(format!("{dir}/{name} is not a shard folder it names"));
+            }
+            for f in fs::read_dir(entry.path())? {
+                let f = f?;
+                let fname = f.file_name();
+                let ok = f.file_type()?.is_file()
+                    && fname.to_str().is_some_and(|n| is_entry_name(name, n));
+                if !ok {
+                    return foreign(format!(
+                        "{dir}/{name}/{} is not a file it names",
+                        fname.display()
+                    ));
+                }
+            }
+        }
+    }
+    Ok(if both {
+        Layout::Engine
+    } else {
+        Layout::Incomplete
+    })
+}
+
+impl Cache {
+    /// Opens (creating if needed) the cache at `root`. A folder without the FORMAT marker becomes
+    /// a cache only if nothing under its `cas/`, `ac/` and `tmp/` is foreign to the engine
+    /// (else [`NotACache`]): the marker is never written over someone else's files.
+    pub fn open(root: &Path) -> io::Result<Cache> {
+        let marked = Self::marked(root)?;
+        if !marked && let Layout::Foreign(why) = layout(root)? {
+            return Err(NotACache::error(
+                root,
+                format!("it has no FORMAT file and {why}"),
+            ));
+        }
+        Self::create_dirs(root)?;
+        if !marked {
+            write_atomic(&root.join("tmp"), &root.join("FORMAT"), FORMAT.as_bytes())?;
         }
         Ok(Cache {
             root: root.to_path_buf(),
         })
+    }
+
+    /// Opens the existing cache at `root` for a command that deletes from it (`gc`), creating
+    /// nothing: `root` must carry the FORMAT marker, or be a cache made without one (`cas/` and
+    /// `ac/` present, and nothing under them or `tmp/` that the engine does not name), which is
+    /// then marked. Anything else is [`NotACache`].
+    pub fn open_existing(root: &Path) -> io::Result<Cache> {
+        match fs::metadata(root) {
+            Ok(m) if m.is_dir() => {}
+            Ok(_) => return Err(NotACache::error(root, "it is not a folder".into())),
+            Err(e) if e.kind() == io::ErrorKind::NotFound => {
+                return Err(NotACache::error(root, "it does not exist".into()));
+            }
+            Err(e) => return Err(e),
+        }
+        if !Self::marked(root)? {
+            match layout(root)? {
+                Layout::Engine => {
+                    Self::create_dirs(root)?;
+                    write_atomic(&root.join("tmp"), &root.join("FORMAT"), FORMAT.as_bytes())?;
+                }
+                Layout::Incomplete => {
+                    return Err(NotACache::error(
+                        root,
+                        "it has no FORMAT file and no cas/ and ac/ folders".into(),
+                    ));
+                }
+                Layout::Foreign(why) => {
+                    return Err(NotACache::error(
+                        root,
+                        format!("it has no FORMAT file and {why}"),
+                    ));
+                }
+            }
+        }
+        Self::create_dirs(root)?;
+        Ok(Cache {
+            root: root.to_path_buf(),
+        })
+    }
+
+    /// Whether `root` carries this engine's FORMAT marker; an error if it carries another's.
+    fn marked(root: &Path) -> io::Result<bool> {
+        let fmt = root.join("FORMAT");
+        match fs::symlink_metadata(&fmt) {
+            Ok(m) if m.is_file() => {}
+            Ok(_) => {
+                return Err(NotACache::error(
+                    root,
+                    "its FORMAT is not a regular file".into(),
+                ));
+            }
+            Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(false),
+            Err(e) => return Err(e),
+        }
+        // A marker is a few bytes; a large file there is not one (and is not read whole).
+        let mut text = String::new();
+        io::Read::read_to_string(&mut io::Read::take(File::open(&fmt)?, 64), &mut text)
+            .map_err(|_| NotACache::error(root, "its FORMAT file is not text".into()))?;
+        if text == FORMAT {
+            return Ok(true);
+        }
+        if !text.starts_with("kodama-dag cache ") {
+            return Err(NotACache::error(
+                root,
+                format!("its FORMAT file reads {:?}", text.trim()),
+            ));
+        }
+        Err(io::Error::other(format!(
+            "{} is a cache of another format ({:?}); use another --cache or delete it",
+            root.display(),
+            text.trim()
+        )))
+    }
+
+    fn create_dirs(root: &Path) -> io::Result<()> {
+        for d in ["cas", "ac", "stat", "runs", "tmp"] {
+            fs::create_dir_all(root.join(d))?;
+        }
+        Ok(())
     }
 
     /// The cache root.
@@ -296,6 +506,91 @@ mod tests {
         // An empty blob maps to nothing and still verifies.
         let (empty, _) = cache.put_blob_with(|_| Ok(())).unwrap();
         assert!(cache.get_blob(&empty).unwrap().is_empty());
+    }
+
+    /// A real cache: one blob, its action entry, a stale temp file.
+    fn filled_cache(root: &Path) -> Digest {
+        let cache = Cache::open(root).unwrap();
+        let (d, size) = cache.put_blob_with(|w| w.write_all(b"artifact")).unwrap();
+        cache.put_action(&blake3::hash(b"key"), &d, size).unwrap();
+        fs::write(root.join("tmp/.kodama-999999999-0-0.tmp"), b"left").unwrap();
+        d
+    }
+
+    /// Only a folder that is a cache opens for deleting: marked, or laid out exactly as the
+    /// engine lays one out (then it is marked). Nothing is created in one that is refused.
+    #[test]
+    fn only_a_cache_opens_for_deleting() {
+        let dir = tempfile::tempdir().unwrap();
+        let not = |root: &Path| -> String {
+            let e = Cache::open_existing(root).err().expect("refused");
+            NotACache::of(&e).expect("a NotACache").why.clone()
+        };
+        assert!(not(&dir.path().join("missing")).contains("does not exist"));
+        assert!(!dir.path().join("missing").exists());
+
+        let user = dir.path().join("user");
+        fs::create_dir_all(user.join("cas")).unwrap();
+        fs::create_dir_all(user.join("ac")).unwrap();
+        fs::create_dir_all(user.join("tmp")).unwrap();
+        fs::write(user.join("tmp/draft.txt"), b"mine").unwrap();
+        assert!(not(&user).contains("tmp/draft.txt"), "{}", not(&user));
+        fs::remove_file(user.join("tmp/draft.txt")).unwrap();
+        fs::create_dir_all(user.join("cas/ab")).unwrap();
+        fs::write(user.join("cas/ab/photo.jpg"), b"mine").unwrap();
+        assert!(not(&user).contains("cas/ab/photo.jpg"));
+        // A digest-like name in the wrong shard is not the engine's either.
+        fs::remove_file(user.join("cas/ab/photo.jpg")).unwrap();
+        fs::write(user.join("cas/ab").join("cd".repeat(32)), b"x").unwrap();
+        assert!(not(&user).contains("is not a file it names"));
+        assert!(!user.join("FORMAT").exists() && !user.join("lock").exists());
+        // Nor may a run mark such a folder as a cache.
+        assert!(NotACache::of(&Cache::open(&user).err().unwrap()).is_some());
+        assert!(!user.join("FORMAT").exists());
+
+        let empty = dir.path().join("empty");
+        fs::create_dir_all(&empty).unwrap();
+        assert!(not(&empty).contains("no cas/ and ac/"));
+
+        let other = dir.path().join("other");
+        fs::create_dir_all(&other).unwrap();
+        fs::write(other.join("FORMAT"), b"my own format notes").unwrap();
+        assert!(not(&other).contains("FORMAT file reads"));
+
+        // A cache made without the marker: recognised by its layout and names, then marked.
+        let legacy = dir.path().join("legacy");
+        let d = filled_cache(&legacy);
+        fs::remove_file(legacy.join("FORMAT")).unwrap();
+        let cache = Cache::open_existing(&legacy).unwrap();
+        assert_eq!(fs::read_to_string(legacy.join("FORMAT")).unwrap(), FORMAT);
+        assert!(cache.get_blob(&d).is_ok());
+    }
+
+    /// gc deletes only what the engine named, even inside a marked cache.
+    #[test]
+    fn gc_never_deletes_a_file_the_engine_did_not_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().join("cache");
+        filled_cache(&root);
+        let planted = [
+            root.join("cas/ab/notes.txt"),
+            root.join("cas/notes.txt"),
+            root.join("ac/zz/x"),
+            root.join("tmp/keep.txt"),
+        ];
+        for p in &planted {
+            fs::create_dir_all(p.parent().unwrap()).unwrap();
+            fs::write(p, b"mine").unwrap();
+        }
+        let cache = Cache::open_existing(&root).unwrap();
+        let report = gc(&cache, 0, &Default::default(), || {}).unwrap();
+        assert_eq!((report.blobs_removed, report.actions_removed), (1, 1));
+        assert_eq!(report.bytes_after, 0);
+        for p in &planted {
+            assert_eq!(fs::read(p).unwrap(), b"mine", "{}", p.display());
+        }
+        assert_eq!(report.foreign.len(), planted.len(), "{:?}", report.foreign);
+        assert!(!root.join("tmp/.kodama-999999999-0-0.tmp").exists());
     }
 
     /// A failing writer leaves neither a blob nor a temp file.
