@@ -121,7 +121,7 @@ impl SceneRays {
             // Leaves of one packet: four triangles cost one SSE test.
             // A more thorough build cuts the time per cast for a build that costs about 10^4
             // casts; past `THOROUGH_BUILD_MAX` triangles the build time would outweigh it.
-            // Measured on munich (BENCHMARKS.md, "the BVH's build"): PLOC searching 14
+            // Measured on munich (docs/benchmarks-log.md, 2026-11-27, commit 5ff914a): PLOC searching 14
             // neighbours in every merging pass after the first, without pre-splitting, casts
             // bounce rays 7-11 % faster than obvhs's `slow_build` (24 neighbours after the
             // second pass, pre-split) and shadow rays 7 % slower, in the same build time. The
@@ -168,7 +168,7 @@ impl SceneRays {
 
     /// The closest hit of the ray from `origin` along the unit vector `dir` within (`tmin`, `tmax`).
     // Always inlined: left to the inliner, the radio map's bounce loop came to call it out as
-    // the crate grew, and the map took 15 % longer (BENCHMARKS.md, "the inliner").
+    // the crate grew, and the map took 15 % longer (docs/benchmarks-log.md, 2026-11-27, commit 34e95bb).
     #[inline(always)]
     pub fn cast(&self, origin: [f32; 3], dir: [f32; 3], tmin: f32, tmax: f32) -> Option<Hit> {
         self.closest(origin, dir, tmin, tmax).map(|h| self.hit(h))

@@ -356,7 +356,7 @@ impl WideBvh {
 
     /// The closest hit of `origin + t dir`, t in (`tmin`, `tmax`).
     // Always inlined: left to the inliner, the radio map's bounce loop came to call it out as
-    // the crate grew, and the map took 15 % longer (BENCHMARKS.md, "the inliner").
+    // the crate grew, and the map took 15 % longer (docs/benchmarks-log.md, 2026-11-27, commit 34e95bb).
     #[inline(always)]
     pub fn closest(&self, origin: Vec3A, dir: Vec3A, tmin: f32, tmax: f32) -> Option<WideHit> {
         if self.nodes.is_empty() {

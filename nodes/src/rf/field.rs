@@ -46,7 +46,7 @@ pub fn mirror(k: DVec3, n: DVec3) -> DVec3 {
 
 /// The field after a reflection with coefficients (r_TE, r_TM): returns it and the new direction.
 // Always inlined: left to the inliner, the radio map's bounce loop came to call it out as
-// the crate grew, and the map took 15 % longer (BENCHMARKS.md, "the inliner").
+// the crate grew, and the map took 15 % longer (docs/benchmarks-log.md, 2026-11-27, commit 34e95bb).
 #[inline(always)]
 pub fn reflect(e: &CVec, k: DVec3, n: DVec3, r: (C64, C64)) -> (CVec, DVec3) {
     let (perp, par_i) = basis(k, n);

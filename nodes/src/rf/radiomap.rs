@@ -68,7 +68,7 @@ pub fn radio_map(
                 let start = k * chunk;
                 // Every first bounce leaves the transmitter, and the lattice's neighbours lie side by
                 // side: cast as packets of a patch each, these rays cost a fraction of a lone ray
-                // (BENCHMARKS.md, issue 16). The map is the same to the bit.
+                // (BENCHMARKS.md, "Tracer speed"). The map is the same to the bit.
                 let order = patch_order(opt.rays, start, chunk);
                 // Put in patch order once: every later pass reads them in sequence, where
                 // the lattice's order would scatter each patch over the chunk.

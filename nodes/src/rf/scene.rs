@@ -119,7 +119,7 @@ impl RfScene {
 
     /// The closest surface along `o + t d` for t in (`tmin`, `tmax`).
     // Always inlined: left to the inliner, the radio map's bounce loop came to call it out as
-    // the crate grew, and the map took 15 % longer (BENCHMARKS.md, "the inliner").
+    // the crate grew, and the map took 15 % longer (docs/benchmarks-log.md, 2026-11-27, commit 34e95bb).
     #[inline(always)]
     pub fn cast(&self, o: DVec3, d: DVec3, tmin: f64, tmax: f64) -> Option<SurfaceHit> {
         let hit = self.rays.cast_index(

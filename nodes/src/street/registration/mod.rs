@@ -7,7 +7,7 @@
 //! within a bounded window to where the twin, rendered from the view, best agrees with what the
 //! view's own segmentation says is building, sky and ground. Relief is the stage that needs it:
 //! half a metre of metadata error moves every window a view deposits by half a metre, which at
-//! IoU 0.5 on a 1.4 m window loses most of them (BENCHMARKS.md, issue 13).
+//! IoU 0.5 on a 1.4 m window loses most of them (docs/benchmarks-log.md, 2026-11-25, commit d3e6605).
 //!
 //! The search, per view: a 7 x 7 x 5 grid over (dx, dy, dyaw) scored on a coarse pixel lattice,
 //! then pattern searches from its best few poses on finer lattices kept near the label edges
@@ -197,7 +197,7 @@ const MOVES_AROUND: [(f64, f64, f64); 10] = [
 /// The pattern search stops once its step is under this, metres. A drainpipe is 0.12 m wide:
 /// found at IoU 0.5 only within 4 cm along its wall, and a search that stopped at 6 cm steps
 /// (the 10 cm façade texel's scale) left the views' median position error at 5-7 cm; at 1.6 cm
-/// steps it is 2 cm (BENCHMARKS.md, "View registration"). The two levels past 6 cm, on the
+/// steps it is 2 cm (docs/benchmarks-log.md, 2026-11-27, commit 84fa211). The two levels past 6 cm, on the
 /// finest lattice, took the registration of 416 views from 24 to 63 s.
 const FINEST_STEP_M: f64 = 0.025;
 
