@@ -22,11 +22,12 @@ use kodama_nodes::stage::{Arity, Slot};
 use kodama_nodes::{Artifact, Ctx, Inputs, StageError};
 use rayon::prelude::*;
 
-use crate::cache::{Cache, Digest, InputStamp, write_atomic};
+use crate::cache::{Action, Cache, Digest, InputStamp, write_atomic};
 use crate::graph::Graph;
 use crate::key::{action_key, site_digest};
 use crate::progress::Reporter;
 use crate::record::{LastRun, NodeRecord, RunRecord, Snapshot, Status, save_record, what_changed};
+use crate::registry;
 
 /// Options of one run.
 #[derive(Clone, Debug, Default)]
@@ -240,6 +241,8 @@ pub fn run(
 struct Outcome {
     record: NodeRecord,
     digest: Option<Digest>,
+    /// The digest of each report the node made, by name.
+    reports: BTreeMap<&'static str, Digest>,
     /// This node or one of its ancestors ran in this run.
     ran_upstream: bool,
     snapshot: Option<Snapshot>,
@@ -261,6 +264,7 @@ struct State {
 struct Executed {
     artifact: Arc<Artifact>,
     digest: Digest,
+    reports: BTreeMap<&'static str, Digest>,
     snapshot: Snapshot,
     /// Why the stage ran twice: an input moved while it ran the first time.
     rerun: Option<String>,
@@ -421,18 +425,24 @@ impl<'a> Exec<'a> {
                 return Outcome {
                     record: self.record(i, Status::Skipped, reason, None),
                     digest: None,
+                    reports: BTreeMap::new(),
                     ran_upstream: false,
                     snapshot: None,
                 };
             }
             deps.iter().any(|o| o.ran_upstream)
         };
+        if let Some(report) = node.kind.report {
+            return self.report_outcome(i, report);
+        }
         let files = lock(&self.files[i]).digests.clone();
         let (key, snapshot) = action_key(node, &self.site, &self.input_digests(i), &files);
         let last = self.last.nodes.get(&node.id);
         let mut reason = None;
-        if let Some((digest, size)) = self.cache.get_action(&key) {
-            if self.cache.has_blob(&digest, size) {
+        if let Some(action) = self.cache.get_action(&key) {
+            let (digest, size) = action.output;
+            let reports = self.stored_reports(i, &action);
+            if self.cache.has_blob(&digest, size) && reports.is_some() {
                 let unchanged = last.is_some_and(|l| l.key == snapshot.key);
                 let (status, why) = match (ran_upstream, unchanged) {
                     (true, true) => (
@@ -456,15 +466,17 @@ impl<'a> Exec<'a> {
                 return Outcome {
                     record: self.record(i, status, why, Some(digest)),
                     digest: Some(digest),
+                    reports: reports.unwrap_or_default(),
                     ran_upstream,
                     snapshot: Some(snapshot),
                 };
             }
             self.reporter.warn(&format!(
-                "node \"{}\": its cached output is missing from the store; rebuilding",
+                "node \"{}\": its cached output or a report is missing from the store; rebuilding",
                 node.id
             ));
-            reason = Some("cached output was missing from the store; rebuilt".to_owned());
+            reason =
+                Some("cached output or a report was missing from the store; rebuilt".to_owned());
         }
         let reason = reason.unwrap_or_else(|| what_changed(&snapshot, last));
         match self.execute(i) {
@@ -477,6 +489,7 @@ impl<'a> Exec<'a> {
                 Outcome {
                     record: self.record(i, Status::Ran, reason, Some(ex.digest)),
                     digest: Some(ex.digest),
+                    reports: ex.reports,
                     ran_upstream: true,
                     snapshot: Some(ex.snapshot),
                 }
@@ -488,6 +501,7 @@ impl<'a> Exec<'a> {
                 Outcome {
                     record,
                     digest: None,
+                    reports: BTreeMap::new(),
                     ran_upstream: true,
                     snapshot: None,
                 }
@@ -562,7 +576,7 @@ impl<'a> Exec<'a> {
             *lock(&self.files[i]) = fresh;
             moved_once = Some(why);
         };
-        let artifact = match artifact {
+        let ran = match artifact {
             Ok(r) => r?,
             Err(panic) => {
                 let msg = panic
@@ -575,11 +589,19 @@ impl<'a> Exec<'a> {
                 )));
             }
         };
+        let artifact = ran.output;
         if artifact.ty() != node.kind.output {
             return Err(StageError::Failed(format!(
                 "the stage returned {} instead of {}",
                 artifact.ty(),
                 node.kind.output
+            )));
+        }
+        let declared: Vec<_> = node.kind.reports.iter().map(|r| (r.name, r.ty)).collect();
+        let made: Vec<_> = ran.reports.iter().map(|(n, a)| (*n, a.ty())).collect();
+        if made != declared {
+            return Err(StageError::Failed(format!(
+                "the stage made the reports {made:?}; its kind declares {declared:?} (a bug)"
             )));
         }
         let store = |e: std::io::Error| {
@@ -588,31 +610,111 @@ impl<'a> Exec<'a> {
                 self.cache.root().display()
             ))
         };
-        // Encoded straight into the store: a large artifact's encoding is never held whole.
-        let (digest, size) = self
-            .cache
-            .put_blob_with(|w| {
-                rmp_serde::encode::write(w, &artifact).map_err(|e| {
-                    // A failed write (a full disk) is told as itself, not as an encoding error.
-                    let mut cause = std::error::Error::source(&e);
-                    while let Some(c) = cause {
-                        if let Some(io) = c.downcast_ref::<std::io::Error>() {
-                            return std::io::Error::new(io.kind(), io.to_string());
-                        }
-                        cause = c.source();
-                    }
-                    std::io::Error::other(format!("cannot encode the output: {e}"))
-                })
-            })
-            .map_err(store)?;
-        self.cache.put_action(&key, &digest, size).map_err(store)?;
+        let (digest, size) = self.store(&artifact).map_err(store)?;
+        let mut action = Action {
+            output: (digest, size),
+            reports: Vec::new(),
+        };
+        let mut reports = BTreeMap::new();
+        for (name, report) in &ran.reports {
+            let (d, size) = self.store(report).map_err(store)?;
+            action.reports.push((name.to_string(), d, size));
+            reports.insert(*name, d);
+        }
+        self.cache.put_action(&key, &action).map_err(store)?;
         snapshot.digest = Some(digest.to_hex().to_string());
         Ok(Executed {
             artifact: Arc::new(artifact),
             digest,
+            reports,
             snapshot,
             rerun: moved_once.map(|why| format!("{why} while it ran, so it ran again")),
         })
+    }
+
+    /// Encodes `artifact` straight into the store (a large artifact's encoding is never held
+    /// whole): its digest and size.
+    fn store(&self, artifact: &Artifact) -> std::io::Result<(Digest, u64)> {
+        self.cache.put_blob_with(|w| {
+            rmp_serde::encode::write(w, artifact).map_err(|e| {
+                // A failed write (a full disk) is told as itself, not as an encoding error.
+                let mut cause = std::error::Error::source(&e);
+                while let Some(c) = cause {
+                    if let Some(io) = c.downcast_ref::<std::io::Error>() {
+                        return std::io::Error::new(io.kind(), io.to_string());
+                    }
+                    cause = c.source();
+                }
+                std::io::Error::other(format!("cannot encode the output: {e}"))
+            })
+        })
+    }
+
+    /// The reports of node `i` a cached action recorded, if it recorded every report the kind
+    /// declares and each is in the store (an entry from before the kind had reports has none:
+    /// the node runs again to make them).
+    fn stored_reports(&self, i: usize, action: &Action) -> Option<BTreeMap<&'static str, Digest>> {
+        self.graph.nodes[i]
+            .kind
+            .reports
+            .iter()
+            .map(|r| {
+                let (d, size) = action.report(r.name)?;
+                self.cache.has_blob(&d, size).then_some((r.name, d))
+            })
+            .collect()
+    }
+
+    /// The outcome of report node `i` (`"carved.outcomes"`): what its node's run, done or
+    /// cached, recorded for it. Nothing runs.
+    fn report_outcome(&self, i: usize, report: &'static str) -> Outcome {
+        let node = &self.graph.nodes[i];
+        let of = node.inputs[0][0];
+        let st = lock(&self.state);
+        let parent = st.outcomes[of].as_ref().expect("deps done");
+        let of_id = &self.graph.nodes[of].id;
+        let Some(&digest) = parent.reports.get(report) else {
+            let mut record = self.record(i, Status::Failed, String::new(), None);
+            record.error = Some(format!("\"{of_id}\" made no report `{report}` (a bug)"));
+            return Outcome {
+                record,
+                digest: None,
+                reports: BTreeMap::new(),
+                ran_upstream: parent.ran_upstream,
+                snapshot: None,
+            };
+        };
+        let status = match parent.record.status {
+            Status::Ran => Status::Ran,
+            _ => Status::Cached,
+        };
+        let key = parent.snapshot.as_ref().map(|p| {
+            let mut h = blake3::Hasher::new();
+            h.update(p.key.as_bytes());
+            h.update(b"\0report\0");
+            h.update(report.as_bytes());
+            h.finalize().to_hex().to_string()
+        });
+        let snapshot = Snapshot {
+            kind: node.kind.name.to_owned(),
+            version: node.kind.version,
+            site: self.site.to_hex().to_string(),
+            params: BTreeMap::new(),
+            inputs: vec![(
+                registry::Kind::REPORT_OF.to_owned(),
+                vec![parent.digest.expect("deps ok").to_hex().to_string()],
+            )],
+            files: Vec::new(),
+            key: key.unwrap_or_default(),
+            digest: Some(digest.to_hex().to_string()),
+        };
+        Outcome {
+            record: self.record(i, status, format!("report of \"{of_id}\""), Some(digest)),
+            digest: Some(digest),
+            reports: BTreeMap::new(),
+            ran_upstream: parent.ran_upstream,
+            snapshot: Some(snapshot),
+        }
     }
 
     /// The artifact of finished node `d`: from memory, else from the store (verified). A missing or
@@ -643,6 +745,11 @@ impl<'a> Exec<'a> {
             &digest.to_hex()[..12]
         ));
         let t0 = Instant::now();
+        if let Some(report) = self.graph.nodes[d].kind.report {
+            let a = self.rebuild_report(d, report, &digest, &problem)?;
+            *slot = Some(a.clone());
+            return Ok(a);
+        }
         let ex = self.execute(d)?;
         if ex.digest != digest {
             self.reporter.warn(&format!("node \"{id}\": the rebuilt output differs from the recorded one; is its stage deterministic?"));
@@ -651,6 +758,7 @@ impl<'a> Exec<'a> {
             let mut st = lock(&self.state);
             let o = st.outcomes[d].as_mut().expect("input done");
             o.digest = Some(ex.digest);
+            o.reports = ex.reports;
             o.snapshot = Some(ex.snapshot);
             o.record.status = Status::Ran;
             o.record.reason = format!("stored output was {problem}; rebuilt");
@@ -662,6 +770,43 @@ impl<'a> Exec<'a> {
         }
         *slot = Some(ex.artifact.clone());
         Ok(ex.artifact)
+    }
+
+    /// Report node `d`'s artifact, its stored blob being `problem`: its node runs again and the
+    /// report it makes is read back.
+    fn rebuild_report(
+        &self,
+        d: usize,
+        report: &str,
+        recorded: &Digest,
+        problem: &str,
+    ) -> Result<Arc<Artifact>, StageError> {
+        let of = self.graph.nodes[d].inputs[0][0];
+        let (id, of_id) = (&self.graph.nodes[d].id, &self.graph.nodes[of].id);
+        let ex = self.execute(of)?;
+        let digest = *ex.reports.get(report).ok_or_else(|| {
+            StageError::Failed(format!("\"{of_id}\" made no report `{report}` (a bug)"))
+        })?;
+        if digest != *recorded {
+            self.reporter.warn(&format!("node \"{id}\": the rebuilt report differs from the recorded one; is the stage of \"{of_id}\" deterministic?"));
+        }
+        let bytes = self.cache.get_blob(&digest).map_err(|e| {
+            StageError::Failed(format!(
+                "the rebuilt report of \"{of_id}\" cannot be read: {e}"
+            ))
+        })?;
+        let a = rmp_serde::from_slice::<Artifact>(&bytes).map_err(|e| {
+            StageError::Failed(format!(
+                "the rebuilt report of \"{of_id}\" is undecodable: {e}"
+            ))
+        })?;
+        let mut st = lock(&self.state);
+        let o = st.outcomes[d].as_mut().expect("input done");
+        o.digest = Some(digest);
+        o.record.status = Status::Ran;
+        o.record.reason = format!("stored report was {problem}; \"{of_id}\" ran again to make it");
+        o.record.digest = Some(digest.to_hex().to_string());
+        Ok(Arc::new(a))
     }
 
     /// Writes every declared output whose node succeeded into `dir`, each file atomically. An

@@ -2,7 +2,7 @@
 
 use serde::Serialize;
 
-use crate::cache::{Cache, Digest};
+use crate::cache::{Action, Cache, Digest};
 use crate::exec::{RunError, file_digests, graph_key, target_indices};
 use crate::graph::Graph;
 use crate::key::{action_key, site_digest};
@@ -44,7 +44,8 @@ pub fn explain(
     let last = LastRun::load(&cache.runs_dir(&graph_key(graph)));
     let site = site_digest(&graph.site);
     let mut digests: Vec<Option<Digest>> = vec![None; graph.nodes.len()];
-    let mut out = Vec::new();
+    let mut actions: Vec<Option<Action>> = vec![None; graph.nodes.len()];
+    let mut out: Vec<PlanEntry> = Vec::new();
     for (i, node) in graph.nodes.iter().enumerate().filter(|(i, _)| need[*i]) {
         let entry = |plan, reason| PlanEntry {
             id: node.id.clone(),
@@ -52,6 +53,26 @@ pub fn explain(
             plan,
             reason,
         };
+        if let Some(report) = node.kind.report {
+            // A report node does what its node does: it is made by that node's run.
+            let of = node.inputs[0][0];
+            let of_id = &graph.nodes[of].id;
+            let parent = out.iter().rfind(|e| e.id == *of_id).map(|e| e.plan.clone());
+            match actions[of].as_ref().and_then(|a| a.report(report)) {
+                Some((d, _)) => {
+                    digests[i] = Some(d);
+                    out.push(entry(
+                        Plan::Cached,
+                        format!("report of \"{of_id}\", in the cache"),
+                    ));
+                }
+                None => out.push(entry(
+                    parent.unwrap_or(Plan::Run),
+                    format!("report of \"{of_id}\", made when it runs"),
+                )),
+            }
+            continue;
+        }
         let unknown: Vec<&str> = node
             .deps
             .iter()
@@ -78,12 +99,18 @@ pub fn explain(
             .map(|l| l.iter().map(|&d| digests[d].expect("known")).collect())
             .collect();
         let (key, snapshot) = action_key(node, &site, &inputs, &files[i]);
-        let hit = cache
-            .get_action(&key)
-            .filter(|(d, size)| cache.has_blob(d, *size));
+        let hit = cache.get_action(&key).filter(|a| {
+            let (d, size) = a.output;
+            cache.has_blob(&d, size)
+                && node.kind.reports.iter().all(|r| {
+                    a.report(r.name)
+                        .is_some_and(|(d, size)| cache.has_blob(&d, size))
+                })
+        });
         match hit {
-            Some((d, _)) => {
-                digests[i] = Some(d);
+            Some(a) => {
+                digests[i] = Some(a.output.0);
+                actions[i] = Some(a);
                 out.push(entry(Plan::Cached, "in the cache".into()));
             }
             None => out.push(entry(

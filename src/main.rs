@@ -620,6 +620,9 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
                     k.output,
                     k.doc
                 );
+                for r in k.reports {
+                    println!("    report \"<node>.{}\" -> {}: {}", r.name, r.ty, r.doc);
+                }
             }
             Ok(0)
         }

@@ -6,7 +6,7 @@ use std::marker::PhantomData;
 use std::sync::LazyLock;
 
 use kodama_nodes::artifact::Typed;
-use kodama_nodes::stage::{FileRef, InputSpec, Inputs, ParamError};
+use kodama_nodes::stage::{FileRef, InputSpec, Inputs, ParamError, ReportSpec};
 use kodama_nodes::{Artifact, ArtifactType, Ctx, Stage, StageError};
 
 use crate::syntax::{Ast, DeError, from_ast};
@@ -22,8 +22,16 @@ pub trait Params: Send + Sync {
     fn validate(&self) -> Result<(), ParamError>;
     /// The files the node reads.
     fn files(&self) -> Vec<FileRef>;
-    /// Runs the stage.
-    fn run(&self, inputs: &Inputs, ctx: &Ctx) -> Result<Artifact, StageError>;
+    /// Runs the stage: its output and its reports, by name.
+    fn run(&self, inputs: &Inputs, ctx: &Ctx) -> Result<Ran, StageError>;
+}
+
+/// What one run of a stage made: its output and each of its reports.
+pub struct Ran {
+    /// The main artifact.
+    pub output: Artifact,
+    /// The reports, by name, in the order the kind declares them.
+    pub reports: Vec<(&'static str, Artifact)>,
 }
 
 struct Erased<S: Stage>(S::Params, PhantomData<fn() -> S>);
@@ -47,9 +55,41 @@ impl<S: Stage> Params for Erased<S> {
     fn files(&self) -> Vec<FileRef> {
         S::files(&self.0)
     }
-    fn run(&self, inputs: &Inputs, ctx: &Ctx) -> Result<Artifact, StageError> {
-        S::run(&self.0, inputs, ctx).map(Typed::into_artifact)
+    fn run(&self, inputs: &Inputs, ctx: &Ctx) -> Result<Ran, StageError> {
+        let r = S::run_reported(&self.0, inputs, ctx)?;
+        Ok(Ran {
+            output: r.output.into_artifact(),
+            reports: r.reports,
+        })
     }
+}
+
+/// The params of a report node (`"carved.outcomes"`): it has none, and runs nothing.
+struct ReportOf;
+
+impl Params for ReportOf {
+    fn canonical(&self) -> Vec<u8> {
+        Vec::new()
+    }
+    fn fields(&self) -> BTreeMap<String, String> {
+        BTreeMap::new()
+    }
+    fn validate(&self) -> Result<(), ParamError> {
+        Ok(())
+    }
+    fn files(&self) -> Vec<FileRef> {
+        Vec::new()
+    }
+    fn run(&self, _: &Inputs, _: &Ctx) -> Result<Ran, StageError> {
+        Err(StageError::Failed(
+            "a report is made by its node's run, never run alone".into(),
+        ))
+    }
+}
+
+fn parse_report_of(ast: &Ast) -> Result<Box<dyn Params>, DeError> {
+    let _: kodama_nodes::params::NoParams = from_ast(ast)?;
+    Ok(Box::new(ReportOf))
 }
 
 /// One node kind.
@@ -66,6 +106,16 @@ pub struct Kind {
     pub output: ArtifactType,
     /// Reads this kind's params from a struct value (inputs already removed).
     pub parse: fn(&Ast) -> Result<Box<dyn Params>, DeError>,
+    /// The reports the kind makes beside its output (`Stage::REPORTS`).
+    pub reports: &'static [ReportSpec],
+    /// For the kind of a report node (`"carved.outcomes"`, made by the loader, never written in a
+    /// graph): the report's name. Its one input, `of`, is the node that makes it.
+    pub report: Option<&'static str>,
+}
+
+impl Kind {
+    /// The input of a report node that names the node making the report.
+    pub const REPORT_OF: &'static str = "of";
 }
 
 fn parse_params<S: Stage>(ast: &Ast) -> Result<Box<dyn Params>, DeError> {
@@ -82,18 +132,51 @@ macro_rules! kinds {
             inputs: <$s as Stage>::INPUTS,
             output: <<$s as Stage>::Output as Typed>::TYPE,
             parse: parse_params::<$s>,
+            reports: <$s as Stage>::REPORTS,
+            report: None,
         }),*]
     };
 }
 
 static KINDS: LazyLock<Vec<Kind>> = LazyLock::new(|| kodama_nodes::for_each_stage!(kinds));
 
-/// Every node kind, in registration order.
+/// The kinds of report nodes, one per (stage kind, report), named `Kind.report`. Made once; their
+/// names and input lists live for the program, as the stages' own do.
+static REPORT_KINDS: LazyLock<Vec<Kind>> = LazyLock::new(|| {
+    KINDS
+        .iter()
+        .flat_map(|k| k.reports.iter().map(move |r| (k, r)))
+        .map(|(k, r)| Kind {
+            name: Box::leak(format!("{}.{}", k.name, r.name).into_boxed_str()),
+            version: k.version,
+            doc: r.doc,
+            inputs: Box::leak(Box::new([InputSpec::one(
+                Kind::REPORT_OF,
+                k.output,
+                "the node whose report this is",
+            )])),
+            output: r.ty,
+            parse: parse_report_of,
+            reports: &[],
+            report: Some(r.name),
+        })
+        .collect()
+});
+
+/// Every node kind a graph may name, in registration order.
 pub fn kinds() -> &'static [Kind] {
     &KINDS
 }
 
-/// The kind called `name`.
+/// The kind called `name`: a stage's, or a report node's (`CarveRelief.outcomes`).
 pub fn kind(name: &str) -> Option<&'static Kind> {
-    KINDS.iter().find(|k| k.name == name)
+    KINDS
+        .iter()
+        .chain(REPORT_KINDS.iter())
+        .find(|k| k.name == name)
+}
+
+/// The kind of the node that reads report `report` of a node of kind `of`.
+pub fn report_kind(of: &Kind, report: &str) -> Option<&'static Kind> {
+    kind(&format!("{}.{report}", of.name))
 }

@@ -34,7 +34,10 @@ pub mod synth;
 
 pub use artifact::{Artifact, ArtifactType};
 pub use site::Site;
-pub use stage::{Arity, Ctx, FileRef, InputSpec, Inputs, ParamError, Progress, Stage, StageError};
+pub use stage::{
+    Arity, Ctx, FileRef, InputSpec, Inputs, ParamError, Progress, ReportSpec, Reported, Stage,
+    StageError,
+};
 
 /// Calls `$m!` with the type of every node kind, in one list, so the engine can build its registry
 /// without the stages knowing about it. A new stage is added here and nowhere else (a stage behind
@@ -85,11 +88,9 @@ macro_rules! for_each_stage {
             $crate::stages::street::register_views::RegisterViews,
             $crate::stages::street::relief::Relief,
             $crate::stages::street::carve_relief::CarveRelief,
-            $crate::stages::street::carve_relief::CarveOutcomes,
             $crate::stages::street::fuse_materials::FuseMaterials,
             $crate::stages::street::apply_materials::ApplyMaterials,
             $crate::stages::street::place_clutter::PlaceClutter,
-            $crate::stages::street::place_clutter::ClutterMetrics,
             $crate::stages::street::canopies::Canopies,
             $crate::stages::heights::coarsen::Coarsen,
             $crate::stages::heights::gaussian_blur::GaussianBlur,

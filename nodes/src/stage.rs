@@ -291,6 +291,28 @@ impl Inputs {
     }
 }
 
+/// One named side output of a node kind: a report the stage makes beside its artifact (the
+/// carve's outcomes, the clutter's counts), cached under the node's key and named in graphs as
+/// `"node.name"`.
+#[derive(Clone, Copy, Debug)]
+pub struct ReportSpec {
+    /// The name after the node id's dot.
+    pub name: &'static str,
+    /// The report's artifact type.
+    pub ty: ArtifactType,
+    /// What it says, for `kinds` and `explain`.
+    pub doc: &'static str,
+}
+
+/// A stage's output with its reports, in the order of its `Stage::REPORTS`.
+#[derive(Debug)]
+pub struct Reported<T> {
+    /// The main artifact.
+    pub output: T,
+    /// Each declared report, by name.
+    pub reports: Vec<(&'static str, Artifact)>,
+}
+
 /// A node kind: what a graph file names, what it takes and what it makes.
 pub trait Stage: 'static {
     /// The kind name as written in graph files, e.g. `"GaussianBlur"`.
@@ -317,4 +339,21 @@ pub trait Stage: 'static {
     }
     /// Computes the output.
     fn run(params: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Self::Output, StageError>;
+
+    /// The reports the stage makes beside its output, each made by the same run (none by
+    /// default).
+    const REPORTS: &'static [ReportSpec] = &[];
+
+    /// Computes the output and every report of [`Stage::REPORTS`]; what the engine calls. A
+    /// stage with reports overrides it, and its `run` keeps only the output.
+    fn run_reported(
+        params: &Self::Params,
+        inputs: &Inputs,
+        ctx: &Ctx,
+    ) -> Result<Reported<Self::Output>, StageError> {
+        Ok(Reported {
+            output: Self::run(params, inputs, ctx)?,
+            reports: Vec::new(),
+        })
+    }
 }

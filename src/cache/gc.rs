@@ -106,8 +106,13 @@ pub fn gc(
     }
     report.bytes_after = total;
     for p in list(&cache.root.join("ac"), &mut report.foreign)? {
+        let present = |(d, size): (Digest, u64)| {
+            fs::metadata(cache.blob_path(&d)).is_ok_and(|m| m.len() == size)
+        };
         let stale = match fs::read_to_string(&p).ok().and_then(|t| parse_action(&t)) {
-            Some((d, size)) => !fs::metadata(cache.blob_path(&d)).is_ok_and(|m| m.len() == size),
+            Some(a) => {
+                !present(a.output) || a.reports.iter().any(|(_, d, size)| !present((*d, *size)))
+            }
             None => true,
         };
         if stale {

@@ -435,20 +435,21 @@ impl Cache {
         Ok(blob)
     }
 
-    /// The artifact digest and size recorded for action `key`, if any.
-    pub fn get_action(&self, key: &Digest) -> Option<(Digest, u64)> {
+    /// What action `key` produced, if recorded: its output blob and its reports'.
+    pub fn get_action(&self, key: &Digest) -> Option<Action> {
         parse_action(&fs::read_to_string(shard(&self.root.join("ac"), &key.to_hex())).ok()?)
     }
 
-    /// Records that action `key` produced the blob `digest` of `size` bytes.
-    pub fn put_action(&self, key: &Digest, digest: &Digest, size: u64) -> io::Result<()> {
+    /// Records that action `key` produced `action`'s blobs.
+    pub fn put_action(&self, key: &Digest, action: &Action) -> io::Result<()> {
         let path = shard(&self.root.join("ac"), &key.to_hex());
         fs::create_dir_all(path.parent().expect("sharded path has a parent"))?;
-        write_atomic(
-            &self.tmp(),
-            &path,
-            format!("blake3:{} {size}\n", digest.to_hex()).as_bytes(),
-        )
+        let (d, size) = action.output;
+        let mut text = format!("blake3:{} {size}\n", d.to_hex());
+        for (name, d, size) in &action.reports {
+            text.push_str(&format!("report {name} blake3:{} {size}\n", d.to_hex()));
+        }
+        write_atomic(&self.tmp(), &path, text.as_bytes())
     }
 
     /// The folder for run records and last-run snapshots of one graph.
@@ -457,10 +458,41 @@ impl Cache {
     }
 }
 
-/// Parses an action entry `blake3:<hex> <size>`.
-fn parse_action(text: &str) -> Option<(Digest, u64)> {
-    let (d, size) = text.trim().strip_prefix("blake3:")?.split_once(' ')?;
-    Some((Digest::from_hex(d).ok()?, size.parse().ok()?))
+/// What one action produced: the output blob (digest, size) and each report's, by name.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Action {
+    /// The output's blob.
+    pub output: (Digest, u64),
+    /// (report name, digest, size) of each report, in the kind's order.
+    pub reports: Vec<(String, Digest, u64)>,
+}
+
+impl Action {
+    /// The blob of report `name`, if recorded.
+    pub fn report(&self, name: &str) -> Option<(Digest, u64)> {
+        self.reports
+            .iter()
+            .find(|(n, _, _)| n == name)
+            .map(|(_, d, s)| (*d, *s))
+    }
+}
+
+/// Parses an action entry: `blake3:<hex> <size>`, then a line `report <name> blake3:<hex> <size>`
+/// per report (entries written before reports existed have none).
+pub(crate) fn parse_action(text: &str) -> Option<Action> {
+    let blob = |t: &str| -> Option<(Digest, u64)> {
+        let (d, size) = t.trim().strip_prefix("blake3:")?.split_once(' ')?;
+        Some((Digest::from_hex(d).ok()?, size.parse().ok()?))
+    };
+    let mut lines = text.lines();
+    let output = blob(lines.next()?)?;
+    let mut reports = Vec::new();
+    for line in lines {
+        let (name, rest) = line.strip_prefix("report ")?.split_once(' ')?;
+        let (d, size) = blob(rest)?;
+        reports.push((name.to_string(), d, size));
+    }
+    Some(Action { output, reports })
 }
 
 /// Marks a file as recently used (its mtime is the LRU clock gc reads). Best effort: a read-only
@@ -512,7 +544,15 @@ mod tests {
     fn filled_cache(root: &Path) -> Digest {
         let cache = Cache::open(root).unwrap();
         let (d, size) = cache.put_blob_with(|w| w.write_all(b"artifact")).unwrap();
-        cache.put_action(&blake3::hash(b"key"), &d, size).unwrap();
+        cache
+            .put_action(
+                &blake3::hash(b"key"),
+                &Action {
+                    output: (d, size),
+                    reports: Vec::new(),
+                },
+            )
+            .unwrap();
         fs::write(root.join("tmp/.kodama-999999999-0-0.tmp"), b"left").unwrap();
         d
     }

@@ -13,7 +13,7 @@ use petgraph::graph::DiGraph;
 
 use super::{Graph, InputFile, Node};
 use crate::diag::{Diagnostic, GraphError, Sources};
-use crate::registry;
+use crate::registry::{self, Kind};
 use crate::syntax::{self, Ast, DeError, Name, Span, Value, did_you_mean};
 
 /// How to load a graph.
@@ -167,6 +167,7 @@ fn check(
     };
     let mut raw = raw_nodes(nodes_ast, diags);
     apply_sets(&mut raw, opts, diags);
+    add_report_nodes(&mut raw, outputs_ast);
 
     // Kinds, inputs and params.
     let ids: Vec<&str> = raw.iter().map(|r| r.id.as_str()).collect();
@@ -187,7 +188,7 @@ fn check(
     }
 
     let outputs = outputs_ast
-        .map(|a| check_outputs(a, &index, &ids, &raw, diags))
+        .map(|a| check_outputs(a, &index, &raw, diags))
         .unwrap_or_default();
     if !diags.is_empty() {
         return None;
@@ -711,11 +712,12 @@ fn build_node(
                 continue;
             };
             let Some(&t) = index.get(target.as_str()) else {
-                let ids = raw.iter().map(|r| r.id.as_str());
+                let names = referable(raw);
+                let names = names.iter().map(String::as_str);
                 diags.push(Diagnostic::at(
                     a.span,
                     id,
-                    format!("input `{}`: {}", spec.name, unknown("node", target, ids)),
+                    format!("input `{}`: {}", spec.name, unknown("node", target, names)),
                 ));
                 continue;
             };
@@ -823,6 +825,97 @@ fn build_node(
     })
 }
 
+/// A node for every report a graph names (`"carved.outcomes"`: the report `outcomes` of the node
+/// `carved`), as an input or an output, unless a node of that id is written in the graph. Its one
+/// input is the node making the report, so it is scheduled after it and takes its type checks.
+fn add_report_nodes(raw: &mut Vec<RawNode>, outputs: Option<&Ast>) {
+    let mut named: Vec<&Ast> = Vec::new();
+    for r in raw.iter() {
+        let Some(kind) = registry::kind(&r.kind.name) else {
+            continue;
+        };
+        for (field, v) in &r.fields {
+            if kind.inputs.iter().any(|s| s.name == field.name) {
+                node_refs(v, &mut named);
+            }
+        }
+    }
+    if let Some(Ast {
+        v: Value::Map(entries),
+        ..
+    }) = outputs
+    {
+        named.extend(entries.iter().map(|(_, v)| v));
+    }
+    let mut added: Vec<RawNode> = Vec::new();
+    for a in named {
+        let (Value::Str(target) | Value::Ident(target)) = &a.v else {
+            continue;
+        };
+        if raw.iter().chain(&added).any(|r| r.id == *target) {
+            continue;
+        }
+        let Some((of, report)) = target.rsplit_once('.') else {
+            continue;
+        };
+        let Some(kind) = raw
+            .iter()
+            .find(|r| r.id == of)
+            .and_then(|r| registry::kind(&r.kind.name))
+            .and_then(|k| registry::report_kind(k, report))
+        else {
+            continue;
+        };
+        added.push(RawNode {
+            id: target.clone(),
+            kind: Name {
+                name: kind.name.to_string(),
+                span: a.span,
+            },
+            fields: vec![(
+                Name {
+                    name: Kind::REPORT_OF.to_string(),
+                    span: a.span,
+                },
+                Ast {
+                    v: Value::Str(of.to_string()),
+                    span: a.span,
+                },
+            )],
+        });
+    }
+    raw.extend(added);
+}
+
+/// What an input or an output may name: every node id, and every report of every node
+/// (`"carved.outcomes"`).
+fn referable(raw: &[RawNode]) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for r in raw {
+        if !out.contains(&r.id) {
+            out.push(r.id.clone());
+        }
+        let reports = registry::kind(&r.kind.name).map_or(&[][..], |k| k.reports);
+        for rep in reports {
+            let name = format!("{}.{}", r.id, rep.name);
+            if !out.contains(&name) {
+                out.push(name);
+            }
+        }
+    }
+    out
+}
+
+/// The node references in an input's value: a string, a list of them, `Some(..)`.
+fn node_refs<'a>(v: &'a Ast, out: &mut Vec<&'a Ast>) {
+    match &v.v {
+        Value::Str(_) | Value::Ident(_) => out.push(v),
+        Value::List(items) => items.iter().for_each(|a| node_refs(a, out)),
+        Value::Call { args, .. } => args.iter().for_each(|a| node_refs(a, out)),
+        _ => {}
+    }
+}
+
 /// Every non-finite number in `a` (`inf`, `NaN`, or a literal too large for an f64), with where
 /// it is. No stage takes one: an infinite size or count would ask for unbounded memory or time,
 /// and NaN fails every comparison a check would make.
@@ -844,7 +937,6 @@ fn non_finite(a: &Ast, out: &mut Vec<(Span, f64)>) {
 fn check_outputs(
     a: &Ast,
     index: &HashMap<&str, usize>,
-    ids: &[&str],
     raw: &[RawNode],
     diags: &mut Vec<Diagnostic>,
 ) -> Vec<(String, usize)> {
@@ -918,7 +1010,7 @@ fn check_outputs(
                 None,
                 format!(
                     "output \"{name}\": {}",
-                    unknown("node", node, ids.iter().copied())
+                    unknown("node", node, referable(raw).iter().map(String::as_str))
                 ),
             )),
         }

@@ -1,10 +1,10 @@
 //! CarveRelief: the relief instances carved into the building solids by Booleans (paper Sec.
 //! 4.2.2): recesses subtracted, protrusions added, carved faces given their materials; every
-//! carved solid passes the solid check or its instance is dropped. CarveOutcomes reports, as
-//! metrics, what the same carve kept and dropped, and why.
+//! carved solid passes the solid check or its instance is dropped. Its report `outcomes` says,
+//! as metrics, what the carve kept and dropped, and why.
 
-use crate::artifact::{ArtifactType, ChartSet, Metrics, ReliefSet, Scene};
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::artifact::{ArtifactType, ChartSet, ReliefSet, Scene, Typed};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, ReportSpec, Reported, Stage, StageError};
 use crate::street::relief::carve::{CarveParams, CarveReport, carve_scene};
 
 /// Relief instances carved into the scene's buildings.
@@ -34,36 +34,28 @@ impl Stage for CarveRelief {
     fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Scene, StageError> {
         Ok(carve(p, inputs)?.0)
     }
-}
 
-/// What CarveRelief keeps and drops with the same inputs and params, as metrics
-/// ([`CarveReport::metrics`]): instances carved and dropped, by the step that dropped them and by
-/// relief class, and the carved buildings' triangles. It carves again: the carve's scene is
-/// CarveRelief's one output.
-pub struct CarveOutcomes;
+    const REPORTS: &'static [ReportSpec] = &[ReportSpec {
+        name: "outcomes",
+        ty: ArtifactType::Metrics,
+        doc: "what the carve kept and dropped, by the step that dropped it and by relief class, and the carved buildings' triangles (CarveReport::metrics)",
+    }];
 
-impl Stage for CarveOutcomes {
-    const KIND: &'static str = "CarveOutcomes";
-    // 2: as CarveRelief 5.
-    // 3: as CarveRelief 6.
-    const VERSION: u32 = 3;
-    const DOC: &'static str =
-        "what CarveRelief carves and drops (and at which step), per relief class, as metrics";
-    const INPUTS: &'static [InputSpec] = INPUTS;
-    type Params = CarveParams;
-    type Output = Metrics;
-
-    fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        validate(p)
-    }
-
-    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Metrics, StageError> {
+    fn run_reported(
+        p: &Self::Params,
+        inputs: &Inputs,
+        _: &Ctx,
+    ) -> Result<Reported<Scene>, StageError> {
         let relief: &ReliefSet = inputs.one("relief")?;
-        Ok(carve(p, inputs)?.1.metrics(relief))
+        let (scene, report) = carve(p, inputs)?;
+        Ok(Reported {
+            output: scene,
+            reports: vec![("outcomes", report.metrics(relief).into_artifact())],
+        })
     }
 }
 
-/// The inputs of both stages.
+/// The carve's inputs.
 const INPUTS: &[InputSpec] = &[
     InputSpec::one(
         "scene",
@@ -82,7 +74,7 @@ const INPUTS: &[InputSpec] = &[
     ),
 ];
 
-/// The params' check, for both stages.
+/// The params' check.
 fn validate(p: &CarveParams) -> Result<(), ParamError> {
     p.validate().map_err(|(f, m)| ParamError::new(f, m))
 }
@@ -106,9 +98,9 @@ fn carve(p: &CarveParams, inputs: &Inputs) -> Result<(Scene, CarveReport), Stage
 mod tests {
     use super::*;
 
-    /// Both stages refuse the same bad knobs, naming the field.
+    /// Bad knobs are refused, naming the field.
     #[test]
-    fn both_stages_refuse_bad_params() {
+    fn bad_params_are_refused() {
         for (field, p) in [
             (
                 "overshoot_m",
@@ -139,12 +131,9 @@ mod tests {
                 },
             ),
         ] {
-            for e in [CarveRelief::validate(&p), CarveOutcomes::validate(&p)] {
-                let e = e.expect_err(field);
-                assert!(format!("{e:?}").contains(field), "{e:?}");
-            }
+            let e = CarveRelief::validate(&p).expect_err(field);
+            assert!(format!("{e:?}").contains(field), "{e:?}");
         }
         assert!(CarveRelief::validate(&CarveParams::default()).is_ok());
-        assert!(CarveOutcomes::validate(&CarveParams::default()).is_ok());
     }
 }

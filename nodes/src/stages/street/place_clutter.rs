@@ -1,21 +1,21 @@
-//! PlaceClutter and ClutterMetrics (paper Sec. 4.2.4): clutter instances of street views, their
-//! depth calibrated per view against the twin (Theil-Sen), lifted to world positions, clustered
-//! across views, suppressed by class and distance, filtered by a scene grammar and instantiated
-//! from the asset library. `PlaceClutter` emits the objects as a scene for `AssembleScene`;
-//! `ClutterMetrics` runs the same chain and emits its counts (detections, clusters, suppressed,
-//! each grammar rule's effect, placed per class, the calibration figures).
+//! PlaceClutter (paper Sec. 4.2.4): clutter instances of street views, their depth calibrated
+//! per view against the twin (Theil-Sen), lifted to world positions, clustered across views,
+//! suppressed by class and distance, filtered by a scene grammar and instantiated from the asset
+//! library. It emits the objects as a scene for `AssembleScene`, and its report `counts` says
+//! what the chain did (detections, clusters, suppressed, each grammar rule's effect, placed per
+//! class, the calibration figures).
 
 use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Metrics, Raster, Scene, ViewSet};
+use crate::artifact::{ArtifactType, Metrics, Raster, Scene, Typed, ViewSet};
 use crate::geom::mesh_check::check_solid;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, ReportSpec, Reported, Stage, StageError};
 use crate::street::clutter::assets::AssetKind;
 use crate::street::clutter::{ClutterConfig, Placed, default_classes, instantiate, place_clutter};
 
-/// Params of [`PlaceClutter`] and [`ClutterMetrics`].
+/// Params of [`PlaceClutter`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PlaceClutterParams {
@@ -197,37 +197,29 @@ impl Stage for PlaceClutter {
         validate(p)
     }
 
-    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Scene, StageError> {
-        let (placed, _) = chain(p, inputs)?;
+    fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Scene, StageError> {
+        Ok(Self::run_reported(p, inputs, ctx)?.output)
+    }
+
+    const REPORTS: &'static [ReportSpec] = &[ReportSpec {
+        name: "counts",
+        ty: ArtifactType::Metrics,
+        doc: "what the chain did: detections, clusters, suppressed, each grammar rule's effect (grammar_*), placed per class, the calibration figures",
+    }];
+
+    fn run_reported(
+        p: &Self::Params,
+        inputs: &Inputs,
+        _: &Ctx,
+    ) -> Result<Reported<Scene>, StageError> {
+        let (placed, counts) = chain(p, inputs)?;
         let scene = instantiate(&placed);
         for o in &scene.objects {
             check_solid(&o.mesh).map_err(|e| StageError::Failed(format!("{}: {e}", o.id)))?;
         }
-        Ok(scene)
-    }
-}
-
-/// The counts of [`PlaceClutter`]'s chain: detections, clusters, suppressed, each grammar rule's
-/// effect (`grammar_*`), placed per class, calibration figures.
-pub struct ClutterMetrics;
-
-impl Stage for ClutterMetrics {
-    const KIND: &'static str = "ClutterMetrics";
-    // 2: PlaceClutter 2.
-    // 3: PlaceClutter 3.
-    // 4: PlaceClutter 4.
-    const VERSION: u32 = 4;
-    const DOC: &'static str =
-        "counts of the clutter chain (detections, clusters, NMS, each grammar rule), Sec. 4.2.4";
-    const INPUTS: &'static [InputSpec] = INPUTS;
-    type Params = PlaceClutterParams;
-    type Output = Metrics;
-
-    fn validate(p: &Self::Params) -> Result<(), ParamError> {
-        validate(p)
-    }
-
-    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Metrics, StageError> {
-        Ok(chain(p, inputs)?.1)
+        Ok(Reported {
+            output: scene,
+            reports: vec![("counts", counts.into_artifact())],
+        })
     }
 }
