@@ -1,29 +1,18 @@
 //! A view's reported depth calibrated against the twin: a robust affine fit of reported depth
-//! against ray-cast depth (monocular depth is affinely biased), and the medians it rests on.
+//! against ray-cast depth (monocular depth is affinely biased), and the median with its standard
+//! error that the depth cue rests on.
 
 use crate::artifact::{ChartSet, View};
 use crate::geom::raycast::SceneRays;
+use crate::geom::theil_sen::median;
 
 use super::lookup::Lookup;
 
-pub(super) fn median(v: &mut [f64]) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
-}
-
 /// Median and its standard error (1.4826 MAD x 1.2533 / sqrt(n)).
 pub(super) fn median_se(v: &mut [f64]) -> (f64, f64) {
-    let m = median(v);
+    let m = median(v).unwrap_or(f64::NAN);
     let mut dev: Vec<f64> = v.iter().map(|x| (x - m).abs()).collect();
-    let mad = median(&mut dev);
+    let mad = median(&mut dev).unwrap_or(f64::NAN);
     (m, 1.4826 * mad * 1.2533 / (v.len() as f64).sqrt())
 }
 
@@ -65,7 +54,7 @@ pub fn robust_affine(xs: &[f64], ys: &[f64]) -> Option<(f64, f64)> {
         let b = my - a * mx;
         fit = Some((a, b));
         let mut res: Vec<f64> = (0..n).map(|i| (ys[i] - a * xs[i] - b).abs()).collect();
-        let mad = median(&mut res.clone()).max(1e-6);
+        let mad = median(&mut res.clone()).unwrap_or(f64::NAN).max(1e-6);
         for i in 0..n {
             keep[i] = res[i] <= 3.0 * 1.4826 * mad;
         }

@@ -6,6 +6,7 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use crate::artifact::{Chart, ReliefInstance};
 use crate::geom::raycast::SceneRays;
+use crate::geom::theil_sen::weighted_median;
 use crate::geom::union_find::UnionFind;
 use crate::raster::label::label_components;
 use crate::raster::morph::{close_within, dilate, erode, on_support};
@@ -575,22 +576,6 @@ fn bridge_gaps(
         .collect()
 }
 
-fn weighted_median(v: &mut [(f64, f64)]) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let total: f64 = v.iter().map(|x| x.1).sum();
-    let mut acc = 0.0;
-    for x in v.iter() {
-        acc += x.1;
-        if acc >= total / 2.0 {
-            return Some(x.0);
-        }
-    }
-    v.last().map(|x| x.0)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -992,13 +977,5 @@ mod tests {
         );
         let r = within_width([0.0, 0.0, 0.2, 2.0], (0.15, 0.3), 0.1, w, &edge);
         assert!(r[0] == 0.0 && (r[2] - 1.5).abs() < 1e-9, "{r:?}");
-    }
-
-    #[test]
-    fn weighted_median_follows_the_weights() {
-        let mut v = vec![(0.25, 10.0), (0.1, 1.0), (0.3, 2.0)];
-        assert_eq!(weighted_median(&mut v), Some(0.25));
-        let mut v = vec![(0.25, 1.0), (0.1, 10.0)];
-        assert_eq!(weighted_median(&mut v), Some(0.1));
     }
 }

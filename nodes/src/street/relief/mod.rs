@@ -31,6 +31,7 @@ use crate::artifact::{
     ChartKind, ChartSet, ReliefInstance, ReliefLayers, ReliefSet, ReliefStats, Scene, View,
 };
 use crate::geom::raycast::SceneRays;
+use crate::geom::theil_sen::median;
 use crate::stage::Progress;
 use crate::street::fusion::{FusionParams, Vote, fuse_views_each};
 
@@ -42,7 +43,6 @@ pub use posterior::{
 };
 pub use votes::{RegionVote, ViewRelief};
 
-use calibrate::median;
 use instances::{ground_row, instances};
 use layers::{Posterior, chart_layers, unobserved_layers};
 use lookup::Lookup;
@@ -135,11 +135,7 @@ fn view_stats(per_view: &[ViewRelief], views: usize) -> ReliefStats {
 /// one ray per pixel: J_ref^gamma x (pixels per texel = J_ref texel²). Returns J_ref.
 fn exposure_unit(views: &[View], p: &ReliefParams) -> f64 {
     let mut focals: Vec<f64> = views.iter().map(|v| v.intrinsics.fx).collect();
-    let f = if focals.is_empty() {
-        1.0
-    } else {
-        median(&mut focals)
-    };
+    let f = median(&mut focals).unwrap_or(1.0);
     (f / p.ref_distance_m).powi(2)
 }
 

@@ -3,7 +3,7 @@
 
 use crate::artifact::{ChartKind, ChartSet, View};
 
-use super::calibrate::median;
+use crate::geom::theil_sen::median;
 
 /// How far (as a share of the range its pixels' depth gives) a region's centre ray may run past
 /// that range before the region counts as standing past the twin's silhouette, and how far from
@@ -32,7 +32,7 @@ pub(super) fn past_silhouette(
     if range.len() < 5 {
         return None;
     }
-    let range = median(&mut range);
+    let range = median(&mut range).unwrap_or(f64::NAN);
     let slack = (SILHOUETTE_DEPTH_SLACK * range).max(1.0);
     if hit.is_some_and(|t| t <= range + slack) {
         return None;
