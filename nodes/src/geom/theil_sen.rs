@@ -38,6 +38,24 @@ pub fn median(v: &mut [f64]) -> Option<f64> {
     Some((lo + hi) / 2.0)
 }
 
+/// The weighted median of (value, weight) pairs: the first value, in increasing order, at which
+/// the running weight reaches half the total; `None` when empty. Sorts `v` by value.
+pub fn weighted_median(v: &mut [(f64, f64)]) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let total: f64 = v.iter().map(|x| x.1).sum();
+    let mut acc = 0.0;
+    for x in v.iter() {
+        acc += x.1;
+        if acc >= total / 2.0 {
+            return Some(x.0);
+        }
+    }
+    v.last().map(|x| x.0)
+}
+
 /// The median of the shortest half of `v`: the values in the narrowest window holding
 /// floor(n/2) + 1 of them (Rousseeuw's shorth), whose median is a location estimate that, unlike
 /// the plain median, one-sided contamination below 50 % barely moves. Sorts `v`; `None` when
@@ -171,5 +189,13 @@ mod tests {
         let b = theil_sen(&xs, &ys, 1e-9, 5000, 9).unwrap();
         assert_eq!(a, b);
         assert!((a.slope - 2.0).abs() < 1e-9, "{a:?}");
+    }
+
+    #[test]
+    fn weighted_median_follows_the_weights() {
+        let mut v = vec![(0.25, 10.0), (0.1, 1.0), (0.3, 2.0)];
+        assert_eq!(weighted_median(&mut v), Some(0.25));
+        let mut v = vec![(0.25, 1.0), (0.1, 10.0)];
+        assert_eq!(weighted_median(&mut v), Some(0.1));
     }
 }

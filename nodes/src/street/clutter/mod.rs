@@ -13,7 +13,7 @@ use crate::artifact::{Metrics, ObjectClass, Raster, Scene, SceneObject, View};
 use crate::geom::from_above::{down, top_z};
 use crate::geom::polygon::convex_hull;
 use crate::geom::raycast::SceneRays;
-use crate::geom::theil_sen::{LineFit, median, theil_sen};
+use crate::geom::theil_sen::{LineFit, median, theil_sen, weighted_median};
 use crate::street::clutter::assets::AssetKind;
 
 /// Knobs of the clutter chain.
@@ -503,19 +503,6 @@ pub struct Cluster {
     pub score: f64,
 }
 
-fn weighted_median(v: &mut [(f64, f64)]) -> f64 {
-    v.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let total: f64 = v.iter().map(|p| p.1).sum();
-    let mut acc = 0.0;
-    for &(x, w) in v.iter() {
-        acc += w;
-        if acc >= total / 2.0 {
-            return x;
-        }
-    }
-    v.last().map_or(0.0, |p| p.0)
-}
-
 fn class_length(kind: AssetKind) -> f64 {
     let s = kind.size();
     s[0].max(s[1])
@@ -558,7 +545,7 @@ pub fn cluster(dets: &[Detection], cfg: &ClutterConfig) -> Vec<Cluster> {
                 .iter()
                 .map(|&j| (f(&dets[j]), dets[j].weight))
                 .collect();
-            weighted_median(&mut v)
+            weighted_median(&mut v).unwrap_or(0.0)
         };
         let mut views: Vec<usize> = members.iter().map(|&j| dets[j].view).collect();
         views.sort_unstable();
