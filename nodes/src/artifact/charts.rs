@@ -5,6 +5,7 @@
 //! and `v` are plan x and y, so a roof texel is square in plan. Texel (i, j) covers
 //! `[i, i + 1) x [j, j + 1)` texel units from the chart's `origin`; its centre is at `i + 0.5`.
 
+use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
 use super::PodVec;
@@ -90,10 +91,10 @@ impl Chart {
     pub fn uv_of(&self, p: [f64; 3]) -> (f64, f64) {
         match self.kind {
             ChartKind::Wall => {
-                let d = sub(p, self.origin);
+                let d = DVec3::from(p) - DVec3::from(self.origin);
                 (
-                    dot(d, self.u_axis) / self.texel_m,
-                    dot(d, self.v_axis) / self.texel_m,
+                    d.dot(self.u_axis.into()) / self.texel_m,
+                    d.dot(self.v_axis.into()) / self.texel_m,
                 )
             }
             ChartKind::Roof => (
@@ -304,12 +305,4 @@ pub struct FusionStats {
     pub accepted: u64,
     /// Rays dropped because their pixel belongs to a clutter instance (occlusion masking).
     pub masked: u64,
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }

@@ -4,6 +4,8 @@
 
 use std::collections::BTreeMap;
 
+use glam::DVec3;
+
 use crate::artifact::{Chart, ChartKind, ChartSet, Mesh, ObjectClass, PodVec, Scene};
 use crate::geom::union_find::UnionFind;
 
@@ -64,27 +66,26 @@ pub fn building_charts(scene: &Scene, spec: &ChartSpec) -> Result<ChartSet, Stri
     Ok(ChartSet { charts })
 }
 
-fn vertex(m: &Mesh, i: u32) -> [f64; 3] {
-    m.positions[i as usize].map(|c| c as f64)
+fn vertex(m: &Mesh, i: u32) -> DVec3 {
+    DVec3::from(m.positions[i as usize].map(|c| c as f64))
 }
 
 /// Unit normal and twice the area of triangle `t`.
-fn face(m: &Mesh, t: usize) -> ([f64; 3], f64) {
+fn face(m: &Mesh, t: usize) -> (DVec3, f64) {
     let [a, b, c] = m.triangles[t].map(|i| vertex(m, i));
-    let (e1, e2) = (sub(b, a), sub(c, a));
-    let n = cross(e1, e2);
-    let len = dot(n, n).sqrt();
+    let n = (b - a).cross(c - a);
+    let len = n.length();
     if len == 0.0 {
-        return ([0.0; 3], 0.0);
+        return (DVec3::ZERO, 0.0);
     }
-    (n.map(|c| c / len), len)
+    (n / len, len)
 }
 
 /// Triangles grouped into planar charts: union-find over shared edges between faces of nearly
 /// the same plane. Degenerate faces join nothing and are left out.
 fn planar_groups(m: &Mesh, spec: &ChartSpec) -> Vec<Vec<u32>> {
     let n = m.triangles.len();
-    let faces: Vec<([f64; 3], f64)> = (0..n).map(|t| face(m, t)).collect();
+    let faces: Vec<(DVec3, f64)> = (0..n).map(|t| face(m, t)).collect();
     let mut sets = UnionFind::new(n);
     let mut by_edge: BTreeMap<(u32, u32), Vec<u32>> = BTreeMap::new();
     for (t, tri) in m.triangles.iter().enumerate() {
@@ -101,14 +102,14 @@ fn planar_groups(m: &Mesh, spec: &ChartSpec) -> Vec<Vec<u32>> {
         for (x, &s) in tris.iter().enumerate() {
             for &t in &tris[x + 1..] {
                 let ((ns, as_), (nt, at)) = (faces[s as usize], faces[t as usize]);
-                if as_ == 0.0 || at == 0.0 || dot(ns, nt) < cos_max {
+                if as_ == 0.0 || at == 0.0 || ns.dot(nt) < cos_max {
                     continue;
                 }
                 // Same plane: every vertex of t lies within the offset of s's plane.
                 let p0 = vertex(m, m.triangles[s as usize][0]);
                 let flat = m.triangles[t as usize]
                     .iter()
-                    .all(|&i| dot(sub(vertex(m, i), p0), ns).abs() <= spec.max_offset_m);
+                    .all(|&i| (vertex(m, i) - p0).dot(ns).abs() <= spec.max_offset_m);
                 if flat {
                     sets.join(s, t);
                 }
@@ -133,13 +134,12 @@ fn chart_of(
     tris: &[u32],
     spec: &ChartSpec,
 ) -> Result<Option<Chart>, String> {
-    let mut n = [0.0; 3];
+    let mut n = DVec3::ZERO;
     for &t in tris {
         let (nt, a) = face(m, t as usize);
-        n = std::array::from_fn(|k| n[k] + nt[k] * a);
+        n += nt * a;
     }
-    let len = dot(n, n).sqrt();
-    let n = n.map(|c| c / len);
+    let n = (n / n.length()).to_array();
     let (kind, u_axis, v_axis, texel_m) = if n[2] > WALL_NZ {
         (
             ChartKind::Roof,
@@ -151,12 +151,17 @@ fn chart_of(
         // u along the wall (horizontal), v up the wall in its plane: (u, v, n) right-handed.
         let h = (n[0] * n[0] + n[1] * n[1]).sqrt();
         let u = [-n[1] / h, n[0] / h, 0.0];
-        (ChartKind::Wall, u, cross(n, u), spec.wall_texel_m)
+        (
+            ChartKind::Wall,
+            u,
+            DVec3::from(n).cross(u.into()).to_array(),
+            spec.wall_texel_m,
+        )
     } else {
         return Ok(None);
     };
     // A point on the plane; the grid's corner is placed from the UV extent below.
-    let p0 = vertex(m, m.triangles[tris[0] as usize][0]);
+    let p0 = vertex(m, m.triangles[tris[0] as usize][0]).to_array();
     let mut chart = Chart {
         object,
         building: id.to_owned(),
@@ -174,7 +179,7 @@ fn chart_of(
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for &t in tris {
         for &i in &m.triangles[t as usize] {
-            let (u, v) = chart.uv_of(vertex(m, i));
+            let (u, v) = chart.uv_of(vertex(m, i).to_array());
             lo = [lo[0].min(u), lo[1].min(v)];
             hi = [hi[0].max(u), hi[1].max(v)];
         }
@@ -200,7 +205,7 @@ fn chart_of(
 fn texel_triangles(c: &Chart, m: &Mesh) -> Vec<u32> {
     let mut at = vec![u32::MAX; c.len()];
     for &t in c.triangles.iter() {
-        let uv = m.triangles[t as usize].map(|i| c.uv_of(vertex(m, i)));
+        let uv = m.triangles[t as usize].map(|i| c.uv_of(vertex(m, i).to_array()));
         let (u0, u1) = (
             uv.iter().map(|p| p.0).fold(f64::INFINITY, f64::min),
             uv.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max),
@@ -236,22 +241,6 @@ fn texel_triangles(c: &Chart, m: &Mesh) -> Vec<u32> {
 
 fn orient(a: (f64, f64), b: (f64, f64), p: (f64, f64)) -> f64 {
     (b.0 - a.0) * (p.1 - a.1) - (b.1 - a.1) * (p.0 - a.0)
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 #[cfg(test)]
@@ -308,8 +297,8 @@ mod tests {
                     let (u, v) = ch.uv_of(p);
                     assert!((u - i as f64 - 0.5).abs() < 1e-6 && (v - j as f64 - 0.5).abs() < 1e-6);
                     // The centre lies on the chart's plane.
-                    let d = sub(p, ch.origin);
-                    assert!(dot(d, ch.normal).abs() < 1e-6);
+                    let d = DVec3::from(p) - DVec3::from(ch.origin);
+                    assert!(d.dot(ch.normal.into()).abs() < 1e-6);
                 }
             }
         }

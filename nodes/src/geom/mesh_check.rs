@@ -5,6 +5,8 @@
 
 use std::collections::HashMap;
 
+use glam::DVec3;
+
 use crate::artifact::Mesh;
 
 /// What a closed-solid check found.
@@ -122,40 +124,28 @@ fn check_vertex_manifold(mesh: &Mesh) -> Result<(), String> {
 /// Distances below this count as touching, metres: a few f32 steps at kilometre coordinates.
 const TOUCH_M: f64 = 1e-5;
 
-type P3 = [f64; 3];
+type P3 = DVec3;
 
-fn sub(a: P3, b: P3) -> P3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn cross(a: P3, b: P3) -> P3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn dot(a: P3, b: P3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn norm(a: P3) -> f64 {
-    dot(a, a).sqrt()
+/// A mesh vertex in f64, where the checks measure.
+fn position(mesh: &Mesh, i: u32) -> P3 {
+    DVec3::from(mesh.positions[i as usize].map(f64::from))
 }
 
 /// Signed distance of `p` from the plane of triangle `t` (positive on its front side).
 fn plane_distance(t: &[P3; 3], p: P3) -> f64 {
-    let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
-    dot(n, sub(p, t[0])) / norm(n)
+    let n = (t[1] - t[0]).cross(t[2] - t[0]);
+    n.dot(p - t[0]) / n.length()
 }
 
 /// Which side of the line through `p`, `q` the line through `a`, `b` passes, as a signed distance
 /// between the two lines (the scaled orientation of the tetrahedron p, q, a, b).
 fn line_side(p: P3, q: P3, a: P3, b: P3) -> f64 {
-    let n = cross(sub(q, p), sub(b, a));
-    let len = norm(n);
+    let n = (q - p).cross(b - a);
+    let len = n.length();
     if len < 1e-300 {
         return 0.0;
     }
-    dot(n, sub(a, p)) / len
+    n.dot(a - p) / len
 }
 
 /// True when segment `p q` passes through the interior of triangle `t` (touching does not count).
@@ -175,7 +165,7 @@ fn segment_crosses(p: P3, q: P3, t: &[P3; 3]) -> bool {
 /// Coplanar triangles: project on the plane's dominant axis and look for properly crossing edges
 /// or a vertex strictly inside the other triangle.
 fn coplanar_overlap(a: &[P3; 3], b: &[P3; 3]) -> bool {
-    let n = cross(sub(a[1], a[0]), sub(a[2], a[0]));
+    let n = (a[1] - a[0]).cross(a[2] - a[0]);
     let drop = (0..3)
         .max_by(|&i, &j| n[i].abs().total_cmp(&n[j].abs()))
         .expect("three axes");
@@ -219,9 +209,9 @@ pub fn find_self_intersection(mesh: &Mesh) -> Option<(usize, usize)> {
     let tris: Vec<[P3; 3]> = mesh
         .triangles
         .iter()
-        .map(|t| t.map(|i| mesh.positions[i as usize].map(f64::from)))
+        .map(|t| t.map(|i| position(mesh, i)))
         .collect();
-    let bounds: Vec<(P3, P3)> = tris
+    let bounds: Vec<([f64; 3], [f64; 3])> = tris
         .iter()
         .map(|t| {
             let lo = [0, 1, 2].map(|k| t.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min));
@@ -270,12 +260,9 @@ fn faces_intersect(mesh: &Mesh, tris: &[[P3; 3]], i: usize, j: usize) -> bool {
             let third_b = (0..3)
                 .find(|&k| tj[k] != e0 && tj[k] != e1)
                 .expect("one left");
-            let (p, q) = (
-                mesh.positions[e0 as usize].map(f64::from),
-                mesh.positions[e1 as usize].map(f64::from),
-            );
-            let n = cross(sub(a[1], a[0]), sub(a[2], a[0]));
-            let side = |r: P3| dot(n, cross(sub(q, p), sub(r, p)));
+            let (p, q) = (position(mesh, e0), position(mesh, e1));
+            let n = (a[1] - a[0]).cross(a[2] - a[0]);
+            let side = |r: P3| n.dot((q - p).cross(r - p));
             return side(a[third_a]) * side(b[third_b]) > 0.0;
         }
         return coplanar_overlap(a, b);

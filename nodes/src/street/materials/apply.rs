@@ -12,6 +12,8 @@
 
 use std::collections::BTreeMap;
 
+use glam::DVec3;
+
 use crate::artifact::{Chart, ChartMaterials, ChartSet, Mesh, NO_MATERIAL, PodVec, Scene};
 
 /// How material regions are turned into geometry.
@@ -362,7 +364,7 @@ enum Carrier {
 
 /// Working vertices: the mesh's, then added ones, in f64.
 struct Verts {
-    pos: Vec<[f64; 3]>,
+    pos: Vec<DVec3>,
     /// Points on mesh edges, by edge (low, high): (parameter from low to high, vertex).
     on_edge: BTreeMap<(u32, u32), Vec<(f64, u32)>>,
     /// Crossings of two cut lines of a chart: (chart, line, line) -> vertex.
@@ -370,15 +372,15 @@ struct Verts {
 }
 
 impl Verts {
-    fn add(&mut self, p: [f64; 3]) -> u32 {
+    fn add(&mut self, p: DVec3) -> u32 {
         self.pos.push(p);
         self.pos.len() as u32 - 1
     }
 }
 
 /// Texel coordinates of a world point on chart `c` (walls: in the plane; roofs: plan x, y).
-fn uv(c: &Chart, p: [f64; 3]) -> (f64, f64) {
-    c.uv_of(p)
+fn uv(c: &Chart, p: DVec3) -> (f64, f64) {
+    c.uv_of(p.to_array())
 }
 
 fn split_object(
@@ -389,7 +391,11 @@ fn split_object(
 ) -> Result<Mesh, String> {
     let n0 = mesh.positions.len();
     let mut verts = Verts {
-        pos: mesh.positions.iter().map(|p| p.map(f64::from)).collect(),
+        pos: mesh
+            .positions
+            .iter()
+            .map(|p| DVec3::from(p.map(f64::from)))
+            .collect(),
         on_edge: BTreeMap::new(),
         crossing: BTreeMap::new(),
     };
@@ -414,7 +420,7 @@ fn split_object(
             for e in 0..3 {
                 let (a, b) = (tri[e].min(tri[(e + 1) % 3]), tri[e].max(tri[(e + 1) % 3]));
                 let (pa, pb) = (verts.pos[a as usize], verts.pos[b as usize]);
-                let len = dist(pa, pb);
+                let len = pa.distance(pb);
                 if len <= 2.0 * TOL_M {
                     continue;
                 }
@@ -441,7 +447,7 @@ fn split_object(
     for ((a, b), mut ss) in edge_pts {
         ss.sort_by(f64::total_cmp);
         let (pa, pb) = (verts.pos[a as usize], verts.pos[b as usize]);
-        let len = dist(pa, pb);
+        let len = pa.distance(pb);
         let mut kept: Vec<(f64, u32)> = Vec::new();
         for s in ss {
             if kept
@@ -450,7 +456,7 @@ fn split_object(
             {
                 continue;
             }
-            let v = verts.add(lerp(pa, pb, s));
+            let v = verts.add(pa.lerp_monotonic(pb, s));
             kept.push((s, v));
         }
         verts.on_edge.insert((a, b), kept);
@@ -519,7 +525,13 @@ fn split_object(
     }
     stats.vertices_added += (verts.pos.len() - n0) as u64;
     Ok(Mesh {
-        positions: PodVec(verts.pos.iter().map(|p| p.map(|x| x as f32)).collect()),
+        positions: PodVec(
+            verts
+                .pos
+                .iter()
+                .map(|p| p.to_array().map(|x| x as f32))
+                .collect(),
+        ),
         triangles: PodVec(tris),
         materials: PodVec(mats),
     })
@@ -650,18 +662,19 @@ fn crossing(
         (ua.1, ub.1)
     };
     let s = ((l - x0) / (x1 - x0)).clamp(0.0, 1.0);
-    let p = lerp(pa, pb, s);
+    let p = pa.lerp_monotonic(pb, s);
     match carrier {
         Carrier::Edge(e0, e1) => {
             let pts = verts.on_edge.get(&(e0, e1));
             pts.and_then(|pts| {
                 pts.iter()
                     .map(|&(_, v)| v)
-                    .find(|&v| dist(verts.pos[v as usize], p) < 2.0 * TOL_M)
+                    .find(|&v| verts.pos[v as usize].distance(p) < 2.0 * TOL_M)
             })
             .ok_or_else(|| {
                 format!(
-                    "a cut line crosses mesh edge ({e0}, {e1}) at {p:?} where no shared vertex was placed"
+                    "a cut line crosses mesh edge ({e0}, {e1}) at {:?} where no shared vertex was placed",
+                    p.to_array()
                 )
             })
         }
@@ -688,9 +701,8 @@ fn triangulate(p: &[(u32, Carrier)], verts: &mut Verts) -> Vec<[u32; 3]> {
     let pos = |i: usize| verts.pos[p[i % n].0 as usize];
     let corner = |i: usize| {
         let (a, b, c) = (pos(i + n - 1), pos(i), pos(i + 1));
-        let (e1, e2) = (sub(b, a), sub(c, b));
-        let cr = cross(e1, e2);
-        let s = norm(cr) / (norm(e1) * norm(e2)).max(1e-300);
+        let (e1, e2) = (b - a, c - b);
+        let s = e1.cross(e2).length() / (e1.length() * e2.length()).max(1e-300);
         s > 1e-6
     };
     let corners: Vec<bool> = (0..n).map(corner).collect();
@@ -701,37 +713,12 @@ fn triangulate(p: &[(u32, Carrier)], verts: &mut Verts) -> Vec<[u32; 3]> {
             .map(|k| [p[i].0, p[(i + k) % n].0, p[(i + k + 1) % n].0])
             .collect();
     }
-    let mut centre = [0.0; 3];
+    let mut centre = DVec3::ZERO;
     for i in 0..n {
-        let q = pos(i);
-        centre = std::array::from_fn(|a| centre[a] + q[a] / n as f64);
+        centre += pos(i) / n as f64;
     }
     let cv = verts.add(centre);
     (0..n).map(|i| [cv, p[i].0, p[(i + 1) % n].0]).collect()
-}
-
-fn lerp(a: [f64; 3], b: [f64; 3], s: f64) -> [f64; 3] {
-    std::array::from_fn(|k| a[k] + (b[k] - a[k]) * s)
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
-}
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    norm(sub(a, b))
 }
 
 #[cfg(test)]
@@ -792,8 +779,8 @@ mod tests {
             .zip(mesh.materials.iter())
             .filter(|(_, x)| **x == m as u8)
             .map(|(t, _)| {
-                let [a, b, c] = t.map(|i| mesh.positions[i as usize].map(f64::from));
-                norm(cross(sub(b, a), sub(c, a))) / 2.0
+                let [a, b, c] = t.map(|i| DVec3::from(mesh.positions[i as usize].map(f64::from)));
+                (b - a).cross(c - a).length() / 2.0
             })
             .sum()
     }

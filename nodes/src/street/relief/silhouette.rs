@@ -1,6 +1,8 @@
 //! A protruding region past the twin's silhouette (a feature by a corner seen from the street
 //! round it): the wall end it stands by.
 
+use glam::DVec3;
+
 use crate::artifact::{ChartKind, ChartSet, View};
 
 use crate::geom::theil_sen::median;
@@ -17,17 +19,17 @@ const SILHOUETTE_DEPTH_SLACK: f64 = 0.25;
 /// meets the twin about where that depth puts the region.
 pub(super) fn past_silhouette(
     view: &View,
-    (pixels, (x0, x1, cy), dir): (&[u32], (u32, u32, f64), [f64; 3]),
+    (pixels, (x0, x1, cy), dir): (&[u32], (u32, u32, f64), DVec3),
     hit: Option<f64>,
-    point: impl Fn(usize) -> Option<[f64; 3]>,
+    point: impl Fn(usize) -> Option<DVec3>,
     charts: &ChartSet,
     reach: f64,
-) -> Option<(u32, [f64; 3])> {
-    let eye = view.pose.position;
+) -> Option<(u32, DVec3)> {
+    let eye = DVec3::from(view.pose.position);
     let mut range: Vec<f64> = pixels
         .iter()
         .filter_map(|&q| point(q as usize))
-        .map(|x| (0..3).map(|k| (x[k] - eye[k]).powi(2)).sum::<f64>().sqrt())
+        .map(|x| x.distance(eye))
         .collect();
     if range.len() < 5 {
         return None;
@@ -37,9 +39,9 @@ pub(super) fn past_silhouette(
     if hit.is_some_and(|t| t <= range + slack) {
         return None;
     }
-    let (l, _) = view.pixel_ray(x0 as f64, cy);
-    let (r, _) = view.pixel_ray(x1 as f64 + 1.0, cy);
-    let cos = dot(l, r) / (dot(l, l) * dot(r, r)).sqrt();
+    let l = DVec3::from(view.pixel_ray(x0 as f64, cy).0);
+    let r = DVec3::from(view.pixel_ray(x1 as f64 + 1.0, cy).0);
+    let cos = l.dot(r) / (l.dot(l) * r.dot(r)).sqrt();
     let half_width = 0.5 * cos.clamp(-1.0, 1.0).acos() * range;
     silhouette_edge(
         charts,
@@ -56,27 +58,26 @@ pub(super) fn past_silhouette(
 /// point of that end. The closest such end if several.
 fn silhouette_edge(
     charts: &ChartSet,
-    eye: [f64; 3],
-    dir: [f64; 3],
+    eye: DVec3,
+    dir: DVec3,
     reach: f64,
     range: (f64, f64),
-) -> Option<(u32, [f64; 3])> {
-    let mut best: Option<(f64, u32, [f64; 3])> = None;
+) -> Option<(u32, DVec3)> {
+    let mut best: Option<(f64, u32, DVec3)> = None;
     for (ci, c) in charts.charts.iter().enumerate() {
         if c.kind != ChartKind::Wall || c.width == 0 || c.height == 0 {
             continue;
         }
-        let n = c.normal;
-        let rel = |x: [f64; 3]| std::array::from_fn::<f64, 3, _>(|k| x[k] - c.origin[k]);
-        if dot(rel(eye), n) >= 0.0 {
+        let (n, origin) = (DVec3::from(c.normal), DVec3::from(c.origin));
+        if (eye - origin).dot(n) >= 0.0 {
             continue;
         }
-        let up: [f64; 3] = c.v_axis.map(|x| x * c.height as f64 * c.texel_m);
+        let up = DVec3::from(c.v_axis) * c.height as f64 * c.texel_m;
         for end in [0.0, c.width as f64 * c.texel_m] {
-            let a: [f64; 3] = std::array::from_fn(|k| c.origin[k] + c.u_axis[k] * end);
+            let a = origin + DVec3::from(c.u_axis) * end;
             // Closest approach of the ray and the segment a + s up, s in [0, 1].
-            let w0: [f64; 3] = std::array::from_fn(|k| eye[k] - a[k]);
-            let (b, cc, d, e) = (dot(dir, up), dot(up, up), dot(dir, w0), dot(up, w0));
+            let w0 = eye - a;
+            let (b, cc, d, e) = (dir.dot(up), up.dot(up), dir.dot(w0), up.dot(w0));
             let denom = cc - b * b;
             if denom <= 1e-9 * cc {
                 continue;
@@ -86,13 +87,10 @@ fn silhouette_edge(
             if t < range.0 || t > range.1 {
                 continue;
             }
-            let on_ray: [f64; 3] = std::array::from_fn(|k| eye[k] + dir[k] * t);
-            let on_end: [f64; 3] = std::array::from_fn(|k| a[k] + up[k] * s);
-            let gap = (0..3)
-                .map(|k| (on_ray[k] - on_end[k]).powi(2))
-                .sum::<f64>()
-                .sqrt();
-            if gap > reach || dot(rel(on_ray), n) < 0.0 {
+            let on_ray = eye + dir * t;
+            let on_end = a + up * s;
+            let gap = on_ray.distance(on_end);
+            if gap > reach || (on_ray - origin).dot(n) < 0.0 {
                 continue;
             }
             if best.is_none_or(|(g, _, _)| gap < g) {
@@ -101,10 +99,6 @@ fn silhouette_edge(
         }
     }
     best.map(|(_, ci, at)| (ci, at))
-}
-
-pub(super) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 #[cfg(test)]
@@ -116,23 +110,22 @@ mod tests {
         let charts = ChartSet {
             charts: vec![crate::artifact::Chart::flat_wall(100, 100)],
         };
-        let ray = |eye: [f64; 3], to: [f64; 3]| {
-            let d: [f64; 3] = std::array::from_fn(|k| to[k] - eye[k]);
-            let n = dot(d, d).sqrt();
-            (d.map(|c| c / n), n)
+        let ray = |eye: DVec3, to: [f64; 3]| {
+            let d = DVec3::from(to) - eye;
+            (d / d.length(), d.length())
         };
-        let eye = [12.0, 10.0, 1.5];
+        let eye = DVec3::new(12.0, 10.0, 1.5);
         let (dir, dist) = ray(eye, [10.05, -0.08, 5.0]);
         let around = (dist - 2.0, dist + 2.0);
         let (ci, at) = silhouette_edge(&charts, eye, dir, 0.3, around).unwrap();
-        let (u, v) = charts.charts[ci as usize].uv_of(at);
+        let (u, v) = charts.charts[ci as usize].uv_of(at.to_array());
         assert_eq!(u, 100.0);
         assert!((v - 50.0).abs() < 2.0, "{v}");
         // Not where its depth puts it farther off, nor beyond the reach of the wall's end.
         assert!(silhouette_edge(&charts, eye, dir, 0.3, (dist + 5.0, dist + 9.0)).is_none());
         assert!(silhouette_edge(&charts, eye, dir, 0.01, around).is_none());
         // A view the wall faces sees a feature there on the wall, not past it.
-        let front = [12.0, -10.0, 1.5];
+        let front = DVec3::new(12.0, -10.0, 1.5);
         let (dir, dist) = ray(front, [10.05, -0.08, 5.0]);
         assert!(silhouette_edge(&charts, front, dir, 0.3, (dist - 2.0, dist + 2.0)).is_none());
         // Nor on a ray that crosses the wall's plane inside its end (into the building).

@@ -4,6 +4,8 @@
 
 use std::collections::BTreeMap;
 
+use glam::DVec3;
+
 use crate::artifact::{ChartSet, Instances, View};
 use crate::geom::raycast::SceneRays;
 use crate::raster::label::label_regions;
@@ -12,7 +14,7 @@ use crate::raster::morph::dilate;
 use super::calibrate::{calibrate, median_se};
 use super::lookup::Lookup;
 use super::params::ReliefParams;
-use super::silhouette::{dot, past_silhouette};
+use super::silhouette::past_silhouette;
 
 /// What one kept region of one view said, located on a chart.
 #[derive(Clone, Debug, PartialEq)]
@@ -121,7 +123,7 @@ impl ViewCtx<'_> {
     }
 
     /// A pixel's calibrated point in the site frame; None without a finite depth.
-    fn point(&self, px: usize, (a, b): (f64, f64)) -> Option<[f64; 3]> {
+    fn point(&self, px: usize, (a, b): (f64, f64)) -> Option<DVec3> {
         let view = self.view;
         let w = view.width;
         let d = self.depth?[px] as f64;
@@ -131,16 +133,14 @@ impl ViewCtx<'_> {
         let z = (d - b) / a;
         let (x, y) = ((px as u32 % w) as f64 + 0.5, (px as u32 / w) as f64 + 0.5);
         let (dir, norm) = view.pixel_ray(x, y);
-        Some(std::array::from_fn(|k| {
-            view.pose.position[k] + dir[k] * z * norm
-        }))
+        Some(DVec3::from(view.pose.position) + DVec3::from(dir) * z * norm)
     }
 
     /// A side-face pixel: its normal further than `cos_side` (as a cosine) from the wall's `nrm`.
-    fn is_side(&self, q: u32, nrm: [f64; 3], cos_side: f64) -> bool {
+    fn is_side(&self, q: u32, nrm: DVec3, cos_side: f64) -> bool {
         self.normals.is_some_and(|nm| {
             let ns = self.view.pose.to_site(nm[q as usize].map(|c| c as f64));
-            dot(ns, nrm) < cos_side
+            DVec3::from(ns).dot(nrm) < cos_side
         })
     }
 
@@ -398,18 +398,18 @@ fn judge_region(cx: &ViewCtx, pixels: &[u32], out: &mut ViewRelief) -> bool {
         return false;
     };
     let chart = &charts.charts[ci as usize];
-    let nrm = chart.normal;
+    let nrm = DVec3::from(chart.normal);
     // Where the segmentation missed the wall (its pixels unlabelled), the depth still tells
     // it: unlabelled ring pixels that lie on the chart's plane enclose as wall.
     let on_plane: Vec<usize> = match cal {
         Some(cal) if !walled => {
-            let plane = dot(chart.origin, nrm);
+            let plane = DVec3::from(chart.origin).dot(nrm);
             ring.plain
                 .iter()
                 .copied()
                 .filter(|&px| {
                     cx.point(px, cal)
-                        .is_some_and(|x| (dot(x, nrm) - plane).abs() <= p.plane_tol_m)
+                        .is_some_and(|x| (x.dot(nrm) - plane).abs() <= p.plane_tol_m)
                 })
                 .collect()
         }
@@ -445,7 +445,7 @@ fn judge_region(cx: &ViewCtx, pixels: &[u32], out: &mut ViewRelief) -> bool {
         0
     };
     let disp = deposit(cx, pixels, &class, sign, step, &is_side, out);
-    let t = hit.t as f64 - disp / (-dot(nrm, dir)).max(1e-3);
+    let t = hit.t as f64 - disp / (-nrm.dot(DVec3::from(dir))).max(1e-3);
     let at: [f64; 3] = std::array::from_fn(|k| view.pose.position[k] + dir[k] * t);
     out.regions.push(RegionVote {
         view: cx.vi as u32,
@@ -485,14 +485,14 @@ fn past_corner_vote(
     };
     let depth = |q: usize| cx.point(q, cal);
     let reach = p.depth_range(class, 1).1;
-    let seen = (pixels, (b.x0, b.x1, b.cy), dir);
+    let seen = (pixels, (b.x0, b.x1, b.cy), DVec3::from(dir));
     let (ci, at) = past_silhouette(cx.view, seen, hit_t, depth, cx.charts, reach)?;
     let score = p.weights.semantic * prior as f64;
     let sign: i8 = if score >= p.score_min { 1 } else { 0 };
     Some(RegionVote {
         view: cx.vi as u32,
         chart: ci,
-        uv: cx.charts.charts[ci as usize].uv_of(at),
+        uv: cx.charts.charts[ci as usize].uv_of(at.to_array()),
         class: class.to_owned(),
         sign,
         step_m: f64::NAN,
@@ -513,7 +513,7 @@ fn depth_cue(
     pixels: &[u32],
     b: &RegionBox,
     wall_ring: impl Iterator<Item = usize>,
-    nrm: [f64; 3],
+    nrm: DVec3,
     is_side: &dyn Fn(u32) -> bool,
 ) -> (f64, f64) {
     let p = cx.p;
@@ -524,15 +524,12 @@ fn depth_cue(
     };
     let mut ring_s: Vec<f64> = wall_ring
         .filter_map(|px| cx.point(px, cal))
-        .map(|x| dot(x, nrm))
+        .map(|x| x.dot(nrm))
         .collect();
     // Each pixel's offset from the wall, and whether it lies on a face parallel to it.
     let at: Vec<(f64, bool)> = pixels
         .iter()
-        .filter_map(|&q| {
-            cx.point(q as usize, cal)
-                .map(|x| (dot(x, nrm), !is_side(q)))
-        })
+        .filter_map(|&q| cx.point(q as usize, cal).map(|x| (x.dot(nrm), !is_side(q))))
         .collect();
     let across = pixels.len() as f64 / (b.x1 - b.x0 + 1).max(b.y1 - b.y0 + 1) as f64;
     let mut front_s: Vec<f64> = if across >= FACE_MIN_PX {
