@@ -36,7 +36,9 @@ impl Stage for Relief {
     // so a missed drainpipe or door that reaches the ground is judged on its own.
     // 14: a protruding feature a view sees past the twin's silhouette (a corner downpipe from
     // the street round the corner) votes, by its label, on the wall it stands by.
-    const VERSION: u32 = 14;
+    // 15: a view's depth calibrated by Theil-Sen, as the clutter's lifting does, instead of
+    // least squares trimmed at three MADs (one depth calibration in the tree).
+    const VERSION: u32 = 15;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),

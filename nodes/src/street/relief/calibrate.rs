@@ -1,10 +1,10 @@
-//! A view's reported depth calibrated against the twin: a robust affine fit of reported depth
+//! A view's reported depth calibrated against the twin: a Theil-Sen affine fit of reported depth
 //! against ray-cast depth (monocular depth is affinely biased), and the median with its standard
 //! error that the depth cue rests on.
 
 use crate::artifact::{ChartSet, View};
 use crate::geom::raycast::SceneRays;
-use crate::geom::theil_sen::median;
+use crate::geom::theil_sen::{median, theil_sen};
 
 use super::lookup::Lookup;
 
@@ -16,52 +16,32 @@ pub(super) fn median_se(v: &mut [f64]) -> (f64, f64) {
     (m, 1.4826 * mad * 1.2533 / (v.len() as f64).sqrt())
 }
 
-/// Robust affine fit y = a x + b: least squares, then refits on the points within three robust
-/// standard deviations of the line, four times. `None` when too few points or too little spread
-/// in x to separate scale from offset.
-pub fn robust_affine(xs: &[f64], ys: &[f64]) -> Option<(f64, f64)> {
+/// Fewer points than this leave a view uncalibrated.
+const MIN_POINTS: usize = 30;
+
+/// The affine fit y = a x + b of reported depth on ray-cast depth: the Theil-Sen fit the clutter's
+/// lifting uses too ([`theil_sen`]; its intercept from the residuals' shortest half, which
+/// one-sided outliers such as balconies in front of a wall do not drag). `None` with fewer than
+/// 30 points, too little spread in x to separate scale from offset (1 m standard deviation), or a
+/// fit that does not rise.
+pub fn depth_affine(xs: &[f64], ys: &[f64]) -> Option<(f64, f64)> {
     let n = xs.len();
-    if n < 30 {
+    if n < MIN_POINTS {
         return None;
     }
-    let mut keep = vec![true; n];
-    let mut fit = None;
-    for _ in 0..5 {
-        let (mut sx, mut sy, mut c) = (0.0, 0.0, 0.0);
-        for i in 0..n {
-            if keep[i] {
-                sx += xs[i];
-                sy += ys[i];
-                c += 1.0;
-            }
-        }
-        if c < 30.0 {
-            return None;
-        }
-        let (mx, my) = (sx / c, sy / c);
-        let (mut sxx, mut sxy) = (0.0, 0.0);
-        for i in 0..n {
-            if keep[i] {
-                sxx += (xs[i] - mx) * (xs[i] - mx);
-                sxy += (xs[i] - mx) * (ys[i] - my);
-            }
-        }
-        // Depth must spread over at least 1 m (std) to tell scale from offset.
-        if sxx / c < 1.0 {
-            return None;
-        }
-        let a = sxy / sxx;
-        let b = my - a * mx;
-        fit = Some((a, b));
-        let mut res: Vec<f64> = (0..n).map(|i| (ys[i] - a * xs[i] - b).abs()).collect();
-        let mad = median(&mut res.clone()).unwrap_or(f64::NAN).max(1e-6);
-        for i in 0..n {
-            keep[i] = res[i] <= 3.0 * 1.4826 * mad;
-        }
-        res.clear();
+    let mean = xs.iter().sum::<f64>() / n as f64;
+    let variance = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / n as f64;
+    if !(variance >= 1.0) {
+        return None;
     }
-    fit.filter(|(a, b)| *a > 0.0 && a.is_finite() && b.is_finite())
+    theil_sen(xs, ys, 0.5, 20_000, CALIBRATION_SEED)
+        .filter(|f| f.slope > 0.0 && f.slope.is_finite() && f.intercept.is_finite())
+        .map(|f| (f.slope, f.intercept))
 }
+
+/// The seed of the pairs Theil-Sen draws when a view has more than it takes: fixed, so a view's
+/// calibration is the same in every run.
+const CALIBRATION_SEED: u64 = 0x5EED;
 
 /// Calibrates a view's reported depth against the twin: (a, b) with reported = a z + b, from
 /// wall pixels whose ray hits a wall chart and unlabelled pixels whose ray hits the terrain
@@ -103,7 +83,7 @@ pub(super) fn calibrate(
             ys.push(d);
         }
     }
-    robust_affine(&xs, &ys)
+    depth_affine(&xs, &ys)
 }
 
 #[cfg(test)]
@@ -111,15 +91,15 @@ mod tests {
     use super::*;
 
     #[test]
-    fn robust_affine_recovers_scale_and_offset_despite_outliers() {
+    fn depth_affine_recovers_scale_and_offset_despite_outliers() {
         let xs: Vec<f64> = (0..200).map(|i| 5.0 + i as f64 * 0.1).collect();
         let mut ys: Vec<f64> = xs.iter().map(|x| 0.8 * x + 1.0).collect();
         for k in (0..200).step_by(10) {
             ys[k] -= 3.0; // balconies in front of the wall
         }
-        let (a, b) = robust_affine(&xs, &ys).unwrap();
+        let (a, b) = depth_affine(&xs, &ys).unwrap();
         assert!((a - 0.8).abs() < 1e-9 && (b - 1.0).abs() < 1e-9, "{a} {b}");
         // No spread, no fit.
-        assert!(robust_affine(&vec![10.0; 100], &vec![9.0; 100]).is_none());
+        assert!(depth_affine(&vec![10.0; 100], &vec![9.0; 100]).is_none());
     }
 }

@@ -3,7 +3,7 @@
 //! at a high gamma, turned into a per-texel posterior over the displacement class by discrete
 //! Bayesian fusion (eq. (4)), and extracted as rectangular instances with a depth.
 //!
-//! Per view: the reported depth is calibrated against the twin (a robust affine fit of reported
+//! Per view: the reported depth is calibrated against the twin (a Theil-Sen affine fit of reported
 //! depth against the ray-cast depth on wall pixels: monocular depth is affinely biased); regions
 //! are connected pixels of one non-wall architectural instance, or unlabelled pixels (what
 //! segmentation missed), kept when a dominant wall encloses them; each kept region is classified
@@ -35,7 +35,7 @@ use crate::geom::theil_sen::median;
 use crate::stage::Progress;
 use crate::street::fusion::{FusionParams, Vote, fuse_views_each};
 
-pub use calibrate::robust_affine;
+pub use calibrate::depth_affine;
 pub use params::{ClassRule, CueWeights, ReliefParams};
 pub use posterior::{
     Cpt, CptRow, DeltaParams, ExpandedCpt, MeshState, RELIEF_CLASSES, level, mesh_delta,
