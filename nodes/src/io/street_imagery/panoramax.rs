@@ -16,7 +16,7 @@
 //! folder.
 //!
 //! # Pose
-//! As for Mapillary ([`crate::io::mapillary`]): camera to site = A · (heading, pitch, roll) with A
+//! As for Mapillary ([`super::mapillary`]): camera to site = A · (heading, pitch, roll) with A
 //! the ENU-to-site turn by the meridian convergence; z from the terrain plus a camera height, or
 //! the geometry's height with `trust_altitude`. Panoramax serves images upright. Panoramas are cut
 //! into level pinhole views `<id>-<k>` from the panorama's heading.
@@ -25,12 +25,14 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use crate::artifact::Pose;
-use crate::io::mapillary::{
-    DropReason, Geo, ImageIndex, ProviderView, ProviderViews, ReadOptions, Record, RecordViews,
-    camera_z, cut_panorama, load_image, mat_mul, parse_json, plain_view, read_records, same_aspect,
-    scan_folder,
+use super::camera::{cut_panorama, plain_view};
+use super::folder::{ImageIndex, load_image, same_aspect, scan_folder};
+use super::provider::{
+    DropReason, Geo, ProviderView, ProviderViews, ReadOptions, RecordViews, camera_z, read_records,
 };
+use super::record::{Record, parse_json};
+use super::rotation::mat_mul;
+use crate::artifact::Pose;
 use crate::site::Site;
 use crate::stage::StageError;
 
