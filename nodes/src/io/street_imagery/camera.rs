@@ -3,11 +3,12 @@
 //! views cut from an equirectangular panorama, and the EXIF orientations that turn a stored image
 //! upright.
 
+use glam::{DMat3, DVec3};
 use image::RgbImage;
 use rayon::prelude::*;
 
 use super::provider::{MAX_VIEW_SIDE, PanoramaCut};
-use super::rotation::{Mat3, heading_deg, mat_vec, transpose};
+use super::rotation::{heading_deg, mat_vec};
 use crate::artifact::{Intrinsics, PodVec, Pose, View};
 
 /// A view with an image and no model outputs.
@@ -113,7 +114,7 @@ pub fn cut_panorama(
     pano: &RgbImage,
     id: &str,
     position: [f64; 3],
-    c2s: &Mat3,
+    c2s: &DMat3,
     cut: &PanoramaCut,
     captured_at: &Option<String>,
 ) -> Vec<View> {
@@ -127,7 +128,7 @@ pub fn cut_panorama(
     });
     let f = side as f64 / 2.0 / tan;
     let heading0 = heading_deg(c2s).unwrap_or(0.0);
-    let s2c = transpose(c2s);
+    let s2c = c2s.transpose();
     (0..cut.views)
         .map(|k| {
             let heading = heading0 + k as f64 * 360.0 / cut.views as f64;
@@ -147,12 +148,12 @@ pub fn cut_panorama(
 
 /// The camera axes of the upright image in the stored image's camera frame (columns), for EXIF
 /// orientations 1, 3, 6 and 8.
-pub fn exif_axes(orientation: u8) -> Mat3 {
+pub fn exif_axes(orientation: u8) -> DMat3 {
     match orientation {
-        3 => [[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]],
-        6 => [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
-        8 => [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
-        _ => [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        3 => DMat3::from_cols(DVec3::NEG_X, DVec3::NEG_Y, DVec3::Z),
+        6 => DMat3::from_cols(DVec3::NEG_Y, DVec3::X, DVec3::Z),
+        8 => DMat3::from_cols(DVec3::Y, DVec3::NEG_X, DVec3::Z),
+        _ => DMat3::IDENTITY,
     }
 }
 

@@ -53,6 +53,7 @@
 
 use std::path::Path;
 
+use glam::DMat3;
 use image::RgbImage;
 use serde_json::{Value, json};
 
@@ -61,7 +62,7 @@ use super::dates::{iso_from_ms, ms_from_iso};
 use super::folder::{ImageIndex, extension, load_image, same_aspect, scan_folder};
 use super::provider::{Geo, ProviderView, RecordViews, camera_z, read_records};
 use super::record::{Record, parse_json};
-use super::rotation::{Mat3, angle_axis, heading_deg, mat_mul, rodrigues, transpose};
+use super::rotation::{angle_axis, from_rows, heading_deg, rodrigues, to_rows};
 use crate::artifact::{Pose, ViewSet};
 use crate::site::Site;
 use crate::stage::StageError;
@@ -188,9 +189,10 @@ fn read_entity(
     else {
         return Ok(Err(DropReason::NoTerrain));
     };
+    let c2s = enu_to_site * c2e;
     let pose = Pose {
         position: [xy[0], xy[1], z],
-        rotation: mat_mul(&enu_to_site, &c2e),
+        rotation: to_rows(c2s),
     };
     let pose_source = format!("{orient_field}, {pos_field}, {height_source}");
     let captured_at = captured_at(rec)?;
@@ -205,14 +207,7 @@ fn read_entity(
     let img = stored_image(rec, path, size, orientation)?;
     let (views, distortion) = match lens {
         None => {
-            let cut = cut_panorama(
-                &img,
-                id,
-                pose.position,
-                &pose.rotation,
-                &opts.panorama,
-                &captured_at,
-            );
+            let cut = cut_panorama(&img, id, pose.position, &c2s, &opts.panorama, &captured_at);
             (cut, None)
         }
         Some((focal, k)) => {
@@ -289,26 +284,23 @@ fn camera_to_enu(
     rec: &Record,
     orientation: u8,
     max_yaw_deg: f64,
-) -> Result<Result<(Mat3, &'static str), DropReason>, StageError> {
+) -> Result<Result<(DMat3, &'static str), DropReason>, StageError> {
     let compass = rec.num("computed_compass_angle")?;
-    let level = |h: f64| Pose::from_angles([0.0; 3], h, 0.0, 0.0).rotation;
+    let level = |h: f64| from_rows(&Pose::from_angles([0.0; 3], h, 0.0, 0.0).rotation);
     match (
         rec.nums("computed_rotation", 3..=3)?,
         compass,
         rec.num("compass_angle")?,
     ) {
         (Some(r), ..) => {
-            let stored = transpose(&rodrigues([r[0], r[1], r[2]]));
+            let stored = rodrigues([r[0], r[1], r[2]]).transpose();
             if let (Some(c), Some(h)) = (compass, heading_deg(&stored)) {
                 let off = (h - c + 180.0).rem_euclid(360.0) - 180.0;
                 if off.abs() > max_yaw_deg {
                     return Ok(Err(DropReason::YawDisagreement(off)));
                 }
             }
-            Ok(Ok((
-                mat_mul(&stored, &exif_axes(orientation)),
-                "computed_rotation",
-            )))
+            Ok(Ok((stored * exif_axes(orientation), "computed_rotation")))
         }
         (None, Some(h), _) => Ok(Ok((level(h), "computed_compass_angle"))),
         (None, None, Some(h)) => Ok(Ok((level(h), "compass_angle"))),
@@ -399,7 +391,7 @@ pub fn write_mapillary(set: &ViewSet, site: &Site) -> Result<Vec<(String, Vec<u8
         let [x, y, z] = v.pose.position;
         let (lon, lat) = geo.lon_lat(x, y)?;
         let (_, enu_to_site) = geo.enu_to_site(lon, lat)?;
-        let c2e = mat_mul(&transpose(&enu_to_site), &v.pose.rotation);
+        let c2e = enu_to_site.transpose() * from_rows(&v.pose.rotation);
         let compass = heading_deg(&c2e).unwrap_or(0.0);
         let point = json!({"type": "Point", "coordinates": [lon, lat]});
         let mut entity = json!({
@@ -408,7 +400,7 @@ pub fn write_mapillary(set: &ViewSet, site: &Site) -> Result<Vec<(String, Vec<u8
             "geometry": point,
             "computed_altitude": z,
             "altitude": z,
-            "computed_rotation": angle_axis(&transpose(&c2e)),
+            "computed_rotation": angle_axis(&c2e.transpose()),
             "computed_compass_angle": compass,
             "compass_angle": compass,
             "camera_type": "perspective",

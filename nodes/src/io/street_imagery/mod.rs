@@ -8,7 +8,7 @@
 //! - [`folder`]: the files and images under a download folder;
 //! - [`camera`]: camera models and resampling (pinhole views, fisheye, panorama cutting, EXIF
 //!   orientation);
-//! - [`rotation`]: rotations (angle-axis, the meridian convergence, headings);
+//! - [`rotation`]: rotations in glam's f64 types (angle-axis, the meridian convergence, headings);
 //! - [`dates`]: ISO 8601 capture times.
 
 pub mod camera;

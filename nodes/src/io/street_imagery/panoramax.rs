@@ -31,7 +31,7 @@ use super::provider::{
     DropReason, Geo, ProviderView, ProviderViews, ReadOptions, RecordViews, camera_z, read_records,
 };
 use super::record::{Record, parse_json};
-use super::rotation::mat_mul;
+use super::rotation::{from_rows, to_rows};
 use crate::artifact::Pose;
 use crate::site::Site;
 use crate::stage::StageError;
@@ -138,7 +138,7 @@ fn read_item(
     let position = [xy[0], xy[1], z];
     let c2e =
         Pose::from_angles([0.0; 3], heading, pitch.unwrap_or(0.0), roll.unwrap_or(0.0)).rotation;
-    let c2s = mat_mul(&enu_to_site, &c2e);
+    let c2s = enu_to_site * from_rows(&c2e);
     let pose_source = format!("{orient_field}, geometry, {height_source}");
     let captured_at = rec.str("properties.datetime")?.map(str::to_owned);
     let path = image_path(id, rec, images)?;
@@ -165,7 +165,7 @@ fn read_item(
         let f = focal_px(rec, fov, sensor.as_deref(), img.width())?;
         let pose = Pose {
             position,
-            rotation: c2s,
+            rotation: to_rows(c2s),
         };
         vec![plain_view(id.to_owned(), img, f, pose, captured_at)]
     };

@@ -7,11 +7,12 @@
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
+use glam::DMat3;
 use rayon::prelude::*;
 use serde_json::Value;
 
 use super::record::{Record, record_id};
-use super::rotation::{Mat3, enu_to_grid};
+use super::rotation::enu_to_grid;
 use crate::artifact::{Raster, View, ViewSet};
 use crate::io::crs::{Crs, ToSite};
 use crate::site::Site;
@@ -282,7 +283,7 @@ impl Geo {
 
     /// Site-frame (x, y) of (lon, lat), degrees, and the rotation taking ENU vectors there: a turn
     /// about z by the meridian convergence (the grid bearing of true north).
-    pub fn enu_to_site(&self, lon: f64, lat: f64) -> Result<([f64; 2], Mat3), String> {
+    pub fn enu_to_site(&self, lon: f64, lat: f64) -> Result<([f64; 2], DMat3), String> {
         const D: f64 = 1e-4;
         let (x, y, _) = self.wgs84.apply(lon, lat, 0.0)?;
         let (xn, yn, _) = self.wgs84.apply(lon, lat + D, 0.0)?;

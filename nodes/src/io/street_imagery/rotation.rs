@@ -1,49 +1,45 @@
-//! Rotations of the provider readers: 3 x 3 matrices as rows (a [`crate::artifact::Pose`]'s
-//! `rotation`), angle-axis vectors (Rodrigues), the meridian-convergence turn from ENU to the site
-//! frame, and headings of optical axes.
+//! Rotations of the provider readers, in glam's f64 types: angle-axis vectors (Rodrigues), the
+//! meridian-convergence turn from ENU to the site frame, headings of optical axes, and the
+//! conversions to and from the row arrays a [`crate::artifact::Pose`] stores.
 
-/// A 3 x 3 matrix, rows.
-pub type Mat3 = [[f64; 3]; 3];
+use glam::{DMat3, DQuat, DVec3};
 
-/// `a · b`.
-pub fn mat_mul(a: &Mat3, b: &Mat3) -> Mat3 {
-    std::array::from_fn(|r| std::array::from_fn(|c| (0..3).map(|k| a[r][k] * b[k][c]).sum()))
+/// The matrix of a rotation stored as rows (a [`crate::artifact::Pose`]'s `rotation`).
+pub fn from_rows(rows: &[[f64; 3]; 3]) -> DMat3 {
+    DMat3::from_cols_array_2d(rows).transpose()
 }
 
-/// `aᵀ`.
-pub fn transpose(a: &Mat3) -> Mat3 {
-    std::array::from_fn(|r| std::array::from_fn(|c| a[c][r]))
+/// The rows of a matrix, as a [`crate::artifact::Pose`] stores its rotation.
+pub fn to_rows(m: DMat3) -> [[f64; 3]; 3] {
+    m.transpose().to_cols_array_2d()
+}
+
+/// `m · v`, on arrays.
+pub fn mat_vec(m: &DMat3, v: [f64; 3]) -> [f64; 3] {
+    m.mul_vec3(DVec3::from_array(v)).to_array()
 }
 
 /// The rotation matrix of an angle-axis vector (Rodrigues).
-pub fn rodrigues(v: [f64; 3]) -> Mat3 {
-    let m = glam::DMat3::from_quat(glam::DQuat::from_scaled_axis(glam::DVec3::from_array(v)));
-    transpose(&m.to_cols_array_2d())
+pub fn rodrigues(v: [f64; 3]) -> DMat3 {
+    DMat3::from_quat(DQuat::from_scaled_axis(DVec3::from_array(v)))
 }
 
 /// The angle-axis vector of a rotation matrix.
-pub fn angle_axis(m: &Mat3) -> [f64; 3] {
-    let g = glam::DMat3::from_cols_array_2d(&transpose(m));
-    glam::DQuat::from_mat3(&g).to_scaled_axis().to_array()
-}
-
-/// Heading (degrees clockwise from the frame's y axis, in [0, 360)) of a camera's optical axis,
-/// `None` when it points straight up or down.
-pub fn heading_deg(camera_to_frame: &Mat3) -> Option<f64> {
-    let (x, y) = (camera_to_frame[0][2], camera_to_frame[1][2]);
-    (x.hypot(y) > 1e-9).then(|| x.atan2(y).to_degrees().rem_euclid(360.0))
-}
-
-/// `m · v`.
-pub fn mat_vec(m: &Mat3, v: [f64; 3]) -> [f64; 3] {
-    std::array::from_fn(|r| m[r][0] * v[0] + m[r][1] * v[1] + m[r][2] * v[2])
+pub fn angle_axis(m: &DMat3) -> [f64; 3] {
+    DQuat::from_mat3(m).to_scaled_axis().to_array()
 }
 
 /// The rotation taking ENU vectors into a site frame whose grid north lies `convergence` radians
 /// clockwise of true north (the meridian convergence): a turn about z by its negative.
-pub fn enu_to_grid(convergence: f64) -> Mat3 {
-    let (s, c) = convergence.sin_cos();
-    [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]
+pub fn enu_to_grid(convergence: f64) -> DMat3 {
+    DMat3::from_rotation_z(-convergence)
+}
+
+/// Heading (degrees clockwise from the frame's y axis, in [0, 360)) of a camera's optical axis,
+/// `None` when it points straight up or down.
+pub fn heading_deg(camera_to_frame: &DMat3) -> Option<f64> {
+    let DVec3 { x, y, .. } = camera_to_frame.z_axis;
+    (x.hypot(y) > 1e-9).then(|| x.atan2(y).to_degrees().rem_euclid(360.0))
 }
 
 #[cfg(test)]
