@@ -9,7 +9,7 @@
 //! - [`camera`]: camera models and resampling (pinhole views, fisheye, panorama cutting, EXIF
 //!   orientation);
 //! - [`rotation`]: rotations in glam's f64 types (angle-axis, the meridian convergence, headings);
-//! - [`dates`]: ISO 8601 capture times.
+//! - [`dates`]: ISO 8601 capture times through chrono.
 
 pub mod camera;
 pub mod dates;
