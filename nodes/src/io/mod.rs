@@ -1,5 +1,5 @@
 //! Files and frames: the formats artifacts are read from and written to (GeoTIFF, GeoJSON, EXR,
-//! the street-view folder layout, Sionna's Mitsuba XML + PLY, and every `export` format), coordinate
+//! the street-view folder layout, street imagery from Mapillary and Panoramax, Sionna's Mitsuba XML + PLY, and every `export` format), coordinate
 //! reference systems, ECEF/ENU, and resampling into the site frame. Never imports a stage.
 
 pub mod crs;
@@ -9,12 +9,14 @@ pub mod export;
 pub mod exr_io;
 pub mod geojson;
 pub mod geotiff;
-pub mod mapillary;
 /// ONNX models run on view images (feature `onnx`): the runtime found through `ORT_DYLIB_PATH`.
 #[cfg(feature = "onnx")]
 pub mod onnx;
-pub mod panoramax;
 pub mod safe_name;
 pub mod sionna_xml;
+pub mod street_imagery;
 pub mod views_io;
 pub mod warp;
+
+/// The provider readers at the paths callers have always used.
+pub use street_imagery::{mapillary, panoramax};

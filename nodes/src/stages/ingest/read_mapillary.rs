@@ -5,9 +5,10 @@
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Raster, ViewSet};
-use crate::io::mapillary::{
+use crate::io::street_imagery::mapillary::read_mapillary;
+use crate::io::street_imagery::provider::{
     PanoramaCut, ReadOptions, check_options, default_camera_height_m, default_panorama_hfov_deg,
-    default_panorama_views, read_mapillary,
+    default_panorama_views,
 };
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -16,7 +17,7 @@ use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageErro
 #[serde(deny_unknown_fields)]
 pub struct ReadMapillaryParams {
     /// The download folder: `<id>.json` beside `<id>.jpg`, or `metadata.jsonl` with
-    /// `<date>/<sequence>/<id>.jpg` (see [`crate::io::mapillary`]). The whole folder is the
+    /// `<date>/<sequence>/<id>.jpg` (see [`crate::io::street_imagery::mapillary`]). The whole folder is the
     /// node's input.
     pub path: String,
     /// Camera height above the terrain, metres. Default 2.5.

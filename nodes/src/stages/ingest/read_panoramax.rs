@@ -5,11 +5,11 @@
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Raster, ViewSet};
-use crate::io::mapillary::{
+use crate::io::street_imagery::panoramax::read_panoramax;
+use crate::io::street_imagery::provider::{
     PanoramaCut, ReadOptions, check_options, default_camera_height_m, default_panorama_hfov_deg,
     default_panorama_views,
 };
-use crate::io::panoramax::read_panoramax;
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`ReadPanoramax`].
@@ -17,7 +17,7 @@ use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageErro
 #[serde(deny_unknown_fields)]
 pub struct ReadPanoramaxParams {
     /// The folder of STAC Item `*.json` files (or an ItemCollection) and their images (see
-    /// [`crate::io::panoramax`]). The whole folder is the node's input.
+    /// [`crate::io::street_imagery::panoramax`]). The whole folder is the node's input.
     pub path: String,
     /// Camera height above the terrain, metres. Default 2.5.
     #[serde(default = "default_camera_height_m")]

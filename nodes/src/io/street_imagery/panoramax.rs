@@ -16,7 +16,7 @@
 //! folder.
 //!
 //! # Pose
-//! As for Mapillary ([`crate::io::mapillary`]): camera to site = A · (heading, pitch, roll) with A
+//! As for Mapillary ([`super::mapillary`]): camera to site = A · (heading, pitch, roll) with A
 //! the ENU-to-site turn by the meridian convergence; z from the terrain plus a camera height, or
 //! the geometry's height with `trust_altitude`. Panoramax serves images upright. Panoramas are cut
 //! into level pinhole views `<id>-<k>` from the panorama's heading.
@@ -25,12 +25,14 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use crate::artifact::Pose;
-use crate::io::mapillary::{
-    DropReason, Geo, ImageIndex, ProviderView, ProviderViews, ReadOptions, Record, RecordViews,
-    camera_z, cut_panorama, load_image, mat_mul, parse_json, plain_view, read_records, same_aspect,
-    scan_folder,
+use super::camera::{cut_panorama, plain_view};
+use super::folder::{ImageIndex, load_image, same_aspect, scan_folder};
+use super::provider::{
+    DropReason, Geo, ProviderView, ProviderViews, ReadOptions, RecordViews, camera_z, read_records,
 };
+use super::record::{Record, parse_json};
+use super::rotation::{from_rows, to_rows};
+use crate::artifact::Pose;
 use crate::site::Site;
 use crate::stage::StageError;
 
@@ -136,7 +138,7 @@ fn read_item(
     let position = [xy[0], xy[1], z];
     let c2e =
         Pose::from_angles([0.0; 3], heading, pitch.unwrap_or(0.0), roll.unwrap_or(0.0)).rotation;
-    let c2s = mat_mul(&enu_to_site, &c2e);
+    let c2s = enu_to_site * from_rows(&c2e);
     let pose_source = format!("{orient_field}, geometry, {height_source}");
     let captured_at = rec.str("properties.datetime")?.map(str::to_owned);
     let path = image_path(id, rec, images)?;
@@ -163,7 +165,7 @@ fn read_item(
         let f = focal_px(rec, fov, sensor.as_deref(), img.width())?;
         let pose = Pose {
             position,
-            rotation: c2s,
+            rotation: to_rows(c2s),
         };
         vec![plain_view(id.to_owned(), img, f, pose, captured_at)]
     };
