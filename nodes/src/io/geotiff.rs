@@ -129,6 +129,9 @@ fn tiff_error(path: &Path, place: &str, e: tiff::TiffError) -> StageError {
     StageError::bad_input(path, place, format!("expected a readable TIFF: {e}"))
 }
 
+/// The decoder over a TIFF file, as every step of [`read_geotiff`] reads it.
+type FileDecoder = Decoder<std::io::BufReader<std::fs::File>>;
+
 /// Reads a GeoTIFF's first image with its georeferencing. A TIFF without tiepoint and pixel scale
 /// (or a model transformation) is an error: we would not know where it is.
 pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
@@ -140,6 +143,23 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
     let (width, height) = d
         .dimensions()
         .map_err(|e| tiff_error(path, "dimensions", e))?;
+    let bands = interleaved_bands(path, &mut d)?;
+    let pixels = pixel_grid(path, &mut d, width, height)?;
+    let crs = geokeys_crs(path, &mut d)?;
+    let nodata = gdal_nodata(&mut d);
+    let samples = image_samples(path, &mut d, width, height, bands)?;
+    Ok(GeoTiff {
+        pixels,
+        bands,
+        samples,
+        crs,
+        nodata,
+    })
+}
+
+/// Samples per pixel, from the colour type; an error for a colour type we do not read or a
+/// band-sequential (planar) multi-band layout, which [`GeoTiff::sample`] could not index.
+fn interleaved_bands(path: &Path, d: &mut FileDecoder) -> Result<u16, StageError> {
     let bands = match d
         .colortype()
         .map_err(|e| tiff_error(path, "colour type", e))?
@@ -168,15 +188,29 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
             "band-sequential (planar) multi-band TIFFs are not supported; write it pixel-interleaved (gdal_translate -co INTERLEAVE=PIXEL)",
         ));
     }
-    let f64s = |d: &mut Decoder<_>, tag: u16| {
-        d.find_tag(Tag::Unknown(tag))
-            .ok()
-            .flatten()
-            .and_then(|v| v.into_f64_vec().ok())
-    };
-    let scale = f64s(&mut d, MODEL_PIXEL_SCALE);
-    let tie = f64s(&mut d, MODEL_TIEPOINT);
-    let matrix = f64s(&mut d, MODEL_TRANSFORMATION);
+    Ok(bands)
+}
+
+/// The values of the doubles tag `tag`, if the file has it and they read as doubles.
+fn f64_tag(d: &mut FileDecoder, tag: u16) -> Option<Vec<f64>> {
+    d.find_tag(Tag::Unknown(tag))
+        .ok()
+        .flatten()
+        .and_then(|v| v.into_f64_vec().ok())
+}
+
+/// Where the pixels are, from the tiepoint and pixel scale, else the model transformation
+/// (north-up only), checked. An error when neither is there: we would not know where the raster
+/// is.
+fn pixel_grid(
+    path: &Path,
+    d: &mut FileDecoder,
+    width: u32,
+    height: u32,
+) -> Result<PixelGrid, StageError> {
+    let scale = f64_tag(d, MODEL_PIXEL_SCALE);
+    let tie = f64_tag(d, MODEL_TIEPOINT);
+    let matrix = f64_tag(d, MODEL_TRANSFORMATION);
     let no_georef = || {
         StageError::bad_input(
             path,
@@ -215,36 +249,52 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
     pixels
         .check()
         .map_err(|m| StageError::bad_input(path, "georeferencing", format!("expected {m}")))?;
-    let crs = match d
+    Ok(pixels)
+}
+
+/// The CRS the GeoKey directory records, None without one; an error for keys we cannot read as
+/// a CRS.
+fn geokeys_crs(path: &Path, d: &mut FileDecoder) -> Result<Option<Crs>, StageError> {
+    let Some(dir) = d
         .find_tag_unsigned_vec::<u16>(Tag::Unknown(GEO_KEY_DIRECTORY))
         .ok()
         .flatten()
-    {
-        Some(dir) => {
-            let doubles = f64s(&mut d, GEO_DOUBLE_PARAMS).unwrap_or_default();
-            let ascii = d
-                .find_tag(Tag::Unknown(GEO_ASCII_PARAMS))
-                .ok()
-                .flatten()
-                .and_then(|v| v.into_string().ok())
-                .unwrap_or_default();
-            let keys = parse_geokeys(&dir, &doubles, &ascii)
-                .map_err(|m| StageError::bad_input(path, "GeoKeyDirectory", m))?;
-            Some(
-                Crs::from_geokeys(&keys)
-                    .map_err(|m| StageError::bad_input(path, "GeoKeyDirectory", m))?,
-            )
-        }
-        None => None,
+    else {
+        return Ok(None);
     };
-    let nodata = d
-        .find_tag(Tag::Unknown(GDAL_NODATA))
+    let doubles = f64_tag(d, GEO_DOUBLE_PARAMS).unwrap_or_default();
+    let ascii = d
+        .find_tag(Tag::Unknown(GEO_ASCII_PARAMS))
         .ok()
         .flatten()
         .and_then(|v| v.into_string().ok())
-        .and_then(|s| s.trim_matches(['\0', ' ']).parse::<f64>().ok());
-    // The header's size, checked before the decoder allocates it: a few bytes of TIFF can claim
-    // 10^10 x 10^10 pixels.
+        .unwrap_or_default();
+    let keys = parse_geokeys(&dir, &doubles, &ascii)
+        .map_err(|m| StageError::bad_input(path, "GeoKeyDirectory", m))?;
+    Ok(Some(Crs::from_geokeys(&keys).map_err(|m| {
+        StageError::bad_input(path, "GeoKeyDirectory", m)
+    })?))
+}
+
+/// The GDAL no-data value, if the file records one that reads as a number.
+fn gdal_nodata(d: &mut FileDecoder) -> Option<f64> {
+    d.find_tag(Tag::Unknown(GDAL_NODATA))
+        .ok()
+        .flatten()
+        .and_then(|v| v.into_string().ok())
+        .and_then(|s| s.trim_matches(['\0', ' ']).parse::<f64>().ok())
+}
+
+/// The image's samples, its size checked against the budget before the decoder allocates it (a
+/// few bytes of TIFF can claim 10^10 x 10^10 pixels) and what it decoded checked to hold every
+/// pixel's `bands` samples.
+fn image_samples(
+    path: &Path,
+    d: &mut FileDecoder,
+    width: u32,
+    height: u32,
+    bands: u16,
+) -> Result<DecodingResult, StageError> {
     let sample_bytes = d
         .colortype()
         .map(|c| c.bit_depth().div_ceil(8).max(1) as usize)
@@ -256,7 +306,21 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
         .map_err(|e| tiff_error(path, "pixel data", e))?;
     // The decoder returns what the strips hold, which a file's tags can make fewer than the
     // pixels times the bands that `sample` indexes.
-    let got = match &samples {
+    let got = decoded_len(&samples);
+    let want = width as usize * height as usize * bands as usize;
+    if got < want {
+        return Err(StageError::bad_input(
+            path,
+            "pixel data",
+            format!("{want} samples ({width} x {height} x {bands} bands), found {got}"),
+        ));
+    }
+    Ok(samples)
+}
+
+/// How many samples the decoder returned, whatever their type.
+fn decoded_len(samples: &DecodingResult) -> usize {
+    match samples {
         DecodingResult::U8(v) => v.len(),
         DecodingResult::U16(v) => v.len(),
         DecodingResult::U32(v) => v.len(),
@@ -268,22 +332,7 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
         DecodingResult::I16(v) => v.len(),
         DecodingResult::I32(v) => v.len(),
         DecodingResult::I64(v) => v.len(),
-    };
-    let want = width as usize * height as usize * bands as usize;
-    if got < want {
-        return Err(StageError::bad_input(
-            path,
-            "pixel data",
-            format!("{want} samples ({width} x {height} x {bands} bands), found {got}"),
-        ));
     }
-    Ok(GeoTiff {
-        pixels,
-        bands,
-        samples,
-        crs,
-        nodata,
-    })
 }
 
 /// Writes `r` as a single-band float32 GeoTIFF in the site CRS (absolute coordinates), NaN as

@@ -196,7 +196,8 @@ pub fn canopies(
     (Scene { objects }, m)
 }
 
-/// The envelope of region `l` (its cells `idx`).
+/// The envelope of region `l` (its cells `idx`): the ground under it, the window it stands in, its
+/// top and widest level, its upper and lower surfaces per column, then the slices between.
 fn envelope(
     failed: &mut usize,
     l: u32,
@@ -208,9 +209,39 @@ fn envelope(
     cfg: &CanopyConfig,
 ) -> Option<Canopy> {
     let g = a.grid;
+    let gz = ground_under(idx, g, terrain)?;
+    let window = CrownWindow::around(l, idx, labels, g);
+    let outside = window.outside();
+    let (top, outline_mid) = top_and_outline_level(l, idx, labels, a, cfg)?;
+    let upper = window.upper_surface(&outside, a, top, cfg.close_cells);
+    let lowest = window.lowest_returns(returns);
+    let mid = widest_level(&upper, &lowest, outline_mid);
+    let columns = CrownColumns {
+        window: &window,
+        upper,
+        lowest,
+        mid,
+        returns,
+        min_clearance_m: cfg.min_clearance_m,
+    };
+    let bottom = columns.bottom();
+    if bottom >= top {
+        return None;
+    }
+    let shells = columns.slice_shells(failed, gz, bottom, top, cfg);
+    Some(Canopy {
+        label: l,
+        area_m2: idx.len() as f64 * g.cell_m * g.cell_m,
+        top_m: top,
+        mid_m: mid,
+        shells,
+    })
+}
+
+/// Ground under the crown: the median terrain height over its cells. A step of its own because
+/// every height of the envelope is above ground and the slices stand on this one level.
+fn ground_under(idx: &[usize], g: Grid, terrain: &Raster) -> Option<f64> {
     let w = g.width as usize;
-    let h = g.height as usize;
-    // Ground under the crown: the median terrain height over its cells.
     let mut ground: Vec<f64> = idx
         .iter()
         .filter_map(|&i| {
@@ -218,63 +249,27 @@ fn envelope(
             terrain.bilinear(x, y)
         })
         .collect();
-    let gz = crate::geom::theil_sen::median(&mut ground)?;
-    // The region's bounding box, one cell of margin.
-    let (mut c0, mut r0, mut c1, mut r1) = (usize::MAX, usize::MAX, 0, 0);
-    for &i in idx {
-        let (c, r) = (i % w, i / w);
-        (c0, r0, c1, r1) = (c0.min(c), r0.min(r), c1.max(c), r1.max(r));
-    }
-    let (c0, r0) = (c0.saturating_sub(1), r0.saturating_sub(1));
-    let (c1, r1) = ((c1 + 1).min(w - 1), (r1 + 1).min(h - 1));
-    let sub = Grid {
-        x0: g.x0 + c0 as f64 * g.cell_m,
-        y0: g.y0 - r0 as f64 * g.cell_m,
-        cell_m: g.cell_m,
-        width: (c1 - c0 + 1) as u32,
-        height: (r1 - r0 + 1) as u32,
-    };
-    let (sw, sh) = (sub.width as usize, sub.height as usize);
-    // Outside: the cells of other labels reachable from the box's border; the gaps inside the
-    // crown (returns that reached the ground) are crown.
-    let other: Vec<bool> = (0..sw * sh)
-        .map(|j| labels[(r0 + j / sw) * w + c0 + j % sw] != l)
-        .collect();
-    let mut outside = vec![false; sw * sh];
-    let mut stack: Vec<usize> = (0..sw * sh)
-        .filter(|&j| {
-            let (c, r) = (j % sw, j / sw);
-            other[j] && (c == 0 || r == 0 || c + 1 == sw || r + 1 == sh)
-        })
-        .collect();
-    for &j in &stack {
-        outside[j] = true;
-    }
-    while let Some(j) = stack.pop() {
-        let (c, r) = (j % sw, j / sw);
-        let mut visit = |k: usize| {
-            if other[k] && !outside[k] {
-                outside[k] = true;
-                stack.push(k);
-            }
-        };
-        if c > 0 {
-            visit(j - 1);
-        }
-        if c + 1 < sw {
-            visit(j + 1);
-        }
-        if r > 0 {
-            visit(j - sw);
-        }
-        if r + 1 < sh {
-            visit(j + sw);
-        }
-    }
-    // The crown's top: the 98.5th percentile of the field (returns inside the crown make it
-    // rough below the top; a pole or sign standing in the crown pokes above it). Its widest level:
-    // a lower quantile (`edge_quantile`) of the field on the outline (an outline cell's highest return comes
-    // from the part of the crown inside it, above the widest level).
+    crate::geom::theil_sen::median(&mut ground)
+}
+
+/// The crown's top and the field's level on its outline, or None when the crown is too flat
+/// (half-height not above 0.25 m) to hold an envelope. A step of its own: both are read from the
+/// region's cells on the whole field, before any window or surface is built.
+///
+/// The top is the 98.5th percentile of the field (returns inside the crown make it rough below
+/// the top; a pole or sign standing in the crown pokes above it). The outline level stands for
+/// the widest level where no returns read it: a lower quantile (`edge_quantile`) of the field on
+/// the outline (an outline cell's highest return comes from the part of the crown inside it,
+/// above the widest level).
+fn top_and_outline_level(
+    l: u32,
+    idx: &[usize],
+    labels: &[u32],
+    a: &Raster,
+    cfg: &CanopyConfig,
+) -> Option<(f64, f64)> {
+    let g = a.grid;
+    let (w, h) = (g.width as usize, g.height as usize);
     let mut hs: Vec<f64> = idx.iter().map(|&i| a.data[i] as f64).collect();
     hs.sort_by(f64::total_cmp);
     let top = hs[((hs.len() - 1) as f64 * 0.985).round() as usize];
@@ -302,128 +297,288 @@ fn envelope(
     if !(half > 0.25) {
         return None;
     }
-    // The crown's upper surface per cell: the highest return in the cell and its eight
-    // neighbours of the region. One cell alone is too rough (a cell whose few pulses went through a
-    // gap reads low); the 3 x 3 maximum reads the surface, and fills the crown's gaps, at the cost
-    // of a quarter-cell of width at the rim (a closing, max then min, lost a fifth of the volume).
-    // The crown's cells are closed by `close_cells` first: rim cells whose few pulses all missed
-    // the crown's edge leave notches in the outline.
-    let value = |j: usize| {
-        let i = (r0 + j / sw) * w + c0 + j % sw;
-        (labels[i] == l).then(|| a.data[i] as f64)
-    };
-    let crown: Vec<bool> = outside.iter().map(|&o| !o).collect();
-    let crown = close_within(&crown, sw as u32, sh as u32, cfg.close_cells as i64);
-    let neighbourhood = |j: usize| {
-        let (c, r) = (j % sw, j / sw);
-        (r.saturating_sub(1)..(r + 2).min(sh))
-            .flat_map(move |rr| (c.saturating_sub(1)..(c + 2).min(sw)).map(move |cc| rr * sw + cc))
-    };
-    let upper: Vec<f64> = (0..sw * sh)
-        .map(|j| {
-            if !crown[j] {
-                return f64::NAN;
-            }
-            let best = neighbourhood(j).filter_map(value).fold(f64::NAN, f64::max);
-            best.min(top)
-        })
-        .collect();
-    // The lowest vegetation return over the cell and its eight neighbours of the region, and how
-    // many returns there are: pulses that go through the crown echo all along their path in it.
-    let lowest: Vec<(f64, u32)> = (0..sw * sh)
-        .map(|j| {
-            let Some(lr) = returns else {
-                return (f64::NAN, 0);
-            };
-            neighbourhood(j)
-                .map(|k| (r0 + k / sw) * w + c0 + k % sw)
-                .filter(|&i| labels[i] == l)
-                .fold((f64::NAN, 0), |(z, n), i| {
-                    (z.min(lr.lowest[i] as f64), n + lr.count[i])
-                })
-        })
-        .collect();
-    // With returns, the widest level is read from them: the median over the crown of each
-    // well-sampled column's midpoint between its upper surface and its lowest return (a crown
-    // symmetric about its widest level has every vertical chord centred on it). Without, the
-    // field on the outline (above) stands for it.
-    let mut midpoints: Vec<f64> = (0..sw * sh)
+    Some((top, mid))
+}
+
+/// With returns, the widest level is read from them: the median over the crown of each
+/// well-sampled column's midpoint between its upper surface and its lowest return (a crown
+/// symmetric about its widest level has every vertical chord centred on it). Without, the field
+/// on the outline (`outline_mid`) stands for it. A step of its own: the lower surface mirrors the
+/// upper about this one level.
+fn widest_level(upper: &[f64], lowest: &[(f64, u32)], outline_mid: f64) -> f64 {
+    let mut midpoints: Vec<f64> = (0..upper.len())
         .filter(|&j| upper[j].is_finite() && lowest[j].1 >= MIN_MIDPOINT_RETURNS)
         .map(|j| (upper[j] + lowest[j].0) / 2.0)
         .collect();
-    let mid = crate::geom::theil_sen::median(&mut midpoints).unwrap_or(mid);
-    // A cell the crown grew into from the fringe may lie over a building's roof: there the crown
-    // stops at the cell's own lowest return, above the roof.
-    let floor = |j: usize| {
-        let i = (r0 + j / sw) * w + c0 + j % sw;
-        returns
+    crate::geom::theil_sen::median(&mut midpoints).unwrap_or(outline_mid)
+}
+
+/// A crown's bounding box on the field's grid, one cell of margin: the window every per-column
+/// step of [`envelope`] works in, its cells `j` numbered row by row.
+struct CrownWindow<'a> {
+    /// The crown's region label.
+    l: u32,
+    /// Region labels of the whole field.
+    labels: &'a [u32],
+    /// The field's width, cells.
+    w: usize,
+    /// The window's first column and row on the field.
+    c0: usize,
+    r0: usize,
+    /// The window as a grid, and its width and height in cells.
+    sub: Grid,
+    sw: usize,
+    sh: usize,
+}
+
+impl<'a> CrownWindow<'a> {
+    /// The bounding box of region `l` (its cells `idx`) on `g`, one cell of margin, clipped to
+    /// the field.
+    fn around(l: u32, idx: &[usize], labels: &'a [u32], g: Grid) -> CrownWindow<'a> {
+        let w = g.width as usize;
+        let h = g.height as usize;
+        let (mut c0, mut r0, mut c1, mut r1) = (usize::MAX, usize::MAX, 0, 0);
+        for &i in idx {
+            let (c, r) = (i % w, i / w);
+            (c0, r0, c1, r1) = (c0.min(c), r0.min(r), c1.max(c), r1.max(r));
+        }
+        let (c0, r0) = (c0.saturating_sub(1), r0.saturating_sub(1));
+        let (c1, r1) = ((c1 + 1).min(w - 1), (r1 + 1).min(h - 1));
+        let sub = Grid {
+            x0: g.x0 + c0 as f64 * g.cell_m,
+            y0: g.y0 - r0 as f64 * g.cell_m,
+            cell_m: g.cell_m,
+            width: (c1 - c0 + 1) as u32,
+            height: (r1 - r0 + 1) as u32,
+        };
+        let (sw, sh) = (sub.width as usize, sub.height as usize);
+        CrownWindow {
+            l,
+            labels,
+            w,
+            c0,
+            r0,
+            sub,
+            sw,
+            sh,
+        }
+    }
+
+    /// Cells in the window.
+    fn len(&self) -> usize {
+        self.sw * self.sh
+    }
+
+    /// The field's cell index of window cell `j`.
+    fn cell(&self, j: usize) -> usize {
+        (self.r0 + j / self.sw) * self.w + self.c0 + j % self.sw
+    }
+
+    /// Window cell `j` and its eight neighbours inside the window.
+    fn neighbourhood(&self, j: usize) -> impl Iterator<Item = usize> {
+        let (sw, sh) = (self.sw, self.sh);
+        let (c, r) = (j % sw, j / sw);
+        (r.saturating_sub(1)..(r + 2).min(sh))
+            .flat_map(move |rr| (c.saturating_sub(1)..(c + 2).min(sw)).map(move |cc| rr * sw + cc))
+    }
+
+    /// Outside: the cells of other labels reachable from the box's border; the gaps inside the
+    /// crown (returns that reached the ground) are crown. A step of its own: a flood fill, and
+    /// what it leaves is the crown's footprint in the window.
+    fn outside(&self) -> Vec<bool> {
+        let (sw, sh) = (self.sw, self.sh);
+        let other: Vec<bool> = (0..sw * sh)
+            .map(|j| self.labels[self.cell(j)] != self.l)
+            .collect();
+        let mut outside = vec![false; sw * sh];
+        let mut stack: Vec<usize> = (0..sw * sh)
+            .filter(|&j| {
+                let (c, r) = (j % sw, j / sw);
+                other[j] && (c == 0 || r == 0 || c + 1 == sw || r + 1 == sh)
+            })
+            .collect();
+        for &j in &stack {
+            outside[j] = true;
+        }
+        while let Some(j) = stack.pop() {
+            let (c, r) = (j % sw, j / sw);
+            let mut visit = |k: usize| {
+                if other[k] && !outside[k] {
+                    outside[k] = true;
+                    stack.push(k);
+                }
+            };
+            if c > 0 {
+                visit(j - 1);
+            }
+            if c + 1 < sw {
+                visit(j + 1);
+            }
+            if r > 0 {
+                visit(j - sw);
+            }
+            if r + 1 < sh {
+                visit(j + sw);
+            }
+        }
+        outside
+    }
+
+    /// The crown's upper surface per window cell (NaN outside the crown), capped at `top`: the
+    /// highest return in the cell and its eight neighbours of the region. One cell alone is too
+    /// rough (a cell whose few pulses went through a gap reads low); the 3 x 3 maximum reads the
+    /// surface, and fills the crown's gaps, at the cost of a quarter-cell of width at the rim (a
+    /// closing, max then min, lost a fifth of the volume). The crown's cells are closed by
+    /// `close_cells` first: rim cells whose few pulses all missed the crown's edge leave notches
+    /// in the outline.
+    fn upper_surface(&self, outside: &[bool], a: &Raster, top: f64, close_cells: u32) -> Vec<f64> {
+        let value = |j: usize| {
+            let i = self.cell(j);
+            (self.labels[i] == self.l).then(|| a.data[i] as f64)
+        };
+        let crown: Vec<bool> = outside.iter().map(|&o| !o).collect();
+        let crown = close_within(&crown, self.sw as u32, self.sh as u32, close_cells as i64);
+        (0..self.len())
+            .map(|j| {
+                if !crown[j] {
+                    return f64::NAN;
+                }
+                let best = self
+                    .neighbourhood(j)
+                    .filter_map(value)
+                    .fold(f64::NAN, f64::max);
+                best.min(top)
+            })
+            .collect()
+    }
+
+    /// The lowest vegetation return over each window cell and its eight neighbours of the region,
+    /// and how many returns there are (NaN and 0 without returns): pulses that go through the
+    /// crown echo all along their path in it.
+    fn lowest_returns(&self, returns: Option<&LowestReturns>) -> Vec<(f64, u32)> {
+        (0..self.len())
+            .map(|j| {
+                let Some(lr) = returns else {
+                    return (f64::NAN, 0);
+                };
+                self.neighbourhood(j)
+                    .map(|k| self.cell(k))
+                    .filter(|&i| self.labels[i] == self.l)
+                    .fold((f64::NAN, 0), |(z, n), i| {
+                        (z.min(lr.lowest[i] as f64), n + lr.count[i])
+                    })
+            })
+            .collect()
+    }
+}
+
+/// A crown's columns in its window: the upper surface, the lowest returns and the widest level
+/// that together give each column's span, from which the slices are cut.
+struct CrownColumns<'a> {
+    window: &'a CrownWindow<'a>,
+    /// Upper surface per window cell, above ground (NaN outside the crown).
+    upper: Vec<f64>,
+    /// Lowest return and return count per window cell.
+    lowest: Vec<(f64, u32)>,
+    /// The widest level, above ground.
+    mid: f64,
+    returns: Option<&'a LowestReturns>,
+    /// The lowest the crown's bottom may come, above ground.
+    min_clearance_m: f64,
+}
+
+impl CrownColumns<'_> {
+    /// A cell the crown grew into from the fringe may lie over a building's roof: there the crown
+    /// stops at the cell's own lowest return, above the roof.
+    fn floor(&self, j: usize) -> f64 {
+        let i = self.window.cell(j);
+        self.returns
             .filter(|lr| lr.fringe[i])
             .map_or(f64::NEG_INFINITY, |lr| lr.lowest[i] as f64)
-    };
-    // The lower surface mirrors the upper about the widest level; where returns reached below the
-    // top, it is the mean of that mirror and the lowest return (the lowest of a handful of echoes
-    // stops short of the crown's bottom, the mirror is off where the crown is not symmetric). A
-    // cell whose upper surface is not above the widest level and that has no return below it
-    // holds no crown.
-    let span = |j: usize| {
-        let t = upper[j];
-        let mirror = 2.0 * mid - t;
-        let (lo, _) = lowest[j];
-        let b = if lo < t { (lo + mirror) / 2.0 } else { mirror };
-        (t > mid || lo < t).then(|| (b.max(floor(j)).max(cfg.min_clearance_m), t))
-    };
-    let bottom = (0..sw * sh)
-        .filter_map(span)
-        .map(|(b, _)| b)
-        .fold(f64::MAX, f64::min);
-    if bottom >= top {
-        return None;
     }
-    let n = cfg.slices.max(1);
-    let dz = (top - bottom) / n as f64;
-    let mut shells = Vec::new();
-    for k in 0..n {
-        let (z0, z1) = (bottom + k as f64 * dz, bottom + (k + 1) as f64 * dz);
-        let zm = (z0 + z1) / 2.0;
+
+    /// The column's crown from bottom to top, or None where it holds none. The lower surface
+    /// mirrors the upper about the widest level; where returns reached below the top, it is the
+    /// mean of that mirror and the lowest return (the lowest of a handful of echoes stops short
+    /// of the crown's bottom, the mirror is off where the crown is not symmetric). A cell whose
+    /// upper surface is not above the widest level and that has no return below it holds no
+    /// crown.
+    fn span(&self, j: usize) -> Option<(f64, f64)> {
+        let t = self.upper[j];
+        let mirror = 2.0 * self.mid - t;
+        let (lo, _) = self.lowest[j];
+        let b = if lo < t { (lo + mirror) / 2.0 } else { mirror };
+        (t > self.mid || lo < t).then(|| (b.max(self.floor(j)).max(self.min_clearance_m), t))
+    }
+
+    /// The crown's bottom: the lowest of its columns' spans.
+    fn bottom(&self) -> f64 {
+        (0..self.window.len())
+            .filter_map(|j| self.span(j))
+            .map(|(b, _)| b)
+            .fold(f64::MAX, f64::min)
+    }
+
+    /// The cells whose span holds height `zm`, pinches filled, as a 0/1 raster on the window; None
+    /// when no column reaches it. A step of its own: what one slice's outlines are traced from.
+    fn slice_cells(&self, zm: f64) -> Option<Raster> {
+        let sub = self.window.sub;
         let mut data = vec![0f32; sub.len()];
         let mut any = false;
         for (j, cell) in data.iter_mut().enumerate() {
-            if span(j).is_some_and(|(b, t)| b <= zm && zm <= t) {
+            if self.span(j).is_some_and(|(b, t)| b <= zm && zm <= t) {
                 *cell = 1.0;
                 any = true;
             }
         }
         if !any {
-            continue;
+            return None;
         }
         fill_pinches(&mut data, sub.width as usize, sub.height as usize);
-        let lab = Raster {
+        Some(Raster {
             grid: sub,
             data: PodVec(data),
-        };
-        let polys = trace(&lab).remove(&1).unwrap_or_default();
-        // Slices stop 1 cm short of each other so no two shells share a face.
-        let (za, zb) = (gz + z0 + 0.005, gz + z1 - 0.005);
-        for p in polys {
-            let simplified = simplify_polygon(p.clone(), cfg.simplify_m);
-            let shell = [simplified, p].into_iter().find_map(|q| {
-                prism(&q, za, zb, Material::Foliage, Material::Foliage)
-                    .ok()
-                    .filter(|m| check_solid(m).is_ok())
-            });
-            match shell {
-                Some(s) => shells.push(s),
-                None => *failed += 1,
+        })
+    }
+
+    /// The envelope as `cfg.slices` prisms from `bottom` to `top` (above the ground `gz`), one
+    /// closed, checked shell per slice outline, simplified where the simplified outline still
+    /// makes one; counts in `failed` the outlines that make none.
+    fn slice_shells(
+        &self,
+        failed: &mut usize,
+        gz: f64,
+        bottom: f64,
+        top: f64,
+        cfg: &CanopyConfig,
+    ) -> Vec<crate::artifact::Mesh> {
+        let n = cfg.slices.max(1);
+        let dz = (top - bottom) / n as f64;
+        let mut shells = Vec::new();
+        for k in 0..n {
+            let (z0, z1) = (bottom + k as f64 * dz, bottom + (k + 1) as f64 * dz);
+            let zm = (z0 + z1) / 2.0;
+            let Some(lab) = self.slice_cells(zm) else {
+                continue;
+            };
+            let polys = trace(&lab).remove(&1).unwrap_or_default();
+            // Slices stop 1 cm short of each other so no two shells share a face.
+            let (za, zb) = (gz + z0 + 0.005, gz + z1 - 0.005);
+            for p in polys {
+                let simplified = simplify_polygon(p.clone(), cfg.simplify_m);
+                let shell = [simplified, p].into_iter().find_map(|q| {
+                    prism(&q, za, zb, Material::Foliage, Material::Foliage)
+                        .ok()
+                        .filter(|m| check_solid(m).is_ok())
+                });
+                match shell {
+                    Some(s) => shells.push(s),
+                    None => *failed += 1,
+                }
             }
         }
+        shells
     }
-    Some(Canopy {
-        label: l,
-        area_m2: idx.len() as f64 * g.cell_m * g.cell_m,
-        top_m: top,
-        mid_m: mid,
-        shells,
-    })
 }
 
 /// Returns a column needs, over its 3 x 3 cells, for its midpoint to count toward the widest

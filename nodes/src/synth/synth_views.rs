@@ -14,7 +14,7 @@ use crate::artifact::{
     ArtifactType, BuildingSpec, City, FeatureKind, Instances, Intrinsics, ObjectClass, PodVec,
     Pose, RMSNET_CLASSES, Scene, View, ViewSet,
 };
-use crate::geom::raycast::SceneRays;
+use crate::geom::raycast::{Hit, SceneRays};
 use crate::io::export::material_color;
 use crate::rng::{gaussian, mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
@@ -262,6 +262,8 @@ fn arch_class(b: Option<&BuildingSpec>, at: [f64; 3], roof: bool) -> (Option<usi
     (None, if roof { "roof" } else { "wall" })
 }
 
+/// View `k` of `scene` from `pose`: the camera's rays cast, each pixel painted from what it hits,
+/// the buffers gathered into a view.
 fn render(
     scene: &Scene,
     rays: &SceneRays,
@@ -271,29 +273,53 @@ fn render(
     pose: Pose,
 ) -> View {
     let (w, h) = p.size;
+    let intrinsics = camera_intrinsics(p);
+    let origin = pose.position.map(|v| v as f32);
+    let pixel_rays = pixel_rays(&pose, &intrinsics, w, h);
+    let hits = rays.cast_grid(
+        w,
+        h,
+        |u, v| (origin, pixel_rays[(v * w + u) as usize].0.map(|d| d as f32)),
+        1e-3,
+        2000.0,
+    );
+    let painter = Painter {
+        scene,
+        buildings,
+        p,
+        pose: &pose,
+        seed: mix(p.seed ^ mix(k as u64)),
+    };
+    let mut frame = Frame::new((w * h) as usize);
+    for v in 0..h {
+        for u in 0..w {
+            let i = (v * w + u) as usize;
+            match &hits[i] {
+                Some(hit) => painter.paint(&mut frame, i, hit, pixel_rays[i]),
+                None => frame.sky(i),
+            }
+        }
+    }
+    frame.into_view(k, (w, h), intrinsics, pose)
+}
+
+/// The pinhole camera of `p`'s image size and horizontal field of view, principal point at the
+/// image centre.
+fn camera_intrinsics(p: &SynthViewsParams) -> Intrinsics {
+    let (w, h) = p.size;
     let f = w as f64 / 2.0 / (p.hfov_deg.to_radians() / 2.0).tan();
-    let intrinsics = Intrinsics {
+    Intrinsics {
         fx: f,
         fy: f,
         cx: w as f64 / 2.0,
         cy: h as f64 / 2.0,
-    };
-    let n = (w * h) as usize;
-    let (mut image, mut depth, mut normal) = (
-        vec![[0u8; 3]; n],
-        vec![f32::INFINITY; n],
-        vec![[0f32; 3]; n],
-    );
-    let mut material = vec![255u8; n];
-    let (mut arch_ids, mut clutter_ids) = (vec![0u16; n], vec![0u16; n]);
-    let mut arch = Instances::default();
-    let mut clutter = Instances::default();
-    // One instance per (object, feature) and per (object, wall or roof), numbered in pixel order.
-    let mut arch_of: HashMap<(usize, Option<usize>, bool), u16> = HashMap::new();
-    let mut clutter_of: HashMap<usize, u16> = HashMap::new();
-    let seed = mix(p.seed ^ mix(k as u64));
-    let sun = [0.35f64, -0.45, 0.82];
-    let origin = pose.position.map(|v| v as f32);
+    }
+}
+
+/// Per pixel, row by row, the unit ray through its centre in the site frame and the length of
+/// the camera-frame ray it was normalised from (depth = t / that).
+fn pixel_rays(pose: &Pose, intrinsics: &Intrinsics, w: u32, h: u32) -> Vec<([f64; 3], f64)> {
+    let f = intrinsics.fx;
     let ray = |u: u32, v: u32| {
         let cam = [
             (u as f64 + 0.5 - intrinsics.cx) / f,
@@ -303,107 +329,190 @@ fn render(
         let norm = (cam[0] * cam[0] + cam[1] * cam[1] + 1.0).sqrt();
         (pose.to_site(cam.map(|c| c / norm)), norm)
     };
-    let pixel_rays: Vec<([f64; 3], f64)> = (0..h)
+    (0..h)
         .flat_map(|v| (0..w).map(move |u| (u, v)))
         .map(|(u, v)| ray(u, v))
-        .collect();
-    let hits = rays.cast_grid(
-        w,
-        h,
-        |u, v| (origin, pixel_rays[(v * w + u) as usize].0.map(|d| d as f32)),
-        1e-3,
-        2000.0,
-    );
-    for v in 0..h {
-        for u in 0..w {
-            let i = (v * w + u) as usize;
-            let (dir, norm) = pixel_rays[i];
-            let Some(hit) = hits[i] else {
-                image[i] = [150, 185, 225];
-                material[i] = rmsnet_index("sky");
-                continue;
-            };
-            let obj = &scene.objects[hit.object];
-            let mut nrm = hit.normal.map(|c| c as f64);
-            if nrm[0] * dir[0] + nrm[1] * dir[1] + nrm[2] * dir[2] > 0.0 {
-                nrm = nrm.map(|c| -c);
-            }
-            let z_depth = hit.t as f64 / norm;
-            let noise = 1.0 + p.depth_noise * gaussian(mix(seed ^ (i as u64).wrapping_mul(0x9E37)));
-            depth[i] = (z_depth * noise * p.depth_scale + p.depth_offset_m) as f32;
-            normal[i] = pose.to_camera(nrm).map(|c| c as f32);
-            let m = obj
-                .mesh
-                .materials
-                .get(hit.triangle)
-                .copied()
-                .and_then(Material::from_u8)
-                .unwrap_or(Material::Concrete);
-            // Per-object material confusion: the same wrong class for all of the object's pixels.
-            let h_obj = mix(seed ^ mix(hit.object as u64 ^ 0xA5A5));
-            let truth_class = rmsnet_index(rmsnet_class(m));
-            material[i] = if unit(h_obj) < p.material_error {
-                (h_obj % RMSNET_CLASSES.len() as u64) as u8
-            } else {
-                truth_class
-            };
-            let lambert = (nrm[0] * sun[0] + nrm[1] * sun[1] + nrm[2] * sun[2]).max(0.0);
-            let c = material_color(m);
-            image[i] = c.map(|x| {
-                (255.0
-                    * (x as f64 * (0.45 + 0.55 * lambert))
-                        .clamp(0.0, 1.0)
-                        .powf(1.0 / 2.2)) as u8
-            });
-            let missed = |key: u64| unit(mix(seed ^ mix(key ^ 0x5EED))) < p.instance_miss;
-            match obj.class {
-                ObjectClass::Building => {
-                    let roof = nrm[2] > 0.7;
-                    let t = hit.t as f64;
-                    let at = std::array::from_fn(|a| pose.position[a] + dir[a] * t);
-                    let (feature, class) =
-                        arch_class(buildings.get(obj.id.as_str()).copied(), at, roof);
-                    let next = arch_of.len() as u16 + 1;
-                    let id = *arch_of.entry((hit.object, feature, roof)).or_insert(next);
-                    let key = (hit.object as u64) << 20
-                        ^ feature.map_or(0xFFFFF, |f| f as u64) << 1
-                        ^ roof as u64;
-                    if !missed(key) {
-                        arch_ids[i] = id;
-                        arch.classes.insert(id, class.into());
-                    }
-                }
-                ObjectClass::Clutter | ObjectClass::Vegetation => {
-                    let next = clutter_of.len() as u16 + 1;
-                    let id = *clutter_of.entry(hit.object).or_insert(next);
-                    if !missed(hit.object as u64 + (1 << 40)) {
-                        clutter_ids[i] = id;
-                        let kind = obj.id.split('-').next().unwrap_or("object").to_owned();
-                        clutter.classes.insert(id, kind);
-                    }
-                }
-                _ => {}
-            }
+        .collect()
+}
+
+/// The buffers of one view being rendered, and its instances numbered as they are met.
+struct Frame {
+    image: Vec<[u8; 3]>,
+    depth: Vec<f32>,
+    normal: Vec<[f32; 3]>,
+    material: Vec<u8>,
+    arch_ids: Vec<u16>,
+    clutter_ids: Vec<u16>,
+    arch: Instances,
+    clutter: Instances,
+    /// One instance per (object, feature) and per (object, wall or roof), numbered in pixel
+    /// order.
+    arch_of: HashMap<(usize, Option<usize>, bool), u16>,
+    clutter_of: HashMap<usize, u16>,
+}
+
+impl Frame {
+    /// Buffers for `n` pixels: nothing seen yet.
+    fn new(n: usize) -> Frame {
+        Frame {
+            image: vec![[0u8; 3]; n],
+            depth: vec![f32::INFINITY; n],
+            normal: vec![[0f32; 3]; n],
+            material: vec![255u8; n],
+            arch_ids: vec![0u16; n],
+            clutter_ids: vec![0u16; n],
+            arch: Instances::default(),
+            clutter: Instances::default(),
+            arch_of: HashMap::new(),
+            clutter_of: HashMap::new(),
         }
     }
-    arch.ids = PodVec(arch_ids);
-    clutter.ids = PodVec(clutter_ids);
-    View {
-        id: format!("v{k:04}"),
-        width: w,
-        height: h,
-        intrinsics,
-        pose,
-        captured_at: None,
-        pose_source: Some(
-            "synthetic: rendered from the true pose, reported with SynthViews' pose noise".into(),
-        ),
-        distortion: None,
-        image: PodVec(image),
-        arch: Some(arch),
-        clutter: Some(clutter),
-        material: Some(PodVec(material)),
-        depth: Some(PodVec(depth)),
-        normal: Some(PodVec(normal)),
+
+    /// Pixel `i` sees the sky.
+    fn sky(&mut self, i: usize) {
+        self.image[i] = [150, 185, 225];
+        self.material[i] = rmsnet_index("sky");
     }
+
+    /// The view, once every pixel is painted.
+    fn into_view(self, k: usize, (w, h): (u32, u32), intrinsics: Intrinsics, pose: Pose) -> View {
+        let Frame {
+            image,
+            depth,
+            normal,
+            material,
+            arch_ids,
+            clutter_ids,
+            mut arch,
+            mut clutter,
+            ..
+        } = self;
+        arch.ids = PodVec(arch_ids);
+        clutter.ids = PodVec(clutter_ids);
+        View {
+            id: format!("v{k:04}"),
+            width: w,
+            height: h,
+            intrinsics,
+            pose,
+            captured_at: None,
+            pose_source: Some(
+                "synthetic: rendered from the true pose, reported with SynthViews' pose noise"
+                    .into(),
+            ),
+            distortion: None,
+            image: PodVec(image),
+            arch: Some(arch),
+            clutter: Some(clutter),
+            material: Some(PodVec(material)),
+            depth: Some(PodVec(depth)),
+            normal: Some(PodVec(normal)),
+        }
+    }
+}
+
+/// What paints a view's pixels from their hits: the scene, its buildings' façade features, the
+/// error knobs, the true pose and the view's seed.
+struct Painter<'a> {
+    scene: &'a Scene,
+    buildings: &'a HashMap<&'a str, &'a BuildingSpec>,
+    p: &'a SynthViewsParams,
+    pose: &'a Pose,
+    seed: u64,
+}
+
+impl Painter<'_> {
+    /// Pixel `i`, whose ray (`dir`, `norm` as [`pixel_rays`] gives them) hits `hit`: what the
+    /// camera and each model output would say of it.
+    fn paint(&self, frame: &mut Frame, i: usize, hit: &Hit, (dir, norm): ([f64; 3], f64)) {
+        let (p, seed) = (self.p, self.seed);
+        let obj = &self.scene.objects[hit.object];
+        let mut nrm = hit.normal.map(|c| c as f64);
+        if nrm[0] * dir[0] + nrm[1] * dir[1] + nrm[2] * dir[2] > 0.0 {
+            nrm = nrm.map(|c| -c);
+        }
+        let z_depth = hit.t as f64 / norm;
+        let noise = 1.0 + p.depth_noise * gaussian(mix(seed ^ (i as u64).wrapping_mul(0x9E37)));
+        frame.depth[i] = (z_depth * noise * p.depth_scale + p.depth_offset_m) as f32;
+        frame.normal[i] = self.pose.to_camera(nrm).map(|c| c as f32);
+        let m = obj
+            .mesh
+            .materials
+            .get(hit.triangle)
+            .copied()
+            .and_then(Material::from_u8)
+            .unwrap_or(Material::Concrete);
+        frame.material[i] = self.reported_material(hit.object, m);
+        frame.image[i] = shaded_color(m, nrm);
+        match obj.class {
+            ObjectClass::Building => self.label_building(frame, i, hit, dir, nrm),
+            ObjectClass::Clutter | ObjectClass::Vegetation => self.label_clutter(frame, i, hit),
+            _ => {}
+        }
+    }
+
+    /// The RMSNet class the material model reports for material `m` of object `object`.
+    /// Per-object material confusion: the same wrong class for all of the object's pixels.
+    fn reported_material(&self, object: usize, m: Material) -> u8 {
+        let h_obj = mix(self.seed ^ mix(object as u64 ^ 0xA5A5));
+        let truth_class = rmsnet_index(rmsnet_class(m));
+        if unit(h_obj) < self.p.material_error {
+            (h_obj % RMSNET_CLASSES.len() as u64) as u8
+        } else {
+            truth_class
+        }
+    }
+
+    /// Whether the instance model misses the instance of `key` (the same for all its pixels).
+    fn missed(&self, key: u64) -> bool {
+        unit(mix(self.seed ^ mix(key ^ 0x5EED))) < self.p.instance_miss
+    }
+
+    /// Pixel `i` on a building: its architectural instance (the façade feature there, else the
+    /// wall or the roof), unless the model misses it.
+    fn label_building(&self, frame: &mut Frame, i: usize, hit: &Hit, dir: [f64; 3], nrm: [f64; 3]) {
+        let obj = &self.scene.objects[hit.object];
+        let roof = nrm[2] > 0.7;
+        let t = hit.t as f64;
+        let at = std::array::from_fn(|a| self.pose.position[a] + dir[a] * t);
+        let (feature, class) = arch_class(self.buildings.get(obj.id.as_str()).copied(), at, roof);
+        let next = frame.arch_of.len() as u16 + 1;
+        let id = *frame
+            .arch_of
+            .entry((hit.object, feature, roof))
+            .or_insert(next);
+        let key =
+            (hit.object as u64) << 20 ^ feature.map_or(0xFFFFF, |f| f as u64) << 1 ^ roof as u64;
+        if !self.missed(key) {
+            frame.arch_ids[i] = id;
+            frame.arch.classes.insert(id, class.into());
+        }
+    }
+
+    /// Pixel `i` on clutter or vegetation: the object's instance, of the kind its id names,
+    /// unless the model misses it.
+    fn label_clutter(&self, frame: &mut Frame, i: usize, hit: &Hit) {
+        let obj = &self.scene.objects[hit.object];
+        let next = frame.clutter_of.len() as u16 + 1;
+        let id = *frame.clutter_of.entry(hit.object).or_insert(next);
+        if !self.missed(hit.object as u64 + (1 << 40)) {
+            frame.clutter_ids[i] = id;
+            let kind = obj.id.split('-').next().unwrap_or("object").to_owned();
+            frame.clutter.classes.insert(id, kind);
+        }
+    }
+}
+
+/// The colour of material `m` under the fixed sun, Lambert-shaded on normal `nrm` (facing the
+/// camera), gamma-encoded.
+fn shaded_color(m: Material, nrm: [f64; 3]) -> [u8; 3] {
+    let sun = [0.35f64, -0.45, 0.82];
+    let lambert = (nrm[0] * sun[0] + nrm[1] * sun[1] + nrm[2] * sun[2]).max(0.0);
+    let c = material_color(m);
+    c.map(|x| {
+        (255.0
+            * (x as f64 * (0.45 + 0.55 * lambert))
+                .clamp(0.0, 1.0)
+                .powf(1.0 / 2.2)) as u8
+    })
 }

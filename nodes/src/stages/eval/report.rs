@@ -152,68 +152,9 @@ impl Stage for Report {
         let fail = StageError::Failed;
         let mut files = Vec::new();
         let (md_table, csv) = tables(p, &evals);
-        let mut json: BTreeMap<&str, &BTreeMap<String, f64>> = BTreeMap::new();
-        for (name, e) in p.models.iter().zip(&evals) {
-            json.insert(name, &e.values);
-        }
-        // Per model: (distance, measured with its offset taken out, predicted), and each link's
-        // frequency.
-        let (series, freqs): (Vec<Vec<(f64, f64, f64)>>, Vec<Vec<f64>>) = preds
-            .iter()
-            .zip(&evals)
-            .map(|(pr, ev)| pairs(meas, pr, ev).into_iter().unzip())
-            .unzip();
-        let models = model_series(p, &series, &freqs);
-        let mut figures: Vec<(String, Figure)> = vec![
-            ("scatter".into(), render(&Scatter(&models)).map_err(fail)?),
-            (
-                "error_cdf".into(),
-                render(&ErrorCdf(&models)).map_err(fail)?,
-            ),
-            (
-                "path_loss_distance".into(),
-                render(&PathLossDistance(&models)).map_err(fail)?,
-            ),
-        ];
-        if let Some(map) = radio_map {
-            figures.push(("radio_map".into(), map_figure(map, ortho).map_err(fail)?));
-        }
-        // Every plot as plots/<name>.png (shown) and .svg (print); the per-stage figures' files
-        // join them under their own names.
-        let mut plots: Vec<(String, Vec<u8>)> = Vec::new();
-        for (name, f) in figures {
-            plots.push((format!("plots/{name}.png"), f.png));
-            plots.push((format!("plots/{name}.svg"), f.svg.into_bytes()));
-        }
-        for (k, fig) in inputs
-            .many::<ReportFiles>("figures")?
-            .into_iter()
-            .enumerate()
-        {
-            for (name, bytes) in &fig.files {
-                crate::io::safe_name::check_file_name(name)
-                    .map_err(|m| fail(format!("figure {} (input `figures` #{k}): {m}", name)))?;
-                let path = format!("plots/{name}");
-                if plots.iter().any(|(p, _)| *p == path) {
-                    return Err(fail(format!(
-                        "two figures write {path}: give each MapPlot/ReliefPlot/MaterialPlot its own `name`"
-                    )));
-                }
-                plots.push((path, bytes.clone()));
-            }
-        }
-        let intro = format!(
-            "{} measured links; every model is scored at the same links (paper Sec. 5, rf.md §6). \
-             P2P: e_i = PL_pred,i − PL_meas,i. PD (power-distance): PL = α + 10 β log10 d; CI \
-             (close-in, 1 m): PL = FSPL(f, 1 m) + 10 n log10 d; each fitted by least squares to \
-             the model's predictions, and PD/CI RMSE = RMS of the measurements about that line \
-             (3GPP's line is its own formula). The other variant fits the same line to the \
-             measurements too and gives the RMS between the two lines at the links' distances. \
-             Links predicted at the floor count in P2P as the floor and are left out of the fits. \
-             LOS/NLOS rows group the links by the measurements' LOS where known, else by one \
-             stated reference trace, the same for every model.",
-            meas.links.len()
-        );
+        let figures = model_figures(p, meas, &preds, &evals, radio_map, ortho)?;
+        let plots = plot_files(figures, &inputs.many::<ReportFiles>("figures")?)?;
+        let intro = intro(meas);
         let mut md = format!("# KODAMA report: {}\n\n{intro}\n\n{md_table}\n", p.site);
         for (name, _) in plots.iter().filter(|(n, _)| n.ends_with(".png")) {
             md.push_str(&format!("![{name}]({name})\n\n"));
@@ -224,12 +165,135 @@ impl Stage for Report {
             "links.csv".to_string(),
             links_csv(&p.models, meas, &preds, &evals).into_bytes(),
         ));
-        files.push((
-            "metrics.json".to_string(),
-            (serde_json::to_string_pretty(&json).map_err(|e| fail(e.to_string()))? + "\n")
-                .into_bytes(),
-        ));
-        let names: Vec<String> = (0..scenes.len())
+        files.push(("metrics.json".to_string(), metrics_json(p, &evals)?));
+        let page = PageInputs {
+            p,
+            intro: &intro,
+            meas,
+            preds: &preds,
+            evals: &evals,
+            scenes: &scenes,
+            radio_map,
+        };
+        let html = page.html(&plots).map_err(fail)?;
+        files.push(("report.html".to_string(), html.into_bytes()));
+        files.extend(plots);
+        Ok(ReportFiles { files })
+    }
+}
+
+/// metrics.json: each model's evaluation by the model's name. A step of its own: the one file
+/// written from the evaluations as they are.
+fn metrics_json(p: &ReportParams, evals: &[&Metrics]) -> Result<Vec<u8>, StageError> {
+    let mut json: BTreeMap<&str, &BTreeMap<String, f64>> = BTreeMap::new();
+    for (name, e) in p.models.iter().zip(evals) {
+        json.insert(name, &e.values);
+    }
+    Ok(
+        (serde_json::to_string_pretty(&json).map_err(|e| StageError::Failed(e.to_string()))?
+            + "\n")
+            .into_bytes(),
+    )
+}
+
+/// The report's own figures: predicted against measured, the CDF of the error, path loss
+/// against distance, and the radio map over the orthophoto when there is one.
+fn model_figures(
+    p: &ReportParams,
+    meas: &Measurements,
+    preds: &[&Measurements],
+    evals: &[&Metrics],
+    radio_map: Option<&Raster>,
+    ortho: Option<&Ortho>,
+) -> Result<Vec<(String, Figure)>, StageError> {
+    let fail = StageError::Failed;
+    // Per model: (distance, measured with its offset taken out, predicted), and each link's
+    // frequency.
+    let (series, freqs): (Vec<Vec<(f64, f64, f64)>>, Vec<Vec<f64>>) = preds
+        .iter()
+        .zip(evals)
+        .map(|(pr, ev)| pairs(meas, pr, ev).into_iter().unzip())
+        .unzip();
+    let models = model_series(p, &series, &freqs);
+    let mut figures: Vec<(String, Figure)> = vec![
+        ("scatter".into(), render(&Scatter(&models)).map_err(fail)?),
+        (
+            "error_cdf".into(),
+            render(&ErrorCdf(&models)).map_err(fail)?,
+        ),
+        (
+            "path_loss_distance".into(),
+            render(&PathLossDistance(&models)).map_err(fail)?,
+        ),
+    ];
+    if let Some(map) = radio_map {
+        figures.push(("radio_map".into(), map_figure(map, ortho).map_err(fail)?));
+    }
+    Ok(figures)
+}
+
+/// Every plot as plots/<name>.png (shown) and .svg (print); the per-stage figures' files
+/// (`stage_figures`, the `figures` input) join them under their own names, each checked to be a
+/// plain file name that no other figure writes.
+fn plot_files(
+    figures: Vec<(String, Figure)>,
+    stage_figures: &[&ReportFiles],
+) -> Result<Vec<(String, Vec<u8>)>, StageError> {
+    let fail = StageError::Failed;
+    let mut plots: Vec<(String, Vec<u8>)> = Vec::new();
+    for (name, f) in figures {
+        plots.push((format!("plots/{name}.png"), f.png));
+        plots.push((format!("plots/{name}.svg"), f.svg.into_bytes()));
+    }
+    for (k, fig) in stage_figures.iter().enumerate() {
+        for (name, bytes) in &fig.files {
+            crate::io::safe_name::check_file_name(name)
+                .map_err(|m| fail(format!("figure {} (input `figures` #{k}): {m}", name)))?;
+            let path = format!("plots/{name}");
+            if plots.iter().any(|(p, _)| *p == path) {
+                return Err(fail(format!(
+                    "two figures write {path}: give each MapPlot/ReliefPlot/MaterialPlot its own `name`"
+                )));
+            }
+            plots.push((path, bytes.clone()));
+        }
+    }
+    Ok(plots)
+}
+
+/// The report's introduction: how many links, and how each score is computed.
+fn intro(meas: &Measurements) -> String {
+    format!(
+        "{} measured links; every model is scored at the same links (paper Sec. 5, rf.md §6). \
+         P2P: e_i = PL_pred,i − PL_meas,i. PD (power-distance): PL = α + 10 β log10 d; CI \
+         (close-in, 1 m): PL = FSPL(f, 1 m) + 10 n log10 d; each fitted by least squares to \
+         the model's predictions, and PD/CI RMSE = RMS of the measurements about that line \
+         (3GPP's line is its own formula). The other variant fits the same line to the \
+         measurements too and gives the RMS between the two lines at the links' distances. \
+         Links predicted at the floor count in P2P as the floor and are left out of the fits. \
+         LOS/NLOS rows group the links by the measurements' LOS where known, else by one \
+         stated reference trace, the same for every model.",
+        meas.links.len()
+    )
+}
+
+/// What report.html is made of besides its plots.
+struct PageInputs<'a> {
+    p: &'a ReportParams,
+    intro: &'a str,
+    meas: &'a Measurements,
+    preds: &'a [&'a Measurements],
+    evals: &'a [&'a Metrics],
+    scenes: &'a [&'a Scene],
+    radio_map: Option<&'a Raster>,
+}
+
+impl PageInputs<'_> {
+    /// report.html: the table, the PNG plots among `plots`, and the 3D view of the scenes (named
+    /// by `scene_names`, else "scene 1", ...) with the radio map and the links.
+    fn html(&self, plots: &[(String, Vec<u8>)]) -> Result<String, String> {
+        let p = self.p;
+        let names: Vec<String> = (0..self.scenes.len())
             .map(|k| {
                 p.scene_names
                     .get(k)
@@ -240,28 +304,24 @@ impl Stage for Report {
         let named: Vec<(&str, &Scene)> = names
             .iter()
             .map(String::as_str)
-            .zip(scenes.iter().copied())
+            .zip(self.scenes.iter().copied())
             .collect();
-        let points = link_points(meas, &preds, &evals);
+        let points = link_points(self.meas, self.preds, self.evals);
         let plot_names: Vec<&str> = plots
             .iter()
             .map(|(n, _)| n.as_str())
             .filter(|n| n.ends_with(".png"))
             .collect();
-        let html = report_html(&Page {
+        report_html(&Page {
             site: &p.site,
-            intro: &intro,
+            intro: self.intro,
             models: &p.models,
-            table: &table_rows(&evals),
+            table: &table_rows(self.evals),
             plots: &plot_names,
             scenes: &named,
-            radio_map,
+            radio_map: self.radio_map,
             points: &points,
         })
-        .map_err(fail)?;
-        files.push(("report.html".to_string(), html.into_bytes()));
-        files.extend(plots);
-        Ok(ReportFiles { files })
     }
 }
 

@@ -270,6 +270,8 @@ fn visit_tile(
     Ok(())
 }
 
+/// Reads one content file (b3dm or glb) of a tile whose transform is `tile`: each glTF node with
+/// a mesh becomes an object `<uri>#<node name>` of `scene`, placed in the site frame.
 fn read_content_file(
     file: &Path,
     uri: &str,
@@ -285,31 +287,8 @@ fn read_content_file(
         (bytes.as_slice(), [0.0; 3])
     };
     check_glb_container(file, glb)?;
-    // gltf-json's validation indexes some lists unchecked (a POSITION accessor past the
-    // accessors panics, gltf-json 1.4.1): a panic there is this file's fault, reported as such.
-    let parsed = StageError::catch_decoder_panic(
-        file,
-        "glTF",
-        "expected a well-formed glTF binary (its parser failed",
-        || gltf::Gltf::from_slice(glb),
-    )?;
-    let gltf = parsed
-        .map_err(|e| StageError::bad_input(file, "glTF", format!("expected a glTF binary: {e}")))?;
-    let buffers: Vec<Vec<u8>> = gltf
-        .buffers()
-        .map(|b| match b.source() {
-            gltf::buffer::Source::Bin => gltf
-                .blob
-                .clone()
-                .ok_or_else(|| StageError::bad_input(file, "glTF", "the BIN chunk is missing")),
-            gltf::buffer::Source::Uri(u) => {
-                let base = file.parent().unwrap_or(Path::new("."));
-                let buffer = tiles.resolve(file, &format!("buffer {u}"), base, u)?;
-                std::fs::read(&buffer)
-                    .map_err(|e| StageError::bad_input(file, format!("buffer {u}"), e.to_string()))
-            }
-        })
-        .collect::<Result<_, _>>()?;
+    let gltf = parse_gltf(file, glb)?;
+    let buffers = gltf_buffers(file, &gltf, tiles)?;
     let rtc_m: Mat4 = [
         1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., rtc[0], rtc[1], rtc[2], 1.,
     ];
@@ -317,68 +296,18 @@ fn read_content_file(
     let Some(s) = gltf.default_scene().or_else(|| gltf.scenes().next()) else {
         return Ok(());
     };
+    let content = Content {
+        file,
+        tiles,
+        buffers: &buffers,
+    };
     let mut stack: Vec<(gltf::Node, Mat4)> = s.nodes().map(|n| (n, to_tile)).collect();
     while let Some((node, parent)) = stack.pop() {
         let local = node.transform().matrix();
         let m: Mat4 = std::array::from_fn(|i| local[i / 4][i % 4] as f64);
         let world = mul(&parent, &m);
         if let Some(mesh) = node.mesh() {
-            let mut out = Mesh::default();
-            // Primitives often share one POSITION accessor (one per material): read each once.
-            let mut bases: std::collections::HashMap<usize, (u32, u32)> = Default::default();
-            for prim in mesh.primitives() {
-                if prim.mode() != gltf::mesh::Mode::Triangles {
-                    continue;
-                }
-                let material = prim
-                    .material()
-                    .name()
-                    .and_then(Material::from_name)
-                    .unwrap_or(Material::Concrete);
-                let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
-                let Some(accessor) = prim.get(&gltf::Semantic::Positions) else {
-                    continue;
-                };
-                if !check_accessor(file, "POSITION", &accessor, &buffers)? {
-                    continue;
-                }
-                if let Some(ix) = prim.indices() {
-                    check_accessor(file, "indices", &ix, &buffers)?;
-                }
-                let (base, n) = match bases.get(&accessor.index()) {
-                    Some(&b) => b,
-                    None => {
-                        let Some(positions) = reader.read_positions() else {
-                            continue;
-                        };
-                        let base = out.positions.len() as u32;
-                        for p in positions {
-                            let e = apply(&world, [p[0] as f64, p[1] as f64, p[2] as f64]);
-                            let q = (tiles.place)(e)
-                                .map_err(|m| StageError::bad_input(file, "vertex", m))?;
-                            out.positions.push([q[0] as f32, q[1] as f32, q[2] as f32]);
-                        }
-                        let b = (base, out.positions.len() as u32 - base);
-                        bases.insert(accessor.index(), b);
-                        b
-                    }
-                };
-                let indices: Vec<u32> = match reader.read_indices() {
-                    Some(ix) => ix.into_u32().collect(),
-                    None => (0..n).collect(),
-                };
-                for t in indices.chunks_exact(3) {
-                    if t.iter().any(|&i| i >= n) {
-                        return Err(StageError::bad_input(
-                            file,
-                            "indices",
-                            "an index points past the vertices",
-                        ));
-                    }
-                    out.triangles.push([base + t[0], base + t[1], base + t[2]]);
-                    out.materials.push(material as u8);
-                }
-            }
+            let out = content.mesh(&mesh, &world)?;
             let name = node
                 .name()
                 .map(str::to_owned)
@@ -397,6 +326,135 @@ fn read_content_file(
         stack.extend(node.children().map(|c| (c, world)));
     }
     Ok(())
+}
+
+/// The glTF document of `glb`. gltf-json's validation indexes some lists unchecked (a POSITION
+/// accessor past the accessors panics, gltf-json 1.4.1): a panic there is this file's fault,
+/// reported as such.
+fn parse_gltf(file: &Path, glb: &[u8]) -> Result<gltf::Gltf, StageError> {
+    let parsed = StageError::catch_decoder_panic(
+        file,
+        "glTF",
+        "expected a well-formed glTF binary (its parser failed",
+        || gltf::Gltf::from_slice(glb),
+    )?;
+    parsed.map_err(|e| StageError::bad_input(file, "glTF", format!("expected a glTF binary: {e}")))
+}
+
+/// The bytes of each buffer of `gltf`: the GLB's BIN chunk, or a file beside `file` inside the
+/// declared folder.
+fn gltf_buffers(file: &Path, gltf: &gltf::Gltf, tiles: &Tiles) -> Result<Vec<Vec<u8>>, StageError> {
+    gltf.buffers()
+        .map(|b| match b.source() {
+            gltf::buffer::Source::Bin => gltf
+                .blob
+                .clone()
+                .ok_or_else(|| StageError::bad_input(file, "glTF", "the BIN chunk is missing")),
+            gltf::buffer::Source::Uri(u) => {
+                let base = file.parent().unwrap_or(Path::new("."));
+                let buffer = tiles.resolve(file, &format!("buffer {u}"), base, u)?;
+                std::fs::read(&buffer)
+                    .map_err(|e| StageError::bad_input(file, format!("buffer {u}"), e.to_string()))
+            }
+        })
+        .collect()
+}
+
+/// One content file's glTF being read into meshes: the file (for errors), the tileset (to place
+/// vertices) and the glTF's buffers.
+struct Content<'a> {
+    file: &'a Path,
+    tiles: &'a Tiles<'a>,
+    buffers: &'a [Vec<u8>],
+}
+
+impl Content<'_> {
+    /// The triangles of `mesh`'s primitives, placed by the node's transform `world`.
+    /// Primitives often share one POSITION accessor (one per material): each is read once.
+    fn mesh(&self, mesh: &gltf::Mesh, world: &Mat4) -> Result<Mesh, StageError> {
+        let mut out = Mesh::default();
+        let mut bases: std::collections::HashMap<usize, (u32, u32)> = Default::default();
+        for prim in mesh.primitives() {
+            self.append_primitive(&mut out, &mut bases, &prim, world)?;
+        }
+        Ok(out)
+    }
+
+    /// Appends the triangles of `prim` to `out` (its vertices too, unless `bases` says where its
+    /// POSITION accessor's already are), each with the material its glTF material names.
+    /// Primitives other than triangle lists, or without positions, add nothing.
+    fn append_primitive(
+        &self,
+        out: &mut Mesh,
+        bases: &mut std::collections::HashMap<usize, (u32, u32)>,
+        prim: &gltf::Primitive,
+        world: &Mat4,
+    ) -> Result<(), StageError> {
+        let (file, buffers) = (self.file, self.buffers);
+        if prim.mode() != gltf::mesh::Mode::Triangles {
+            return Ok(());
+        }
+        let material = prim
+            .material()
+            .name()
+            .and_then(Material::from_name)
+            .unwrap_or(Material::Concrete);
+        let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+        let Some(accessor) = prim.get(&gltf::Semantic::Positions) else {
+            return Ok(());
+        };
+        if !check_accessor(file, "POSITION", &accessor, buffers)? {
+            return Ok(());
+        }
+        if let Some(ix) = prim.indices() {
+            check_accessor(file, "indices", &ix, buffers)?;
+        }
+        let (base, n) = match bases.get(&accessor.index()) {
+            Some(&b) => b,
+            None => {
+                let Some(positions) = reader.read_positions() else {
+                    return Ok(());
+                };
+                let b = self.append_positions(out, positions, world)?;
+                bases.insert(accessor.index(), b);
+                b
+            }
+        };
+        let indices: Vec<u32> = match reader.read_indices() {
+            Some(ix) => ix.into_u32().collect(),
+            None => (0..n).collect(),
+        };
+        for t in indices.chunks_exact(3) {
+            if t.iter().any(|&i| i >= n) {
+                return Err(StageError::bad_input(
+                    file,
+                    "indices",
+                    "an index points past the vertices",
+                ));
+            }
+            out.triangles.push([base + t[0], base + t[1], base + t[2]]);
+            out.materials.push(material as u8);
+        }
+        Ok(())
+    }
+
+    /// Appends `positions`, transformed by `world` and placed in the site frame, to `out`;
+    /// returns where they start and how many there are.
+    fn append_positions(
+        &self,
+        out: &mut Mesh,
+        positions: impl Iterator<Item = [f32; 3]>,
+        world: &Mat4,
+    ) -> Result<(u32, u32), StageError> {
+        let base = out.positions.len() as u32;
+        for p in positions {
+            let e = apply(world, [p[0] as f64, p[1] as f64, p[2] as f64]);
+            let q =
+                (self.tiles.place)(e).map_err(|m| StageError::bad_input(self.file, "vertex", m))?;
+            out.positions.push([q[0] as f32, q[1] as f32, q[2] as f32]);
+        }
+        Ok((base, out.positions.len() as u32 - base))
+    }
 }
 
 /// The GLB container's lengths, checked before the gltf crate subtracts and slices by them

@@ -141,19 +141,7 @@ pub fn lift_view(
     let (Some(inst), Some(depth)) = (view.clutter.as_ref(), view.depth.as_ref()) else {
         return vec![];
     };
-    let mut pixels: BTreeMap<u16, Vec<(u32, u32)>> = BTreeMap::new();
-    let mut border: BTreeMap<u16, bool> = BTreeMap::new();
-    for (i, &id) in inst.ids.iter().enumerate() {
-        if id == 0 {
-            continue;
-        }
-        let (u, v) = (i as u32 % view.width, i as u32 / view.width);
-        pixels.entry(id).or_default().push((u, v));
-        if u == 0 || v == 0 || u + 1 == view.width || v + 1 == view.height {
-            border.insert(id, true);
-        }
-    }
-    let o = view.pose.position;
+    let (pixels, border) = instance_pixels(view, &inst.ids);
     let mut out = Vec::new();
     for (id, px) in pixels {
         let Some(class) = inst.classes.get(&id) else {
@@ -165,12 +153,80 @@ pub fn lift_view(
         if px.len() < cfg.min_pixels {
             continue;
         }
+        let Some(lifted) = LiftedInstance::lift(&px, view, depth, cal, cfg) else {
+            continue;
+        };
+        let (mx, my) = lifted.median_xy();
+        let z = lifted.z_range();
+        let heading = lifted.main_axis_heading();
+        let xy = lifted.centre(kind, track, heading, mx, my);
+        let weight = px.len() as f64 * if border.contains_key(&id) { 0.25 } else { 1.0 };
+        out.push(Detection {
+            class: class.clone(),
+            kind,
+            view: k,
+            xy,
+            z,
+            heading,
+            pixels: px.len(),
+            weight,
+        });
+    }
+    out
+}
+
+/// The pixels of each clutter instance of `view` (instance ids `ids`, 0 for none), and which
+/// instances touch the image border. A step of its own: one pass over the image groups what the
+/// per-instance steps then lift one by one.
+fn instance_pixels(
+    view: &View,
+    ids: &[u16],
+) -> (BTreeMap<u16, Vec<(u32, u32)>>, BTreeMap<u16, bool>) {
+    let mut pixels: BTreeMap<u16, Vec<(u32, u32)>> = BTreeMap::new();
+    let mut border: BTreeMap<u16, bool> = BTreeMap::new();
+    for (i, &id) in ids.iter().enumerate() {
+        if id == 0 {
+            continue;
+        }
+        let (u, v) = (i as u32 % view.width, i as u32 / view.width);
+        pixels.entry(id).or_default().push((u, v));
+        if u == 0 || v == 0 || u + 1 == view.width || v + 1 == view.height {
+            border.insert(id, true);
+        }
+    }
+    (pixels, border)
+}
+
+/// One instance's pixels back-projected to the site frame, with what its centre is read from:
+/// where each point's pixel ends its image row, which image side is cut, and the camera.
+struct LiftedInstance {
+    /// The lifted points, site frame.
+    pts: Vec<[f64; 3]>,
+    /// Which image side of its row each lifted point's pixel ends the instance on (-1 left, +1
+    /// right, 0 neither).
+    row_end: Vec<i8>,
+    /// The image side on which the instance is cut off ([`hidden_side`]).
+    hidden_side: Option<i8>,
+    /// The camera's position.
+    o: [f64; 3],
+}
+
+impl LiftedInstance {
+    /// The pixels `px` lifted at their calibrated depth (`cal` on the view's `depth`), leaving out
+    /// those nearer than 0.3 m or beyond `max_range_m`; None when fewer than `min_pixels` remain.
+    fn lift(
+        px: &[(u32, u32)],
+        view: &View,
+        depth: &[f32],
+        cal: &Calibration,
+        cfg: &ClutterConfig,
+    ) -> Option<LiftedInstance> {
+        let o = view.pose.position;
         let mut pts = Vec::with_capacity(px.len());
-        // Which image side of its row each lifted point's pixel ends the instance on, if any.
         let mut row_end = Vec::with_capacity(px.len());
-        let ends = row_ends(&px);
+        let ends = row_ends(px);
         let hidden_side = hidden_side(&ends, depth, view.width);
-        for &(u, v) in &px {
+        for &(u, v) in px {
             let d = depth[(v * view.width + u) as usize] as f64;
             let dh = cal.fit.eval(d);
             if !(dh > 0.3) {
@@ -192,121 +248,162 @@ pub fn lift_view(
                 }
             }));
         }
-        if pts.len() < cfg.min_pixels {
-            continue;
-        }
-        let mut xs: Vec<f64> = pts.iter().map(|p| p[0]).collect();
-        let mut ys: Vec<f64> = pts.iter().map(|p| p[1]).collect();
-        let mut zs: Vec<f64> = pts.iter().map(|p| p[2]).collect();
-        let (mx, my) = (
+        (pts.len() >= cfg.min_pixels).then_some(LiftedInstance {
+            pts,
+            row_end,
+            hidden_side,
+            o,
+        })
+    }
+
+    /// The per-coordinate median of the points on the ground plane.
+    fn median_xy(&self) -> (f64, f64) {
+        let mut xs: Vec<f64> = self.pts.iter().map(|p| p[0]).collect();
+        let mut ys: Vec<f64> = self.pts.iter().map(|p| p[1]).collect();
+        (
             median(&mut xs).unwrap_or(0.0),
             median(&mut ys).unwrap_or(0.0),
-        );
-        let z = (percentile(&mut zs, 0.05), percentile(&mut zs, 0.95));
-        // Main horizontal axis of the points (principal component).
-        let spread = Spread::of(pts.iter().map(|p| [p[0], p[1]]));
+        )
+    }
+
+    /// The lowest and highest point, as the 5th and 95th percentile of z.
+    fn z_range(&self) -> (f64, f64) {
+        let mut zs: Vec<f64> = self.pts.iter().map(|p| p[2]).collect();
+        (percentile(&mut zs, 0.05), percentile(&mut zs, 0.95))
+    }
+
+    /// Main horizontal axis of the points (principal component), radians (mod pi), when the
+    /// spread along it is more than four times the spread across it.
+    fn main_axis_heading(&self) -> Option<f64> {
+        let spread = Spread::of(self.pts.iter().map(|p| [p[0], p[1]]));
         let (sxx, syy, sxy) = (spread.sxx, spread.syy, spread.sxy);
         let tr = sxx + syy;
         let det = sxx * syy - sxy * sxy;
         let disc = (tr * tr / 4.0 - det).max(0.0).sqrt();
         let (l1, l2) = (tr / 2.0 + disc, tr / 2.0 - disc);
-        let heading = (l1 > 4.0 * l2.max(1e-12)).then(|| spread.axis_angle());
+        (l1 > 4.0 * l2.max(1e-12)).then(|| spread.axis_angle())
+    }
+
+    /// The asset's centre on the ground plane, from the median (`mx`, `my`): along its side for
+    /// an elongated asset with a known axis, else behind the median. A vehicle's axis is the
+    /// road's where the track knows it, else the points' main axis (`heading`).
+    fn centre(
+        &self,
+        kind: AssetKind,
+        track: Option<&Track>,
+        heading: Option<f64>,
+        mx: f64,
+        my: f64,
+    ) -> [f64; 2] {
+        let o = self.o;
         let (vx, vy) = (mx - o[0], my - o[1]);
         let vl = vx.hypot(vy).max(1e-9);
         let view_dir = [vx / vl, vy / vl];
         let size = kind.size();
-        // A vehicle's axis is the road's where the track knows it, else the points' main axis.
         let axis = kind
             .is_vehicle()
             .then(|| track.and_then(|t| t.road([mx, my])).map(|r| r.0))
             .flatten()
             .or(heading.map(|h| [h.cos(), h.sin()]));
-        let xy = match axis {
-            // An elongated asset seen along its side: the centre of the visible extent along the
-            // axis, and half the width behind the median of the side facing the camera.
-            Some(a) if size[0] >= 2.0 * size[1] => {
-                let mut nrm = [-a[1], a[0]];
-                if nrm[0] * view_dir[0] + nrm[1] * view_dir[1] < 0.0 {
-                    nrm = [-nrm[0], -nrm[1]];
-                }
-                let mut along: Vec<f64> = pts.iter().map(|p| p[0] * a[0] + p[1] * a[1]).collect();
-                let mut across: Vec<f64> =
-                    pts.iter().map(|p| p[0] * nrm[0] + p[1] * nrm[1]).collect();
-                // Where along the axis the instance's left and right image ends lie (before the
-                // percentiles sort `along`).
-                let side_along = |side: i8| {
-                    let v: Vec<f64> = along
-                        .iter()
-                        .zip(&row_end)
-                        .filter(|(_, e)| **e == side)
-                        .map(|(s, _)| *s)
-                        .collect();
-                    (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
-                };
-                let image_ends = [side_along(-1), side_along(1)];
-                let (s0, s1) = (percentile(&mut along, 0.03), percentile(&mut along, 0.97));
-                // Whether the image's left and right run along the asset's axis: seen end-on,
-                // they are its sides, and neither the border nor an occluder says which end
-                // shows.
-                let lengthwise = matches!(image_ends,
-                    [Some(lo), Some(hi)] if (lo - hi).abs() > 0.25 * (s1 - s0));
-                // Seen short of its length, the asset shows one end whole: the end the image's
-                // side edge or a nearer object does not hide, else the end nearer the camera
-                // (the far end hides behind the body). Its centre is half a length from there.
-                let near = o[0] * a[0] + o[1] * a[1];
-                let s = if s1 - s0 < 0.8 * size[0] {
-                    let hidden = hidden_side
-                        .and_then(|side| image_ends[(side > 0) as usize])
-                        .filter(|_| lengthwise);
-                    let low_end = if let Some(hidden) = hidden {
-                        // The image's edge or something nearer hides one end: the other end is
-                        // the asset's.
-                        hidden > (s0 + s1) / 2.0
-                    } else {
-                        (near - s0).abs() < (near - s1).abs()
-                    };
-                    if low_end {
-                        s0 + size[0] / 2.0
-                    } else {
-                        s1 - size[0] / 2.0
-                    }
-                } else {
-                    (s0 + s1) / 2.0
-                };
-                let q = median(&mut across).unwrap_or(0.0) + kind.visible_depth();
-                [a[0] * s + nrm[0] * q, a[1] * s + nrm[1] * q]
-            }
-            // Otherwise the median pushed back along the viewing direction by the depth of the
-            // asset's visible surface in front of its centre, and, for a round asset seen
-            // narrower than it is with one side hidden (a tree in a row behind the next one's
-            // crown, or cut by the frame), moved across the view to half a width from the side
-            // that shows.
-            _ => {
-                let back = kind.visible_depth();
-                let across = [view_dir[1], -view_dir[0]];
-                let at = (mx - o[0]) * across[0] + (my - o[1]) * across[1];
-                let shift = hidden_side
-                    .and_then(|side| centre_across(&pts, &row_end, o, across, side, size[1]))
-                    .map_or(0.0, |c| c - at);
-                [
-                    mx + view_dir[0] * back + across[0] * shift,
-                    my + view_dir[1] * back + across[1] * shift,
-                ]
-            }
-        };
-        let weight = px.len() as f64 * if border.contains_key(&id) { 0.25 } else { 1.0 };
-        out.push(Detection {
-            class: class.clone(),
-            kind,
-            view: k,
-            xy,
-            z,
-            heading,
-            pixels: px.len(),
-            weight,
-        });
+        match axis {
+            Some(a) if size[0] >= 2.0 * size[1] => self.centre_beside_axis(kind, a, view_dir),
+            _ => self.centre_behind_median(kind, mx, my, view_dir),
+        }
     }
-    out
+
+    /// An elongated asset seen along its side: the centre of the visible extent along the axis
+    /// `a`, and half the width behind the median of the side facing the camera.
+    fn centre_beside_axis(&self, kind: AssetKind, a: [f64; 2], view_dir: [f64; 2]) -> [f64; 2] {
+        let mut nrm = [-a[1], a[0]];
+        if nrm[0] * view_dir[0] + nrm[1] * view_dir[1] < 0.0 {
+            nrm = [-nrm[0], -nrm[1]];
+        }
+        let along: Vec<f64> = self.pts.iter().map(|p| p[0] * a[0] + p[1] * a[1]).collect();
+        let mut across: Vec<f64> = self
+            .pts
+            .iter()
+            .map(|p| p[0] * nrm[0] + p[1] * nrm[1])
+            .collect();
+        let s = self.centre_along_axis(along, a, kind.size()[0]);
+        let q = median(&mut across).unwrap_or(0.0) + kind.visible_depth();
+        [a[0] * s + nrm[0] * q, a[1] * s + nrm[1] * q]
+    }
+
+    /// Where along the axis `a` an asset of length `length` has its centre, from the points'
+    /// coordinates `along` it: the middle of their extent, or, seen short of its length, half a
+    /// length from the end that shows. A step of its own: which end shows is read from the image
+    /// ends, the cut side and the camera.
+    fn centre_along_axis(&self, mut along: Vec<f64>, a: [f64; 2], length: f64) -> f64 {
+        // Where along the axis the instance's left and right image ends lie (before the
+        // percentiles sort `along`).
+        let side_along = |side: i8| {
+            let v: Vec<f64> = along
+                .iter()
+                .zip(&self.row_end)
+                .filter(|(_, e)| **e == side)
+                .map(|(s, _)| *s)
+                .collect();
+            (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+        };
+        let image_ends = [side_along(-1), side_along(1)];
+        let (s0, s1) = (percentile(&mut along, 0.03), percentile(&mut along, 0.97));
+        // Whether the image's left and right run along the asset's axis: seen end-on, they are
+        // its sides, and neither the border nor an occluder says which end shows.
+        let lengthwise = matches!(image_ends,
+            [Some(lo), Some(hi)] if (lo - hi).abs() > 0.25 * (s1 - s0));
+        // Seen short of its length, the asset shows one end whole: the end the image's side edge
+        // or a nearer object does not hide, else the end nearer the camera (the far end hides
+        // behind the body). Its centre is half a length from there.
+        let o = self.o;
+        let near = o[0] * a[0] + o[1] * a[1];
+        if s1 - s0 < 0.8 * length {
+            let hidden = self
+                .hidden_side
+                .and_then(|side| image_ends[(side > 0) as usize])
+                .filter(|_| lengthwise);
+            let low_end = if let Some(hidden) = hidden {
+                // The image's edge or something nearer hides one end: the other end is the
+                // asset's.
+                hidden > (s0 + s1) / 2.0
+            } else {
+                (near - s0).abs() < (near - s1).abs()
+            };
+            if low_end {
+                s0 + length / 2.0
+            } else {
+                s1 - length / 2.0
+            }
+        } else {
+            (s0 + s1) / 2.0
+        }
+    }
+
+    /// Otherwise the median (`mx`, `my`) pushed back along the viewing direction by the depth of
+    /// the asset's visible surface in front of its centre, and, for a round asset seen narrower
+    /// than it is with one side hidden (a tree in a row behind the next one's crown, or cut by
+    /// the frame), moved across the view to half a width from the side that shows.
+    fn centre_behind_median(
+        &self,
+        kind: AssetKind,
+        mx: f64,
+        my: f64,
+        view_dir: [f64; 2],
+    ) -> [f64; 2] {
+        let o = self.o;
+        let back = kind.visible_depth();
+        let across = [view_dir[1], -view_dir[0]];
+        let at = (mx - o[0]) * across[0] + (my - o[1]) * across[1];
+        let shift = self
+            .hidden_side
+            .and_then(|side| {
+                centre_across(&self.pts, &self.row_end, o, across, side, kind.size()[1])
+            })
+            .map_or(0.0, |c| c - at);
+        [
+            mx + view_dir[0] * back + across[0] * shift,
+            my + view_dir[1] * back + across[1] * shift,
+        ]
+    }
 }
 
 /// Where across the view (the coordinate along `across` from the camera at `o`, metres) a round

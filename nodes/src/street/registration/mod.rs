@@ -235,27 +235,86 @@ fn refine_view(
     start: Option<Candidate>,
     p: &RegistrationParams,
 ) -> (Pose, Refinement) {
-    let unchanged = Refinement {
-        shift_m: [0.0, 0.0],
-        yaw_deg: 0.0,
-        before: f64::NAN,
-        after: f64::NAN,
-        accepted: false,
-        by_facades: consensus.is_some(),
-    };
-    // Samples per level of the search: the whole view on the coarse lattice for the grid; then
-    // ever finer lattices kept ever closer to the edges, as the pose left to find shrinks. The
-    // moves are judged, and the pose accepted, on the finest lattice within a coarse stride of
-    // an edge.
-    let (coarse_stride, fine_stride) = strides(view, p);
-    let coarse = samples(view, coarse_stride, None, p);
-    let edge = edges(view, consensus.is_some(), p);
-    let near = |band: u32| dilate_square(&edge, view.width, view.height, band as i64);
-    let fine = samples(view, fine_stride, Some(&near(coarse_stride)), p);
+    let by_facades = consensus.is_some();
     // A view with no building in it has nothing to be placed by (nor anything for the façade
     // stages to take from it).
+    let Some(lattices) = lattices(view, by_facades, p) else {
+        return (view.pose, Refinement::unchanged(by_facades));
+    };
+    let poses = ScoredPoses {
+        view,
+        twin,
+        consensus,
+        lattices,
+        scored: RefCell::default(),
+    };
+    let search_rad = p.search_deg.to_radians();
+    // Coarse: 7 x 7 positions, 5 headings.
+    let steps = Steps {
+        step_m: p.search_m / 3.0,
+        step_rad: search_rad / 2.0,
+        search_rad,
+    };
+    let starts = search_starts(&poses, start, steps, p);
+    let axes = plan_axes(&view.pose);
+    // The metadata, or the first pass's pose, stands unless a search beats it.
+    let mut best = start.unwrap_or([0.0; 3]);
+    let mut best_score = poses.at(ON_FINEST, best) - p.prior(&best);
+    for (first, from_level) in starts {
+        let here = pattern_search(&poses, first, from_level, steps, axes, p);
+        let s = poses.at(ON_FINEST, here) - p.prior(&here);
+        if s > best_score {
+            (best, best_score) = (here, s);
+        }
+    }
+    // The best pose found has the best agreement less the prior; where several poses agree
+    // equally well (a sample lattice cannot tell poses apart finer than its spacing), the prior
+    // picked the one nearest the metadata: the plateau's near edge, up to half a lattice step
+    // off. Its middle is the better estimate.
+    let best = plateau_middle(best, &|c| poses.at(ON_FINEST, c), axes, p);
+    let (before, after) = (poses.at(ON_FINEST, [0.0; 3]), poses.at(ON_FINEST, best));
+    verdict(view, best, (before, after), search_rad, by_facades, p)
+}
+
+impl Refinement {
+    /// The outcome of a view left where its metadata put it, before any pose was scored.
+    fn unchanged(by_facades: bool) -> Refinement {
+        Refinement {
+            shift_m: [0.0, 0.0],
+            yaw_deg: 0.0,
+            before: f64::NAN,
+            after: f64::NAN,
+            accepted: false,
+            by_facades,
+        }
+    }
+}
+
+/// How many sample lattices the search uses, coarse to finest.
+const LATTICES: usize = 5;
+/// The lattice the coarse grid is scored on.
+const ON_COARSE: usize = 0;
+/// The lattice the moves are judged, and the pose accepted, on.
+const ON_FINEST: usize = LATTICES - 1;
+
+/// Samples per level of the search: the whole view on the coarse lattice for the grid; then ever
+/// finer lattices kept ever closer to the edges, as the pose left to find shrinks. The moves are
+/// judged, and the pose accepted, on the finest lattice within a coarse stride of an edge. The
+/// lattices by level: the coarse grid's, then the pattern search's from level 0 on, its last one
+/// for every level past it. None when the view shows no building or the fine lattice is empty.
+/// A step of its own: every pose is scored on these, and they depend on the view alone.
+fn lattices(
+    view: &View,
+    by_facades: bool,
+    p: &RegistrationParams,
+) -> Option<[Vec<Sample>; LATTICES]> {
+    let (coarse_stride, fine_stride) = strides(view, p);
+    let coarse = samples(view, coarse_stride, None, p);
+    let edge = edges(view, by_facades, p);
+    let near = |band: u32| dilate_square(&edge, view.width, view.height, band as i64);
+    let fine = samples(view, fine_stride, Some(&near(coarse_stride)), p);
     if fine.is_empty() || !coarse.iter().any(|s| s.seen == Seen::Building) {
-        return (view.pose, unchanged);
+        return None;
     }
     let mid = samples(
         view,
@@ -271,31 +330,69 @@ fn refine_view(
     );
     // Past the fine lattice's resolution: every pixel within a fine stride of an edge.
     let finest = samples(view, 1, Some(&near(fine_stride)), p);
-    // The lattices by level: the coarse grid's, then the pattern search's from level 0 on,
-    // its last one for every level past it.
-    let lattices: [&[Sample]; 5] = [&coarse, &mid, &close, &fine, &finest];
-    let (on_coarse, on_finest) = (0, lattices.len() - 1);
-    // A pattern search comes back to poses it has scored (the pose it stands on, the one it
-    // came from, the best at the end): a fifth of the rays of the demo's registration were
-    // such repeats. Looked up, never iterated: the order of evaluation stays the search's.
-    let scored = RefCell::new(HashMap::<(usize, [u64; 3]), f64>::new());
-    let at = |lattice: usize, c: Candidate| {
+    Some([coarse, mid, close, fine, finest])
+}
+
+/// One view's poses scored against the twin on its lattices, each score kept. A pattern search
+/// comes back to poses it has scored (the pose it stands on, the one it came from, the best at
+/// the end): a fifth of the rays of the demo's registration were such repeats. Looked up, never
+/// iterated: the order of evaluation stays the search's.
+struct ScoredPoses<'a> {
+    view: &'a View,
+    twin: &'a Twin<'a>,
+    consensus: Option<&'a OthersSay<'a>>,
+    lattices: [Vec<Sample>; LATTICES],
+    scored: RefCell<HashMap<(usize, [u64; 3]), f64>>,
+}
+
+impl ScoredPoses<'_> {
+    /// The agreement of candidate `c` on lattice `lattice`.
+    fn at(&self, lattice: usize, c: Candidate) -> f64 {
         let key = (lattice, c.map(f64::to_bits));
-        if let Some(&s) = scored.borrow().get(&key) {
+        if let Some(&s) = self.scored.borrow().get(&key) {
             return s;
         }
+        let view = self.view;
         let pos = [
             view.pose.position[0] + c[0],
             view.pose.position[1] + c[1],
             view.pose.position[2],
         ];
-        let s = score(lattices[lattice], twin, consensus, pos, c[2]);
-        scored.borrow_mut().insert(key, s);
+        let s = score(
+            &self.lattices[lattice],
+            self.twin,
+            self.consensus,
+            pos,
+            c[2],
+        );
+        self.scored.borrow_mut().insert(key, s);
         s
-    };
-    let search_rad = p.search_deg.to_radians();
-    // Coarse: 7 x 7 positions, 5 headings.
-    let (step_m, step_rad) = (p.search_m / 3.0, search_rad / 2.0);
+    }
+}
+
+/// The coarse grid's steps and the heading window, radians.
+#[derive(Clone, Copy)]
+struct Steps {
+    /// The coarse grid's position step, metres.
+    step_m: f64,
+    /// The coarse grid's heading step.
+    step_rad: f64,
+    /// Largest heading change searched.
+    search_rad: f64,
+}
+
+/// The poses the pattern searches start from, each with the level it starts at. The best few of
+/// the coarse grid (7 x 7 positions, 5 headings) each start a pattern search on the fine lattice;
+/// a start given (the first pass's pose) skips the grid and searches from a quarter step.
+fn search_starts(
+    poses: &ScoredPoses,
+    start: Option<Candidate>,
+    steps: Steps,
+    p: &RegistrationParams,
+) -> Vec<(Candidate, u32)> {
+    let Steps {
+        step_m, step_rad, ..
+    } = steps;
     let mut grid = Vec::with_capacity(245);
     for i in -3..=3 {
         for j in -3..=3 {
@@ -304,19 +401,13 @@ fn refine_view(
             }
         }
     }
-    // The best few of the coarse grid each start a pattern search on the fine lattice: the
-    // `MOVES_AROUND` neighbours, moving while a neighbour is better (at most `MOVES` a level),
-    // then half the step; at least three levels, more for a wide window, until the step is
-    // under `FINEST_STEP_M`. Heading and a sideways move trade off along a narrow valley for a
-    // distant wall: one start can stop short in it.
-    // A start given (the first pass's pose) skips the grid and searches from a quarter step.
-    let starts: Vec<(Candidate, u32)> = match start {
+    match start {
         Some(c) => vec![(c, 2)],
         None => {
             let mut ranked: Vec<(f64, usize)> = grid
                 .iter()
                 .enumerate()
-                .map(|(k, c)| (at(on_coarse, *c) - p.prior(c), k))
+                .map(|(k, c)| (poses.at(ON_COARSE, *c) - p.prior(c), k))
                 .filter(|(s, _)| s.is_finite())
                 .collect();
             ranked.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
@@ -326,59 +417,92 @@ fn refine_view(
                 .map(|&(_, k)| (grid[k], 0))
                 .collect()
         }
-    };
-    // The camera's right and forward axes in plan (rotation columns 0 and 2).
+    }
+}
+
+/// The camera's right and forward axes in plan (rotation columns 0 and 2): the pattern search
+/// moves along them.
+fn plan_axes(pose: &Pose) -> [[f64; 2]; 2] {
     let plan = |col: usize| {
-        let r = view.pose.rotation;
+        let r = pose.rotation;
         let (x, y) = (r[0][col], r[1][col]);
         let n = x.hypot(y);
         if n > 1e-9 { [x / n, y / n] } else { [1.0, 0.0] }
     };
-    let (right, fwd) = (plan(0), plan(2));
-    // The metadata, or the first pass's pose, stands unless a search beats it.
-    let mut best = start.unwrap_or([0.0; 3]);
-    let mut best_score = at(on_finest, best) - p.prior(&best);
-    for (first, from_level) in starts {
-        let scale = (1u32 << from_level) as f64;
-        let (mut here, mut sm, mut sr) = (first, step_m / scale, step_rad / scale);
-        for level in from_level..8 {
-            if level >= 3 && sm <= FINEST_STEP_M {
+    [plan(0), plan(2)]
+}
+
+/// One pattern search from `first`, starting at level `from_level`: the `MOVES_AROUND`
+/// neighbours, moving while a neighbour is better (at most `MOVES` a level), then half the
+/// step; at least three levels, more for a wide window, until the step is under
+/// `FINEST_STEP_M`. Heading and a sideways move trade off along a narrow valley for a distant
+/// wall: one start can stop short in it. Returns where the search stopped.
+fn pattern_search(
+    poses: &ScoredPoses,
+    first: Candidate,
+    from_level: u32,
+    steps: Steps,
+    axes: [[f64; 2]; 2],
+    p: &RegistrationParams,
+) -> Candidate {
+    let scale = (1u32 << from_level) as f64;
+    let (mut here, mut sm, mut sr) = (first, steps.step_m / scale, steps.step_rad / scale);
+    for level in from_level..8 {
+        if level >= 3 && sm <= FINEST_STEP_M {
+            break;
+        }
+        sm /= 2.0;
+        sr /= 2.0;
+        for _ in 0..MOVES {
+            let around = moves_around(here, sm, sr, axes, steps.search_rad, p);
+            let lattice = (level as usize + 1).min(ON_FINEST);
+            let next = best_of(&around, &|c| poses.at(lattice, c), p).0;
+            if next == here {
                 break;
             }
-            sm /= 2.0;
-            sr /= 2.0;
-            for _ in 0..MOVES {
-                let mut around = Vec::with_capacity(1 + MOVES_AROUND.len());
-                around.push(here);
-                for (a, b, k) in MOVES_AROUND {
-                    // a and b along the camera's right and forward axes in plan.
-                    around.push([
-                        (here[0] + (a * right[0] + b * fwd[0]) * sm).clamp(-p.search_m, p.search_m),
-                        (here[1] + (a * right[1] + b * fwd[1]) * sm).clamp(-p.search_m, p.search_m),
-                        (here[2] + k * sr).clamp(-search_rad, search_rad),
-                    ]);
-                }
-                let lattice = (level as usize + 1).min(on_finest);
-                let next = best_of(&around, &|c| at(lattice, c), p).0;
-                if next == here {
-                    break;
-                }
-                here = next;
-            }
-        }
-        let s = at(on_finest, here) - p.prior(&here);
-        if s > best_score {
-            (best, best_score) = (here, s);
+            here = next;
         }
     }
-    // The best pose found has the best agreement less the prior; where several poses agree
-    // equally well (a sample lattice cannot tell poses apart finer than its spacing), the prior
-    // picked the one nearest the metadata: the plateau's near edge, up to half a lattice step
-    // off. Its middle is the better estimate.
-    let best = plateau_middle(best, &|c| at(on_finest, c), [right, fwd], p);
-    let (before, after) = (at(on_finest, [0.0; 3]), at(on_finest, best));
+    here
+}
+
+/// `here` and its `MOVES_AROUND` neighbours at steps `sm` metres and `sr` radians, kept inside
+/// the search window.
+fn moves_around(
+    here: Candidate,
+    sm: f64,
+    sr: f64,
+    [right, fwd]: [[f64; 2]; 2],
+    search_rad: f64,
+    p: &RegistrationParams,
+) -> Vec<Candidate> {
+    let mut around = Vec::with_capacity(1 + MOVES_AROUND.len());
+    around.push(here);
+    for (a, b, k) in MOVES_AROUND {
+        // a and b along the camera's right and forward axes in plan.
+        around.push([
+            (here[0] + (a * right[0] + b * fwd[0]) * sm).clamp(-p.search_m, p.search_m),
+            (here[1] + (a * right[1] + b * fwd[1]) * sm).clamp(-p.search_m, p.search_m),
+            (here[2] + k * sr).clamp(-search_rad, search_rad),
+        ]);
+    }
+    around
+}
+
+/// The pose to use and the outcome, given the best pose found and the agreement `before` (at
+/// the reported pose) and `after` (at the best): the best pose only where it beats the reported
+/// one by `min_gain`, agrees on at least `min_agreement`, and does not lie on the window's edge.
+/// A step of its own: the search proposes, this decides.
+fn verdict(
+    view: &View,
+    best: Candidate,
+    (before, after): (f64, f64),
+    search_rad: f64,
+    by_facades: bool,
+    p: &RegistrationParams,
+) -> (Pose, Refinement) {
     if !before.is_finite() {
-        return (view.pose, unchanged);
+        return (view.pose, Refinement::unchanged(by_facades));
     }
     // A best pose on the window's edge means the truth lies beyond it, or that nothing within
     // it explains the view: either way not a pose to trust.
@@ -397,7 +521,7 @@ fn refine_view(
         before,
         after: if accepted { after } else { before },
         accepted,
-        by_facades: consensus.is_some(),
+        by_facades,
     };
     if !accepted {
         return (view.pose, refinement);
