@@ -270,6 +270,51 @@ struct Executed {
     rerun: Option<String>,
 }
 
+/// A stage run on files that held still while it ran: what it returned (or how it panicked),
+/// the key and snapshot of the digests it ran on, and why it first ran again, if it did.
+struct Settled {
+    result: std::thread::Result<Result<registry::Ran, StageError>>,
+    key: Digest,
+    snapshot: Snapshot,
+    moved_once: Option<String>,
+}
+
+/// What `node`'s stage made, as a failure when it failed, panicked (a bug, named so), returned
+/// another type than its kind's output, or made other reports than its kind declares.
+fn checked_run(
+    node: &crate::graph::Node,
+    result: std::thread::Result<Result<registry::Ran, StageError>>,
+) -> Result<registry::Ran, StageError> {
+    let ran = match result {
+        Ok(r) => r?,
+        Err(panic) => {
+            let msg = panic
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned());
+            return Err(StageError::Failed(format!(
+                "the stage panicked (a bug): {}",
+                msg.unwrap_or_default()
+            )));
+        }
+    };
+    if ran.output.ty() != node.kind.output {
+        return Err(StageError::Failed(format!(
+            "the stage returned {} instead of {}",
+            ran.output.ty(),
+            node.kind.output
+        )));
+    }
+    let declared: Vec<_> = node.kind.reports.iter().map(|r| (r.name, r.ty)).collect();
+    let made: Vec<_> = ran.reports.iter().map(|(n, a)| (*n, a.ty())).collect();
+    if made != declared {
+        return Err(StageError::Failed(format!(
+            "the stage made the reports {made:?}; its kind declares {declared:?} (a bug)"
+        )));
+    }
+    Ok(ran)
+}
+
 struct Exec<'a> {
     graph: &'a Graph,
     cache: &'a Cache,
@@ -512,6 +557,27 @@ impl<'a> Exec<'a> {
     /// Runs node `i`'s stage on its inputs and stores the output.
     fn execute(&self, i: usize) -> Result<Executed, StageError> {
         let node = &self.graph.nodes[i];
+        let inputs = self.stage_inputs(i)?;
+        let settled = self.run_on_settled_files(i, &inputs)?;
+        let ran = checked_run(node, settled.result)?;
+        let (digest, reports) = self.store_ran(&settled.key, &ran)?;
+        let mut snapshot = settled.snapshot;
+        snapshot.digest = Some(digest.to_hex().to_string());
+        Ok(Executed {
+            artifact: Arc::new(ran.output),
+            digest,
+            reports,
+            snapshot,
+            rerun: settled
+                .moved_once
+                .map(|why| format!("{why} while it ran, so it ran again")),
+        })
+    }
+
+    /// Node `i`'s inputs as its stage takes them: each input slot's upstream artifacts, loaded
+    /// (or rebuilt) as needed.
+    fn stage_inputs(&self, i: usize) -> Result<Inputs, StageError> {
+        let node = &self.graph.nodes[i];
         let mut inputs = Inputs::new();
         for (spec, list) in node.kind.inputs.iter().zip(&node.inputs) {
             let arts = list
@@ -525,13 +591,19 @@ impl<'a> Exec<'a> {
             };
             inputs.push(spec.name, slot);
         }
+        Ok(inputs)
+    }
+
+    /// Runs node `i`'s stage on `inputs` until its files held still while it ran. The stage reads
+    /// its files while it runs, after they were digested: if one moved in between, its output
+    /// belongs to other bytes than its key says. It is dropped and the node runs once more on
+    /// fresh digests; if they move again, the node fails. Nothing of a moved input is ever stored
+    /// under a key.
+    fn run_on_settled_files(&self, i: usize, inputs: &Inputs) -> Result<Settled, StageError> {
+        let node = &self.graph.nodes[i];
         let paths: Vec<PathBuf> = node.files.iter().map(|f| f.path.clone()).collect();
-        // The stage reads its files while it runs, after they were digested: if one moved in
-        // between, its output belongs to other bytes than its key says. It is dropped and the
-        // node runs once more on fresh digests; if they move again, the node fails. Nothing of a
-        // moved input is ever stored under a key.
         let mut moved_once: Option<String> = None;
-        let (artifact, key, mut snapshot) = loop {
+        loop {
             let files = lock(&self.files[i]).clone();
             // Inputs are loaded now; a rebuilt input may have changed its digest, so key afresh.
             let (key, snapshot) =
@@ -543,7 +615,7 @@ impl<'a> Exec<'a> {
                 progress: &progress,
                 seed: *key.as_bytes(),
             };
-            let result = catch_unwind(AssertUnwindSafe(|| node.params.run(&inputs, &ctx)));
+            let result = catch_unwind(AssertUnwindSafe(|| node.params.run(inputs, &ctx)));
             drop(progress);
             // A failure is re-checked too: a file caught half-saved fails a stage that the saved
             // file would not.
@@ -553,7 +625,12 @@ impl<'a> Exec<'a> {
                 .zip(&files.stamps)
                 .find_map(|(f, s)| s.moved().map(|why| format!("input `{}`: {why}", f.field)));
             let Some(why) = moved else {
-                break (result, key, snapshot);
+                return Ok(Settled {
+                    result,
+                    key,
+                    snapshot,
+                    moved_once,
+                });
             };
             if let Some(first) = moved_once {
                 return Err(StageError::Failed(format!(
@@ -575,42 +652,23 @@ impl<'a> Exec<'a> {
             })?;
             *lock(&self.files[i]) = fresh;
             moved_once = Some(why);
-        };
-        let ran = match artifact {
-            Ok(r) => r?,
-            Err(panic) => {
-                let msg = panic
-                    .downcast_ref::<&str>()
-                    .map(|s| s.to_string())
-                    .or_else(|| panic.downcast_ref::<String>().cloned());
-                return Err(StageError::Failed(format!(
-                    "the stage panicked (a bug): {}",
-                    msg.unwrap_or_default()
-                )));
-            }
-        };
-        let artifact = ran.output;
-        if artifact.ty() != node.kind.output {
-            return Err(StageError::Failed(format!(
-                "the stage returned {} instead of {}",
-                artifact.ty(),
-                node.kind.output
-            )));
         }
-        let declared: Vec<_> = node.kind.reports.iter().map(|r| (r.name, r.ty)).collect();
-        let made: Vec<_> = ran.reports.iter().map(|(n, a)| (*n, a.ty())).collect();
-        if made != declared {
-            return Err(StageError::Failed(format!(
-                "the stage made the reports {made:?}; its kind declares {declared:?} (a bug)"
-            )));
-        }
+    }
+
+    /// Stores what the stage made: its output and reports as blobs, the action entry listing
+    /// them under `key`. Returns the output's digest and each report's.
+    fn store_ran(
+        &self,
+        key: &Digest,
+        ran: &registry::Ran,
+    ) -> Result<(Digest, BTreeMap<&'static str, Digest>), StageError> {
         let store = |e: std::io::Error| {
             StageError::Failed(format!(
                 "cannot store the output in {}: {e}",
                 self.cache.root().display()
             ))
         };
-        let (digest, size) = self.store(&artifact).map_err(store)?;
+        let (digest, size) = self.store(&ran.output).map_err(store)?;
         let mut action = Action {
             output: (digest, size),
             reports: Vec::new(),
@@ -621,15 +679,8 @@ impl<'a> Exec<'a> {
             action.reports.push((name.to_string(), d, size));
             reports.insert(*name, d);
         }
-        self.cache.put_action(&key, &action).map_err(store)?;
-        snapshot.digest = Some(digest.to_hex().to_string());
-        Ok(Executed {
-            artifact: Arc::new(artifact),
-            digest,
-            reports,
-            snapshot,
-            rerun: moved_once.map(|why| format!("{why} while it ran, so it ran again")),
-        })
+        self.cache.put_action(key, &action).map_err(store)?;
+        Ok((digest, reports))
     }
 
     /// Encodes `artifact` straight into the store (a large artifact's encoding is never held

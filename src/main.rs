@@ -82,35 +82,7 @@ enum Command {
         debounce_ms: u64,
     },
     /// Run a sweep file: a base graph over grids of parameters and ablation switches.
-    Sweep {
-        /// The sweep file (RON).
-        sweep: PathBuf,
-        /// Resolve the base graph's data paths against this folder.
-        #[arg(long)]
-        data: Option<PathBuf>,
-        /// Override applied to every variant: NODE.PARAM=VALUE (repeatable).
-        #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
-        sets: Vec<String>,
-        /// Cache directory (default: $KODAMA_DAG_CACHE, else ./cache).
-        #[arg(long)]
-        cache: Option<PathBuf>,
-        /// Where the table and each variant's outputs go (default: out/<sweep name>/).
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// Worker threads per variant (default: all cores; at most 4 per core).
-        #[arg(long, short, value_parser = parse_jobs)]
-        jobs: Option<usize>,
-        /// Print only warnings, errors and the table.
-        #[arg(long, short)]
-        quiet: bool,
-        /// Check every variant's graph and list the variants, without running anything.
-        #[arg(long)]
-        dry_run: bool,
-        /// Let the base graph lie outside the sweep's folder and the one above it, and its data
-        /// paths leave its folder (or --data).
-        #[arg(long)]
-        allow_outside: bool,
-    },
+    Sweep(SweepArgs),
     /// Say what `run` would do and why, without running anything.
     Explain {
         #[command(flatten)]
@@ -134,23 +106,7 @@ enum Command {
         port: u16,
     },
     /// Evict least recently used artifacts until the cache holds at most --max-bytes.
-    Gc {
-        /// Cache directory (default: $KODAMA_DAG_CACHE, else ./cache).
-        #[arg(long)]
-        cache: Option<PathBuf>,
-        /// Size bound, in bytes or with a unit: 500M, 2G, 1GiB.
-        #[arg(long, value_parser = parse_bytes)]
-        max_bytes: u64,
-        /// Never evict what this graph's last run produced (repeatable).
-        #[arg(long, value_name = "GRAPH")]
-        keep: Vec<PathBuf>,
-        /// Resolve the kept graphs' data paths against this folder.
-        #[arg(long)]
-        data: Option<PathBuf>,
-        /// Let the kept graphs' data paths leave their folder (or --data).
-        #[arg(long)]
-        allow_outside: bool,
-    },
+    Gc(GcArgs),
     /// Print the graph as Graphviz dot or Mermaid.
     Graph {
         #[command(flatten)]
@@ -161,6 +117,58 @@ enum Command {
     },
     /// List the node kinds with their inputs and outputs.
     Kinds,
+}
+
+/// `sweep` arguments.
+#[derive(Args)]
+struct SweepArgs {
+    /// The sweep file (RON).
+    sweep: PathBuf,
+    /// Resolve the base graph's data paths against this folder.
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Override applied to every variant: NODE.PARAM=VALUE (repeatable).
+    #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+    sets: Vec<String>,
+    /// Cache directory (default: $KODAMA_DAG_CACHE, else ./cache).
+    #[arg(long)]
+    cache: Option<PathBuf>,
+    /// Where the table and each variant's outputs go (default: out/<sweep name>/).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Worker threads per variant (default: all cores; at most 4 per core).
+    #[arg(long, short, value_parser = parse_jobs)]
+    jobs: Option<usize>,
+    /// Print only warnings, errors and the table.
+    #[arg(long, short)]
+    quiet: bool,
+    /// Check every variant's graph and list the variants, without running anything.
+    #[arg(long)]
+    dry_run: bool,
+    /// Let the base graph lie outside the sweep's folder and the one above it, and its data
+    /// paths leave its folder (or --data).
+    #[arg(long)]
+    allow_outside: bool,
+}
+
+/// `gc` arguments.
+#[derive(Args)]
+struct GcArgs {
+    /// Cache directory (default: $KODAMA_DAG_CACHE, else ./cache).
+    #[arg(long)]
+    cache: Option<PathBuf>,
+    /// Size bound, in bytes or with a unit: 500M, 2G, 1GiB.
+    #[arg(long, value_parser = parse_bytes)]
+    max_bytes: u64,
+    /// Never evict what this graph's last run produced (repeatable).
+    #[arg(long, value_name = "GRAPH")]
+    keep: Vec<PathBuf>,
+    /// Resolve the kept graphs' data paths against this folder.
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Let the kept graphs' data paths leave their folder (or --data).
+    #[arg(long)]
+    allow_outside: bool,
 }
 
 #[derive(Args)]
@@ -418,6 +426,7 @@ fn main() -> ExitCode {
     }
 }
 
+/// Runs the command the user gave; its exit code.
 fn dispatch(cmd: Command) -> Result<u8, Fail> {
     match cmd {
         Command::Trace(a) => rf_commands::trace(a).map_err(|(c, m)| Fail(c, m)),
@@ -445,147 +454,14 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             quiet,
             debounce_ms,
         } => watch_loop(graph, cache, out, jobs, json, quiet, debounce_ms),
-        Command::Sweep {
-            sweep,
-            data,
-            sets,
-            cache,
-            out,
-            jobs,
-            quiet,
-            dry_run,
-            allow_outside,
-        } => {
-            let sw = kodama_dag::sweep::load_sweep(&sweep, allow_outside)
-                .map_err(|e| Fail(2, format!("error: {e}")))?;
-            if dry_run {
-                let opts = kodama_dag::sweep::SweepOptions {
-                    data_dir: data,
-                    sets,
-                    allow_outside,
-                    ..Default::default()
-                };
-                let variants = kodama_dag::sweep::check_variants(&sw, &opts)
-                    .map_err(|e| Fail(2, format!("error: {e}")))?;
-                for v in variants {
-                    println!("{}", v.name());
-                }
-                return Ok(0);
-            }
-            let cache = open_cache(cache)?;
-            let out_dir = out.unwrap_or_else(|| Path::new("out").join(&sw.name));
-            let opts = kodama_dag::sweep::SweepOptions {
-                data_dir: data,
-                sets,
-                out_dir: out_dir.clone(),
-                jobs,
-                allow_outside,
-            };
-            let reporter = Reporter::new(Mode::detect(quiet), 0);
-            let results = kodama_dag::sweep::run_sweep(&sw, &cache, &opts, &reporter, |i, n, v| {
-                if !quiet {
-                    eprintln!("variant {}/{n}: {}", i + 1, v.name());
-                }
-            })
-            .map_err(|e| match e {
-                kodama_dag::sweep::SweepError::Graph(m) => Fail(2, format!("error: {m}")),
-                kodama_dag::sweep::SweepError::Failed(m) => Fail(1, format!("error: {m}")),
-                kodama_dag::sweep::SweepError::Run(e) => Fail::from(e),
-            })?;
-            let ran: usize = results
-                .iter()
-                .map(|r| {
-                    r.record
-                        .nodes
-                        .iter()
-                        .filter(|n| n.status == Status::Ran)
-                        .count()
-                })
-                .sum();
-            eprintln!(
-                "{} variants, {ran} node runs in all; table in {}",
-                results.len(),
-                out_dir.join("table.md").display()
-            );
-            print!(
-                "{}",
-                std::fs::read_to_string(out_dir.join("table.md")).unwrap_or_default()
-            );
-            Ok(0)
-        }
+        Command::Sweep(a) => sweep_command(a),
         Command::Explain {
             graph,
             cache,
             targets,
             json,
-        } => {
-            let g = load_graph(&graph)?;
-            let cache = open_cache(cache)?;
-            let plan = explain(&g, &cache, &targets)?;
-            if json {
-                println!(
-                    "{}",
-                    serde_json::json!({ "graph": g.path.display().to_string(), "nodes": plan })
-                );
-            } else {
-                for e in &plan {
-                    let word = match e.plan {
-                        Plan::Cached => "cached",
-                        Plan::Run => "run",
-                        Plan::Maybe => "maybe",
-                    };
-                    println!("{word:<7} {} ({}): {}", e.id, e.kind, e.reason);
-                }
-            }
-            Ok(0)
-        }
-        Command::Gc {
-            cache,
-            max_bytes,
-            keep,
-            data,
-            allow_outside,
-        } => {
-            // gc deletes: it opens only a folder that is a cache, and creates none.
-            let dir = cache_dir(cache);
-            let cache = Cache::open_existing(&dir).map_err(|e| cache_fail(&dir, e))?;
-            let mut pinned = BTreeSet::new();
-            for g in keep {
-                let graph = load_graph(&GraphArgs {
-                    graph: g,
-                    data: data.clone(),
-                    sets: Vec::new(),
-                    allow_outside,
-                })?;
-                pinned.extend(kodama_dag::exec::last_run_digests(&graph, &cache));
-            }
-            let report = gc(&cache, max_bytes, &pinned, || {
-                eprintln!("waiting for running jobs to release the cache...")
-            })
-            .map_err(|e| {
-                Fail(
-                    1,
-                    format!("error: gc of {} failed: {e}", cache.root().display()),
-                )
-            })?;
-            println!(
-                "{} -> {} bytes; removed {} artifacts and {} stale action entries; kept {} pinned",
-                report.bytes_before,
-                report.bytes_after,
-                report.blobs_removed,
-                report.actions_removed,
-                report.blobs_pinned
-            );
-            if let Some(first) = report.foreign.first() {
-                eprintln!(
-                    "warning: left alone {} entries under cas/, ac/ and tmp/ that kodama-dag did \
-                     not name (first: {}); gc never deletes them",
-                    report.foreign.len(),
-                    first.display()
-                );
-            }
-            Ok(0)
-        }
+        } => explain_command(&graph, cache, &targets, json),
+        Command::Gc(a) => gc_command(a),
         Command::Graph { graph, format } => {
             let g = load_graph(&graph)?;
             print!(
@@ -602,29 +478,186 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             Ok(0)
         }
         Command::Kinds => {
-            for k in registry::kinds() {
-                let inputs: Vec<String> = k
-                    .inputs
-                    .iter()
-                    .map(|i| match i.arity {
-                        Arity::One => format!("{}: {}", i.name, i.ty),
-                        Arity::Optional => format!("{}: {}?", i.name, i.ty),
-                        Arity::Many => format!("{}: [{}]", i.name, i.ty),
-                    })
-                    .collect();
-                println!(
-                    "{} v{} ({}) -> {}\n    {}",
-                    k.name,
-                    k.version,
-                    inputs.join(", "),
-                    k.output,
-                    k.doc
-                );
-                for r in k.reports {
-                    println!("    report \"<node>.{}\" -> {}: {}", r.name, r.ty, r.doc);
-                }
-            }
+            print_kinds();
             Ok(0)
+        }
+    }
+}
+
+/// `sweep`: every variant run in order through one cache, then the metrics table; with
+/// `--dry-run`, every variant's graph checked and the variants listed instead.
+fn sweep_command(a: SweepArgs) -> Result<u8, Fail> {
+    let SweepArgs {
+        sweep,
+        data,
+        sets,
+        cache,
+        out,
+        jobs,
+        quiet,
+        dry_run,
+        allow_outside,
+    } = a;
+    let sw = kodama_dag::sweep::load_sweep(&sweep, allow_outside)
+        .map_err(|e| Fail(2, format!("error: {e}")))?;
+    if dry_run {
+        let opts = kodama_dag::sweep::SweepOptions {
+            data_dir: data,
+            sets,
+            allow_outside,
+            ..Default::default()
+        };
+        let variants = kodama_dag::sweep::check_variants(&sw, &opts)
+            .map_err(|e| Fail(2, format!("error: {e}")))?;
+        for v in variants {
+            println!("{}", v.name());
+        }
+        return Ok(0);
+    }
+    let cache = open_cache(cache)?;
+    let out_dir = out.unwrap_or_else(|| Path::new("out").join(&sw.name));
+    let opts = kodama_dag::sweep::SweepOptions {
+        data_dir: data,
+        sets,
+        out_dir: out_dir.clone(),
+        jobs,
+        allow_outside,
+    };
+    let reporter = Reporter::new(Mode::detect(quiet), 0);
+    let results = kodama_dag::sweep::run_sweep(&sw, &cache, &opts, &reporter, |i, n, v| {
+        if !quiet {
+            eprintln!("variant {}/{n}: {}", i + 1, v.name());
+        }
+    })
+    .map_err(|e| match e {
+        kodama_dag::sweep::SweepError::Graph(m) => Fail(2, format!("error: {m}")),
+        kodama_dag::sweep::SweepError::Failed(m) => Fail(1, format!("error: {m}")),
+        kodama_dag::sweep::SweepError::Run(e) => Fail::from(e),
+    })?;
+    let ran: usize = results
+        .iter()
+        .map(|r| {
+            r.record
+                .nodes
+                .iter()
+                .filter(|n| n.status == Status::Ran)
+                .count()
+        })
+        .sum();
+    eprintln!(
+        "{} variants, {ran} node runs in all; table in {}",
+        results.len(),
+        out_dir.join("table.md").display()
+    );
+    print!(
+        "{}",
+        std::fs::read_to_string(out_dir.join("table.md")).unwrap_or_default()
+    );
+    Ok(0)
+}
+
+/// `explain`: what `run` would do for each node of the graph (or of `targets` and what they
+/// need) and why, as lines or as JSON.
+fn explain_command(
+    graph: &GraphArgs,
+    cache: Option<PathBuf>,
+    targets: &[String],
+    json: bool,
+) -> Result<u8, Fail> {
+    let g = load_graph(graph)?;
+    let cache = open_cache(cache)?;
+    let plan = explain(&g, &cache, targets)?;
+    if json {
+        println!(
+            "{}",
+            serde_json::json!({ "graph": g.path.display().to_string(), "nodes": plan })
+        );
+    } else {
+        for e in &plan {
+            let word = match e.plan {
+                Plan::Cached => "cached",
+                Plan::Run => "run",
+                Plan::Maybe => "maybe",
+            };
+            println!("{word:<7} {} ({}): {}", e.id, e.kind, e.reason);
+        }
+    }
+    Ok(0)
+}
+
+/// `gc`: least recently used artifacts evicted down to `--max-bytes`, never what a kept
+/// graph's last run produced. gc deletes: it opens only a folder that is a cache, and creates
+/// none.
+fn gc_command(a: GcArgs) -> Result<u8, Fail> {
+    let GcArgs {
+        cache,
+        max_bytes,
+        keep,
+        data,
+        allow_outside,
+    } = a;
+    let dir = cache_dir(cache);
+    let cache = Cache::open_existing(&dir).map_err(|e| cache_fail(&dir, e))?;
+    let mut pinned = BTreeSet::new();
+    for g in keep {
+        let graph = load_graph(&GraphArgs {
+            graph: g,
+            data: data.clone(),
+            sets: Vec::new(),
+            allow_outside,
+        })?;
+        pinned.extend(kodama_dag::exec::last_run_digests(&graph, &cache));
+    }
+    let report = gc(&cache, max_bytes, &pinned, || {
+        eprintln!("waiting for running jobs to release the cache...")
+    })
+    .map_err(|e| {
+        Fail(
+            1,
+            format!("error: gc of {} failed: {e}", cache.root().display()),
+        )
+    })?;
+    println!(
+        "{} -> {} bytes; removed {} artifacts and {} stale action entries; kept {} pinned",
+        report.bytes_before,
+        report.bytes_after,
+        report.blobs_removed,
+        report.actions_removed,
+        report.blobs_pinned
+    );
+    if let Some(first) = report.foreign.first() {
+        eprintln!(
+            "warning: left alone {} entries under cas/, ac/ and tmp/ that kodama-dag did \
+             not name (first: {}); gc never deletes them",
+            report.foreign.len(),
+            first.display()
+        );
+    }
+    Ok(0)
+}
+
+/// `kinds`: every node kind with its inputs, output, doc and reports.
+fn print_kinds() {
+    for k in registry::kinds() {
+        let inputs: Vec<String> = k
+            .inputs
+            .iter()
+            .map(|i| match i.arity {
+                Arity::One => format!("{}: {}", i.name, i.ty),
+                Arity::Optional => format!("{}: {}?", i.name, i.ty),
+                Arity::Many => format!("{}: [{}]", i.name, i.ty),
+            })
+            .collect();
+        println!(
+            "{} v{} ({}) -> {}\n    {}",
+            k.name,
+            k.version,
+            inputs.join(", "),
+            k.output,
+            k.doc
+        );
+        for r in k.reports {
+            println!("    report \"<node>.{}\" -> {}: {}", r.name, r.ty, r.doc);
         }
     }
 }

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use kodama_nodes::Site;
 use kodama_nodes::io::safe_name::check_file_name;
-use kodama_nodes::stage::Arity;
+use kodama_nodes::stage::{Arity, InputSpec};
 use petgraph::algo::tarjan_scc;
 use petgraph::graph::DiGraph;
 
@@ -89,6 +89,9 @@ fn de_diag(e: DeError, fallback: Span, node: Option<&str>) -> Diagnostic {
     Diagnostic::at(e.span.unwrap_or(fallback), node, e.message)
 }
 
+/// The graph of the file in `sources` (item 0), its `--set` overrides applied: parsed, its site
+/// and nodes checked, its outputs resolved, its nodes in topological order. None when anything
+/// is wrong, every problem in `diags`.
 fn check(
     path: &Path,
     opts: &LoadOptions,
@@ -102,6 +105,66 @@ fn check(
             return None;
         }
     };
+    let top = top_fields(&ast, diags)?;
+    let site = site_of(&ast, top.site, diags);
+    let Some(nodes_ast) = top.nodes else {
+        diags.push(Diagnostic::at(
+            ast.span,
+            None,
+            "missing field `nodes`: expected `nodes: { \"id\": Kind(...), ... }`",
+        ));
+        return None;
+    };
+    let mut raw = raw_nodes(nodes_ast, diags);
+    apply_sets(&mut raw, opts, diags);
+    add_report_nodes(&mut raw, top.outputs);
+
+    // Kinds, inputs and params.
+    let ids: Vec<&str> = raw.iter().map(|r| r.id.as_str()).collect();
+    let index: HashMap<&str, usize> = ids.iter().enumerate().map(|(i, id)| (*id, i)).collect();
+    let mut nodes: Vec<Option<Node>> = Vec::with_capacity(raw.len());
+    let roots = data_root(path, opts);
+    for r in &raw {
+        nodes.push(build_node(r, &raw, &index, &roots, diags));
+    }
+
+    let outputs = top
+        .outputs
+        .map(|a| check_outputs(a, &index, &raw, diags))
+        .unwrap_or_default();
+    if !diags.is_empty() {
+        return None;
+    }
+    let nodes: Vec<Node> = nodes
+        .into_iter()
+        .map(|n| n.expect("no diagnostics means every node built"))
+        .collect();
+    let order = topo_order(&nodes, &raw, diags)?;
+    let site = site?;
+    let (nodes, outputs) = in_topological_order(nodes, &order, outputs);
+    let name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "graph".into());
+    Some(Graph {
+        path: path.to_path_buf(),
+        name,
+        site,
+        nodes,
+        outputs,
+    })
+}
+
+/// The fields of a graph file's `Graph(...)`, each as written, if given.
+struct TopFields<'a> {
+    site: Option<&'a Ast>,
+    nodes: Option<&'a Ast>,
+    outputs: Option<&'a Ast>,
+}
+
+/// The fields of the graph file's top value `ast`, which must be a `Graph(...)` (None, and a
+/// diagnostic, when it is not); a diagnostic for each field it does not know.
+fn top_fields<'a>(ast: &'a Ast, diags: &mut Vec<Diagnostic>) -> Option<TopFields<'a>> {
     let top = match &ast.v {
         Value::Struct { name, fields } if name.as_ref().is_none_or(|n| n.name == "Graph") => fields,
         _ => {
@@ -117,14 +180,16 @@ fn check(
         }
     };
     const TOP: &[&str] = &["site", "nodes", "outputs"];
-    let mut site_ast = None;
-    let mut nodes_ast = None;
-    let mut outputs_ast = None;
+    let mut fields = TopFields {
+        site: None,
+        nodes: None,
+        outputs: None,
+    };
     for (name, v) in top {
         match name.name.as_str() {
-            "site" => site_ast = Some(v),
-            "nodes" => nodes_ast = Some(v),
-            "outputs" => outputs_ast = Some(v),
+            "site" => fields.site = Some(v),
+            "nodes" => fields.nodes = Some(v),
+            "outputs" => fields.outputs = Some(v),
             other => diags.push(Diagnostic::at(
                 name.span,
                 None,
@@ -132,7 +197,13 @@ fn check(
             )),
         }
     }
-    let site = match site_ast {
+    Some(fields)
+}
+
+/// The graph's site, from its `site` field (`site_ast`; the graph `ast` is where a missing one
+/// is reported), parsed and checked; None, and a diagnostic, when it is missing or wrong.
+fn site_of(ast: &Ast, site_ast: Option<&Ast>, diags: &mut Vec<Diagnostic>) -> Option<Site> {
+    match site_ast {
         None => {
             diags.push(Diagnostic::at(ast.span, None, "missing field `site`: expected `site: Site(crs: \"EPSG:<code>\", origin: (x, y), cell_m: 0.5)`"));
             None
@@ -156,23 +227,12 @@ fn check(
                 Ok(()) => Some(site),
             },
         },
-    };
-    let Some(nodes_ast) = nodes_ast else {
-        diags.push(Diagnostic::at(
-            ast.span,
-            None,
-            "missing field `nodes`: expected `nodes: { \"id\": Kind(...), ... }`",
-        ));
-        return None;
-    };
-    let mut raw = raw_nodes(nodes_ast, diags);
-    apply_sets(&mut raw, opts, diags);
-    add_report_nodes(&mut raw, outputs_ast);
+    }
+}
 
-    // Kinds, inputs and params.
-    let ids: Vec<&str> = raw.iter().map(|r| r.id.as_str()).collect();
-    let index: HashMap<&str, usize> = ids.iter().enumerate().map(|(i, id)| (*id, i)).collect();
-    let mut nodes: Vec<Option<Node>> = Vec::with_capacity(raw.len());
+/// Where the nodes' data paths resolve: `--data`, else the graph file's folder (`.` when the
+/// path has none).
+fn data_root(path: &Path, opts: &LoadOptions) -> DataRoot {
     let base = opts
         .data_dir
         .clone()
@@ -182,25 +242,16 @@ fn check(
     } else {
         base
     };
-    let roots = DataRoot::new(base, opts);
-    for r in &raw {
-        nodes.push(build_node(r, &raw, &index, &roots, diags));
-    }
+    DataRoot::new(base, opts)
+}
 
-    let outputs = outputs_ast
-        .map(|a| check_outputs(a, &index, &raw, diags))
-        .unwrap_or_default();
-    if !diags.is_empty() {
-        return None;
-    }
-    let nodes: Vec<Node> = nodes
-        .into_iter()
-        .map(|n| n.expect("no diagnostics means every node built"))
-        .collect();
-    let order = topo_order(&nodes, &raw, diags)?;
-    let site = site?;
-
-    // Renumber into topological order.
+/// The nodes renumbered into topological `order` (`order[new]` = old index), their inputs and
+/// the outputs pointing at the new indices, each node's deps the distinct nodes it takes.
+fn in_topological_order(
+    nodes: Vec<Node>,
+    order: &[usize],
+    outputs: Vec<(String, usize)>,
+) -> (Vec<Node>, Vec<(String, usize)>) {
     let mut new_index = vec![0; nodes.len()];
     for (new, &old) in order.iter().enumerate() {
         new_index[old] = new;
@@ -230,17 +281,7 @@ fn check(
         .into_iter()
         .map(|(name, old)| (name, new_index[old]))
         .collect();
-    let name = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "graph".into());
-    Some(Graph {
-        path: path.to_path_buf(),
-        name,
-        site,
-        nodes,
-        outputs,
-    })
+    (nodes, outputs)
 }
 
 /// The finest site cell accepted. Every raster of a graph is on the site's grid, so a cell far
@@ -645,6 +686,9 @@ fn check_input_kind(path: &Path, written: &str, contained: bool) -> Result<(), S
     ))
 }
 
+/// The node `r` as the engine runs it: its kind, its inputs resolved to node indices, its params
+/// parsed and validated, its declared files resolved; None (with every problem in `diags`) when
+/// any of these fails.
 fn build_node(
     r: &RawNode,
     raw: &[RawNode],
@@ -652,26 +696,94 @@ fn build_node(
     roots: &DataRoot,
     diags: &mut Vec<Diagnostic>,
 ) -> Option<Node> {
-    let id = Some(r.id.as_str());
     let Some(kind) = registry::kind(&r.kind.name) else {
         let names = registry::kinds().iter().map(|k| k.name);
         diags.push(Diagnostic::at(
             r.kind.span,
-            id,
+            Some(r.id.as_str()),
             unknown("node kind", &r.kind.name, names),
         ));
         return None;
     };
     let before = diags.len();
-    let mut inputs = vec![Vec::new(); kind.inputs.len()];
-    let mut params = Vec::new();
-    for (name, v) in &r.fields {
-        let Some(slot) = kind.inputs.iter().position(|s| s.name == name.name) else {
-            params.push((name.clone(), v.clone()));
-            continue;
-        };
-        let spec = kind.inputs[slot];
-        let refs: Vec<&Ast> = match (&v.v, spec.arity) {
+    let b = NodeBuild {
+        r,
+        raw,
+        index,
+        kind,
+    };
+    let (inputs, params) = b.inputs_and_params(diags);
+    b.check_required_inputs(&inputs, diags);
+    if !b.params_finite(&params, diags) {
+        return None;
+    }
+    let parsed = b.parse_params(&params, diags)?;
+    let files = b.declared_files(parsed.as_ref(), &params, roots, diags);
+    if diags.len() > before {
+        return None;
+    }
+    Some(Node {
+        id: r.id.clone(),
+        kind,
+        inputs,
+        deps: Vec::new(),
+        params: parsed,
+        files,
+    })
+}
+
+/// One raw node being built into a [`Node`] of its `kind`, with the graph's raw nodes and their
+/// indices by id to resolve its inputs against.
+struct NodeBuild<'a> {
+    r: &'a RawNode,
+    raw: &'a [RawNode],
+    index: &'a HashMap<&'a str, usize>,
+    kind: &'static Kind,
+}
+
+impl NodeBuild<'_> {
+    /// The node id, as diagnostics name it.
+    fn id(&self) -> Option<&str> {
+        Some(self.r.id.as_str())
+    }
+
+    /// The node's fields sorted into inputs (per input slot, the indices of the nodes named) and
+    /// params (every field that is not an input). A step of its own: the kind says which is
+    /// which, and only inputs refer to other nodes.
+    fn inputs_and_params(
+        &self,
+        diags: &mut Vec<Diagnostic>,
+    ) -> (Vec<Vec<usize>>, Vec<(Name, Ast)>) {
+        let kind = self.kind;
+        let mut inputs = vec![Vec::new(); kind.inputs.len()];
+        let mut params = Vec::new();
+        for (name, v) in &self.r.fields {
+            let Some(slot) = kind.inputs.iter().position(|s| s.name == name.name) else {
+                params.push((name.clone(), v.clone()));
+                continue;
+            };
+            let spec = kind.inputs[slot];
+            let Some(refs) = self.input_refs(v, spec, diags) else {
+                continue;
+            };
+            for a in refs {
+                if let Some(t) = self.input_node(a, spec, diags) {
+                    inputs[slot].push(t);
+                }
+            }
+        }
+        (inputs, params)
+    }
+
+    /// The references an input's value holds, by its arity: none for `None`, one for an id or
+    /// `Some(id)`, each of a list; None (and a diagnostic) for any other shape.
+    fn input_refs<'v>(
+        &self,
+        v: &'v Ast,
+        spec: InputSpec,
+        diags: &mut Vec<Diagnostic>,
+    ) -> Option<Vec<&'v Ast>> {
+        Some(match (&v.v, spec.arity) {
             (Value::Ident(n), Arity::Optional) if n == "None" => vec![],
             (Value::Str(_) | Value::Ident(_), _) => vec![v],
             (Value::Call { name: n, args }, Arity::Optional)
@@ -687,7 +799,7 @@ fn build_node(
                 };
                 diags.push(Diagnostic::at(
                     v.span,
-                    id,
+                    self.id(),
                     format!(
                         "input `{}` expects {expected} ({} nodes), found {}",
                         spec.name,
@@ -695,134 +807,161 @@ fn build_node(
                         v.v.describe()
                     ),
                 ));
-                continue;
+                return None;
             }
+        })
+    }
+
+    /// The index of the node reference `a` names for input `spec`; None (and a diagnostic) when
+    /// it is not an id string, names no node, or names a node of another output type.
+    fn input_node(&self, a: &Ast, spec: InputSpec, diags: &mut Vec<Diagnostic>) -> Option<usize> {
+        let (raw, id) = (self.raw, self.id());
+        let (Value::Str(target) | Value::Ident(target)) = &a.v else {
+            diags.push(Diagnostic::at(
+                a.span,
+                id,
+                format!(
+                    "input `{}` expects a node id string, found {}",
+                    spec.name,
+                    a.v.describe()
+                ),
+            ));
+            return None;
         };
-        for a in refs {
-            let (Value::Str(target) | Value::Ident(target)) = &a.v else {
-                diags.push(Diagnostic::at(
-                    a.span,
-                    id,
-                    format!(
-                        "input `{}` expects a node id string, found {}",
-                        spec.name,
-                        a.v.describe()
-                    ),
-                ));
-                continue;
-            };
-            let Some(&t) = index.get(target.as_str()) else {
-                let names = referable(raw);
-                let names = names.iter().map(String::as_str);
-                diags.push(Diagnostic::at(
-                    a.span,
-                    id,
-                    format!("input `{}`: {}", spec.name, unknown("node", target, names)),
-                ));
-                continue;
-            };
-            let produced = registry::kind(&raw[t].kind.name).map(|k| k.output);
-            if let Some(out) = produced.filter(|o| *o != spec.ty) {
-                diags.push(Diagnostic::at(
-                    a.span,
-                    id,
-                    format!(
-                        "input `{}` expects a {} node, but \"{target}\" ({}) produces {out}",
-                        spec.name, spec.ty, raw[t].kind.name
-                    ),
-                ));
-                continue;
-            }
-            inputs[slot].push(t);
-        }
-    }
-    for (slot, spec) in kind.inputs.iter().enumerate() {
-        if spec.arity == Arity::One
-            && inputs[slot].is_empty()
-            && !r.fields.iter().any(|(n, _)| n.name == spec.name)
-        {
+        let Some(&t) = self.index.get(target.as_str()) else {
+            let names = referable(raw);
+            let names = names.iter().map(String::as_str);
             diags.push(Diagnostic::at(
-                r.kind.span,
+                a.span,
+                id,
+                format!("input `{}`: {}", spec.name, unknown("node", target, names)),
+            ));
+            return None;
+        };
+        let produced = registry::kind(&raw[t].kind.name).map(|k| k.output);
+        if let Some(out) = produced.filter(|o| *o != spec.ty) {
+            diags.push(Diagnostic::at(
+                a.span,
                 id,
                 format!(
-                    "missing input `{}`: expected the id of a {} node ({})",
-                    spec.name, spec.ty, spec.doc
+                    "input `{}` expects a {} node, but \"{target}\" ({}) produces {out}",
+                    spec.name, spec.ty, raw[t].kind.name
                 ),
             ));
-        }
-    }
-    let before_values = diags.len();
-    for (name, v) in &params {
-        let mut bad = Vec::new();
-        non_finite(v, &mut bad);
-        for (span, x) in bad {
-            diags.push(Diagnostic::at(
-                span,
-                id,
-                format!(
-                    "`{}`: {x} can never run; expected a finite number",
-                    name.name
-                ),
-            ));
-        }
-    }
-    if diags.len() > before_values {
-        return None;
-    }
-    let params_ast = Ast {
-        v: Value::Struct {
-            name: None,
-            fields: params.clone(),
-        },
-        span: r.kind.span,
-    };
-    let parsed = match (kind.parse)(&params_ast) {
-        Ok(p) => p,
-        Err(e) => {
-            diags.push(de_diag(e, r.kind.span, id));
             return None;
         }
-    };
-    if let Err(e) = parsed.validate() {
-        let span = params
-            .iter()
-            .find(|(n, _)| n.name == e.field)
-            .map(|(_, v)| v.span)
-            .unwrap_or(r.kind.span);
-        diags.push(Diagnostic::at(
-            span,
-            id,
-            format!("invalid `{}`: {}", e.field, e.message),
-        ));
+        Some(t)
     }
-    let mut files = Vec::new();
-    for f in parsed.files() {
-        let (path, checked) = roots.resolve(&f.path, f.field);
-        if let Err(msg) = checked {
-            let span = params
-                .iter()
-                .find(|(n, _)| n.name == f.field)
-                .map(|(_, v)| v.span)
-                .unwrap_or(r.kind.span);
-            diags.push(Diagnostic::at(span, id, msg));
+
+    /// A diagnostic for every input taking exactly one node that the node leaves out.
+    fn check_required_inputs(&self, inputs: &[Vec<usize>], diags: &mut Vec<Diagnostic>) {
+        let r = self.r;
+        for (slot, spec) in self.kind.inputs.iter().enumerate() {
+            if spec.arity == Arity::One
+                && inputs[slot].is_empty()
+                && !r.fields.iter().any(|(n, _)| n.name == spec.name)
+            {
+                diags.push(Diagnostic::at(
+                    r.kind.span,
+                    self.id(),
+                    format!(
+                        "missing input `{}`: expected the id of a {} node ({})",
+                        spec.name, spec.ty, spec.doc
+                    ),
+                ));
+            }
         }
-        files.push(InputFile {
-            field: f.field,
-            written: f.path,
-            path,
-        });
     }
-    if diags.len() > before {
-        return None;
+
+    /// Whether every number in the params is finite; a diagnostic for each that is not. A step
+    /// of its own: a non-finite value stops the node before its params are parsed.
+    fn params_finite(&self, params: &[(Name, Ast)], diags: &mut Vec<Diagnostic>) -> bool {
+        let before_values = diags.len();
+        for (name, v) in params {
+            let mut bad = Vec::new();
+            non_finite(v, &mut bad);
+            for (span, x) in bad {
+                diags.push(Diagnostic::at(
+                    span,
+                    self.id(),
+                    format!(
+                        "`{}`: {x} can never run; expected a finite number",
+                        name.name
+                    ),
+                ));
+            }
+        }
+        diags.len() <= before_values
     }
-    Some(Node {
-        id: r.id.clone(),
-        kind,
-        inputs,
-        deps: Vec::new(),
-        params: parsed,
-        files,
-    })
+
+    /// The span of param `field` as written, else the node's kind.
+    fn param_span(&self, params: &[(Name, Ast)], field: &str) -> Span {
+        params
+            .iter()
+            .find(|(n, _)| n.name == field)
+            .map(|(_, v)| v.span)
+            .unwrap_or(self.r.kind.span)
+    }
+
+    /// The params parsed into the kind's typed struct (None, and a diagnostic, when they do not
+    /// parse), and validated (a diagnostic at the offending field when they are not valid).
+    fn parse_params(
+        &self,
+        params: &[(Name, Ast)],
+        diags: &mut Vec<Diagnostic>,
+    ) -> Option<Box<dyn registry::Params>> {
+        let r = self.r;
+        let params_ast = Ast {
+            v: Value::Struct {
+                name: None,
+                fields: params.to_vec(),
+            },
+            span: r.kind.span,
+        };
+        let parsed = match (self.kind.parse)(&params_ast) {
+            Ok(p) => p,
+            Err(e) => {
+                diags.push(de_diag(e, r.kind.span, self.id()));
+                return None;
+            }
+        };
+        if let Err(e) = parsed.validate() {
+            diags.push(Diagnostic::at(
+                self.param_span(params, e.field),
+                self.id(),
+                format!("invalid `{}`: {}", e.field, e.message),
+            ));
+        }
+        Some(parsed)
+    }
+
+    /// The files the parsed params declare, resolved against the data root; a diagnostic at the
+    /// naming field for each that is refused.
+    fn declared_files(
+        &self,
+        parsed: &dyn registry::Params,
+        params: &[(Name, Ast)],
+        roots: &DataRoot,
+        diags: &mut Vec<Diagnostic>,
+    ) -> Vec<InputFile> {
+        let mut files = Vec::new();
+        for f in parsed.files() {
+            let (path, checked) = roots.resolve(&f.path, f.field);
+            if let Err(msg) = checked {
+                diags.push(Diagnostic::at(
+                    self.param_span(params, f.field),
+                    self.id(),
+                    msg,
+                ));
+            }
+            files.push(InputFile {
+                field: f.field,
+                written: f.path,
+                path,
+            });
+        }
+        files
+    }
 }
 
 /// A node for every report a graph names (`"carved.outcomes"`: the report `outcomes` of the node
