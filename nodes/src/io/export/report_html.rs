@@ -14,7 +14,7 @@ use serde_json::{Value, json};
 use super::colormap::viridis;
 use super::glb::material_color;
 use crate::artifact::Material;
-use crate::artifact::{ObjectClass, Raster, Scene};
+use crate::artifact::{Metrics, ObjectClass, Raster, Scene};
 use crate::geom::raycast::SceneRays;
 
 /// three.js (MIT; `nodes/assets/three/`, fetched by `scripts/vendor_three.sh`).
@@ -64,6 +64,44 @@ pub struct Page<'a> {
     pub radio_map: Option<&'a Raster>,
     /// The measured links.
     pub points: &'a [LinkPoint],
+    /// Stages' reports (a carve's outcomes, the clutter's counts), by name: what each stage
+    /// did, shown after the plots.
+    pub evidence: &'a [(&'a str, &'a Metrics)],
+}
+
+/// The stages' reports as one table each (name, value), in a section of its own; nothing when
+/// the graph gives none.
+fn evidence_section(evidence: &[(&str, &Metrics)]) -> String {
+    if evidence.is_empty() {
+        return String::new();
+    }
+    let mut out = String::from(
+        "<section><h2>Stage evidence</h2><p>What each stage did, from its own reports.</p>",
+    );
+    for (name, m) in evidence {
+        out += &format!(
+            "<h3>{}</h3><table><thead><tr><th>figure</th><th>value</th></tr></thead><tbody>",
+            esc(name)
+        );
+        for (k, v) in &m.values {
+            out += &format!("<tr><td>{}</td><td>{}</td></tr>", esc(k), esc(&number(*v)));
+        }
+        out += "</tbody></table>";
+    }
+    out + "</section>\n"
+}
+
+/// A report's value as a reader wants it: counts whole, other figures to four significant
+/// digits.
+pub fn number(v: f64) -> String {
+    if v.fract() == 0.0 && v.abs() < 1e15 {
+        format!("{v:.0}")
+    } else if v.is_finite() {
+        let digits = (3 - v.abs().log10().floor() as i32).clamp(0, 12) as usize;
+        format!("{v:.digits$}")
+    } else {
+        format!("{v}")
+    }
 }
 
 /// Escapes text for HTML.
@@ -287,6 +325,7 @@ pub fn report_html(p: &Page) -> Result<String, String> {
             )
         })
         .collect();
+    let evidence = evidence_section(p.evidence);
     Ok(format!(
         r#"<!doctype html>
 <html lang="en"><head><meta charset="utf-8">
@@ -318,7 +357,7 @@ footer{{max-width:1200px;margin:0 auto;padding:12px 24px 40px;color:#667;font-si
 <div id="viewer"><canvas id="c"></canvas><div id="panel"></div><div id="info"></div><div id="legend"></div></div>
 <div id="errors"></div></section>
 <section><h2>Plots</h2>{plots}</section>
-<footer>Written by kodama-dag {version}. The 3D view uses three.js (MIT licence, below).<details><summary>three.js licence</summary><pre>{license}</pre></details></footer>
+{evidence}<footer>Written by kodama-dag {version}. The 3D view uses three.js (MIT licence, below).<details><summary>three.js licence</summary><pre>{license}</pre></details></footer>
 <script>window.addEventListener('error',e=>{{const d=document.getElementById('errors');d.textContent+=String(e.message)+'\n';document.body.dataset.errors=(+(document.body.dataset.errors||0)+1)}});</script>
 <script id="kodama-data" type="application/json">{data}</script>
 <script type="module">
@@ -353,6 +392,28 @@ mod tests {
         ] {
             assert_eq!(base64(plain.as_bytes()), enc);
         }
+    }
+
+    #[test]
+    fn stage_reports_become_escaped_tables_with_readable_numbers() {
+        assert_eq!(evidence_section(&[]), "");
+        let mut m = Metrics::default();
+        m.values.insert("dropped_<thin>".into(), 12.0);
+        m.values.insert("median_slope".into(), 1.244732269868257);
+        m.values.insert("share".into(), 0.004567);
+        let html = evidence_section(&[("Carve & co", &m)]);
+        assert!(html.contains("<h3>Carve &amp; co</h3>"), "{html}");
+        assert!(
+            html.contains("<td>dropped_&lt;thin&gt;</td><td>12</td>"),
+            "{html}"
+        );
+        assert!(
+            html.contains("<td>median_slope</td><td>1.245</td>"),
+            "{html}"
+        );
+        assert!(html.contains("<td>share</td><td>0.004567</td>"), "{html}");
+        assert_eq!(number(-1.2183483536188164), "-1.218");
+        assert_eq!(number(f64::NAN), "NaN");
     }
 
     #[test]

@@ -15,7 +15,7 @@ use crate::io::csv_text;
 use crate::io::export::figures::charts::{ErrorCdf, ModelSeries, PathLossDistance, Scatter};
 use crate::io::export::figures::maps::{Layer, MapFigure, Palette, robust_range, view_grid};
 use crate::io::export::figures::{Figure, render};
-use crate::io::export::report_html::{LinkPoint, Page, TableRow, report_html};
+use crate::io::export::report_html::{LinkPoint, Page, TableRow, number, report_html};
 use crate::rf::em::fspl_db;
 use crate::rf::pathloss_fit::{fit_close_in, fit_power_distance};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
@@ -32,6 +32,9 @@ pub struct ReportParams {
     /// Names of the `scenes` in report.html's 3D view, in order. Default "scene 1", ...
     #[serde(default)]
     pub scene_names: Vec<String>,
+    /// Names of the `evidence` reports, in order. Default the report's place, "evidence 1", ...
+    #[serde(default)]
+    pub evidence_names: Vec<String>,
 }
 
 fn site() -> String {
@@ -74,8 +77,8 @@ impl Stage for Report {
     // 3: report.html with the 3D view; 4: scenes past the page's budget left out, named;
     // 5: plotters figures as SVG and PNG at print size, per-stage figures; 6: close-in lines in
     // the path-loss chart; 7: both trend-line variants, the floor count, the definitions;
-    // 8: links.csv, every link as scored.
-    const VERSION: u32 = 8;
+    // 8: links.csv, every link as scored; 9: stages' reports (`evidence`) as tables.
+    const VERSION: u32 = 9;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -113,6 +116,11 @@ impl Stage for Report {
             ArtifactType::Scene,
             "scenes for report.html's 3D view (the twin first: its terrain carries the map and points)",
         ),
+        InputSpec::many(
+            "evidence",
+            ArtifactType::Metrics,
+            "stages' reports (\"carved.outcomes\", \"clutter.counts\"), each a table after the plots",
+        ),
     ];
     type Params = ReportParams;
     type Output = ReportFiles;
@@ -123,6 +131,12 @@ impl Stage for Report {
         }
         if p.scene_names.len() > 16 {
             return Err(ParamError::new("scene_names", "expected at most 16 scenes"));
+        }
+        if p.evidence_names.len() > 64 {
+            return Err(ParamError::new(
+                "evidence_names",
+                "expected at most 64 reports",
+            ));
         }
         Ok(())
     }
@@ -149,6 +163,8 @@ impl Stage for Report {
                 scenes.len()
             )));
         }
+        let named = named_evidence(p, inputs.many("evidence")?)?;
+        let evidence: Vec<(&str, &Metrics)> = named.iter().map(|(n, m)| (n.as_str(), *m)).collect();
         let fail = StageError::Failed;
         let mut files = Vec::new();
         let (md_table, csv) = tables(p, &evals);
@@ -159,6 +175,7 @@ impl Stage for Report {
         for (name, _) in plots.iter().filter(|(n, _)| n.ends_with(".png")) {
             md.push_str(&format!("![{name}]({name})\n\n"));
         }
+        md.push_str(&evidence_markdown(&evidence));
         files.push(("report.md".to_string(), md.into_bytes()));
         files.push(("table.csv".to_string(), csv.into_bytes()));
         files.push((
@@ -174,6 +191,7 @@ impl Stage for Report {
             evals: &evals,
             scenes: &scenes,
             radio_map,
+            evidence: &evidence,
         };
         let html = page.html(&plots).map_err(fail)?;
         files.push(("report.html".to_string(), html.into_bytes()));
@@ -286,6 +304,7 @@ struct PageInputs<'a> {
     evals: &'a [&'a Metrics],
     scenes: &'a [&'a Scene],
     radio_map: Option<&'a Raster>,
+    evidence: &'a [(&'a str, &'a Metrics)],
 }
 
 impl PageInputs<'_> {
@@ -321,8 +340,48 @@ impl PageInputs<'_> {
             scenes: &named,
             radio_map: self.radio_map,
             points: &points,
+            evidence: self.evidence,
         })
     }
+}
+
+/// The `evidence` reports with their names (`evidence_names`, else "evidence 1", ...).
+fn named_evidence<'a>(
+    p: &ReportParams,
+    evidence: Vec<&'a Metrics>,
+) -> Result<Vec<(String, &'a Metrics)>, StageError> {
+    if !p.evidence_names.is_empty() && p.evidence_names.len() != evidence.len() {
+        return Err(StageError::Failed(format!(
+            "{} evidence names for {} evidence reports: name each report, or none",
+            p.evidence_names.len(),
+            evidence.len()
+        )));
+    }
+    Ok(evidence
+        .into_iter()
+        .enumerate()
+        .map(|(k, m)| {
+            let name = p.evidence_names.get(k).cloned();
+            (name.unwrap_or_else(|| format!("evidence {}", k + 1)), m)
+        })
+        .collect())
+}
+
+/// report.md's "Stage evidence": one table per stage report; nothing without any.
+fn evidence_markdown(evidence: &[(&str, &Metrics)]) -> String {
+    let mut md = String::new();
+    if evidence.is_empty() {
+        return md;
+    }
+    md.push_str("## Stage evidence\n\nWhat each stage did, from its own reports.\n\n");
+    for (name, m) in evidence {
+        md.push_str(&format!("### {name}\n\n| figure | value |\n|---|---:|\n"));
+        for (k, v) in &m.values {
+            md.push_str(&format!("| {k} | {} |\n", number(*v)));
+        }
+        md.push('\n');
+    }
+    md
 }
 
 /// Table 1's rows for report.html: the rows some model has, the best RMSE of each marked.
