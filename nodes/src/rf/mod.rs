@@ -18,6 +18,7 @@ pub mod image_method;
 pub mod links_csv;
 pub mod map_plane;
 pub mod materials;
+pub mod p527;
 pub mod path;
 pub mod path_field;
 pub mod pathloss_fit;
