@@ -70,7 +70,8 @@ pub struct Interactions {
     /// Scattering coefficient S of every surface, in [0, 1] (specular keeps √(1 − S²)).
     #[arg(long, default_value_t = 0.0)]
     scattering_coefficient: f64,
-    /// Use P.2040 material laws outside their frequency ranges.
+    /// Use P.2040 material laws outside their frequency ranges (ground above 10 GHz needs none:
+    /// it is ITU-R P.527 soil there).
     #[arg(long)]
     extrapolate: bool,
 }

@@ -116,6 +116,62 @@ fn two_ray_ground_reflection_matches_the_closed_form() {
     }
 }
 
+/// Issue 49: the paper's Brooklyn (16.95 GHz) and Boulder (28 GHz) traces run over ground, which
+/// P.2040 defines only to 10 GHz. Above 10 GHz the ground classes are ITU-R P.527 soil, so a scene
+/// of the materials the graphs build (ground, concrete, glass, metal) resolves without
+/// `extrapolate`, and the ground reflection is the two-ray closed form with P.527's permittivity.
+#[test]
+fn ground_traces_above_10_ghz_with_p527_soil() {
+    let g = 1000.0;
+    let mut objects = vec![quad(
+        "ground",
+        [[-g, -g, 0.0], [g, -g, 0.0], [g, g, 0.0], [-g, g, 0.0]],
+        Material::MediumDryGround,
+    )];
+    // Far behind the transmitter, facing away: resolved, not on the traced paths.
+    for (i, m) in [
+        Material::Concrete,
+        Material::Glass,
+        Material::Metal,
+        Material::WetGround,
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let x = -500.0 - 10.0 * i as f32;
+        objects.push(quad(
+            &format!("far-{i}"),
+            [[x, -1.0, 0.0], [x, 1.0, 0.0], [x, 1.0, 3.0], [x, -1.0, 3.0]],
+            m,
+        ));
+    }
+    let scene_in = Scene { objects };
+    for f in [16.95e9, 28e9] {
+        let scene = RfScene::new(&scene_in, f, false).unwrap_or_else(|e| panic!("{f}: {e}"));
+        let eta = permittivity(Material::MediumDryGround, f, false).unwrap();
+        assert!(eta.re.is_finite() && eta.im < 0.0, "{f}: {eta}");
+        let lam = wavelength(f);
+        let k = 2.0 * std::f64::consts::PI / lam;
+        let (ht, hr, dist) = (10.0, 1.5, 100.0);
+        let links = [([0.0, 0.0, ht], [dist, 0.0, hr])];
+        let r = &trace_links(&scene, &links, &horizontal(), &horizontal(), &options(1), f)[0];
+        assert_eq!(r.paths.len(), 2, "{f}: {:?}", r.paths);
+        assert!(r.gain_db.is_finite() && r.coherent_gain_db.is_finite());
+        let d1 = (dist * dist + (ht - hr) * (ht - hr)).sqrt();
+        let d2 = (dist * dist + (ht + hr) * (ht + hr)).sqrt();
+        let ((r_te, _), _) = slab((ht + hr) / d2, eta, 0.1, lam);
+        let amp = lam / (4.0 * std::f64::consts::PI);
+        let total =
+            amp * (C64::from_polar(1.0, -k * d1) / d1 + r_te * C64::from_polar(1.0, -k * d2) / d2);
+        let expected = 10.0 * total.norm_sqr().log10();
+        assert!(
+            (r.coherent_gain_db - expected).abs() < 1e-6,
+            "{f}: traced {} dB, two-ray {expected} dB",
+            r.coherent_gain_db
+        );
+    }
+}
+
 #[test]
 fn a_concrete_wall_costs_its_slab_transmission_loss() {
     // A 0.1 m concrete slab (one surface, as Sionna models walls) across the link at normal

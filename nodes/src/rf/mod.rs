@@ -1,4 +1,5 @@
-//! Radio propagation physics: ITU-R P.2040 materials as complex permittivities, Fresnel and
+//! Radio propagation physics: ITU-R P.2040 materials as complex permittivities (the grounds
+//! above 10 GHz, where P.2040 ends, from the ITU-R P.527 soil model in `p527`), Fresnel and
 //! thin-slab coefficients, UTD wedge diffraction and the P.526 knife edge, antenna patterns,
 //! foliage loss (P.833), and the ray tracers built on them: links (`paths`, the entry point, and
 //! its parts `sequences`, `image_method`, `path_field`, `diffraction_search`, `diffracted`,
@@ -18,6 +19,7 @@ pub mod image_method;
 pub mod links_csv;
 pub mod map_plane;
 pub mod materials;
+pub mod p527;
 pub mod path;
 pub mod path_field;
 pub mod pathloss_fit;

@@ -33,7 +33,8 @@ pub struct RadioMapParams {
     /// The transmit antenna. Default isotropic, vertical.
     #[serde(default)]
     pub antenna: Antenna,
-    /// Use P.2040 laws outside their frequency ranges. Default false.
+    /// Use P.2040 laws outside their frequency ranges. Default false. Ground above 10 GHz needs
+    /// none: it is ITU-R P.527 soil there (`rf::materials`).
     #[serde(default)]
     pub extrapolate: bool,
 }
@@ -132,7 +133,8 @@ impl Stage for RadioMap {
     // 7: a wedge diffracts no more than its size allows (rf::diffraction::bounded_by_size).
     // 8: a face's reflection term capped at half a strip's peak, as the UTD's at a boundary.
     // 9: an edge's length for that bound is its run across material changes.
-    const VERSION: u32 = 9;
+    // 10: ground above 10 GHz is ITU-R P.527 soil, not an error or P.2040 extrapolated (rf::p527).
+    const VERSION: u32 = 10;
     const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),

@@ -26,7 +26,8 @@ pub struct TraceParams {
     pub rx_antenna: Antenna,
     /// Report the coherent sum |Σ a e^{-j2πfτ}|² instead of Σ |a|². Default false.
     pub coherent: bool,
-    /// Use P.2040 laws outside their frequency ranges. Default false.
+    /// Use P.2040 laws outside their frequency ranges. Default false. Ground above 10 GHz needs
+    /// none: it is ITU-R P.527 soil there (`rf::materials`).
     pub extrapolate: bool,
 }
 
@@ -120,7 +121,8 @@ impl Stage for Trace {
     // 11: a wedge diffracts no more than its size allows (rf::diffraction::bounded_by_size).
     // 12: a face's reflection term capped at half a strip's peak, as the UTD's at a boundary.
     // 13: an edge's length for that bound is its run across material changes.
-    const VERSION: u32 = 13;
+    // 14: ground above 10 GHz is ITU-R P.527 soil, not an error or P.2040 extrapolated (rf::p527).
+    const VERSION: u32 = 14;
     const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
