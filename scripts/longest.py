@@ -81,8 +81,10 @@ def block_end(lines, start):
     declaration without a body)."""
     depth = 0
     opened = False
+    nest = 0  # `(`, `[`, `<` nesting before the body opens: a `;` inside (`[f64; 2]`) is no end
     for k in range(start, len(lines)):
-        for ch in lines[k]:
+        line = lines[k]
+        for i, ch in enumerate(line):
             if ch == "{":
                 depth += 1
                 opened = True
@@ -90,7 +92,13 @@ def block_end(lines, start):
                 depth -= 1
                 if opened and depth == 0:
                     return k
-            elif ch == ";" and not opened and depth == 0:
+            elif opened:
+                continue
+            elif ch in "([<":
+                nest += 1
+            elif ch in ")]" or (ch == ">" and not (i > 0 and line[i - 1] == "-")):
+                nest = max(nest - 1, 0)
+            elif ch == ";" and depth == 0 and nest == 0:
                 return None
     return None
 

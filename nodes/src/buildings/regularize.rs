@@ -139,6 +139,8 @@ impl Line {
     }
 }
 
+/// The regularized ring of `ring` (dominant direction `theta`), walls moved onto `snap`'s where it
+/// has one: None where a step leaves fewer than three lines or the result fails the checks.
 fn regularize_ring(
     ring: &[[f64; 2]],
     theta: f64,
@@ -159,41 +161,7 @@ fn regularize_ring(
     let mut lines: Vec<Line> = Vec::with_capacity(m);
     for k in 0..m {
         let (i, j) = (keep[k], keep[(k + 1) % m]);
-        let (a, b) = (ring[i], ring[j]);
-        let alpha = (b[1] - a[1]).atan2(b[0] - a[0]);
-        // The dominant direction nearest alpha, among theta + k pi/2.
-        let quarter = std::f64::consts::FRAC_PI_2;
-        let turns = ((alpha - theta) / quarter).round();
-        let snapped_alpha = theta + turns * quarter;
-        let snapped = (alpha - snapped_alpha).abs() <= tol;
-        let dir = if snapped { snapped_alpha } else { alpha };
-        let d = [dir.cos(), dir.sin()];
-        let nrm = [-d[1], d[0]];
-        // Length-weighted mean offset of the run's segments (their midpoints).
-        let (mut sum, mut w) = (0.0, 0.0);
-        let mut idx = i;
-        loop {
-            let next = (idx + 1) % n;
-            let (p, q) = (ring[idx], ring[next]);
-            let len = (q[0] - p[0]).hypot(q[1] - p[1]);
-            let mid = [(p[0] + q[0]) / 2.0, (p[1] + q[1]) / 2.0];
-            sum += len * (nrm[0] * mid[0] + nrm[1] * mid[1]);
-            w += len;
-            idx = next;
-            if idx == j {
-                break;
-            }
-        }
-        if w <= 0.0 {
-            return None;
-        }
-        lines.push(Line {
-            d,
-            o: sum / w,
-            w,
-            snapped,
-            span: (i, j),
-        });
+        lines.push(fit_line(ring, (i, j), theta, tol)?);
     }
     // Consecutive edges on (nearly) one line become one.
     let mut merged = lines;
@@ -201,13 +169,75 @@ fn regularize_ring(
     if merged.len() < 3 {
         return None;
     }
+    remove_off_axis_cuts(&mut merged, ring, cfg.simplify_m);
+    merge_collinear_lines(&mut merged, cfg.simplify_m);
+    if merged.len() < 3 {
+        return None;
+    }
+    if let Some(snap) = snap {
+        snap_lines(&mut merged, ring, cfg, snap);
+    }
+    // Two walls of one step the returns put on one line are one wall.
+    merge_collinear_lines(&mut merged, cfg.simplify_m);
+    if merged.len() < 3 {
+        return None;
+    }
+    let out = corners(&merged, ring)?;
+    checked(out, ring, cfg)
+}
+
+/// The line of the simplified edge from ring vertex `i` to `j`: turned to the dominant direction
+/// (`theta` + k pi/2) nearest it where within `tol` radians, at the length-weighted mean offset of
+/// the traced run it replaces; None for a run of no length. A step: one line per edge.
+fn fit_line(ring: &[[f64; 2]], (i, j): (usize, usize), theta: f64, tol: f64) -> Option<Line> {
+    let n = ring.len();
+    let (a, b) = (ring[i], ring[j]);
+    let alpha = (b[1] - a[1]).atan2(b[0] - a[0]);
+    // The dominant direction nearest alpha, among theta + k pi/2.
+    let quarter = std::f64::consts::FRAC_PI_2;
+    let turns = ((alpha - theta) / quarter).round();
+    let snapped_alpha = theta + turns * quarter;
+    let snapped = (alpha - snapped_alpha).abs() <= tol;
+    let dir = if snapped { snapped_alpha } else { alpha };
+    let d = [dir.cos(), dir.sin()];
+    let nrm = [-d[1], d[0]];
+    // Length-weighted mean offset of the run's segments (their midpoints).
+    let (mut sum, mut w) = (0.0, 0.0);
+    let mut idx = i;
+    loop {
+        let next = (idx + 1) % n;
+        let (p, q) = (ring[idx], ring[next]);
+        let len = (q[0] - p[0]).hypot(q[1] - p[1]);
+        let mid = [(p[0] + q[0]) / 2.0, (p[1] + q[1]) / 2.0];
+        sum += len * (nrm[0] * mid[0] + nrm[1] * mid[1]);
+        w += len;
+        idx = next;
+        if idx == j {
+            break;
+        }
+    }
+    if w <= 0.0 {
+        return None;
+    }
+    Some(Line {
+        d,
+        o: sum / w,
+        w,
+        snapped,
+        span: (i, j),
+    })
+}
+
+/// Removes the runs of lines `off_axis_cut` finds, one after the other, while more than three
+/// lines are left. A step: the clean-up of what simplification made of corners and steps.
+fn remove_off_axis_cuts(merged: &mut Vec<Line>, ring: &[[f64; 2]], simplify_m: f64) {
     // Cut corners, stair chords and spikes: short edges off the dominant directions are what
     // simplification makes of a square corner whose corner cell is missing, of a step, or of a
     // cell of returns standing off a wall; the dominant lines on either side meet instead.
-    let chamfer = 2.0 * cfg.simplify_m.max(1.0);
+    let chamfer = 2.0 * simplify_m.max(1.0);
     let corner = 2.0 * chamfer;
     while merged.len() > 3 {
-        match off_axis_cut(&merged, ring, chamfer, corner) {
+        match off_axis_cut(merged, ring, chamfer, corner) {
             Some((start, len)) => {
                 for _ in 0..len {
                     let at = start % merged.len();
@@ -217,35 +247,34 @@ fn regularize_ring(
             None => break,
         }
     }
-    merge_collinear_lines(&mut merged, cfg.simplify_m);
-    if merged.len() < 3 {
-        return None;
-    }
-    if let Some(snap) = snap {
-        // Each dominant-direction line's extent along itself: its run of the traced ring is gone
-        // after merging, so take the ring's points within a cell of the line.
-        for l in merged.iter_mut().filter(|l| l.snapped) {
-            let (s0, s1) = ring
-                .iter()
-                .filter(|p| l.offset_of(**p).abs() <= cfg.simplify_m)
-                .map(|p| l.d[0] * p[0] + l.d[1] * p[1])
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-                    (a.min(v), b.max(v))
-                });
-            if s1 > s0
-                && let Some(o) = snap(l.d, l.o, [s0, s1])
-                && (o - l.o).abs() <= cfg.max_shift_m
-                && o.is_finite()
-            {
-                l.o = o;
-            }
+}
+
+/// Moves each dominant-direction line onto the wall `snap` gives for its extent, where that is
+/// finite and within `max_shift_m`. A step: the only one that reads outside the ring.
+fn snap_lines(merged: &mut [Line], ring: &[[f64; 2]], cfg: &RegularizeConfig, snap: WallSnap) {
+    // Each dominant-direction line's extent along itself: its run of the traced ring is gone
+    // after merging, so take the ring's points within a cell of the line.
+    for l in merged.iter_mut().filter(|l| l.snapped) {
+        let (s0, s1) = ring
+            .iter()
+            .filter(|p| l.offset_of(**p).abs() <= cfg.simplify_m)
+            .map(|p| l.d[0] * p[0] + l.d[1] * p[1])
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            });
+        if s1 > s0
+            && let Some(o) = snap(l.d, l.o, [s0, s1])
+            && (o - l.o).abs() <= cfg.max_shift_m
+            && o.is_finite()
+        {
+            l.o = o;
         }
     }
-    // Two walls of one step the returns put on one line are one wall.
-    merge_collinear_lines(&mut merged, cfg.simplify_m);
-    if merged.len() < 3 {
-        return None;
-    }
+}
+
+/// The ring's corners: where consecutive lines cross, and a step between parallel ones; None
+/// where two lines do not meet. A step: lines back to vertices.
+fn corners(merged: &[Line], ring: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
     // Corners: where consecutive lines cross; a step between parallel ones.
     let k = merged.len();
     let mut out: Vec<[f64; 2]> = Vec::with_capacity(2 * k);
@@ -260,6 +289,13 @@ fn regularize_ring(
             out.push(intersect(&a, &b)?);
         }
     }
+    Some(out)
+}
+
+/// `out` without repeated vertices, if it is a simple ring of at least three whose area keeps
+/// the sign of `ring`'s and changes by at most `max_area_change`, and no vertex of it lies more
+/// than `max_shift_m` from `ring`. A step: the acceptance checks.
+fn checked(out: Vec<[f64; 2]>, ring: &[[f64; 2]], cfg: &RegularizeConfig) -> Option<Vec<[f64; 2]>> {
     let out = dedup_ring(out);
     if out.len() < 3 || !is_simple(&out) {
         return None;

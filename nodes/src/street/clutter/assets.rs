@@ -102,6 +102,12 @@ impl AssetKind {
     /// its height scaled by `height_scale` (1 = the default size).
     pub fn build(self, center: [f64; 2], heading: f64, z0: f64, height_scale: f64) -> Vec<Part> {
         let s = height_scale;
+        let at = Placement {
+            center,
+            heading,
+            z0,
+            s,
+        };
         let body = |mesh: Mesh| {
             vec![Part {
                 suffix: "",
@@ -110,203 +116,248 @@ impl AssetKind {
             }]
         };
         match self {
-            AssetKind::Car => {
-                let ring = [
-                    (-2.25, 0.0),
-                    (2.25, 0.0),
-                    (2.25, 0.75),
-                    (1.2, 0.9),
-                    (0.6, 1.5),
-                    (-1.2, 1.5),
-                    (-1.9, 0.95),
-                    (-2.25, 0.85),
-                ];
-                body(extrude(
-                    &scale_z(&ring, s),
-                    1.8,
-                    center,
-                    heading,
-                    z0,
-                    |e| {
-                        if e == 3 || e == 5 {
-                            Material::Glass
-                        } else {
-                            Material::Metal
-                        }
-                    },
-                    |_, z| {
-                        if z > 0.95 * s {
-                            Material::Glass
-                        } else {
-                            Material::Metal
-                        }
-                    },
-                ))
-            }
-            AssetKind::Van => {
-                let ring = [
-                    (-2.6, 0.0),
-                    (2.6, 0.0),
-                    (2.6, 0.9),
-                    (2.1, 1.2),
-                    (1.7, 2.3),
-                    (-2.6, 2.3),
-                ];
-                body(extrude(
-                    &scale_z(&ring, s),
-                    2.0,
-                    center,
-                    heading,
-                    z0,
-                    |e| {
-                        if e == 3 {
-                            Material::Glass
-                        } else {
-                            Material::Metal
-                        }
-                    },
-                    |u, z| {
-                        if z > 1.3 * s && u > 0.9 {
-                            Material::Glass
-                        } else {
-                            Material::Metal
-                        }
-                    },
-                ))
-            }
-            AssetKind::Bus => {
-                let ring = [
-                    (-6.0, 0.0),
-                    (6.0, 0.0),
-                    (6.0, 1.1),
-                    (5.9, 3.2),
-                    (-5.9, 3.2),
-                    (-6.0, 1.1),
-                ];
-                body(extrude(
-                    &scale_z(&ring, s),
-                    2.5,
-                    center,
-                    heading,
-                    z0,
-                    |e| {
-                        if e == 2 {
-                            Material::Glass
-                        } else {
-                            Material::Metal
-                        }
-                    },
-                    |_, z| {
-                        if z > 1.4 * s && z < 2.8 * s {
-                            Material::Glass
-                        } else {
-                            Material::Metal
-                        }
-                    },
-                ))
-            }
+            AssetKind::Car => body(car(&at)),
+            AssetKind::Van => body(van(&at)),
+            AssetKind::Bus => body(bus(&at)),
             AssetKind::Pole => body(column(center, 0.125, z0, z0 + 8.0 * s, Material::Metal)),
             AssetKind::Hydrant => body(column(center, 0.15, z0, z0 + 0.8 * s, Material::Metal)),
-            AssetKind::Sign => {
-                let (lift, top) = (2.2 * s, 2.8 * s);
-                let ring = [
-                    (-0.04, 0.0),
-                    (0.04, 0.0),
-                    (0.04, lift),
-                    (0.45, lift),
-                    (0.45, top),
-                    (-0.45, top),
-                    (-0.45, lift),
-                    (-0.04, lift),
-                ];
-                body(extrude(
-                    &ring,
-                    0.08,
-                    center,
-                    heading,
-                    z0,
-                    |_| Material::Metal,
-                    |_, _| Material::Metal,
-                ))
-            }
-            AssetKind::Bench => {
-                // Side profile across the bench (depth u, height z), extruded along its length.
-                let ring = [
-                    (-0.25, 0.0),
-                    (-0.17, 0.0),
-                    (-0.17, 0.42),
-                    (0.17, 0.42),
-                    (0.17, 0.0),
-                    (0.25, 0.0),
-                    (0.25, 0.5),
-                    (-0.17, 0.5),
-                    (-0.17, 0.9),
-                    (-0.25, 0.9),
-                ];
-                body(extrude(
-                    &scale_z(&ring, s),
-                    1.8,
-                    center,
-                    heading + std::f64::consts::FRAC_PI_2,
-                    z0,
-                    |_| Material::Wood,
-                    |_, _| Material::Wood,
-                ))
-            }
-            AssetKind::Shelter => {
-                // Cross-section (depth u, height z): a glass back wall under a metal roof.
-                let ring = [
-                    (-0.8, 0.0),
-                    (-0.7, 0.0),
-                    (-0.7, 2.5),
-                    (0.8, 2.5),
-                    (0.8, 2.6),
-                    (-0.8, 2.6),
-                ];
-                body(extrude(
-                    &scale_z(&ring, s),
-                    3.5,
-                    center,
-                    heading + std::f64::consts::FRAC_PI_2,
-                    z0,
-                    |e| {
-                        if e == 3 || e == 4 || e == 5 {
-                            Material::Metal
-                        } else {
-                            Material::Glass
-                        }
-                    },
-                    |_, z| {
-                        if z > 2.45 * s {
-                            Material::Metal
-                        } else {
-                            Material::Glass
-                        }
-                    },
-                ))
-            }
-            AssetKind::SmallTree => {
-                let (trunk, crown, radius) = (2.8 * s, 5.7 * s, 2.9);
-                vec![
-                    Part {
-                        suffix: "-trunk",
-                        class: ObjectClass::Vegetation,
-                        mesh: column(center, 0.15, z0, z0 + trunk + 0.3, Material::Wood),
-                    },
-                    Part {
-                        suffix: "",
-                        class: ObjectClass::Vegetation,
-                        mesh: ellipsoid(
-                            [center[0], center[1], z0 + trunk + crown / 2.0],
-                            [radius, radius, crown / 2.0],
-                            12,
-                            Material::Foliage,
-                        ),
-                    },
-                ]
-            }
+            AssetKind::Sign => body(sign(&at)),
+            AssetKind::Bench => body(bench(&at)),
+            AssetKind::Shelter => body(shelter(&at)),
+            AssetKind::SmallTree => small_tree(&at),
         }
     }
+}
+
+/// Where and how big an asset stands: the arguments of `AssetKind::build`, shared by its
+/// per-class steps.
+struct Placement {
+    center: [f64; 2],
+    heading: f64,
+    z0: f64,
+    /// The height scale (1 = the default size).
+    s: f64,
+}
+
+/// A car: its side profile (length u, height z) extruded 1.8 m across, glass windscreen and
+/// windows, metal body. A step of `AssetKind::build`: one class's shape and materials.
+fn car(at: &Placement) -> Mesh {
+    let s = at.s;
+    let ring = [
+        (-2.25, 0.0),
+        (2.25, 0.0),
+        (2.25, 0.75),
+        (1.2, 0.9),
+        (0.6, 1.5),
+        (-1.2, 1.5),
+        (-1.9, 0.95),
+        (-2.25, 0.85),
+    ];
+    extrude(
+        &scale_z(&ring, s),
+        1.8,
+        at.center,
+        at.heading,
+        at.z0,
+        |e| {
+            if e == 3 || e == 5 {
+                Material::Glass
+            } else {
+                Material::Metal
+            }
+        },
+        |_, z| {
+            if z > 0.95 * s {
+                Material::Glass
+            } else {
+                Material::Metal
+            }
+        },
+    )
+}
+
+/// A van: its side profile extruded 2.0 m across, a glass windscreen and front side windows,
+/// metal body. A step of `AssetKind::build`: one class's shape and materials.
+fn van(at: &Placement) -> Mesh {
+    let s = at.s;
+    let ring = [
+        (-2.6, 0.0),
+        (2.6, 0.0),
+        (2.6, 0.9),
+        (2.1, 1.2),
+        (1.7, 2.3),
+        (-2.6, 2.3),
+    ];
+    extrude(
+        &scale_z(&ring, s),
+        2.0,
+        at.center,
+        at.heading,
+        at.z0,
+        |e| {
+            if e == 3 {
+                Material::Glass
+            } else {
+                Material::Metal
+            }
+        },
+        |u, z| {
+            if z > 1.3 * s && u > 0.9 {
+                Material::Glass
+            } else {
+                Material::Metal
+            }
+        },
+    )
+}
+
+/// A bus: its side profile extruded 2.5 m across, a glass windscreen and a band of side
+/// windows, metal body. A step of `AssetKind::build`: one class's shape and materials.
+fn bus(at: &Placement) -> Mesh {
+    let s = at.s;
+    let ring = [
+        (-6.0, 0.0),
+        (6.0, 0.0),
+        (6.0, 1.1),
+        (5.9, 3.2),
+        (-5.9, 3.2),
+        (-6.0, 1.1),
+    ];
+    extrude(
+        &scale_z(&ring, s),
+        2.5,
+        at.center,
+        at.heading,
+        at.z0,
+        |e| {
+            if e == 2 {
+                Material::Glass
+            } else {
+                Material::Metal
+            }
+        },
+        |_, z| {
+            if z > 1.4 * s && z < 2.8 * s {
+                Material::Glass
+            } else {
+                Material::Metal
+            }
+        },
+    )
+}
+
+/// A traffic sign: post and plate in one metal profile (its heights scaled in place), extruded
+/// 0.08 m. A step of `AssetKind::build`: one class's shape and materials.
+fn sign(at: &Placement) -> Mesh {
+    let s = at.s;
+    let (lift, top) = (2.2 * s, 2.8 * s);
+    let ring = [
+        (-0.04, 0.0),
+        (0.04, 0.0),
+        (0.04, lift),
+        (0.45, lift),
+        (0.45, top),
+        (-0.45, top),
+        (-0.45, lift),
+        (-0.04, lift),
+    ];
+    extrude(
+        &ring,
+        0.08,
+        at.center,
+        at.heading,
+        at.z0,
+        |_| Material::Metal,
+        |_, _| Material::Metal,
+    )
+}
+
+/// A bench: its wooden side profile extruded along its 1.8 m length. A step of
+/// `AssetKind::build`: one class's shape and materials.
+fn bench(at: &Placement) -> Mesh {
+    let s = at.s;
+    // Side profile across the bench (depth u, height z), extruded along its length.
+    let ring = [
+        (-0.25, 0.0),
+        (-0.17, 0.0),
+        (-0.17, 0.42),
+        (0.17, 0.42),
+        (0.17, 0.0),
+        (0.25, 0.0),
+        (0.25, 0.5),
+        (-0.17, 0.5),
+        (-0.17, 0.9),
+        (-0.25, 0.9),
+    ];
+    extrude(
+        &scale_z(&ring, s),
+        1.8,
+        at.center,
+        at.heading + std::f64::consts::FRAC_PI_2,
+        at.z0,
+        |_| Material::Wood,
+        |_, _| Material::Wood,
+    )
+}
+
+/// A bus shelter: its cross-section (glass back wall, metal roof) extruded along its 3.5 m
+/// length. A step of `AssetKind::build`: one class's shape and materials.
+fn shelter(at: &Placement) -> Mesh {
+    let s = at.s;
+    // Cross-section (depth u, height z): a glass back wall under a metal roof.
+    let ring = [
+        (-0.8, 0.0),
+        (-0.7, 0.0),
+        (-0.7, 2.5),
+        (0.8, 2.5),
+        (0.8, 2.6),
+        (-0.8, 2.6),
+    ];
+    extrude(
+        &scale_z(&ring, s),
+        3.5,
+        at.center,
+        at.heading + std::f64::consts::FRAC_PI_2,
+        at.z0,
+        |e| {
+            if e == 3 || e == 4 || e == 5 {
+                Material::Metal
+            } else {
+                Material::Glass
+            }
+        },
+        |_, z| {
+            if z > 2.45 * s {
+                Material::Metal
+            } else {
+                Material::Glass
+            }
+        },
+    )
+}
+
+/// A small tree: a wooden trunk column and a foliage ellipsoid crown, two parts. A step of
+/// `AssetKind::build`: one class's shape and materials.
+fn small_tree(at: &Placement) -> Vec<Part> {
+    let s = at.s;
+    let (trunk, crown, radius) = (2.8 * s, 5.7 * s, 2.9);
+    vec![
+        Part {
+            suffix: "-trunk",
+            class: ObjectClass::Vegetation,
+            mesh: column(at.center, 0.15, at.z0, at.z0 + trunk + 0.3, Material::Wood),
+        },
+        Part {
+            suffix: "",
+            class: ObjectClass::Vegetation,
+            mesh: ellipsoid(
+                [at.center[0], at.center[1], at.z0 + trunk + crown / 2.0],
+                [radius, radius, crown / 2.0],
+                12,
+                Material::Foliage,
+            ),
+        },
+    ]
 }
 
 fn scale_z(ring: &[(f64, f64)], s: f64) -> Vec<(f64, f64)> {

@@ -383,6 +383,8 @@ fn uv(c: &Chart, p: DVec3) -> (f64, f64) {
     c.uv_of(p.to_array())
 }
 
+/// The mesh of `mesh` with every charted triangle split along its chart plan's cut lines and
+/// each piece given the plan's material at its centre; counts into `stats`.
 fn split_object(
     mesh: &Mesh,
     charts: &ChartSet,
@@ -399,6 +401,44 @@ fn split_object(
         on_edge: BTreeMap::new(),
         crossing: BTreeMap::new(),
     };
+    let plan_of = plan_of_triangles(mesh, charts, plans);
+    // Phase 1: where each chart's lines cross its triangles' edges, on those edges.
+    let edge_pts = edge_crossings(mesh, charts, plans, &verts, stats);
+    place_edge_points(edge_pts, &mut verts);
+    // Phase 2: every triangle with the points on its edges, split by its chart's lines.
+    let mut tris: Vec<[u32; 3]> = Vec::with_capacity(mesh.len());
+    let mut mats: Vec<u8> = Vec::with_capacity(mesh.len());
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let poly = edge_polygon(tri, &verts);
+        let original = mesh.materials.get(t).copied().unwrap_or(0);
+        let pieces: Vec<(Vec<(u32, Carrier)>, u8)> = match plan_of[t] {
+            usize::MAX => vec![(poly, original)],
+            pi => split_by_plan(poly, &plans[pi], charts, &mut verts, original)?,
+        };
+        for (p, m) in pieces {
+            for tr in triangulate(&p, &mut verts) {
+                tris.push(tr);
+                mats.push(m);
+            }
+        }
+    }
+    stats.vertices_added += (verts.pos.len() - n0) as u64;
+    Ok(Mesh {
+        positions: PodVec(
+            verts
+                .pos
+                .iter()
+                .map(|p| p.to_array().map(|x| x as f32))
+                .collect(),
+        ),
+        triangles: PodVec(tris),
+        materials: PodVec(mats),
+    })
+}
+
+/// Triangle -> index into `plans` of its chart's plan (usize::MAX: uncharted). A step of its
+/// own: the look-up phase 2 needs for every triangle.
+fn plan_of_triangles(mesh: &Mesh, charts: &ChartSet, plans: &[(usize, ChartPlan)]) -> Vec<usize> {
     // Triangle -> (plan index) for charted triangles.
     let mut plan_of = vec![usize::MAX; mesh.len()];
     for (pi, (k, _)) in plans.iter().enumerate() {
@@ -406,7 +446,19 @@ fn split_object(
             plan_of[t as usize] = pi;
         }
     }
-    // Phase 1: where each chart's lines cross its triangles' edges, on those edges.
+    plan_of
+}
+
+/// Phase 1, the crossings: for each (sorted) edge of a charted triangle, the parameters where
+/// its chart's cut lines cross it, away from its ends; counts split charts and cut lines into
+/// `stats`. A step of its own: it only finds the points, `place_edge_points` makes them.
+fn edge_crossings(
+    mesh: &Mesh,
+    charts: &ChartSet,
+    plans: &[(usize, ChartPlan)],
+    verts: &Verts,
+    stats: &mut ApplyStats,
+) -> BTreeMap<(u32, u32), Vec<f64>> {
     let mut edge_pts: BTreeMap<(u32, u32), Vec<f64>> = BTreeMap::new();
     for (k, plan) in plans {
         let c = &charts.charts[*k];
@@ -444,6 +496,13 @@ fn split_object(
             }
         }
     }
+    edge_pts
+}
+
+/// Phase 1, the vertices: each edge's crossings in order, those within TOL_M / 2 of the last
+/// kept merged, made vertices and filed under the edge in `verts.on_edge`. A step of its own:
+/// every triangle sharing an edge then shares its points.
+fn place_edge_points(edge_pts: BTreeMap<(u32, u32), Vec<f64>>, verts: &mut Verts) {
     for ((a, b), mut ss) in edge_pts {
         ss.sort_by(f64::total_cmp);
         let (pa, pb) = (verts.pos[a as usize], verts.pos[b as usize]);
@@ -461,80 +520,68 @@ fn split_object(
         }
         verts.on_edge.insert((a, b), kept);
     }
-    // Phase 2: every triangle with the points on its edges, split by its chart's lines.
-    let mut tris: Vec<[u32; 3]> = Vec::with_capacity(mesh.len());
-    let mut mats: Vec<u8> = Vec::with_capacity(mesh.len());
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        let mut poly: Vec<(u32, Carrier)> = Vec::new();
-        for e in 0..3 {
-            let (a, b) = (tri[e], tri[(e + 1) % 3]);
-            let key = (a.min(b), a.max(b));
-            let carrier = Carrier::Edge(key.0, key.1);
-            poly.push((a, carrier));
-            if let Some(pts) = verts.on_edge.get(&key) {
-                if a < b {
-                    poly.extend(pts.iter().map(|&(_, v)| (v, carrier)));
-                } else {
-                    poly.extend(pts.iter().rev().map(|&(_, v)| (v, carrier)));
-                }
-            }
-        }
-        let original = mesh.materials.get(t).copied().unwrap_or(0);
-        let pieces: Vec<(Vec<(u32, Carrier)>, u8)> = match plan_of[t] {
-            usize::MAX => vec![(poly, original)],
-            pi => {
-                let (k, plan) = &plans[pi];
-                let c = &charts.charts[*k];
-                let mut pieces = vec![poly];
-                let lines = plan
-                    .us
-                    .iter()
-                    .map(|&l| (0, l))
-                    .chain(plan.vs.iter().map(|&l| (1, l)));
-                for (li, (axis, l)) in lines.enumerate() {
-                    let mut next = Vec::with_capacity(pieces.len() + 1);
-                    for p in pieces {
-                        let (lo, hi) = split(p, *k, c, &mut verts, li as u32, axis, l)?;
-                        next.extend(lo);
-                        next.extend(hi);
-                    }
-                    pieces = next;
-                }
-                pieces
-                    .into_iter()
-                    .map(|p| {
-                        let (mut su, mut sv) = (0.0, 0.0);
-                        for &(v, _) in &p {
-                            let (u, w) = uv(c, verts.pos[v as usize]);
-                            su += u;
-                            sv += w;
-                        }
-                        let n = p.len() as f64;
-                        let m = plan.material_at(su / n, sv / n);
-                        (p, if m == NO_MATERIAL { original } else { m })
-                    })
-                    .collect()
-            }
-        };
-        for (p, m) in pieces {
-            for tr in triangulate(&p, &mut verts) {
-                tris.push(tr);
-                mats.push(m);
+}
+
+/// Phase 2's start: triangle `tri` as a polygon with the points on its edges, each vertex with
+/// the edge leaving it. A step of its own: the same for charted and uncharted triangles.
+fn edge_polygon(tri: &[u32; 3], verts: &Verts) -> Poly {
+    let mut poly: Vec<(u32, Carrier)> = Vec::new();
+    for e in 0..3 {
+        let (a, b) = (tri[e], tri[(e + 1) % 3]);
+        let key = (a.min(b), a.max(b));
+        let carrier = Carrier::Edge(key.0, key.1);
+        poly.push((a, carrier));
+        if let Some(pts) = verts.on_edge.get(&key) {
+            if a < b {
+                poly.extend(pts.iter().map(|&(_, v)| (v, carrier)));
+            } else {
+                poly.extend(pts.iter().rev().map(|&(_, v)| (v, carrier)));
             }
         }
     }
-    stats.vertices_added += (verts.pos.len() - n0) as u64;
-    Ok(Mesh {
-        positions: PodVec(
-            verts
-                .pos
-                .iter()
-                .map(|p| p.to_array().map(|x| x as f32))
-                .collect(),
-        ),
-        triangles: PodVec(tris),
-        materials: PodVec(mats),
-    })
+    poly
+}
+
+/// Phase 2 for a charted triangle: polygon `poly` split by every cut line of plan `(k, plan)`
+/// (u lines, then v lines), each piece with the plan's material at its centre (`original` where
+/// the plan has none). A step of its own: the only part of phase 2 that reads the plan.
+fn split_by_plan(
+    poly: Poly,
+    (k, plan): &(usize, ChartPlan),
+    charts: &ChartSet,
+    verts: &mut Verts,
+    original: u8,
+) -> Result<Vec<(Poly, u8)>, String> {
+    let c = &charts.charts[*k];
+    let mut pieces = vec![poly];
+    let lines = plan
+        .us
+        .iter()
+        .map(|&l| (0, l))
+        .chain(plan.vs.iter().map(|&l| (1, l)));
+    for (li, (axis, l)) in lines.enumerate() {
+        let mut next = Vec::with_capacity(pieces.len() + 1);
+        for p in pieces {
+            let (lo, hi) = split(p, *k, c, verts, li as u32, axis, l)?;
+            next.extend(lo);
+            next.extend(hi);
+        }
+        pieces = next;
+    }
+    Ok(pieces
+        .into_iter()
+        .map(|p| {
+            let (mut su, mut sv) = (0.0, 0.0);
+            for &(v, _) in &p {
+                let (u, w) = uv(c, verts.pos[v as usize]);
+                su += u;
+                sv += w;
+            }
+            let n = p.len() as f64;
+            let m = plan.material_at(su / n, sv / n);
+            (p, if m == NO_MATERIAL { original } else { m })
+        })
+        .collect())
 }
 
 type Poly = Vec<(u32, Carrier)>;

@@ -12,7 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::Material;
 use crate::artifact::{
-    Chart, ChartSet, Mesh, Metrics, ObjectClass, ReliefInstance, ReliefSet, Scene,
+    Chart, ChartSet, Mesh, Metrics, ObjectClass, ReliefInstance, ReliefSet, Scene, SceneObject,
 };
 use crate::geom::boolean::{subtract_then_add as apply, to_manifold};
 use crate::geom::mesh_build::quad_prism;
@@ -395,6 +395,59 @@ pub fn carve_scene(
     relief: &ReliefSet,
     p: &CarveParams,
 ) -> Result<(Scene, CarveReport), String> {
+    let (mut outcomes, per_object, fitted) = route_instances(scene, charts, relief, p);
+    let ctx = CarveCtx {
+        charts,
+        fitted: &fitted,
+        p,
+    };
+    let done: Vec<Result<Option<Done>, String>> = per_object
+        .par_iter()
+        .enumerate()
+        .map(|(oi, ks)| carve_building(&ctx, &scene.objects[oi], oi, ks))
+        .collect();
+    let mut out = scene.clone();
+    let mut report = CarveReport::default();
+    for d in done {
+        let Some((oi, mesh, results, b)) = d? else {
+            continue;
+        };
+        out.objects[oi].mesh = mesh;
+        for (k, o) in results {
+            outcomes[k] = o;
+        }
+        report.buildings.push(b);
+    }
+    report.outcomes = outcomes;
+    Ok((out, report))
+}
+
+/// One carved building: its object index, its mesh, each of its instances' outcome, its report.
+type Done = (usize, Mesh, Vec<(usize, CarveOutcome)>, CarvedBuilding);
+
+/// What every building's carving reads: the charts, the fitted instances (by relief index) and
+/// the parameters.
+struct CarveCtx<'a> {
+    charts: &'a ChartSet,
+    fitted: &'a [Option<ReliefInstance>],
+    p: &'a CarveParams,
+}
+
+/// The routing step, before any carving: fits each instance to its wall and files it under the
+/// scene object its chart was made from. Returns the outcomes so far (instances that failed to
+/// fit or whose building is not in the scene are dropped here), the instances of each object and
+/// the fitted instances. A step of its own as it is serial and decides which buildings carve.
+#[allow(clippy::type_complexity)]
+fn route_instances(
+    scene: &Scene,
+    charts: &ChartSet,
+    relief: &ReliefSet,
+    p: &CarveParams,
+) -> (
+    Vec<CarveOutcome>,
+    Vec<Vec<usize>>,
+    Vec<Option<ReliefInstance>>,
+) {
     let mut outcomes: Vec<CarveOutcome> = vec![CarveOutcome::Carved; relief.instances.len()];
     let mut per_object: Vec<Vec<usize>> = vec![Vec::new(); scene.objects.len()];
     let mut fitted: Vec<Option<ReliefInstance>> = vec![None; relief.instances.len()];
@@ -422,152 +475,194 @@ pub fn carve_scene(
             }
         }
     }
-    type Done = (usize, Mesh, Vec<(usize, CarveOutcome)>, CarvedBuilding);
-    let done: Vec<Result<Option<Done>, String>> = per_object
-        .par_iter()
-        .enumerate()
-        .map(|(oi, ks)| {
-            if ks.is_empty() {
-                return Ok(None);
-            }
-            let obj = &scene.objects[oi];
-            let wall_default = Material::Concrete;
-            let base = match to_manifold(&obj.mesh) {
-                Ok(b) => b,
-                Err(e) => {
-                    // Not a solid Manifold takes: the building stays as it is.
-                    let why = format!("{}: the building solid: {e}", obj.id);
-                    let results = ks
-                        .iter()
-                        .map(|&k| (k, CarveOutcome::Dropped(DropKind::Solid, why.clone())))
-                        .collect();
-                    let b = CarvedBuilding {
-                        id: obj.id.clone(),
-                        triangles_before: obj.mesh.len(),
-                        triangles_after: obj.mesh.len(),
-                        carved: 0,
-                        dropped: ks.len(),
-                    };
-                    return Ok(Some((oi, obj.mesh.clone(), results, b)));
-                }
-            };
-            let mut prisms: Vec<(usize, i8, Manifold, Material)> = Vec::new();
-            let mut results: Vec<(usize, CarveOutcome)> = Vec::new();
-            for &k in ks {
-                let Some(inst) = fitted[k].as_ref() else {
-                    continue;
-                };
-                let c = &charts.charts[inst.chart as usize];
-                // The wall's material: that of the chart's triangle under the instance's centre.
-                let (cu, cv) = (
-                    ((inst.rect[0] + inst.rect[2]) / 2.0) as u32,
-                    ((inst.rect[1] + inst.rect[3]) / 2.0) as u32,
-                );
-                let wall = c
-                    .triangle_at
-                    .get(
-                        (cv.min(c.height.saturating_sub(1)) * c.width
-                            + cu.min(c.width.saturating_sub(1))) as usize,
-                    )
-                    .and_then(|&t| obj.mesh.materials.get(t as usize))
-                    .and_then(|&m| Material::from_u8(m))
-                    .unwrap_or(wall_default);
-                let prism = instance_prism(inst, c.normal, wall, p);
-                match to_manifold(&prism) {
-                    Ok(m) => prisms.push((k, inst.sign, m, wall)),
-                    Err(e) => results.push((
-                        k,
-                        CarveOutcome::Dropped(DropKind::Prism, format!("prism: {e}")),
-                    )),
-                }
-            }
-            let recess: Vec<&Manifold> = prisms.iter().filter(|p| p.1 < 0).map(|p| &p.2).collect();
-            let protr: Vec<&Manifold> = prisms.iter().filter(|p| p.1 > 0).map(|p| &p.2).collect();
-            let mesh = match apply(&base, &recess, &protr, wall_default) {
-                Ok(m) => {
-                    results.extend(prisms.iter().map(|p| (p.0, CarveOutcome::Carved)));
-                    m
-                }
-                Err(_) => {
-                    // One at a time: keep each instance whose result still checks.
-                    let mut cur = base.clone();
-                    let mut mesh = obj.mesh.clone();
-                    for (k, sign, pm, wall) in &prisms {
-                        let one = |pm: &Manifold| {
-                            let (r, pr): (Vec<&Manifold>, Vec<&Manifold>) = if *sign < 0 {
-                                (vec![pm], vec![])
-                            } else {
-                                (vec![], vec![pm])
-                            };
-                            apply(&cur, &r, &pr, wall_default)
-                        };
-                        // A result that fails the check mostly does so where f32 rounding
-                        // lets a corner through a face another feature left a hair away:
-                        // the prism drawn in by a few millimetres misses that coincidence.
-                        let mut tried = one(pm);
-                        for nudge in NUDGES_M {
-                            if tried.is_ok() {
-                                break;
-                            }
-                            // Prisms are made of fitted instances only.
-                            let Some(inst) = fitted[*k].as_ref() else {
-                                break;
-                            };
-                            let c = &charts.charts[inst.chart as usize];
-                            let Some(inset) = drawn_in(inst, c, nudge, p) else {
-                                break;
-                            };
-                            let q = CarveParams {
-                                overshoot_m: p.overshoot_m + nudge,
-                                ..p.clone()
-                            };
-                            let prism = instance_prism(&inset, c.normal, *wall, &q);
-                            if let Ok(m) = to_manifold(&prism)
-                                && let Ok(r) = one(&m)
-                            {
-                                tried = Ok(r);
-                            }
-                        }
-                        match tried {
-                            Ok(m) => {
-                                cur = to_manifold(&m).map_err(|e| format!("{}: {e}", obj.id))?;
-                                mesh = m;
-                                results.push((*k, CarveOutcome::Carved));
-                            }
-                            Err(e) => results.push((*k, CarveOutcome::Dropped(DropKind::Check, e))),
-                        }
-                    }
-                    mesh
-                }
-            };
-            let carved = results
-                .iter()
-                .filter(|r| r.1 == CarveOutcome::Carved)
-                .count();
-            let b = CarvedBuilding {
-                id: obj.id.clone(),
-                triangles_before: obj.mesh.len(),
-                triangles_after: mesh.len(),
-                carved,
-                dropped: results.len() - carved,
-            };
-            Ok(Some((oi, mesh, results, b)))
-        })
+    (outcomes, per_object, fitted)
+}
+
+/// Carves the instances `ks` into building `obj` (object `oi`): None when it has none. The
+/// per-building step that runs in parallel: makes the solid, the prisms, then applies them all
+/// at once or, when that fails, one at a time.
+fn carve_building(
+    ctx: &CarveCtx,
+    obj: &SceneObject,
+    oi: usize,
+    ks: &[usize],
+) -> Result<Option<Done>, String> {
+    if ks.is_empty() {
+        return Ok(None);
+    }
+    let wall_default = Material::Concrete;
+    let base = match to_manifold(&obj.mesh) {
+        Ok(b) => b,
+        Err(e) => return Ok(Some(unsolid_building(obj, oi, ks, e))),
+    };
+    let (prisms, mut results) = building_prisms(ctx, obj, ks);
+    let recess: Vec<&Manifold> = prisms.iter().filter(|p| p.1 < 0).map(|p| &p.2).collect();
+    let protr: Vec<&Manifold> = prisms.iter().filter(|p| p.1 > 0).map(|p| &p.2).collect();
+    let mesh = match apply(&base, &recess, &protr, wall_default) {
+        Ok(m) => {
+            results.extend(prisms.iter().map(|p| (p.0, CarveOutcome::Carved)));
+            m
+        }
+        Err(_) => carve_one_at_a_time(ctx, obj, base, &prisms, &mut results)?,
+    };
+    let carved = results
+        .iter()
+        .filter(|r| r.1 == CarveOutcome::Carved)
+        .count();
+    let b = CarvedBuilding {
+        id: obj.id.clone(),
+        triangles_before: obj.mesh.len(),
+        triangles_after: mesh.len(),
+        carved,
+        dropped: results.len() - carved,
+    };
+    Ok(Some((oi, mesh, results, b)))
+}
+
+/// The building whose mesh is not a solid Manifold takes (`e` why not): it stays as it is and
+/// all its instances `ks` are dropped. A step of its own: the early way out of carving.
+fn unsolid_building(obj: &SceneObject, oi: usize, ks: &[usize], e: String) -> Done {
+    // Not a solid Manifold takes: the building stays as it is.
+    let why = format!("{}: the building solid: {e}", obj.id);
+    let results = ks
+        .iter()
+        .map(|&k| (k, CarveOutcome::Dropped(DropKind::Solid, why.clone())))
         .collect();
-    let mut out = scene.clone();
-    let mut report = CarveReport::default();
-    for d in done {
-        let Some((oi, mesh, results, b)) = d? else {
+    let b = CarvedBuilding {
+        id: obj.id.clone(),
+        triangles_before: obj.mesh.len(),
+        triangles_after: obj.mesh.len(),
+        carved: 0,
+        dropped: ks.len(),
+    };
+    (oi, obj.mesh.clone(), results, b)
+}
+
+/// A carved prism: the instance's relief index, its sign (< 0 recess, > 0 protrusion), its solid
+/// and the wall material it takes.
+type Prism = (usize, i8, Manifold, Material);
+
+/// The prisms of building `obj`'s fitted instances `ks`, in their order, and the instances
+/// dropped as their prism is no solid. The step that turns instances into solids.
+fn building_prisms(
+    ctx: &CarveCtx,
+    obj: &SceneObject,
+    ks: &[usize],
+) -> (Vec<Prism>, Vec<(usize, CarveOutcome)>) {
+    let mut prisms: Vec<Prism> = Vec::new();
+    let mut results: Vec<(usize, CarveOutcome)> = Vec::new();
+    for &k in ks {
+        let Some(inst) = ctx.fitted[k].as_ref() else {
             continue;
         };
-        out.objects[oi].mesh = mesh;
-        for (k, o) in results {
-            outcomes[k] = o;
+        let c = &ctx.charts.charts[inst.chart as usize];
+        let wall = wall_material(inst, c, obj);
+        let prism = instance_prism(inst, c.normal, wall, ctx.p);
+        match to_manifold(&prism) {
+            Ok(m) => prisms.push((k, inst.sign, m, wall)),
+            Err(e) => results.push((
+                k,
+                CarveOutcome::Dropped(DropKind::Prism, format!("prism: {e}")),
+            )),
         }
-        report.buildings.push(b);
     }
-    report.outcomes = outcomes;
-    Ok((out, report))
+    (prisms, results)
+}
+
+/// The wall's material: that of the chart's triangle under the instance's centre (concrete when
+/// there is none). A step of its own: the only texel look-up of carving.
+fn wall_material(inst: &ReliefInstance, c: &Chart, obj: &SceneObject) -> Material {
+    let wall_default = Material::Concrete;
+    // The wall's material: that of the chart's triangle under the instance's centre.
+    let (cu, cv) = (
+        ((inst.rect[0] + inst.rect[2]) / 2.0) as u32,
+        ((inst.rect[1] + inst.rect[3]) / 2.0) as u32,
+    );
+    c.triangle_at
+        .get(
+            (cv.min(c.height.saturating_sub(1)) * c.width + cu.min(c.width.saturating_sub(1)))
+                as usize,
+        )
+        .and_then(|&t| obj.mesh.materials.get(t as usize))
+        .and_then(|&m| Material::from_u8(m))
+        .unwrap_or(wall_default)
+}
+
+/// The fallback when all prisms at once fail the check: applies them one at a time to `base`,
+/// keeping each whose result still checks (pushing every prism's outcome to `results`), and
+/// returns the mesh. A step of its own: the slow, forgiving path.
+fn carve_one_at_a_time(
+    ctx: &CarveCtx,
+    obj: &SceneObject,
+    base: Manifold,
+    prisms: &[Prism],
+    results: &mut Vec<(usize, CarveOutcome)>,
+) -> Result<Mesh, String> {
+    // One at a time: keep each instance whose result still checks.
+    let mut cur = base;
+    let mut mesh = obj.mesh.clone();
+    for (k, sign, pm, wall) in prisms {
+        match apply_nudged(ctx, &cur, *k, *sign, pm, *wall) {
+            Ok(m) => {
+                cur = to_manifold(&m).map_err(|e| format!("{}: {e}", obj.id))?;
+                mesh = m;
+                results.push((*k, CarveOutcome::Carved));
+            }
+            Err(e) => results.push((*k, CarveOutcome::Dropped(DropKind::Check, e))),
+        }
+    }
+    Ok(mesh)
+}
+
+/// Applies the single prism `pm` of instance `k` (sign `sign`, wall `wall`) to `cur`; when the
+/// result fails the check, retries with the prism drawn in by each of NUDGES_M in turn. The step
+/// that applies one instance in the fallback.
+fn apply_nudged(
+    ctx: &CarveCtx,
+    cur: &Manifold,
+    k: usize,
+    sign: i8,
+    pm: &Manifold,
+    wall: Material,
+) -> Result<Mesh, String> {
+    let wall_default = Material::Concrete;
+    let p = ctx.p;
+    let one = |pm: &Manifold| {
+        let (r, pr): (Vec<&Manifold>, Vec<&Manifold>) = if sign < 0 {
+            (vec![pm], vec![])
+        } else {
+            (vec![], vec![pm])
+        };
+        apply(cur, &r, &pr, wall_default)
+    };
+    // A result that fails the check mostly does so where f32 rounding
+    // lets a corner through a face another feature left a hair away:
+    // the prism drawn in by a few millimetres misses that coincidence.
+    let mut tried = one(pm);
+    for nudge in NUDGES_M {
+        if tried.is_ok() {
+            break;
+        }
+        // Prisms are made of fitted instances only.
+        let Some(inst) = ctx.fitted[k].as_ref() else {
+            break;
+        };
+        let c = &ctx.charts.charts[inst.chart as usize];
+        let Some(inset) = drawn_in(inst, c, nudge, p) else {
+            break;
+        };
+        let q = CarveParams {
+            overshoot_m: p.overshoot_m + nudge,
+            ..p.clone()
+        };
+        let prism = instance_prism(&inset, c.normal, wall, &q);
+        if let Ok(m) = to_manifold(&prism)
+            && let Ok(r) = one(&m)
+        {
+            tried = Ok(r);
+        }
+    }
+    tried
 }
 
 #[cfg(test)]
