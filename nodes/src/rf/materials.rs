@@ -134,15 +134,15 @@ impl Material {
             .law()
             .ok_or_else(|| format!("{self:?} has no P.2040 law"))?;
         let f = freq_hz / 1e9;
-        if let Some(m_v) = self.p527_water_content() {
-            if f > GROUND_P2040_TOP_GHZ {
-                let (re, im) = p527::soil(&p527::LOAM, f, m_v)
-                    .map_err(|e| format!("{} above 10 GHz: {e}", self.itu_type().unwrap_or("?")))?;
-                return Ok((re, p527::conductivity(f, im)));
-            }
+        let ground_water = self.p527_water_content();
+        if let Some(m_v) = ground_water.filter(|_| f > GROUND_P2040_TOP_GHZ) {
+            let (re, im) = p527::soil(&p527::LOAM, f, m_v)
+                .map_err(|e| format!("{} above 10 GHz: {e}", self.itu_type().unwrap_or("?")))?;
+            return Ok((re, p527::conductivity(f, im)));
         }
-        let in_range = law.lo_ghz < f
-            && (f < law.hi_ghz || (self.p527_water_content().is_some() && f == law.hi_ghz));
+        // A ground's P.2040 law holds up to 10 GHz itself, where P.527 takes over.
+        let in_range =
+            law.lo_ghz < f && (f < law.hi_ghz || (ground_water.is_some() && f == law.hi_ghz));
         if !in_range && !extrapolate {
             return Err(format!(
                 "{} is specified for {}-{} GHz by ITU-R P.2040, not {f} GHz ({EXTRAPOLATE_HINT} to extrapolate its law anyway)",
