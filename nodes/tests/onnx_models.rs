@@ -436,6 +436,9 @@ fn the_shipped_label_tables_read_and_use_our_classes() {
         ),
         ("ade20k.ron", 150, [ARCH_CLASSES, CLUTTER_CLASSES].concat()),
         ("rmsnet.ron", 20, RMSNET_CLASSES.to_vec()),
+        // The CMP SegFormer's 13 outputs: "unknown" and the 12 CMP classes.
+        ("cmp_facade.ron", 13, [ARCH_CLASSES, CLUTTER_CLASSES].concat()),
+        ("sam3_prompts.ron", 24, [ARCH_CLASSES, CLUTTER_CLASSES].concat()),
     ] {
         let t = LabelTable::read(&dir.join(name)).unwrap();
         assert_eq!(t.classes.len(), n, "{name}");
@@ -444,6 +447,29 @@ fn the_shipped_label_tables_read_and_use_our_classes() {
                 assert!(vocabulary.contains(&o.as_str()), "{name}: {theirs} -> {o}");
             }
         }
+    }
+}
+
+/// The façade model's table gives the relief its openings and balconies, and the prompt table
+/// every architectural and clutter class (drainpipes only come from prompting).
+#[test]
+fn the_facade_and_prompt_tables_reach_the_relief_classes() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../graphs/labels");
+    let ours = |name: &str| -> Vec<String> {
+        LabelTable::read(&dir.join(name))
+            .unwrap()
+            .classes
+            .into_iter()
+            .filter_map(|(_, o)| o)
+            .collect()
+    };
+    let cmp = ours("cmp_facade.ron");
+    for class in ["wall", "window", "door", "balcony"] {
+        assert!(cmp.iter().any(|c| c == class), "cmp_facade.ron: {class}");
+    }
+    let prompts = ours("sam3_prompts.ron");
+    for class in ARCH_CLASSES.iter().chain(CLUTTER_CLASSES) {
+        assert!(prompts.iter().any(|c| c == class), "sam3_prompts.ron: {class}");
     }
 }
 
