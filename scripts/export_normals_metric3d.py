@@ -40,7 +40,8 @@ checked at run time instead:
   and prints the agreement; `--frame +x+y+z` (or any signs) fixes them. A view that shows only
   walls cannot tell the sign of y (no surface faces up or down): the views' sum decides.
 Every normal is then made unit length and turned to face the camera (a visible surface cannot
-face away), and resized to the view bilinearly.
+face away), and resized to the view bilinearly; a pixel with no valid normal is NaN (the relief
+reads NaN as no normal, but a zero vector as a side face).
 
 `--self-test` checks the pure parts on synthetic data, with no model and no weights: the frame
 fit recovers a known sign pattern, the facing flip, the resize, and the EXR round trip (read
@@ -364,7 +365,9 @@ def run(args):
         ours = to_ours(n_model, signs, rays)
         ours = resize_bilinear(np.nan_to_num(ours), H, W)
         ours = face_camera(unit(ours), pixel_rays(H, W, fx, fy, cx, cy))
-        write_normal_exr(os.path.join(args.out, "normal", f"{vid}.exr"), np.nan_to_num(ours))
+        # NaN where there is no normal: the relief reads NaN as no normal, a zero vector as a
+        # side face.
+        write_normal_exr(os.path.join(args.out, "normal", f"{vid}.exr"), ours)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -429,14 +432,15 @@ def self_test():
 
     # EXR round trip: R, G, B = x, y, z, bit for bit.
     path = os.path.join(os.environ.get("TMPDIR", "/tmp"), f"kodama_normal_selftest_{os.getpid()}.exr")
-    field = np.nan_to_num(ours).astype(np.float32)
+    field = ours.astype(np.float32)
+    field[0, :3] = np.nan  # pixels without a normal stay NaN
     write_normal_exr(path, field)
     chans, reader = read_exr_any(path)
     for k, c in enumerate("RGB"):
-        assert chans[c].shape == (h, w) and np.array_equal(chans[c], field[..., k]), c
+        assert chans[c].shape == (h, w) and np.array_equal(chans[c], field[..., k], equal_nan=True), c
     with open(path, "rb") as fh:
         own, ww, hh = read_exr_uncompressed(fh.read())
-    assert (ww, hh) == (w, h) and np.array_equal(own["B"], field[..., 2])
+    assert (ww, hh) == (w, h) and np.array_equal(own["B"], field[..., 2], equal_nan=True)
     os.remove(path)
     print(f"self-test passed (frame fit, facing, resize, model size; EXR read back by {reader})")
 
