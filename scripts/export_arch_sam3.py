@@ -14,9 +14,10 @@ prompt the higher-scoring mask; an instance left with fewer than `--min-pixels` 
 16) is dropped, its pixels left unlabelled, as SegmentViews drops small regions. SAM 3 is the one published image model found that gives
 drainpipes (by the prompts "drainpipe" and "downspout"); no fixed-class façade model has them.
 
-    # SAM 3: github.com/facebookresearch/sam3 (PyTorch >= 2.7 and a CUDA GPU per its README;
-    # the checkpoint is on Hugging Face, facebook/sam3, which asks you to accept its licence).
-    pip install -e sam3/ numpy pillow
+    # SAM 3: clone github.com/facebookresearch/sam3 and install it as its README says (PyTorch
+    # >= 2.7 and a CUDA GPU); the checkpoint is facebook/sam3 on Hugging Face (whether it asks
+    # you to accept a licence first: not checked).
+    pip install numpy pillow
     python3 scripts/export_arch_sam3.py --views mapillary_views/views.json --out view_outputs
     python3 scripts/export_arch_sam3.py --self-test
 
