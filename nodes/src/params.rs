@@ -34,6 +34,25 @@ pub fn check_cell(cell_m: Option<f64>) -> Result<(), ParamError> {
     }
 }
 
+/// A reader's `window` (x_min, y_min, x_max, y_max in site metres): finite, each min below its
+/// max.
+pub fn check_window(window: Option<(f64, f64, f64, f64)>) -> Result<(), ParamError> {
+    match window {
+        Some((x0, y0, x1, y1))
+            if !([x0, y0, x1, y1].iter().all(|v| v.is_finite()) && x0 < x1 && y0 < y1) =>
+        {
+            Err(ParamError::new(
+                "window",
+                format!(
+                    "expected (x_min, y_min, x_max, y_max) in site metres, finite, each min \
+                     below its max; found ({x0}, {y0}, {x1}, {y1})"
+                ),
+            ))
+        }
+        _ => Ok(()),
+    }
+}
+
 /// The folder holding `path` (`.` for a bare file name): what a node whose data is a folder of
 /// files (a tileset, a view set) declares as its input.
 pub fn folder_of(path: &str) -> String {

@@ -23,6 +23,7 @@ fn raster_params(path: &str) -> ReadRasterParams {
         cell_m: None,
         resample: Resample::Bilinear,
         nodata: None,
+        window: None,
     }
 }
 
@@ -61,6 +62,80 @@ fn gdal_float_dem_with_nodata_on_its_native_grid() {
     }
 }
 
+/// A window keeps the cells whose centres fall in it, with the values the whole file has there:
+/// on the file's own grid (a cut) and through a warp (a coarser grid, cut after covering).
+#[test]
+fn a_window_reads_only_the_cells_inside_it() {
+    let site = Site {
+        crs: "EPSG:32618".into(),
+        origin: (583200.0, 4506600.0),
+        cell_m: 0.5,
+    };
+    let whole = read_raster(&raster_params("x"), fixture("gdal_dem_f32.tif"), &site);
+    let p = ReadRasterParams {
+        window: Some((9.0, 21.0, 31.0, 41.0)),
+        ..raster_params("x")
+    };
+    let cut = read_raster(&p, fixture("gdal_dem_f32.tif"), &site);
+    // Cells of 2 m from x = 0, y = 60: centres 9..31 in x (12 columns), 41..21 in y (11 rows).
+    assert_eq!(
+        cut.grid,
+        Grid {
+            x0: 8.0,
+            y0: 42.0,
+            cell_m: 2.0,
+            width: 12,
+            height: 11
+        }
+    );
+    for row in 0..cut.grid.height {
+        for col in 0..cut.grid.width {
+            let (x, y) = cut.grid.center(col, row);
+            let (c, r) = whole.grid.cell_of(x, y).unwrap();
+            assert_eq!(cut.at(col, row).to_bits(), whole.at(c, r).to_bits());
+        }
+    }
+    let coarse = ReadRasterParams {
+        cell_m: Some(4.0),
+        ..p.clone()
+    };
+    let warped = read_raster(&coarse, fixture("gdal_dem_f32.tif"), &site);
+    let (x1, y1) = (
+        warped.grid.x0 + warped.grid.width as f64 * 4.0,
+        warped.grid.y0 - warped.grid.height as f64 * 4.0,
+    );
+    assert!(
+        warped.grid.x0 >= 9.0 - 2.0 && x1 <= 31.0 + 2.0,
+        "{:?}",
+        warped.grid
+    );
+    assert!(
+        y1 >= 21.0 - 2.0 && warped.grid.y0 <= 41.0 + 2.0,
+        "{:?}",
+        warped.grid
+    );
+    assert!(!warped.grid.is_empty());
+    // A window off the file is an error naming it and the file's extent.
+    let off = ReadRasterParams {
+        window: Some((500.0, 500.0, 600.0, 600.0)),
+        ..raster_params("x")
+    };
+    let files = [fixture("gdal_dem_f32.tif")];
+    let e = ReadRaster::run(&off, &Inputs::new(), &Ctx::new(&site, &files)).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("gdal_dem_f32.tif")
+            && msg.contains("does not overlap the file, which covers x 0.0 to 80.0, y 0.0 to 60.0"),
+        "{msg}"
+    );
+    // A window upside down is refused as a param.
+    let bad = ReadRasterParams {
+        window: Some((10.0, 0.0, 5.0, 1.0)),
+        ..raster_params("x")
+    };
+    assert!(ReadRaster::validate(&bad).is_err());
+}
+
 #[test]
 fn gdal_tiled_lzw_uint16() {
     let site = Site {
@@ -84,6 +159,18 @@ fn gdal_tiled_lzw_uint16() {
 
 #[test]
 fn gdal_rgb_orthophoto() {
+    gdal_rgb_orthophoto_in(None, (10.0, 50.0, 20, 10), (0, 0));
+    // The same image cut to a window: the pixels inside it, the same colours.
+    gdal_rgb_orthophoto_in(Some((14.2, 43.0, 19.9, 47.6)), (14.0, 48.0, 6, 5), (4, 2));
+}
+
+/// Reads the GDAL orthophoto (20 x 10 pixels of 1 m from x 10, y 50; red 10 per column, green 20
+/// per row) through `window`, expecting the grid (x0, y0, width, height) starting at pixel `first`.
+fn gdal_rgb_orthophoto_in(
+    window: Option<(f64, f64, f64, f64)>,
+    (x0, y0, width, height): (f64, f64, u32, u32),
+    first: (usize, usize),
+) {
     let site = Site {
         crs: "EPSG:32618".into(),
         origin: (583200.0, 4506600.0),
@@ -94,22 +181,25 @@ fn gdal_rgb_orthophoto() {
         world_file: None,
         crs: None,
         cell_m: None,
+        window,
     };
     let files = [fixture("gdal_ortho_rgb.tif")];
     let o: Ortho = ReadOrtho::run(&p, &Inputs::new(), &Ctx::new(&site, &files)).unwrap();
     assert_eq!(
         o.grid,
         Grid {
-            x0: 10.0,
-            y0: 50.0,
+            x0,
+            y0,
             cell_m: 1.0,
-            width: 20,
-            height: 10
+            width,
+            height
         }
     );
-    for row in 0..10 {
-        for col in 0..20 {
-            assert_eq!(o.rgb[row * 20 + col], [10 * col as u8, 20 * row as u8, 7]);
+    let w = width as usize;
+    for row in 0..height as usize {
+        for col in 0..w {
+            let (c, r) = (first.0 + col, first.1 + row);
+            assert_eq!(o.rgb[row * w + col], [10 * c as u8, 20 * r as u8, 7]);
         }
     }
 }
@@ -178,6 +268,7 @@ fn our_geotiffs_read_back_with_identical_georeferencing() {
         world_file: None,
         crs: None,
         cell_m: None,
+        window: None,
     };
     let files = [path];
     let o = ReadOrtho::run(&p, &Inputs::new(), &Ctx::new(&site, &files)).unwrap();
@@ -272,6 +363,7 @@ fn autzen_orthophoto_registers_with_the_lidar_colours() {
         world_file: None,
         crs: Some("EPSG:2994".into()),
         cell_m: Some(0.5),
+        window: None,
     };
     let files = [shared("autzen/autzen.jpg"), shared("autzen/autzen.wld")];
     let o = ReadOrtho::run(&p, &Inputs::new(), &Ctx::new(&site, &files)).unwrap();

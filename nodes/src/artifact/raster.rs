@@ -73,6 +73,34 @@ impl Grid {
         crate::params::check_cells(self.width as f64, self.height as f64, 4)
             .map_err(|m| format!("{m} (cells of {} m)", self.cell_m))
     }
+    /// The part of the grid whose cell centres lie in `window` (x_min, y_min, x_max, y_max, site
+    /// metres), with the column and row of its first cell in this grid; None when no cell does.
+    pub fn crop(&self, window: (f64, f64, f64, f64)) -> Option<(Grid, u32, u32)> {
+        let (wx0, wy0, wx1, wy1) = window;
+        let c = self.cell_m;
+        let first = |v: f64| v.ceil().max(0.0);
+        let last = |v: f64, n: u32| v.floor().min(n as f64 - 1.0);
+        let (c0, c1) = (
+            first((wx0 - self.x0) / c - 0.5),
+            last((wx1 - self.x0) / c - 0.5, self.width),
+        );
+        let (r0, r1) = (
+            first((self.y0 - wy1) / c - 0.5),
+            last((self.y0 - wy0) / c - 0.5, self.height),
+        );
+        if !(c0 <= c1 && r0 <= r1) {
+            return None;
+        }
+        let (col0, row0) = (c0 as u32, r0 as u32);
+        let grid = Grid {
+            x0: self.x0 + col0 as f64 * c,
+            y0: self.y0 - row0 as f64 * c,
+            cell_m: c,
+            width: (c1 - c0) as u32 + 1,
+            height: (r1 - r0) as u32 + 1,
+        };
+        Some((grid, col0, row0))
+    }
     /// The smallest grid with cells of `cell_m`, aligned to multiples of `cell_m` from the site
     /// origin, that covers the box `[lo, hi]`.
     pub fn covering(lo: (f64, f64), hi: (f64, f64), cell_m: f64) -> Grid {

@@ -31,6 +31,27 @@ pub fn covering_grid(src: &PixelGrid, to_site: &ToSite, cell_m: f64) -> Result<G
     Grid::covering_checked(lo, hi, cell_m).map_err(|m| format!("{m}; use a coarser cell"))
 }
 
+/// `grid` cut to the cells whose centres lie in `window` (site metres), when one is given: a
+/// file far larger than the site (a DEM tile, an SRTM degree) is resampled only where it is used.
+/// The column and row of the cut's first cell in `grid` come with it.
+pub fn windowed(
+    grid: Grid,
+    window: Option<(f64, f64, f64, f64)>,
+) -> Result<(Grid, u32, u32), String> {
+    let Some(w) = window else {
+        return Ok((grid, 0, 0));
+    };
+    grid.crop(w).ok_or_else(|| {
+        let x1 = grid.x0 + grid.width as f64 * grid.cell_m;
+        let y1 = grid.y0 - grid.height as f64 * grid.cell_m;
+        format!(
+            "the window ({}, {}, {}, {}) does not overlap the file, which covers x {:.1} to {x1:.1}, \
+             y {y1:.1} to {:.1} (site metres)",
+            w.0, w.1, w.2, w.3, grid.x0, grid.y0
+        )
+    })
+}
+
 /// Fractional source pixel coordinates (column, row; pixel centres at +0.5) of every target cell
 /// centre, row by row.
 pub struct SourceMap {

@@ -10,7 +10,7 @@ use crate::artifact::{Ortho, PodVec};
 use crate::io::crs::source_crs;
 use crate::io::crs::{Crs, ToSite};
 use crate::io::geotiff::{PixelGrid, read_geotiff};
-use crate::io::warp::{Resample, SourceMap, covering_grid, sample};
+use crate::io::warp::{Resample, SourceMap, covering_grid, sample, windowed};
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`ReadOrtho`].
@@ -29,6 +29,10 @@ pub struct ReadOrthoParams {
     /// it is in the site CRS with square pixels, else the site's cell size.
     #[serde(default)]
     pub cell_m: Option<f64>,
+    /// Read only the pixels whose centres fall in this box, (x_min, y_min, x_max, y_max) in site
+    /// metres: an orthophoto tile reaches far beyond the site. Default: the whole image.
+    #[serde(default)]
+    pub window: Option<(f64, f64, f64, f64)>,
 }
 
 fn is_tiff(path: &str) -> bool {
@@ -53,7 +57,7 @@ pub struct ReadOrtho;
 
 impl Stage for ReadOrtho {
     const KIND: &'static str = "ReadOrtho";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const DOC: &'static str =
         "orthophoto (RGB GeoTIFF, or JPEG/PNG + world file) into the site frame, Sec. 4";
     const INPUTS: &'static [InputSpec] = &[];
@@ -74,6 +78,7 @@ impl Stage for ReadOrtho {
             None => {}
         }
         crate::params::check_cell(p.cell_m)?;
+        crate::params::check_window(p.window)?;
         Ok(())
     }
 
@@ -106,6 +111,13 @@ impl Stage for ReadOrtho {
             p.cell_m,
             pixels.as_site_grid(ctx.site.origin),
         ) {
+            let full_width = grid.width as usize;
+            let (grid, col0, row0) =
+                windowed(grid, p.window).map_err(|m| StageError::bad_input(path, "window", m))?;
+            let width = grid.width as usize;
+            let rgb = (0..grid.len())
+                .map(|i| rgb[(row0 as usize + i / width) * full_width + col0 as usize + i % width])
+                .collect();
             let n = grid.len();
             return Ok(Ortho {
                 grid,
@@ -115,6 +127,8 @@ impl Stage for ReadOrtho {
         }
         let grid = covering_grid(&pixels, &to_site, p.cell_m.unwrap_or(ctx.site.cell_m))
             .map_err(|m| StageError::bad_input(path, "reprojection", m))?;
+        let (grid, _, _) =
+            windowed(grid, p.window).map_err(|m| StageError::bad_input(path, "window", m))?;
         let map = SourceMap::new(&grid, &pixels, &to_site);
         ctx.progress.set_total(grid.height as u64);
         let w = grid.width as usize;

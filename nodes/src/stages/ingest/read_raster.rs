@@ -8,7 +8,7 @@ use crate::artifact::{PodVec, Raster};
 use crate::io::crs::ToSite;
 use crate::io::crs::source_crs;
 use crate::io::geotiff::{GeoTiff, read_geotiff};
-use crate::io::warp::{Resample, SourceMap, covering_grid, sample};
+use crate::io::warp::{Resample, SourceMap, covering_grid, sample, windowed};
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`ReadRaster`].
@@ -33,6 +33,10 @@ pub struct ReadRasterParams {
     /// The no-data value, overriding the file's.
     #[serde(default)]
     pub nodata: Option<f64>,
+    /// Read only the cells whose centres fall in this box, (x_min, y_min, x_max, y_max) in site
+    /// metres: a DEM or an SRTM tile reaches far beyond the site. Default: the whole file.
+    #[serde(default)]
+    pub window: Option<(f64, f64, f64, f64)>,
 }
 
 fn one() -> u16 {
@@ -47,7 +51,7 @@ pub struct ReadRaster;
 
 impl Stage for ReadRaster {
     const KIND: &'static str = "ReadRaster";
-    const VERSION: u32 = 1;
+    const VERSION: u32 = 2;
     const DOC: &'static str =
         "GeoTIFF band (DSM/DEM) into the site frame as a height field H_s, Sec. 4";
     const INPUTS: &'static [InputSpec] = &[];
@@ -60,6 +64,7 @@ impl Stage for ReadRaster {
             return Err(ParamError::new("band", "bands count from 1"));
         }
         crate::params::check_cell(p.cell_m)?;
+        crate::params::check_window(p.window)?;
         Ok(())
     }
 
@@ -99,9 +104,16 @@ impl Stage for ReadRaster {
             p.cell_m,
             tif.pixels.as_site_grid(ctx.site.origin),
         ) {
+            let full_width = grid.width as usize;
+            let (grid, col0, row0) =
+                windowed(grid, p.window).map_err(|m| StageError::bad_input(path, "window", m))?;
+            let width = grid.width as usize;
             let data = (0..grid.len())
                 .into_par_iter()
-                .map(|i| value(i) as f32)
+                .map(|i| {
+                    let (r, c) = (row0 as usize + i / width, col0 as usize + i % width);
+                    value(r * full_width + c) as f32
+                })
                 .collect();
             return Ok(Raster {
                 grid,
@@ -112,6 +124,7 @@ impl Stage for ReadRaster {
             &tif,
             &to_site,
             p.cell_m.unwrap_or(ctx.site.cell_m),
+            p.window,
             p.resample,
             value,
             ctx,
@@ -124,12 +137,13 @@ fn warp_raster(
     tif: &GeoTiff,
     to_site: &ToSite,
     cell_m: f64,
+    window: Option<(f64, f64, f64, f64)>,
     how: Resample,
     value: impl Fn(usize) -> f64 + Sync,
     ctx: &Ctx,
 ) -> Result<Raster, String> {
     let px = tif.pixels;
-    let grid = covering_grid(&px, to_site, cell_m)?;
+    let (grid, _, _) = windowed(covering_grid(&px, to_site, cell_m)?, window)?;
     let map = SourceMap::new(&grid, &px, to_site);
     ctx.progress.set_total(grid.height as u64);
     let mut data = vec![f32::NAN; grid.len()];
