@@ -221,20 +221,54 @@ fn an_output_format_the_type_cannot_take() {
 }
 
 /// The paper's sites are graphs over data the user downloads: without it, explain names every
-/// missing file and exits 2.
+/// missing file, then the missing site folder with the recipe that fills it and the docs page,
+/// and exits 2.
 #[test]
-fn site_graphs_without_their_data_name_each_missing_file() {
+fn site_graphs_without_their_data_name_each_missing_file_and_the_recipe() {
     let env = Env::new();
-    for site in ["brooklyn", "painiitty", "boulder"] {
+    let common = ["measurements.csv", "mapillary", "view_outputs", "osm.osm"];
+    let own: [(&str, &[&str]); 3] = [
+        (
+            "brooklyn",
+            &["lidar", "dem.tif", "ortho.tif", "srtm/N40W074.hgt"],
+        ),
+        (
+            "boulder",
+            &["lidar", "dem.tif", "ortho.tif", "srtm/N39W106.hgt"],
+        ),
+        ("painiitty", &["tiles", "dem30.tif"]),
+    ];
+    for (site, files) in own {
         let g = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("graphs/{site}.ron"));
-        let r = env.cli(&["explain", g.to_str().unwrap()]);
+        let data = env.dir.path().join(format!("data-{site}"));
+        std::fs::create_dir_all(&data).unwrap();
+        let r = env.cli(&[
+            "explain",
+            g.to_str().unwrap(),
+            "--data",
+            data.to_str().unwrap(),
+        ]);
         assert_eq!(r.code, 2, "{site}: {}", r.stderr);
-        for f in ["lidar.laz", "measurements.csv", "mapillary", "view_outputs"] {
+        for f in common.iter().chain(files) {
             assert!(
-                r.stderr.contains("file not found: ") && r.stderr.contains(&format!("{site}/{f}")),
-                "{site}: {}",
+                r.stderr.contains(&format!(
+                    "file not found: {}",
+                    data.join(site).join(f).display()
+                )),
+                "{site}/{f}: {}",
                 r.stderr
             );
         }
+        has(
+            &r.stderr,
+            &format!(
+                "this graph's data is missing: {}. `python3 scripts/site_data.py {site} --out DATA` downloads",
+                data.join(site).display()
+            ),
+        );
+        has(
+            &r.stderr,
+            &format!("docs/sites.md#{site} says what each input is"),
+        );
     }
 }

@@ -11,6 +11,7 @@ use kodama_nodes::stage::{Arity, InputSpec};
 use petgraph::algo::tarjan_scc;
 use petgraph::graph::DiGraph;
 
+use super::data_source::{data_source_of, missing_data_note};
 use super::{Graph, InputFile, Node};
 use crate::diag::{Diagnostic, GraphError, Sources};
 use crate::registry::{self, Kind};
@@ -127,6 +128,15 @@ fn check(
     for r in &raw {
         nodes.push(build_node(r, &raw, &index, &roots, diags));
     }
+    if let Some(a) = top.data
+        && let Some(source) = data_source_of(a, diags)
+    {
+        let missing = roots.missing.borrow();
+        if !missing.is_empty() {
+            let note = missing_data_note(&source, &roots.base, &missing);
+            diags.push(Diagnostic::at(a.span, None, note));
+        }
+    }
 
     let outputs = top
         .outputs
@@ -160,6 +170,7 @@ struct TopFields<'a> {
     site: Option<&'a Ast>,
     nodes: Option<&'a Ast>,
     outputs: Option<&'a Ast>,
+    data: Option<&'a Ast>,
 }
 
 /// The fields of the graph file's top value `ast`, which must be a `Graph(...)` (None, and a
@@ -179,17 +190,19 @@ fn top_fields<'a>(ast: &'a Ast, diags: &mut Vec<Diagnostic>) -> Option<TopFields
             return None;
         }
     };
-    const TOP: &[&str] = &["site", "nodes", "outputs"];
+    const TOP: &[&str] = &["site", "nodes", "outputs", "data"];
     let mut fields = TopFields {
         site: None,
         nodes: None,
         outputs: None,
+        data: None,
     };
     for (name, v) in top {
         match name.name.as_str() {
             "site" => fields.site = Some(v),
             "nodes" => fields.nodes = Some(v),
             "outputs" => fields.outputs = Some(v),
+            "data" => fields.data = Some(v),
             other => diags.push(Diagnostic::at(
                 name.span,
                 None,
@@ -589,6 +602,8 @@ struct DataRoot {
     /// What `base` is, for messages.
     what: &'static str,
     allow_outside: bool,
+    /// The resolved paths found missing, for the graph's data-source note.
+    missing: std::cell::RefCell<Vec<PathBuf>>,
 }
 
 impl DataRoot {
@@ -602,6 +617,7 @@ impl DataRoot {
                 "the graph file's folder"
             },
             allow_outside: opts.allow_outside,
+            missing: Default::default(),
         }
     }
 
@@ -624,6 +640,7 @@ impl DataRoot {
             self.base.join(w)
         };
         if std::fs::symlink_metadata(&path).is_err() {
+            self.missing.borrow_mut().push(path.clone());
             let msg = format!(
                 "file not found: {} (`{field}` resolves against {})",
                 path.display(),

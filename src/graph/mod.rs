@@ -1,5 +1,6 @@
 //! A loaded, checked graph: nodes in topological order with resolved edges, params and files.
 
+mod data_source;
 mod load;
 mod render;
 
