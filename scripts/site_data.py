@@ -34,7 +34,8 @@ Steps (--only takes a comma-separated list; a site runs those it has):
              line: arguments are visible to every user through ps and stay in shell history).
              Without it the step is skipped with a line saying how to get a token.
   tiles      painiitty: the Helsinki 3D reality mesh (2017) as OGC 3D Tiles. No endpoint could be
-             verified (the city publishes OBJ and 3MX): the step fails and says what to do by hand.
+             verified (the city publishes OBJ and 3MX): the step fails and says what to do by hand,
+             until tiles/tileset.json is there.
 
 Not downloadable (listed in <site>/SOURCES.md with their holders): the measurements of every site,
 NIST's panoramas (Boulder) and view_outputs/ (your own models' outputs).
@@ -46,8 +47,8 @@ from where, when, its licence, size and sha256.
 
 --dry-run prints the requests and files without sending or writing anything (requests that depend
 on an index response are shown as patterns). --replay DIR answers every request from DIR/index.json
-({"responses": [{"method", "url" | "url_prefix" | "url_pattern", "file" | "status"}]}, files
-relative to DIR); a request with no recorded response is an error naming it. --log FILE writes every
+({"responses": [{"method", "url" | "url_prefix" | "url_pattern", optional "body_contains",
+"file", optional "status"}]}, files relative to DIR; the first entry that matches answers); a request with no recorded response is an error naming it. --log FILE writes every
 request (method, URL, body; never headers, so never the token) as JSON lines.
 
 Exit status: 0 done (a skipped Mapillary step included), 1 a step failed (each is named with why),
@@ -158,6 +159,31 @@ NOT_PUBLIC = {
          "not obtainable publicly; ask the paper's authors"),
         ("view_outputs/", "your segmentation, material and depth models' outputs on the street views",
          "you", "run your models on mapillary/ (docs/datasets.md, \"Model outputs\")"),
+    ],
+}
+
+# Public, but fetched by hand: the paper's own sources where the recipe has a stand-in or none.
+BY_HAND = {
+    "brooklyn": [
+        ("dem.tif", "the paper's DEM: NYC 2017 Topobathymetric LiDAR bare-earth DEM (1 ft cells, EPSG:2263, "
+         "feet), NYC DoITT, via the NYS GIS Clearinghouse (https://gis.ny.gov/elevation)",
+         "no verified download URL: the recipe writes the USGS 3DEP 1 m DEM instead"),
+        ("ortho.tif", "the paper's orthophoto: NYS Digital Orthoimagery Program 2024 (NYS GIS Clearinghouse, "
+         "https://gis.ny.gov/); tiles seen (third-party code only) under "
+         "https://gisdata.ny.gov/ortho/nysdop12/new_york_city/spcs/tiles/<tile>.zip",
+         "unverified: the recipe writes NAIP from the Planetary Computer instead"),
+    ],
+    "boulder": [
+        ("lidar/", "the paper's LiDAR: DRCOG 2022 from the Colorado Spatial Data Portal",
+         "portal URL unverified: the recipe fetches the same DRCOG acquisition's 3DEP tiles from USGS"),
+        ("ortho.tif", "the paper's NAIP 2021 Colorado from the Colorado Spatial Data Portal",
+         "the recipe fetches the same NAIP 2021 quarter-quad from the Planetary Computer"),
+    ],
+    "painiitty": [
+        ("tiles/", "Helsinki 3D reality mesh 2017 (City of Helsinki, CC BY 4.0), published as OBJ and 3MX: "
+         "https://www.hel.fi/fi/paatoksenteko-ja-hallinto/tietoa-helsingista/kartat-ja-paikkatieto/helsinki-3d",
+         "no verified 3D Tiles endpoint: download the OBJ/3MX tiles over the site and convert them to "
+         "3D Tiles (tileset.json); coverage of Painiitty (Espoo) unverified"),
     ],
 }
 
@@ -307,9 +333,11 @@ class ReplayHttp(Http):
             print(f"site_data.py: --replay {folder}: cannot read {index}: {e}", file=sys.stderr)
             sys.exit(2)
 
-    def _match(self, method, url):
+    def _match(self, method, url, body=None):
         for e in self.entries:
             if e.get("method", "GET") != method:
+                continue
+            if "body_contains" in e and e["body_contains"].encode() not in (body or b""):
                 continue
             if ("url" in e and e["url"] == url) or \
                ("url_prefix" in e and url.startswith(e["url_prefix"])) or \
@@ -317,15 +345,15 @@ class ReplayHttp(Http):
                 return e
         raise StepFailed(f"replay: no recorded response for {method} {url}")
 
-    def _body(self, method, url):
-        e = self._match(method, url)
+    def _body(self, method, url, body=None):
+        e = self._match(method, url, body)
         status = e.get("status", 200)
         if status >= 400:
             raise StepFailed(f"{shown(url)}: HTTP {status} (recorded)")
         return (self.folder / e["file"]).read_bytes()
 
     def _fetch(self, url, method, body, headers, content_type):
-        return self._body(method, url)
+        return self._body(method, url, body)
 
     def _download(self, url, part, headers):
         part.write_bytes(self._body("GET", url))
@@ -773,6 +801,11 @@ class HelsinkiMesh:
         return [f"(no request: no verified 3D Tiles endpoint) -> {ctx.name}/tiles/tileset.json by hand"]
 
     def run(self, ctx):
+        done = ctx.root / "tiles" / "tileset.json"
+        if done.exists():
+            print(f"  present {done} (put there by hand)")
+            return [ctx.record(done, "Helsinki 3D reality mesh 2017 as 3D Tiles, converted by hand from the "
+                               "city's OBJ/3MX", self.PAGE, "CC BY 4.0 (City of Helsinki)")]
         raise StepFailed(
             "by hand: no 3D Tiles endpoint for the Helsinki 3D reality mesh (2017) could be verified. "
             f"Download the mesh tiles covering the site as OBJ or 3MX from the city's open data ({self.PAGE}; "
@@ -817,7 +850,8 @@ def write_sources(ctx, records, failures, skipped):
     doc = {"site": ctx.name, "crs": site["crs"], "origin": list(site["origin"]), "size_m": list(site["size_m"]),
            "box_wgs84": list(site["box"]), "download_box_wgs84": list(ctx.dbox), "files": files,
            "not_downloadable": [{"path": p, "what": w, "holder": h, "how": how}
-                                for p, w, h, how in NOT_PUBLIC[ctx.name]]}
+                                for p, w, h, how in NOT_PUBLIC[ctx.name]],
+           "by_hand": [{"path": p, "source": w, "why": why} for p, w, why in BY_HAND[ctx.name]]}
     ctx.root.mkdir(parents=True, exist_ok=True)
     js.write_text(json.dumps(doc, indent=1) + "\n")
     lines = [f"# {ctx.name}: where each file came from",
@@ -842,6 +876,10 @@ def write_sources(ctx, records, failures, skipped):
               "| file | what | holder | how to obtain |", "|---|---|---|---|"]
     for p, w, h, how in NOT_PUBLIC[ctx.name]:
         lines.append(f"| `{ctx.name}/{p}` | {w} | {h} | {how} |")
+    lines += ["", "## Public, by hand", "",
+              "| file | source | why by hand |", "|---|---|---|"]
+    for p, what, why in BY_HAND[ctx.name]:
+        lines.append(f"| `{ctx.name}/{p}` | {what} | {why} |")
     if failures or skipped:
         lines += ["", "## Not fetched in the last run", ""]
         lines += [f"- `{n}`: {why}" for n, why in failures]
