@@ -21,6 +21,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "tests" / "fixtures" / "site_data"
+sys.dont_write_bytecode = True
 sys.path.insert(0, str(ROOT / "scripts"))
 import site_data as sd  # noqa: E402  (the URLs are the recipe's own, so the index matches them)
 
