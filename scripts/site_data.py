@@ -42,7 +42,7 @@ NIST's panoramas (Boulder) and view_outputs/ (your own models' outputs).
 
 Downloads go to <file>.part and are renamed when complete; a .part left by an interrupted run is
 resumed (HTTP Range); a file already present (with the published size, where one is published) is
-kept. Each request is tried 3 times. Every site folder gets SOURCES.md and sources.json: what came
+kept. Each request is tried 3 times (network errors, HTTP 429 and 5xx). Every site folder gets SOURCES.md and sources.json: what came
 from where, when, its licence, size and sha256.
 
 --dry-run prints the requests and files without sending or writing anything (requests that depend
@@ -73,7 +73,7 @@ from pathlib import Path
 
 USER_AGENT = "kodama-dag-site-data/0.1 (scripts/site_data.py of the kodama-dag project)"
 TRIES = 3
-TIMEOUT_S = 120
+TIMEOUT_S = 300  # per socket operation; Overpass may think for up to its [timeout:180]
 
 # ---------------------------------------------------------------------------------------------
 # Sites (docs/sites.md; /work/site-layout.md): CRS, SW origin, size, centre and WGS84 box W,S,E,N.
@@ -192,7 +192,25 @@ BY_HAND = {
 
 
 class StepFailed(Exception):
-    pass
+    """A step that failed; `records` are the files it did get (SOURCES.md lists them)."""
+
+    def __init__(self, message, records=()):
+        super().__init__(message)
+        self.records = list(records)
+
+
+def each(items, fetch):
+    """fetch(item) -> record for every item; the failures are gathered into one StepFailed that
+    carries the records of the others."""
+    recs, failed = [], []
+    for item in items:
+        try:
+            recs.append(fetch(item))
+        except StepFailed as e:
+            failed.append(str(e))
+    if failed:
+        raise StepFailed(f"{len(failed)} of {len(items)} files failed: " + "; ".join(failed[:5]), recs)
+    return recs
 
 
 def shown(url):
@@ -240,8 +258,9 @@ class Http:
         self._download(url, part, dict(headers or {}))
         size = part.stat().st_size
         if expected_size is not None and size != expected_size:
-            raise StepFailed(f"{shown(url)}: got {size} bytes, the source says {expected_size} "
-                             f"(kept as {part}; run again to resume)")
+            # The transfer itself was complete (its Content-Length was met): the index is stale.
+            print(f"  warning: {dest.name}: {size} bytes where the index says {expected_size}; kept",
+                  file=sys.stderr)
         os.replace(part, dest)
         dt = max(time.monotonic() - t0, 1e-6)
         print(f"  fetched {dest} ({human(size)}, {human(size / dt)}/s) from {shown(url)}")
@@ -424,6 +443,8 @@ def tnm_items(ctx, dataset, fmt, box):
     while True:
         url = tnm_url(dataset, fmt, box, offset)
         doc = json_of(ctx.http.fetch(url), url)
+        if doc.get("errors") and not doc.get("items"):
+            raise StepFailed(f"{url}: {doc['errors']}")
         page = doc.get("items") or []
         items += page
         offset += len(page)
@@ -458,20 +479,19 @@ class TnmLidar:
 
     def run(self, ctx):
         items = tnm_items(ctx, "Lidar Point Cloud (LPC)", "LAS,LAZ", ctx.box)
-        mine = [i for i in items if self.project.lower() in (i.get("title", "") + i.get("downloadURL", "")).lower()
+        mine = [i for i in items if i.get("downloadURL") and self.project.lower() in (i.get("title", "") + i.get("downloadURL", "")).lower()
                 and (tnm_box(i) is None or intersects(tnm_box(i), ctx.box))]
         if not mine:
             seen = sorted({i.get("title", "?") for i in items})[:10]
             raise StepFailed(f"TNM lists no {self.project} LiDAR tile over the site box "
                              f"{fmt_box(ctx.box)}; it lists: {seen or 'nothing'}")
-        recs = []
-        for i in sorted(mine, key=lambda i: i["downloadURL"]):
+        def fetch(i):
             dest = ctx.root / "lidar" / basename_of(i["downloadURL"])
             ctx.http.download(i["downloadURL"], dest, expected_size=i.get("sizeInBytes"))
             check_magic(dest, "las")
-            recs.append(ctx.record(dest, f"USGS 3DEP Lidar Point Cloud: {i.get('title', '?')}",
-                                   i["downloadURL"], LIC_3DEP))
-        return recs
+            return ctx.record(dest, f"USGS 3DEP Lidar Point Cloud: {i.get('title', '?')}", i["downloadURL"], LIC_3DEP)
+
+        return each(sorted(mine, key=lambda i: i["downloadURL"]), fetch)
 
 
 class TnmDem:
@@ -542,18 +562,19 @@ class NysLidar:
         attrs = [f.get("attributes") or {} for f in doc.get("features") or []]
         if not attrs:
             raise StepFailed(f"{url}: no LAS tile over the site box {fmt_box(ctx.box)}")
-        recs = []
-        for a in sorted(attrs, key=lambda a: str(a.get("FILENAME"))):
-            name = a.get("FILENAME")
-            if not name:
+        for a in attrs:
+            if not a.get("FILENAME"):
                 raise StepFailed(f"{url}: a tile without FILENAME (fields: {sorted(a)})")
-            src = a.get("DIRECT_DL") or f"{NYC_LAS_BASE}/{name}"
+
+        def fetch(a):
+            src = a.get("DIRECT_DL") or f"{NYC_LAS_BASE}/{a['FILENAME']}"
             dest = ctx.root / "lidar" / basename_of(src)
             ctx.http.download(src, dest)
             check_magic(dest, "las")
-            recs.append(ctx.record(dest, f"NYC 2017 Topobathymetric LiDAR tile {name} (EPSG:2263, US ft)",
-                                   src, LIC_NYC))
-        return recs
+            return ctx.record(dest, f"NYC 2017 Topobathymetric LiDAR tile {a['FILENAME']} (EPSG:2263, US ft)",
+                              src, LIC_NYC)
+
+        return each(sorted(attrs, key=lambda a: str(a["FILENAME"])), fetch)
 
 
 PC_STAC = "https://planetarycomputer.microsoft.com/api/stac/v1/search"
@@ -746,7 +767,12 @@ class Mapillary:
     def entities(self, ctx, headers, box, depth=0):
         url, got = mly_url(box), []
         while url:
-            doc = json_of(ctx.http.fetch(url, headers=headers), url.split("?")[0])
+            try:
+                doc = json_of(ctx.http.fetch(url, headers=headers), url.split("?")[0])
+            except StepFailed as e:
+                if re.search(r"HTTP 40[13]", str(e)):
+                    raise StepFailed(f"{e}: is MAPILLARY_TOKEN a valid client token?") from None
+                raise
             if "error" in doc:
                 raise StepFailed(f"{MLY}: {doc['error'].get('message', doc['error'])}")
             got += doc.get("data") or []
@@ -789,7 +815,7 @@ class Mapillary:
                            f"are mapillary/<id>.jpg)", mly_url(ctx.dbox), LIC_MLY)]
         if failed:
             raise StepFailed(f"{len(failed)} of {len(ents)} images failed (the others are kept and listed): "
-                             + "; ".join(failed[:5]))
+                             + "; ".join(failed[:5]), recs)
         return recs
 
 
@@ -951,9 +977,14 @@ def main(argv=None):
             except StepFailed as e:
                 print(f"  FAILED {name}/{s.name}: {e}", file=sys.stderr)
                 failures.append((s.name, str(e)))
+                records += e.records
             except OSError as e:
                 print(f"  FAILED {name}/{s.name}: {e}", file=sys.stderr)
                 failures.append((s.name, str(e)))
+            except (KeyError, TypeError, ValueError, AttributeError) as e:
+                why = f"an answer of an unexpected shape ({type(e).__name__}: {e})"
+                print(f"  FAILED {name}/{s.name}: {why}", file=sys.stderr)
+                failures.append((s.name, why))
         for p, w, h, how in NOT_PUBLIC[name]:
             print(f"  not downloadable: {name}/{p}: {w}; holder {h}; {how}")
         write_sources(ctx, records, failures, skipped)

@@ -207,6 +207,22 @@ class Recipe(unittest.TestCase):
         self.assertTrue((self.out / "brooklyn" / "srtm" / "N40W074.hgt").is_file(), "the other step still ran")
         self.assertFalse((self.out / "brooklyn" / "osm.osm").exists())
 
+    def test_http_error_fails_naming_the_file(self):
+        index = fixture_json("index.json")
+        bad = "https://gisdata.ny.gov/elevation/LIDAR/NYC_TopoBathymetric2017/990190.las"
+        entries = [{"method": "GET", "url": bad, "status": 404}] + \
+                  [dict(e, file=str(FIX / e["file"])) for e in index["responses"]]
+        with tempfile.TemporaryDirectory() as d:
+            (Path(d) / "index.json").write_text(json.dumps({"responses": entries}))
+            r = run("brooklyn", "--out", self.out, "--only", "lidar", replay=d)
+        self.assertEqual(r.returncode, 1)
+        self.assertIn(f"brooklyn/lidar: 1 of 2 files failed: {bad}: HTTP 404", r.stderr)
+        self.assertTrue((self.out / "brooklyn" / "lidar" / "987190.las").is_file())
+        self.assertFalse((self.out / "brooklyn" / "lidar" / "990190.las").exists())
+        md = (self.out / "brooklyn" / "SOURCES.md").read_text()
+        self.assertIn("990190.las: HTTP 404", md)
+        self.assertIn("| `brooklyn/lidar/987190.las` |", md, "the tile that came is listed")
+
     def test_dry_run_writes_nothing(self):
         r = run("all", "--out", self.out, "--dry-run", replay=None)
         self.assertEqual(r.returncode, 0, r.stderr)
