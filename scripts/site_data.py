@@ -73,6 +73,7 @@ from pathlib import Path
 
 USER_AGENT = "kodama-dag-site-data/0.1 (scripts/site_data.py of the kodama-dag project)"
 TRIES = 3
+BACKOFF_S = 2.0  # then 4 s
 TIMEOUT_S = 300  # per socket operation; Overpass may think for up to its [timeout:180]
 
 # ---------------------------------------------------------------------------------------------
@@ -277,7 +278,7 @@ class LiveHttp(Http):
     def _retry(self, url, attempt, why):
         if attempt >= TRIES:
             raise StepFailed(f"{shown(url)}: {why} (tried {TRIES} times)")
-        wait = 2 ** attempt
+        wait = BACKOFF_S * 2 ** (attempt - 1)
         print(f"  {shown(url)}: {why}; trying again in {wait} s", file=sys.stderr)
         time.sleep(wait)
 

@@ -7,7 +7,8 @@ replayed service gave (the tiles the index listed, the DEM the TNM answer chose,
 image), the Overpass query and the STAC search carry the site's boxes, SOURCES.md names every
 non-public item with its holder; and: an unrecorded request fails naming its URL, --dry-run writes
 nothing, a missing MAPILLARY_TOKEN skips the street views with its message, files already present
-are kept, bad usage exits 2. tests/site_data_recipe.rs runs this module under `cargo test`.
+are kept, bad usage exits 2; and the live HTTP path against a server on 127.0.0.1 (retries,
+resumed transfers, atomic rename). tests/site_data_recipe.rs runs this module under `cargo test`.
 """
 import json
 import math
@@ -272,6 +273,128 @@ class Recipe(unittest.TestCase):
             r = run(*args, replay=None)
             self.assertEqual(r.returncode, 2, (args, r.stderr))
         self.assertFalse(self.out.exists())
+
+
+class LiveDownloads(unittest.TestCase):
+    """The live HTTP path (urllib) against a server on 127.0.0.1: retries, resume, atomic rename."""
+
+    BODY = bytes(range(256)) * 64  # 16 KiB
+
+    @classmethod
+    def setUpClass(cls):
+        import http.server
+        import importlib.util
+        import threading
+
+        spec = importlib.util.spec_from_file_location("site_data", SCRIPT)
+        cls.sd = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(cls.sd)
+        cls.sd.BACKOFF_S = 0.0
+        cls.seen = seen = []
+        cls.plan = plan = {}
+        body = cls.BODY
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            def log_message(self, *a):
+                pass
+
+            def do_GET(self):
+                seen.append((self.path, self.headers.get("Range"), self.headers.get("User-Agent")))
+                todo = plan.get(self.path, [])
+                how = todo.pop(0) if todo else "ok"
+                if how.startswith("status"):
+                    self.send_error(int(how[6:]))
+                    return
+                start = 0
+                rng = self.headers.get("Range")
+                if rng and how != "ignore-range":
+                    start = int(rng.split("=")[1].rstrip("-"))
+                    self.send_response(206)
+                else:
+                    self.send_response(200)
+                self.send_header("Content-Length", str(len(body) - start))
+                self.end_headers()
+                if how == "truncate":
+                    self.wfile.write(body[start:start + 1000])
+                    self.close_connection = True
+                    return
+                self.wfile.write(body[start:])
+
+        cls.server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        cls.base = f"http://127.0.0.1:{cls.server.server_address[1]}"
+        threading.Thread(target=cls.server.serve_forever, daemon=True).start()
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.server.shutdown()
+        cls.server.server_close()
+
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory()
+        self.dest = Path(self.tmp.name) / "sub" / "tile.las"
+        self.seen.clear()
+        self.plan.clear()
+
+    def tearDown(self):
+        self.tmp.cleanup()
+
+    def get(self, path, **kw):
+        import contextlib
+        import io
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            return self.sd.LiveHttp().download(self.base + path, self.dest, **kw)
+
+    def test_retries_a_server_error_then_writes_atomically(self):
+        self.plan["/a"] = ["status503", "ok"]
+        self.assertEqual(self.get("/a"), "fetched")
+        self.assertEqual(self.dest.read_bytes(), self.BODY)
+        self.assertFalse(self.dest.with_name("tile.las.part").exists())
+        self.assertEqual(len(self.seen), 2)
+        self.assertIn("kodama-dag", self.seen[0][2])
+
+    def test_a_cut_transfer_resumes_with_a_range(self):
+        self.plan["/b"] = ["truncate", "ok"]
+        self.get("/b")
+        self.assertEqual(self.dest.read_bytes(), self.BODY)
+        self.assertEqual([r for _, r, _ in self.seen], [None, "bytes=1000-"])
+
+    def test_a_part_left_by_an_earlier_run_is_resumed(self):
+        self.dest.parent.mkdir(parents=True)
+        self.dest.with_name("tile.las.part").write_bytes(self.BODY[:5000])
+        self.get("/c")
+        self.assertEqual(self.dest.read_bytes(), self.BODY)
+        self.assertEqual(self.seen[0][1], "bytes=5000-")
+
+    def test_a_server_ignoring_the_range_starts_over(self):
+        self.dest.parent.mkdir(parents=True)
+        self.dest.with_name("tile.las.part").write_bytes(b"junk" * 100)
+        self.plan["/d"] = ["ignore-range"]
+        self.get("/d")
+        self.assertEqual(self.dest.read_bytes(), self.BODY)
+
+    def test_not_found_fails_at_once_and_writes_nothing(self):
+        self.plan["/e"] = ["status404"]
+        with self.assertRaises(self.sd.StepFailed) as e:
+            self.get("/e")
+        self.assertIn("/e: HTTP 404", str(e.exception))
+        self.assertEqual(len(self.seen), 1)
+        self.assertFalse(self.dest.exists())
+
+    def test_gives_up_after_three_tries(self):
+        self.plan["/f"] = ["status503"] * 5
+        with self.assertRaises(self.sd.StepFailed) as e:
+            self.get("/f")
+        self.assertIn("tried 3 times", str(e.exception))
+        self.assertEqual(len(self.seen), 3)
+
+    def test_a_present_file_of_the_published_size_is_kept(self):
+        self.dest.parent.mkdir(parents=True)
+        self.dest.write_bytes(self.BODY)
+        self.assertEqual(self.get("/g", expected_size=len(self.BODY)), "present")
+        self.assertEqual(self.seen, [])
+        self.dest.write_bytes(self.BODY[:10])  # the wrong size: fetched again
+        self.assertEqual(self.get("/g", expected_size=len(self.BODY)), "fetched")
+        self.assertEqual(self.dest.read_bytes(), self.BODY)
 
 
 if __name__ == "__main__":
