@@ -42,14 +42,19 @@ NIST's panoramas (Boulder) and view_outputs/ (your own models' outputs).
 
 Downloads go to <file>.part and are renamed when complete; a .part left by an interrupted run is
 resumed (HTTP Range); a file already present (with the published size, where one is published) is
-kept. Each request is tried 3 times (network errors, HTTP 429 and 5xx). Every site folder gets SOURCES.md and sources.json: what came
-from where, when, its licence, size and sha256.
+kept. Each request is tried 3 times (network errors, HTTP 429 and 5xx). Every site folder gets
+SOURCES.md and sources.json: what came from where, when, its licence, size and sha256.
+
+Endpoints, parameters and answer fields were checked against public documentation and public
+client code, not by calling the services from this repository (docs/sites.md says which pieces are
+unverified). Where a piece could not be checked the step says so when it fails.
 
 --dry-run prints the requests and files without sending or writing anything (requests that depend
 on an index response are shown as patterns). --replay DIR answers every request from DIR/index.json
-({"responses": [{"method", "url" | "url_prefix" | "url_pattern", optional "body_contains",
-"file", optional "status"}]}, files relative to DIR; the first entry that matches answers); a request with no recorded response is an error naming it. --log FILE writes every
-request (method, URL, body; never headers, so never the token) as JSON lines.
+({"responses": [{"method", "url" | "url_prefix" | "url_pattern", optional "body_contains", "file",
+optional "status"}]}, files relative to DIR; the first entry that matches answers); a request with
+no recorded response is an error naming it. --log FILE writes every request (method, URL, body;
+never headers, so never the token) as JSON lines.
 
 Exit status: 0 done (a skipped Mapillary step included), 1 a step failed (each is named with why),
 2 bad usage.
