@@ -172,12 +172,14 @@ NOT_PUBLIC = {
 BY_HAND = {
     "brooklyn": [
         ("dem.tif", "the paper's DEM: NYC 2017 Topobathymetric LiDAR bare-earth DEM (1 ft cells, EPSG:2263, "
-         "feet), NYC DoITT, via the NYS GIS Clearinghouse (https://gis.ny.gov/elevation)",
-         "no verified download URL: the recipe writes the USGS 3DEP 1 m DEM instead"),
+         "feet), NYC DoITT, via the NYS GIS Clearinghouse (https://gis.ny.gov/elevation); tiles seen "
+         "(third-party code only) as https://gisdata.ny.gov/elevation/DEM/NYC_TopoBathymetric2017/be_NYC_<NNN>.tif, "
+         "several hundred MB each",
+         "no tile index verified: the recipe writes the USGS 3DEP 1 m DEM instead"),
         ("ortho.tif", "the paper's orthophoto: NYS Digital Orthoimagery Program 2024 (NYS GIS Clearinghouse, "
-         "https://gis.ny.gov/); tiles seen (third-party code only) under "
-         "https://gisdata.ny.gov/ortho/nysdop12/new_york_city/spcs/tiles/<tile>.zip",
-         "unverified: the recipe writes NAIP from the Planetary Computer instead"),
+         "https://gis.ny.gov/); tiles seen (third-party code only) as "
+         "https://gisdata.ny.gov/ortho/nysdop12/new_york_city/spcs/tiles/<tile>.zip, on the LiDAR tiles' grid",
+         "zip contents unverified and several tiles need a mosaic (GDAL): the recipe writes NAIP instead"),
     ],
     "boulder": [
         ("lidar/", "the paper's LiDAR: DRCOG 2022 from the Colorado Spatial Data Portal",
