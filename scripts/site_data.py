@@ -178,7 +178,7 @@ BY_HAND = {
          "no tile index verified: the recipe writes the USGS 3DEP 1 m DEM instead"),
         ("ortho.tif", "the paper's orthophoto: NYS Digital Orthoimagery Program 2024 (NYS GIS Clearinghouse, "
          "https://gis.ny.gov/); tiles seen (third-party code only) as "
-         "https://gisdata.ny.gov/ortho/nysdop12/new_york_city/spcs/tiles/<tile>.zip, on the LiDAR tiles' grid",
+         "https://gisdata.ny.gov/ortho/nysdop12/new_york_city/spcs/tiles/<tile>.zip",
          "zip contents unverified and several tiles need a mosaic (GDAL): the recipe writes NAIP instead"),
     ],
     "boulder": [
