@@ -952,6 +952,13 @@ def parse_args(argv):
     return args
 
 
+def report_manual(name):
+    for p, w, h, how in NOT_PUBLIC[name]:
+        print(f"  not downloadable: {name}/{p}: {w}; holder {h}; {how}")
+    for p, w, why in BY_HAND[name]:
+        print(f"  by hand (public): {name}/{p}: {w}; {why}")
+
+
 def main(argv=None):
     args = parse_args(sys.argv[1:] if argv is None else argv)
     names = ["brooklyn", "boulder", "painiitty"] if args.site == "all" else [args.site]
@@ -970,8 +977,7 @@ def main(argv=None):
                 for line in s.plan(ctx):
                     print(f"  {line}")
             print(f"[sources] -> {name}/SOURCES.md, {name}/sources.json")
-            for p, w, h, how in NOT_PUBLIC[name]:
-                print(f"  not downloadable: {name}/{p}: {w}; holder {h}; {how}")
+            report_manual(name)
             continue
         records, failures, skipped = [], [], []
         for s in steps:
@@ -993,8 +999,7 @@ def main(argv=None):
                 why = f"an answer of an unexpected shape ({type(e).__name__}: {e})"
                 print(f"  FAILED {name}/{s.name}: {why}", file=sys.stderr)
                 failures.append((s.name, why))
-        for p, w, h, how in NOT_PUBLIC[name]:
-            print(f"  not downloadable: {name}/{p}: {w}; holder {h}; {how}")
+        report_manual(name)
         write_sources(ctx, records, failures, skipped)
         print(f"  wrote {ctx.root / 'SOURCES.md'}")
         failures_all += [(name, n, why) for n, why in failures]
