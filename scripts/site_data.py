@@ -183,9 +183,10 @@ BY_HAND = {
     ],
     "boulder": [
         ("lidar/", "the paper's LiDAR: DRCOG 2022 from the Colorado Spatial Data Portal",
-         "portal URL unverified: the recipe fetches the same DRCOG acquisition's 3DEP tiles from USGS"),
+         "portal URL unverified: the recipe fetches the DRCOG project's USGS 3DEP tiles (that they are "
+         "the paper's DRCOG 2022 is unverified)"),
         ("ortho.tif", "the paper's NAIP 2021 Colorado from the Colorado Spatial Data Portal",
-         "the recipe fetches the same NAIP 2021 quarter-quad from the Planetary Computer"),
+         "the recipe fetches the NAIP 2021 quarter-quad from the Planetary Computer"),
     ],
     "painiitty": [
         ("tiles/", "Helsinki 3D reality mesh 2017 (City of Helsinki, CC BY 4.0), published as OBJ and 3MX: "
