@@ -437,8 +437,16 @@ fn the_shipped_label_tables_read_and_use_our_classes() {
         ("ade20k.ron", 150, [ARCH_CLASSES, CLUTTER_CLASSES].concat()),
         ("rmsnet.ron", 20, RMSNET_CLASSES.to_vec()),
         // The CMP SegFormer's 13 outputs: "unknown" and the 12 CMP classes.
-        ("cmp_facade.ron", 13, [ARCH_CLASSES, CLUTTER_CLASSES].concat()),
-        ("sam3_prompts.ron", 24, [ARCH_CLASSES, CLUTTER_CLASSES].concat()),
+        (
+            "cmp_facade.ron",
+            13,
+            [ARCH_CLASSES, CLUTTER_CLASSES].concat(),
+        ),
+        (
+            "sam3_prompts.ron",
+            24,
+            [ARCH_CLASSES, CLUTTER_CLASSES].concat(),
+        ),
     ] {
         let t = LabelTable::read(&dir.join(name)).unwrap();
         assert_eq!(t.classes.len(), n, "{name}");
@@ -469,7 +477,10 @@ fn the_facade_and_prompt_tables_reach_the_relief_classes() {
     }
     let prompts = ours("sam3_prompts.ron");
     for class in ARCH_CLASSES.iter().chain(CLUTTER_CLASSES) {
-        assert!(prompts.iter().any(|c| c == class), "sam3_prompts.ron: {class}");
+        assert!(
+            prompts.iter().any(|c| c == class),
+            "sam3_prompts.ron: {class}"
+        );
     }
 }
 
