@@ -442,3 +442,30 @@ fn material_fusion_is_the_same_at_any_thread_count() {
     };
     assert!(run(1) == run(2));
 }
+
+/// Every material the pipeline gives a surface on its own (each RMSNet class's target, the OSM
+/// baseline's concrete, the clutter's metal and wood) has its permittivity and conductivity at
+/// every carrier of the paper's sites (Painiitty 3.6, Brooklyn 6.75 and 16.95, Boulder 28 GHz)
+/// without `extrapolate`: a site graph never stops in Trace on a material out of its range.
+#[test]
+fn every_assigned_material_is_defined_at_every_site_carrier() {
+    use kodama_nodes::artifact::RMSNET_CLASSES;
+    use kodama_nodes::street::materials::fusion::{PixelTarget, rmsnet_target};
+    let mut assigned = vec![Material::Concrete, Material::Metal, Material::Wood];
+    for class in RMSNET_CLASSES {
+        if let Some(PixelTarget::Surface(m) | PixelTarget::Ground(m)) = rmsnet_target(class) {
+            assigned.push(m);
+        }
+    }
+    assigned.sort_by_key(|m| *m as u8);
+    assigned.dedup();
+    assert!(assigned.len() >= 9, "{assigned:?}");
+    for f_ghz in [3.6, 6.75, 16.95, 28.0] {
+        for m in &assigned {
+            let (eps, sigma) = m
+                .eps_sigma(f_ghz * 1e9, false)
+                .unwrap_or_else(|e| panic!("{m:?} at {f_ghz} GHz: {e}"));
+            assert!(eps >= 1.0 && sigma >= 0.0 && eps.is_finite() && sigma.is_finite());
+        }
+    }
+}
