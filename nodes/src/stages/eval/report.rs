@@ -417,7 +417,7 @@ fn definitions(evals: &[&Metrics]) -> Vec<String> {
          from the measured trend where the links are. 3GPP is its own line: its formula's \
          value at each link against the measured line. The gap between two least-squares \
          lines fitted to the same links is the least-squares line of the P2P errors, so a \
-         fitted model's PD and CI RMSE are never above its P2P RMSE."
+         fitted model's PD and CI RMSE are never above its P2P RMSE on those links."
             .to_string(),
     ];
     if carriers > 1.0 {
