@@ -140,8 +140,8 @@ impl Stage for Report {
     // 8: links.csv, every link as scored; 9: stages' reports (`evidence`) as tables;
     // 10: Evaluate 5's PD/CI (the gap between the model's and the measured lines), per-carrier
     // rows, the definitions under the table, the chart's lines from the evaluations with the
-    // measured lines.
-    const VERSION: u32 = 10;
+    // measured lines; 11: the PD/CI <= P2P sentence says "on those links".
+    const VERSION: u32 = 11;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
