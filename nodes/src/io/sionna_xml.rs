@@ -1,5 +1,5 @@
-//! Sionna RT scenes: Mitsuba 3 XML naming one binary PLY mesh per shape, each with an
-//! ITU-R P.2040 radio material (rf.md §7.3). Read, so our tracer runs on Sionna's scenes; written,
+//! Sionna RT scenes: Mitsuba 3 XML naming one binary PLY mesh per shape, each with an ITU-R P.2040
+//! radio material (Sionna RT's scene format). Read, so our tracer runs on Sionna's scenes; written,
 //! so `sionna.rt.load_scene` loads ours.
 
 use std::collections::BTreeMap;

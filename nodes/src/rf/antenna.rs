@@ -1,5 +1,5 @@
-//! Antenna patterns (rf.md §7.1, TR 38.901 Table 7.3-1): the field pattern C(θ, φ) = √G F as a
-//! vertical (θ̂) and horizontal (φ̂) component, in the antenna's own frame.
+//! Antenna patterns (Sionna RT's EM primer, TR 38.901 Table 7.3-1): the field pattern C(θ, φ) = √G
+//! F as a vertical (θ̂) and horizontal (φ̂) component, in the antenna's own frame.
 
 use serde::{Deserialize, Serialize};
 

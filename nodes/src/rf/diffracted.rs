@@ -1,9 +1,9 @@
-//! Diffracted paths of a link (rf.md §3.1): each candidate of `diffraction_search` (reflections,
-//! one edge, reflections) solved exactly for one receiver. Unfolded in its mirrors, the path is a
-//! first-order diffraction from the transmitter's image in the surfaces before the edge to the
-//! receiver's image in those after it, so the diffraction point is Keller's for the two images,
-//! and the reflection points follow by the image method on either side of it. The wedges and
-//! the UTD field over them are `diffraction`'s.
+//! Diffracted paths of a link (the UTD, `diffraction`): each candidate of `diffraction_search`
+//! (reflections, one edge, reflections) solved exactly for one receiver. Unfolded in its mirrors,
+//! the path is a first-order diffraction from the transmitter's image in the surfaces before the
+//! edge to the receiver's image in those after it, so the diffraction point is Keller's for the two
+//! images, and the reflection points follow by the image method on either side of it. The wedges
+//! and the UTD field over them are `diffraction`'s.
 
 use glam::{DMat3, DVec3};
 
@@ -93,11 +93,11 @@ impl DiffractionCandidates {
         self.list.is_empty()
     }
 
-    /// The diffracted paths from `tx` (at foliage depth `at_tx`) to `rx`: those whose
-    /// diffraction point lies on the edge, whose reflection points lie on their triangles and
-    /// whose every leg is clear of surfaces (diffracted paths are not transmitted; foliage
-    /// attenuates them, rf.md §5.1), with the UTD field of rf.md §3.1 between the reflections'
-    /// (rf.md §2.2, scaled by √(1 − S²) as specular paths are). In the candidates' order.
+    /// The diffracted paths from `tx` (at foliage depth `at_tx`) to `rx`: those whose diffraction
+    /// point lies on the edge, whose reflection points lie on their triangles and whose every leg
+    /// is clear of surfaces (diffracted paths are not transmitted; foliage attenuates them, ITU-R
+    /// P.833), with the UTD field of `diffraction` between the reflections' (ITU-R P.2040 §2.2.2.2,
+    /// scaled by √(1 − S²) as specular paths are). In the candidates' order.
     pub(super) fn paths(&self, t: &Tracer, tx: DVec3, rx: DVec3, at_tx: FoliageDepth) -> Vec<Path> {
         self.list
             .iter()

@@ -1,4 +1,4 @@
-//! Edge diffraction by the UTD (rf.md §3.1: Kouyoumjian-Pathak, with Luebbers'
+//! Edge diffraction by the UTD (Kouyoumjian-Pathak, with Luebbers'
 //! finite-conductivity reflection factors), the geometry and the field: the wedges of a scene's
 //! meshes, the diffraction point on each edge (Keller's cone: equal angles, the shortest path over
 //! the edge), and the diffracted field in the edge-fixed bases. Which wedges a link tries and the
@@ -415,7 +415,7 @@ pub fn keller_cone(w: &Wedge, ki: DVec3, phi: f64) -> DVec3 {
 }
 
 /// The angle of `s` (a unit direction away from the edge, projected across it) from the 0-face,
-/// in [0, 2π) (rf.md §3.1).
+/// in [0, 2π) (as Sionna RT's EM primer measures it).
 fn face_angle(w: &Wedge, s: DVec3) -> f64 {
     let t0 = w.n0.cross(w.e);
     let st = (s - w.e * s.dot(w.e)).normalize_or_zero();
@@ -520,13 +520,13 @@ pub fn diffracted_field(
     let phi_hat_o = -(ko.cross(w.e)).normalize();
     let beta_hat_o = phi_hat_o.cross(ko);
     // Face reflection factors (Luebbers), as matrices on the edge-fixed components: each face's
-    // reflection of the incident wave at its true angle of incidence on that face (|k · n|),
-    // taken from the incident edge-fixed basis into the face's (⊥, ∥) basis and back out into
-    // the edge-fixed basis of the reflected direction (rf.md §3.1's W matrices, with the
-    // reflected direction's basis as Hashimoto et al. and Sionna RT take it: the factor is the
-    // reflected field's own across its shadow boundary, where it matters). Square to the edge
-    // (β0 = 90°) this is −diag(r_∥, r_⊥): the classic soft (β) and hard (φ) coefficients for a
-    // perfect conductor; oblique to it the components mix.
+    // reflection of the incident wave at its true angle of incidence on that face (|k · n|), taken
+    // from the incident edge-fixed basis into the face's (⊥, ∥) basis and back out into the
+    // edge-fixed basis of the reflected direction (the W matrices of Sionna RT's EM primer, with
+    // the reflected direction's basis as Hashimoto et al. and Sionna RT take it: the factor is the
+    // reflected field's own across its shadow boundary, where it matters). Square to the edge (β0 =
+    // 90°) this is −diag(r_∥, r_⊥): the classic soft (β) and hard (φ) coefficients for a perfect
+    // conductor; oblique to it the components mix.
     let incident = (ki, phi_hat_i, beta_hat_i);
     let r0 = face_reflection(scene, w.tri0, w.n0, incident, w.e);
     let rn = face_reflection(scene, w.trin, w.nn, incident, w.e);

@@ -1,7 +1,7 @@
-//! Diffuse power of links: the effective-roughness model (rf.md §1.3) at the last bounce. Rays
-//! from the transmitter follow every specular and transmitted branch; wherever one lands on a
-//! surface, the patch its tube covers scatters towards every receiver it sees, and the powers
-//! add up incoherently. Foliage on either leg attenuates (rf.md §5.1); it never blocks.
+//! Diffuse power of links: the effective-roughness model (Degli-Esposti, as in Sionna RT) at the
+//! last bounce. Rays from the transmitter follow every specular and transmitted branch; wherever
+//! one lands on a surface, the patch its tube covers scatters towards every receiver it sees, and
+//! the powers add up incoherently. Foliage on either leg attenuates (ITU-R P.833); it never blocks.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -17,9 +17,9 @@ use super::scene::EPS;
 /// Diffusely scattered power at each receiver (linear), last bounce only: rays from `tx` (at
 /// foliage depth `at_tx`) follow specular reflections and transmissions (every branch) to
 /// depth − 1; at each surface they hit, the ray tube of solid angle Ω scatters towards every
-/// receiver it sees a field of amplitude S Γ √(f_s Ω) |E| / r (rf.md §1.3; the tube's footprint
-/// cos θ_i dA = Ω L² cancels its 1/L spreading), times the foliage loss of both legs (rf.md
-/// §5.1), summed incoherently.
+/// receiver it sees a field of amplitude S Γ √(f_s Ω) |E| / r (Degli-Esposti; the tube's footprint
+/// cos θ_i dA = Ω L² cancels its 1/L spreading), times the foliage loss of both legs (ITU-R
+/// P.833), summed incoherently.
 pub(super) fn diffuse_power(t: &Tracer, tx: DVec3, at_tx: FoliageDepth, rxs: &[DVec3]) -> Vec<f64> {
     let (scene, opt) = (t.scene, t.opt);
     let omega = 4.0 * std::f64::consts::PI / opt.rays.max(1) as f64;

@@ -1,4 +1,4 @@
-//! Electromagnetic interactions at surfaces (rf.md §1, §2): complex relative permittivity from the
+//! Electromagnetic interactions at surfaces (ITU-R P.2040): complex relative permittivity from the
 //! P.2040 laws, Fresnel coefficients of a half-space and of a single-layer slab, free-space loss.
 
 use num_complex::Complex64 as C64;
@@ -19,7 +19,7 @@ pub fn permittivity(material: Material, freq_hz: f64, extrapolate: bool) -> Resu
 }
 
 /// Fresnel reflection coefficients (r_TE, r_TM) of a half-space of permittivity `eta` for a wave
-/// from vacuum at incidence cosine `cos_theta` (P.2040 eqs (37a), (37b); rf.md §2.1).
+/// from vacuum at incidence cosine `cos_theta` (ITU-R P.2040 eqs (37a), (37b)).
 pub fn fresnel(cos_theta: f64, eta: C64) -> (C64, C64) {
     let sin2 = 1.0 - cos_theta * cos_theta;
     fresnel_with_root(cos_theta, eta, csqrt(eta - sin2))
@@ -49,7 +49,7 @@ fn csqrt(z: C64) -> C64 {
 }
 
 /// Reflection and transmission coefficients of a slab of thickness `d` (metres) in vacuum, per
-/// polarisation: `((R_TE, R_TM), (T_TE, T_TM))` (P.2040 eqs (43a), (43b), (44); rf.md §2.2).
+/// polarisation: `((R_TE, R_TM), (T_TE, T_TM))` (ITU-R P.2040 eqs (43a), (43b), (44)).
 pub fn slab(cos_theta: f64, eta: C64, d: f64, wavelength: f64) -> ((C64, C64), (C64, C64)) {
     let sin2 = 1.0 - cos_theta * cos_theta;
     let root = csqrt(eta - sin2);
@@ -80,7 +80,8 @@ mod tests {
         assert!((a - b).abs() <= tol, "{what}: {a} vs {b}");
     }
 
-    /// rf.md §8: concrete at 3.5 GHz, half-space and 0.1 m slab.
+    /// Reference values computed apart from ITU-R P.2040 eqs (37), (43), (44): concrete at
+    /// 3.5 GHz, half-space and 0.1 m slab.
     #[test]
     fn fresnel_and_slab_test_vectors() {
         let eta = permittivity(Material::Concrete, 3.5e9, false).unwrap();
@@ -115,8 +116,8 @@ mod tests {
         close(db(t), -46.16, 0.01, "slab T 28 GHz");
     }
 
-    /// rf.md §6: FSPL at 1 m is 43.33 dB at 3.5 GHz and 61.39 dB at 28 GHz; +20 dB per decade.
-    /// The algebraic root is the library's polar one, on every quadrant and on the axes.
+    /// FSPL at 1 m, 20 log10(4π f / c), is 43.33 dB at 3.5 GHz and 61.39 dB at 28 GHz; +20 dB per
+    /// decade. The algebraic root is the library's polar one, on every quadrant and on the axes.
     #[test]
     fn complex_root_matches_the_polar_one() {
         for re in [-7.5, -1.0, -1e-9, 0.0, 1e-9, 0.3, 5.0, 80.0] {

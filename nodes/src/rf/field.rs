@@ -1,6 +1,6 @@
 //! The electric field along a ray as a complex 3-vector across the direction of travel, and how
-//! reflection and transmission change it (rf.md §2.1 bases: e_⊥ = k_i × n / |k_i × n|,
-//! e_∥ = e_⊥ × k_i, reflected e_r∥ = e_⊥ × k_r; TE is ⊥, TM is ∥).
+//! reflection and transmission change it (the bases of Sionna RT's EM primer: e_⊥ = k_i × n / |k_i
+//! × n|, e_∥ = e_⊥ × k_i, reflected e_r∥ = e_⊥ × k_r; TE is ⊥, TM is ∥).
 
 use glam::DVec3;
 use num_complex::Complex64 as C64;

@@ -1,5 +1,5 @@
 //! Foliage as volumes: closed meshes of `Material::Foliage` that a wave crosses, losing a fixed
-//! number of dB per metre inside (rf.md §5.1). Here: how deep a point is in foliage
+//! number of dB per metre inside (ITU-R P.833). Here: how deep a point is in foliage
 //! ([`FoliageDepth`]), the length of a segment inside the union of the volumes
 //! ([`foliage_length`], the one place that length is measured), the loss it costs, and the
 //! default specific attenuation (ITU-R P.833).
@@ -9,11 +9,11 @@ use glam::DVec3;
 use super::scene::{EPS, RfScene, SurfaceHit};
 
 /// Digitised points of ITU-R P.833 Figure 2 (woodland, vertical polarisation): frequency in Hz,
-/// specific attenuation in dB/m (rf.md §5.1).
+/// specific attenuation in dB/m.
 const P833_FIGURE_2: [(f64, f64); 3] = [(30e6, 0.02), (1e9, 0.2), (30e9, 6.0)];
 
 /// The default specific attenuation of foliage at `freq_hz` (> 0), dB/m: ITU-R P.833 Figure 2
-/// (rf.md §5.1), interpolated log-log through its digitised points (0.02 dB/m at 30 MHz, 0.2 at
+/// (woodland), interpolated log-log through its digitised points (0.02 dB/m at 30 MHz, 0.2 at
 /// 1 GHz, 6 at 30 GHz). Below 30 MHz the lowest segment's power law goes on (towards 0); above
 /// 30 GHz the value is held at 6 dB/m, the figure being read no further.
 pub fn specific_attenuation_db_per_m(freq_hz: f64) -> f64 {

@@ -6,8 +6,8 @@
 //! model where P.2040's class ends, not an extrapolation. Every other class keeps P.2040's range.
 //!
 //! # References
-//! ITU-R P.2040-3, Table 3; the same values as Sionna RT v1.0.1 `radio_materials/itu.py`
-//! (../shared/reference/rf.md §1). ITU-R P.527-6 §5.2 for ground above 10 GHz.
+//! ITU-R P.2040-3, Table 3; the same values as Sionna RT v1.0.1 `radio_materials/itu.py`.
+//! ITU-R P.527-6 §5.2 for ground above 10 GHz.
 
 use crate::artifact::Material;
 use crate::rf::p527;
@@ -39,9 +39,9 @@ pub struct ItuLaw {
 
 impl Material {
     /// The slab thickness the tracer gives a surface of this material, metres: the tracer models a
-    /// wall as one surface with the single-layer slab coefficients (rf.md §2.2), so the thickness
-    /// decides how much a surface transmits. Sionna's default is 0.1 m for everything; these are
-    /// typical thicknesses of what each class is on a building:
+    /// wall as one surface with the single-layer slab coefficients (ITU-R P.2040 §2.2.2.2), so the
+    /// thickness decides how much a surface transmits. Sionna's default is 0.1 m for everything;
+    /// these are typical thicknesses of what each class is on a building:
     /// - concrete 0.2 m: an exterior cast-in-place or block wall (0.15-0.3 m);
     /// - brick 0.215 m: a one-brick wall (the UK/EU brick length, 215 mm);
     /// - plasterboard 0.0125 m, ceiling board 0.015 m, chipboard and plywood 0.018 m,
@@ -159,8 +159,8 @@ impl Material {
 mod tests {
     use super::*;
 
-    /// rf.md §8 / compute_checks.out: concrete at 3.5 GHz eps 5.24, sigma 0.1231; at 28 GHz
-    /// sigma 0.626; medium-dry ground at 3.5 GHz eta = 13.234 - j1.385.
+    /// Reference values computed apart from ITU-R P.2040 Table 3: concrete at 3.5 GHz eps 5.24,
+    /// sigma 0.1231; at 28 GHz sigma 0.626; medium-dry ground at 3.5 GHz eta = 13.234 - j1.385.
     #[test]
     fn table_3_test_vectors() {
         let (e, s) = Material::Concrete.eps_sigma(3.5e9, false).unwrap();
@@ -263,7 +263,7 @@ mod tests {
 
     /// With the thickness table a window transmits like a window: at 3.5 GHz and normal incidence
     /// 1 cm of glass loses 3.17 dB (mostly reflection at eps 6.31), 20 cm of concrete 19.03 dB
-    /// (0.1 m: 10.36 dB, rf.md §8); values from the slab formula of rf.md §2.2 evaluated apart.
+    /// (0.1 m: 10.36 dB); values from the slab formula of ITU-R P.2040 §2.2.2.2 evaluated apart.
     #[test]
     fn glass_transmits_and_concrete_does_not() {
         use crate::rf::em::{db, permittivity, slab};

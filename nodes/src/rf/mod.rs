@@ -1,10 +1,10 @@
-//! Radio propagation physics: ITU-R P.2040 materials as complex permittivities (the grounds
-//! above 10 GHz, where P.2040 ends, from the ITU-R P.527 soil model in `p527`), Fresnel and
-//! thin-slab coefficients, UTD wedge diffraction and the P.526 knife edge, antenna patterns,
-//! foliage loss (P.833), and the ray tracers built on them: links (`paths`, the entry point, and
-//! its parts `sequences`, `image_method`, `path_field`, `diffraction_search`, `diffracted`,
-//! `diffuse`) and radio maps
-//! (`radiomap`, with edge diffraction in `radiomap_diffraction`). Formulas and test vectors: `shared/reference/rf.md`.
+//! Radio propagation physics: ITU-R P.2040 materials as complex permittivities (the grounds above
+//! 10 GHz, where P.2040 ends, from the ITU-R P.527 soil model in `p527`), Fresnel and thin-slab
+//! coefficients, UTD wedge diffraction and the P.526 knife edge, antenna patterns, foliage loss
+//! (P.833), and the ray tracers built on them: links (`paths`, the entry point, and its parts
+//! `sequences`, `image_method`, `path_field`, `diffraction_search`, `diffracted`, `diffuse`) and
+//! radio maps (`radiomap`, with edge diffraction in `radiomap_diffraction`). Each module names the
+//! sources of its formulas.
 
 pub mod antenna;
 pub mod diffracted;

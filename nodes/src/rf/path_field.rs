@@ -1,7 +1,8 @@
 //! The field along one path: from the transmit antenna's pattern through each reflection (thin
-//! slab, rf.md §2.2, scaled by √(1 − S²) for rough surfaces, §1.3), each wall crossed on the way
-//! (slab transmission, or a blocked path), the foliage it runs through (rf.md §5.1) and the
-//! spreading over its unfolded length, into the receive antenna's pattern (rf.md §7.1).
+//! slab, ITU-R P.2040 §2.2.2.2, scaled by √(1 − S²) for rough surfaces, Degli-Esposti), each wall
+//! crossed on the way (slab transmission, or a blocked path), the foliage it runs through (ITU-R
+//! P.833) and the spreading over its unfolded length, into the receive antenna's pattern (Sionna
+//! RT's EM primer).
 
 use glam::DVec3;
 
@@ -11,10 +12,10 @@ use super::path::{Interaction, InteractionKind, Path, Tracer};
 use super::scene::EPS;
 
 /// The path along the polyline `points` whose inner points are reflections off `seq`, from a
-/// transmitter at foliage depth `at_tx`: a = (λ/4π) C_R^H T C_T / length (rf.md §7.1), with T
-/// the reflections' and transmissions' coefficients (rf.md §2.2) and 10^(−γ d/20) for d metres
-/// in foliage (rf.md §5.1). `None` if a wall blocks it (without transmission), the walls crossed
-/// take it over the depth, or no field arrives.
+/// transmitter at foliage depth `at_tx`: a = (λ/4π) C_R^H T C_T / length (Sionna RT's EM primer),
+/// with T the reflections' and transmissions' coefficients (ITU-R P.2040) and 10^(−γ d/20) for d
+/// metres in foliage (ITU-R P.833). `None` if a wall blocks it (without transmission), the walls
+/// crossed take it over the depth, or no field arrives.
 pub(super) fn evaluate(
     t: &Tracer,
     points: &[DVec3],
@@ -77,8 +78,8 @@ pub(super) fn evaluate(
 }
 
 /// The field `e` arriving along `d` after its specular reflection off surface `tri` at `point`:
-/// the slab's coefficients at that incidence (rf.md §2.2), scaled by √(1 − S²) for rough
-/// surfaces (§1.3); with the interaction to record.
+/// the slab's coefficients at that incidence (ITU-R P.2040 §2.2.2.2), scaled by √(1 − S²) for
+/// rough surfaces (Degli-Esposti's effective roughness); with the interaction to record.
 pub(super) fn specular(
     t: &Tracer,
     tri: u32,

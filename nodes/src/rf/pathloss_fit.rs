@@ -1,5 +1,6 @@
 //! Path-loss lines fitted to data: the floating-intercept power-distance model and the close-in
-//! free-space reference model (paper Sec. 5; `shared/reference/rf.md` section 6).
+//! free-space reference model (paper Sec. 5; the close-in model of Sun, Rappaport et al., IEEE
+//! Trans. Veh. Technol. 65(5), 2016, with d0 = 1 m).
 
 use crate::rf::em::fspl_db;
 

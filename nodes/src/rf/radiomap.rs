@@ -1,10 +1,10 @@
-//! Radio maps by shooting and bouncing rays, with Sionna RT's estimator (rf.md §7.2): rays leave
-//! the transmitter on a Fibonacci sphere, each carrying the solid angle Ω = 4π/N and a polarised
-//! field; every crossing of the measurement plane adds |E|² Ω / |cos θ| to its cell, and the map
-//! is scaled by (λ/4π)² / A_cell at the end: the mean path gain over each cell for an isotropic
-//! receiver. At a surface the ray reflects, or goes through (slab transmission); with both enabled
-//! one is drawn with probability in proportion to its power and the field divided by √p, as
-//! Sionna does, from a hash of the ray and depth, so maps are deterministic.
+//! Radio maps by shooting and bouncing rays, with Sionna RT's estimator (its radio map solver):
+//! rays leave the transmitter on a Fibonacci sphere, each carrying the solid angle Ω = 4π/N and a
+//! polarised field; every crossing of the measurement plane adds |E|² Ω / |cos θ| to its cell, and
+//! the map is scaled by (λ/4π)² / A_cell at the end: the mean path gain over each cell for an
+//! isotropic receiver. At a surface the ray reflects, or goes through (slab transmission); with
+//! both enabled one is drawn with probability in proportion to its power and the field divided by
+//! √p, as Sionna does, from a hash of the ray and depth, so maps are deterministic.
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -27,7 +27,7 @@ use super::slab_table::SlabTable;
 
 /// The mean path gain (linear) of every cell of `plane` from a transmitter at `tx`; 0 where no
 /// ray arrived. `opt.rays` rays, interactions as `opt` enables them, foliage crossed at
-/// `opt.foliage_loss_db_per_m` (rf.md §5.1). Diffraction adds first-order edge-diffracted power
+/// `opt.foliage_loss_db_per_m` (ITU-R P.833). Diffraction adds first-order edge-diffracted power
 /// from as many samples as rays, over the edges of the surfaces the rays first land on
 /// (`radiomap_diffraction`).
 pub fn radio_map(
@@ -225,10 +225,10 @@ impl Shooter<'_> {
         }
     }
 
-    /// One segment of a ray, from `f.o` along `f.d` to `hit` (or out of the scene): every
-    /// crossing of the plane adds the power it carries to its cell (rf.md §7.2), foliage passed
-    /// through attenuates it (§5.1), and at the surface hit it reflects, scatters or goes
-    /// through. True when the ray goes on, `f` then holding its next segment's start. `out`
+    /// One segment of a ray, from `f.o` along `f.d` to `hit` (or out of the scene): every crossing
+    /// of the plane adds the power it carries to its cell (as Sionna RT's solver does), foliage
+    /// passed through attenuates it (ITU-R P.833), and at the surface hit it reflects, scatters or
+    /// goes through. True when the ray goes on, `f` then holding its next segment's start. `out`
     /// takes (cell, power) per crossing; the second buffer is scratch. `first`, if given, takes
     /// the surface the ray first lands on (foliage aside): the faces whose edges can diffract.
     #[inline(always)]

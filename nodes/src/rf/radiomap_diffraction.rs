@@ -5,7 +5,7 @@
 //! cell it crosses, |E_d|² times the area of the map that a unit of (edge length, cone angle)
 //! maps onto there (the Jacobian of `area_per_length_angle`). Averaged over the samples each
 //! wedge drew, that is ∫ |E_d|² dA over every cell, the mean the shoot-and-bounce part of the
-//! map also gives. The field over the edge is the links' UTD (`diffraction`, rf.md §3.1).
+//! map also gives. The field over the edge is the links' UTD (`diffraction`).
 //!
 //! As in Sionna: the wedges are the edges of the triangles the transmitter's rays first land
 //! on that it meets from outside; the transmitter must see `q` and a point 5 cm outside the corner (so a ray does not

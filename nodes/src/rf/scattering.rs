@@ -1,5 +1,5 @@
-//! Diffuse reflection by the effective-roughness model (Degli-Esposti; rf.md §1.3): a fraction S²
-//! of the reflected power is scattered over the hemisphere by a pattern f_s normalised to one,
+//! Diffuse reflection by the effective-roughness model (Degli-Esposti, as in Sionna RT): a fraction
+//! S² of the reflected power is scattered over the hemisphere by a pattern f_s normalised to one,
 //! the specular part keeps √(1 − S²) of the field.
 
 use std::f64::consts::PI;
@@ -23,7 +23,8 @@ fn binomial(n: u32, k: u32) -> f64 {
     (0..k).fold(1.0, |acc, i| acc * (n - i) as f64 / (i + 1) as f64)
 }
 
-/// The directive pattern's normaliser F_α(θ_i) = 2^−α Σ_k C(α, k) I_k (rf.md §1.3).
+/// The directive pattern's normaliser F_α(θ_i) = 2^−α Σ_k C(α, k) I_k (Degli-Esposti's directive
+/// model).
 pub fn directive_norm(alpha: u32, theta_i: f64) -> f64 {
     let (s2, c) = (theta_i.sin().powi(2), theta_i.cos());
     let sum: f64 = (0..=alpha)

@@ -1,5 +1,6 @@
-//! Diffraction (rf.md §3): the Fresnel integrals, the UTD transition function F(x), the
-//! Kouyoumjian-Pathak wedge coefficients D1..D4, and the ITU-R P.526 knife-edge loss J(v).
+//! Diffraction (the UTD of Kouyoumjian-Pathak; ITU-R P.526): the Fresnel integrals, the UTD
+//! transition function F(x), the Kouyoumjian-Pathak wedge coefficients D1..D4, and the ITU-R P.526
+//! knife-edge loss J(v).
 
 use std::f64::consts::PI;
 
@@ -63,7 +64,7 @@ pub fn fresnel_integrals(x: f64) -> (f64, f64) {
     if x < 0.0 { (-s, -c) } else { (s, c) }
 }
 
-/// The UTD transition function F(x) = 2j √x e^{jx} ∫_{√x}^∞ e^{−jt²} dt (rf.md §3.1).
+/// The UTD transition function F(x) = 2j √x e^{jx} ∫_{√x}^∞ e^{−jt²} dt (Kouyoumjian-Pathak).
 pub fn transition(x: f64) -> C64 {
     if x <= 0.0 {
         return C64::new(0.0, 0.0);
@@ -72,7 +73,7 @@ pub fn transition(x: f64) -> C64 {
     (PI * x / 2.0).sqrt() * C64::from_polar(1.0, x) * (C64::new(1.0, 1.0) - 2.0 * C64::new(s, c))
 }
 
-/// The four UTD wedge coefficients D1..D4 (rf.md §3.1, Kouyoumjian-Pathak as written in Sionna's
+/// The four UTD wedge coefficients D1..D4 (Kouyoumjian-Pathak as written in Sionna's
 /// EM primer) for a wedge of exterior angle n π, incidence and diffraction angles `phi_i`, `phi`
 /// from the 0-face, Keller-cone angle `beta0`, wavenumber `k` and distance parameter `l`.
 pub fn wedge_coefficients(n: f64, phi: f64, phi_i: f64, beta0: f64, k: f64, l: f64) -> [C64; 4] {
@@ -142,7 +143,7 @@ mod tests {
         }
     }
 
-    /// rf.md §8 test vectors for F(x).
+    /// Test vectors for F(x), computed apart from its integral.
     #[test]
     fn transition_function_test_vectors() {
         for (x, re, im) in [
@@ -173,7 +174,7 @@ mod tests {
         assert!((c - 0.5).abs() < 1e-4 && (s - 0.5).abs() < 1e-4);
     }
 
-    /// rf.md §8: J(v) at the P.526 sample points, and J within 0.6 dB of the exact Fresnel-Kirchhoff
+    /// J(v) at the ITU-R P.526 sample points, and J within 0.6 dB of the exact Fresnel-Kirchhoff
     /// loss it approximates.
     #[test]
     fn knife_edge_test_vectors() {

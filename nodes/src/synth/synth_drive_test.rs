@@ -64,7 +64,7 @@ pub struct TruthOptions {
     pub scattering_pattern: ScatteringPattern,
     /// Rays shot from each transmitter (> 0). Default 200 000.
     pub rays: u32,
-    /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at `freq_hz` (rf.md §5.1).
+    /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at `freq_hz`.
     pub foliage_db_per_m: Option<f64>,
     /// Diffract only where faces turn by at least this many degrees, in [0, 90]. Default 0.
     pub min_wedge_deg: f64,

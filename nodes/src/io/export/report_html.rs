@@ -51,6 +51,8 @@ pub struct Page<'a> {
     pub site: &'a str,
     /// A paragraph under the title.
     pub intro: &'a str,
+    /// How each figure of the table is computed, one paragraph each, shown under it.
+    pub definitions: &'a [String],
     /// Column names.
     pub models: &'a [String],
     /// Table 1.
@@ -67,6 +69,18 @@ pub struct Page<'a> {
     /// Stages' reports (a carve's outcomes, the clutter's counts), by name: what each stage
     /// did, shown after the plots.
     pub evidence: &'a [(&'a str, &'a Metrics)],
+}
+
+/// The definitions under Table 1 as a list; nothing without any.
+fn definitions_list(defs: &[String]) -> String {
+    if defs.is_empty() {
+        return String::new();
+    }
+    let items: String = defs
+        .iter()
+        .map(|d| format!("<li>{}</li>", esc(d)))
+        .collect();
+    format!("<p>How each figure is computed:</p><ul>{items}</ul>")
 }
 
 /// The stages' reports as one table each (name, value), in a section of its own; nothing when
@@ -351,7 +365,7 @@ footer{{max-width:1200px;margin:0 auto;padding:12px 24px 40px;color:#667;font-si
 </style></head>
 <body>
 <header><h1>KODAMA report: {site}</h1><p>{intro}</p></header>
-<section><h2>Table 1</h2>{table}</section>
+<section><h2>Table 1</h2>{table}{definitions}</section>
 <section><h2>The twin in 3D</h2>
 <p>Drag to orbit, right-drag (or shift-drag) to pan, wheel to zoom; click a measured point for its link.</p>
 <div id="viewer"><canvas id="c"></canvas><div id="panel"></div><div id="info"></div><div id="legend"></div></div>
@@ -368,6 +382,7 @@ footer{{max-width:1200px;margin:0 auto;padding:12px 24px 40px;color:#667;font-si
 "#,
         site = esc(p.site),
         intro = esc(p.intro),
+        definitions = definitions_list(p.definitions),
         version = env!("CARGO_PKG_VERSION"),
         license = esc(THREE_LICENSE),
         three = three_as_object()?,

@@ -1,5 +1,6 @@
-//! The 3GPP TR 38.901 §7.4 path-loss baseline (rf.md §4): UMa, UMi street canyon and RMa, LOS and
-//! NLOS, with the LOS state from a trace of the scene or from the LOS probability of Table 7.4.2-1.
+//! The 3GPP TR 38.901 §7.4 path-loss baseline (Table 7.4.1-1): UMa, UMi street canyon and RMa, LOS
+//! and NLOS, with the LOS state from a trace of the scene or from the LOS probability of Table
+//! 7.4.2-1.
 
 use serde::{Deserialize, Serialize};
 
@@ -196,7 +197,8 @@ impl Stage for Tr38901 {
 mod tests {
     use super::*;
 
-    /// rf.md §8 (hBS 25/10/35 m, hUT 1.5 m), every cell of the table.
+    /// Reference values computed apart from the Table 7.4.1-1 formulas (hBS 25/10/35 m, hUT
+    /// 1.5 m), every cell of the table.
     #[test]
     fn table_test_vectors() {
         let rows = [

@@ -41,19 +41,34 @@ fn site() -> String {
     "site".into()
 }
 
-/// The table's rows: (metric key in the evaluations, label).
-const ROWS: [(&str, &str); 14] = [
+/// The table's rows: (metric key in the evaluations, label). The rows of each carrier's PD and
+/// CI follow the pooled ones when the links have more than one carrier ([`table_keys`]).
+const ROWS: [(&str, &str); 20] = [
     ("p2p_rmse_db", "P2P RMSE (dB)"),
     ("p2p_me_db", "P2P mean error (dB)"),
     ("p2p_std_db", "P2P std (dB)"),
     ("pd_rmse_db", "PD RMSE (dB)"),
     ("ci_rmse_db", "CI RMSE (dB)"),
-    ("pd_lines_rmse_db", "PD line vs measured PD line, RMS (dB)"),
-    ("ci_lines_rmse_db", "CI line vs measured CI line, RMS (dB)"),
-    ("ci_n", "CI exponent n"),
-    ("ci_n_measured", "CI exponent n of the measurements"),
+    (
+        "pd_scatter_db",
+        "PD: measured about the model's line, RMS (dB)",
+    ),
+    (
+        "ci_scatter_db",
+        "CI: measured about the model's line, RMS (dB)",
+    ),
+    (
+        "pd_sigma_measured_db",
+        "PD: measured about the measured line, σ (dB)",
+    ),
+    ("pd_beta", "PD slope β of the model's line"),
+    ("pd_beta_measured", "PD slope β of the measured line"),
+    ("ci_n", "CI exponent n of the model's line"),
+    ("ci_n_measured", "CI exponent n of the measured line"),
     ("los/p2p_rmse_db", "LOS P2P RMSE (dB)"),
     ("nlos/p2p_rmse_db", "NLOS P2P RMSE (dB)"),
+    ("los/pd_rmse_db", "LOS PD RMSE (dB)"),
+    ("nlos/pd_rmse_db", "NLOS PD RMSE (dB)"),
     ("links_scored", "links scored"),
     (
         "links_unpredicted",
@@ -61,12 +76,57 @@ const ROWS: [(&str, &str); 14] = [
     ),
     (
         "floor_clamped",
-        "links at the floor (left out of PD/CI fits)",
+        "links predicted past the floor (scored at the floor)",
     ),
+    ("trend_links", "links in the PD/CI lines"),
 ];
 
 /// Rows that count links, printed without decimals.
-const COUNT_ROWS: [&str; 3] = ["links_scored", "links_unpredicted", "floor_clamped"];
+const COUNT_ROWS: [&str; 4] = [
+    "links_scored",
+    "links_unpredicted",
+    "floor_clamped",
+    "trend_links",
+];
+
+/// Table 1's rows as (key, label): [`ROWS`], with each carrier's PD and CI RMSE after the pooled
+/// CI row when some evaluation has more than one carrier (`f/<carrier>/…`), in order of
+/// frequency.
+fn table_keys(evals: &[&Metrics]) -> Vec<(String, String)> {
+    let mut carriers: Vec<String> = Vec::new();
+    for e in evals {
+        for k in e.values.keys() {
+            if let Some(c) = k
+                .strip_prefix("f/")
+                .and_then(|r| r.strip_suffix("/pd_rmse_db"))
+                && !carriers.iter().any(|x| x == c)
+            {
+                carriers.push(c.to_string());
+            }
+        }
+    }
+    let ghz = |c: &str| {
+        c.trim_end_matches("GHz")
+            .parse::<f64>()
+            .unwrap_or(f64::INFINITY)
+    };
+    carriers.sort_by(|a, b| ghz(a).total_cmp(&ghz(b)));
+    let mut keys = Vec::new();
+    for (key, label) in ROWS {
+        keys.push((key.to_string(), label.to_string()));
+        if key == "ci_rmse_db" {
+            for c in &carriers {
+                for (m, name) in [("pd", "PD"), ("ci", "CI")] {
+                    keys.push((
+                        format!("f/{c}/{m}_rmse_db"),
+                        format!("{name} RMSE at {c} (dB)"),
+                    ));
+                }
+            }
+        }
+    }
+    keys
+}
 
 /// Table 1 and its plots as a folder: `report.md`, `table.csv`, `links.csv` (every link as
 /// scored), `metrics.json`, `plots/*.png`, and `report.html` with all of it and the scenes in 3D.
@@ -77,8 +137,11 @@ impl Stage for Report {
     // 3: report.html with the 3D view; 4: scenes past the page's budget left out, named;
     // 5: plotters figures as SVG and PNG at print size, per-stage figures; 6: close-in lines in
     // the path-loss chart; 7: both trend-line variants, the floor count, the definitions;
-    // 8: links.csv, every link as scored; 9: stages' reports (`evidence`) as tables.
-    const VERSION: u32 = 9;
+    // 8: links.csv, every link as scored; 9: stages' reports (`evidence`) as tables;
+    // 10: Evaluate 5's PD/CI (the gap between the model's and the measured lines), per-carrier
+    // rows, the definitions under the table, the chart's lines from the evaluations with the
+    // measured lines; 11: the PD/CI <= P2P sentence says "on those links".
+    const VERSION: u32 = 11;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -171,7 +234,12 @@ impl Stage for Report {
         let figures = model_figures(p, meas, &preds, &evals, radio_map, ortho)?;
         let plots = plot_files(figures, &inputs.many::<ReportFiles>("figures")?)?;
         let intro = intro(meas);
-        let mut md = format!("# KODAMA report: {}\n\n{intro}\n\n{md_table}\n", p.site);
+        let defs = definitions(&evals);
+        let mut md = format!(
+            "# KODAMA report: {}\n\n{intro}\n\n{md_table}\n{}\n",
+            p.site,
+            definitions_markdown(&defs)
+        );
         for (name, _) in plots.iter().filter(|(n, _)| n.ends_with(".png")) {
             md.push_str(&format!("![{name}]({name})\n\n"));
         }
@@ -186,6 +254,7 @@ impl Stage for Report {
         let page = PageInputs {
             p,
             intro: &intro,
+            definitions: &defs,
             meas,
             preds: &preds,
             evals: &evals,
@@ -232,7 +301,20 @@ fn model_figures(
         .zip(evals)
         .map(|(pr, ev)| pairs(meas, pr, ev).into_iter().unzip())
         .unzip();
-    let models = model_series(p, &series, &freqs);
+    let models = model_series(p, &series, &freqs, evals);
+    // The path-loss chart also draws the lines fitted to the measurements (the first model's
+    // links): what Table 1's PD and CI compare each model's lines with.
+    let mut with_measured: Vec<ModelSeries> = models.iter().map(ModelSeries::clone).collect();
+    if let (Some(ev), Some(f)) = (evals.first(), freqs.first())
+        && let Some((pd, ci)) = evaluated_lines(ev, "_measured", f)
+    {
+        with_measured.push(ModelSeries {
+            name: "measured",
+            links: &[],
+            trend: Some(pd),
+            close_in: Some(ci),
+        });
+    }
     let mut figures: Vec<(String, Figure)> = vec![
         ("scatter".into(), render(&Scatter(&models)).map_err(fail)?),
         (
@@ -241,7 +323,7 @@ fn model_figures(
         ),
         (
             "path_loss_distance".into(),
-            render(&PathLossDistance(&models)).map_err(fail)?,
+            render(&PathLossDistance(&with_measured)).map_err(fail)?,
         ),
     ];
     if let Some(map) = radio_map {
@@ -279,26 +361,133 @@ fn plot_files(
     Ok(plots)
 }
 
-/// The report's introduction: how many links, and how each score is computed.
+/// The report's introduction: how many links, and where the definitions are.
 fn intro(meas: &Measurements) -> String {
     format!(
-        "{} measured links; every model is scored at the same links (paper Sec. 5, rf.md §6). \
-         P2P: e_i = PL_pred,i − PL_meas,i. PD (power-distance): PL = α + 10 β log10 d; CI \
-         (close-in, 1 m): PL = FSPL(f, 1 m) + 10 n log10 d; each fitted by least squares to \
-         the model's predictions, and PD/CI RMSE = RMS of the measurements about that line \
-         (3GPP's line is its own formula). The other variant fits the same line to the \
-         measurements too and gives the RMS between the two lines at the links' distances. \
-         Links predicted at the floor count in P2P as the floor and are left out of the fits. \
-         LOS/NLOS rows group the links by the measurements' LOS where known, else by one \
-         stated reference trace, the same for every model.",
+        "{} measured links; every model is scored at the same links (paper Sec. 5). How each \
+         figure of Table 1 is computed is stated under it.",
         meas.links.len()
     )
+}
+
+/// How each figure of Table 1 is computed, one paragraph each, with what the measurements' own
+/// lines are on this site (from the first evaluation: every model scored on the same links is
+/// compared with the same measured lines). The paper (Sec. 5, Table 1) names P2P, PD and CI but
+/// gives no formulas; these are the standard forms, chosen as `Evaluate` documents.
+fn definitions(evals: &[&Metrics]) -> Vec<String> {
+    let first = evals.first().copied();
+    let get = |k: &str| first.and_then(|e| e.get(k));
+    let floor = evals.iter().find_map(|e| e.get("floor_db"));
+    let offsets = evals
+        .iter()
+        .any(|e| e.values.keys().any(|k| k.starts_with("offset_db/")));
+    let carriers = get("carriers").unwrap_or(1.0);
+    let mut out = vec![
+        format!(
+            "P2P (point-to-point): e_i = PL_pred,i − PL_meas,i for every link both give a path \
+             loss for; P2P RMSE = sqrt(mean e_i²), mean error = mean e_i, std = sqrt(RMSE² − \
+             mean²). {}{}",
+            match floor {
+                Some(f) => format!(
+                    "A prediction past the receiver's floor ({f:.0} dB), or no path at all, is \
+                     scored as the floor (row \"links predicted past the floor\"). "
+                ),
+                None => "Links a model finds no path for are left out. ".to_string(),
+            },
+            if offsets {
+                "The transmitters' EIRP is unknown: one offset per transmitter (the mean of \
+                 measured − predicted) is taken out of the measurements first."
+            } else {
+                ""
+            }
+        )
+        .trim_end()
+        .to_string(),
+        "Trend lines, each fitted by least squares to the path loss PL_i at the 3-D \
+         transmitter-receiver distances d_i (metres, ground heights from the terrain): PD \
+         (power-distance, floating intercept, the 3GPP TR 38.901 form) PL(d) = α + 10 β \
+         log10(d / 1 m), in α and β; CI (close-in free-space reference distance; Sun, Rappaport \
+         et al., IEEE Trans. Veh. Technol. 65(5), 2016, d0 = 1 m) PL(f, d) = FSPL(f, 1 m) + 10 \
+         n log10(d / 1 m), FSPL(f, 1 m) = 20 log10(4π f / c), in n."
+            .to_string(),
+        "PD RMSE and CI RMSE (Table 1's PD and CI): the line is fitted separately to the \
+         model's predictions and to the measurements of the same links (the same values as \
+         P2P, a prediction past the floor at the floor), and the RMSE is sqrt(mean over the \
+         links of (model's line(d_i) − measured line(d_i))²): how far the model's trend is \
+         from the measured trend where the links are. 3GPP is its own line: its formula's \
+         value at each link against the measured line. The gap between two least-squares \
+         lines fitted to the same links is the least-squares line of the P2P errors, so a \
+         fitted model's PD and CI RMSE are never above its P2P RMSE on those links."
+            .to_string(),
+    ];
+    if carriers > 1.0 {
+        out.push(
+            "The links have more than one carrier: the lines are fitted per carrier (a PD \
+             line's intercept holds the carrier's free-space loss), each carrier's PD and CI \
+             RMSE has its own row, and the pooled PD and CI RMSE is the RMS over all links of \
+             their own carrier's gap: sqrt(Σ n_f RMSE_f² / Σ n_f)."
+                .to_string(),
+        );
+    } else {
+        out.push(
+            "One carrier: the lines are fitted to all the links together (with several \
+             carriers they are fitted per carrier, each with its own row, and pooled as the \
+             RMS over all links)."
+                .to_string(),
+        );
+    }
+    out.push(
+        "Measured about the model's line: sqrt(mean (PL_meas,i − model's line(d_i))²), the \
+         other way a trend-line RMSE is read. It is never below σ, the RMS of the measurements \
+         about their own line (the shadow fading of Sun et al.), which is the same for every \
+         model: it measures how far the site's path loss is from one line, more than the model."
+            .to_string(),
+    );
+    if let (Some(b), Some(sigma)) = (get("pd_beta_measured"), get("pd_sigma_measured_db")) {
+        let mut site = format!(
+            "On this site the measured PD line has slope β = {b:.2} with σ = {sigma:.2} dB \
+             about it"
+        );
+        if let (Some(bl), Some(bn), Some(nl), Some(nn)) = (
+            get("los/pd_beta_measured"),
+            get("nlos/pd_beta_measured"),
+            get("los/n"),
+            get("nlos/n"),
+        ) {
+            site.push_str(&format!(
+                "; fitted apart, the {nl:.0} LOS links have β = {bl:.2} (σ = {:.2} dB) and the \
+                 {nn:.0} NLOS links β = {bn:.2} (σ = {:.2} dB): one line through both spans the \
+                 step from LOS near the transmitter to NLOS far from it, hence its slope and \
+                 scatter",
+                get("los/pd_sigma_measured_db").unwrap_or(f64::NAN),
+                get("nlos/pd_sigma_measured_db").unwrap_or(f64::NAN),
+            ));
+        }
+        site.push('.');
+        out.push(site);
+    }
+    out.push(
+        "LOS/NLOS rows group the links by the measurements' LOS flag where known, else by one \
+         stated reference trace, the same for every model."
+            .to_string(),
+    );
+    out
+}
+
+/// The definitions as Markdown under Table 1.
+fn definitions_markdown(defs: &[String]) -> String {
+    let mut md = String::from("How each figure is computed:\n\n");
+    for d in defs {
+        md.push_str(&format!("- {d}\n"));
+    }
+    md
 }
 
 /// What report.html is made of besides its plots.
 struct PageInputs<'a> {
     p: &'a ReportParams,
     intro: &'a str,
+    definitions: &'a [String],
     meas: &'a Measurements,
     preds: &'a [&'a Measurements],
     evals: &'a [&'a Metrics],
@@ -334,6 +523,7 @@ impl PageInputs<'_> {
         report_html(&Page {
             site: &p.site,
             intro: self.intro,
+            definitions: self.definitions,
             models: &p.models,
             table: &table_rows(self.evals),
             plots: &plot_names,
@@ -386,8 +576,10 @@ fn evidence_markdown(evidence: &[(&str, &Metrics)]) -> String {
 
 /// Table 1's rows for report.html: the rows some model has, the best RMSE of each marked.
 fn table_rows(evals: &[&Metrics]) -> Vec<TableRow> {
-    ROWS.iter()
-        .filter_map(|&(key, label)| {
+    table_keys(evals)
+        .into_iter()
+        .filter_map(|(key, label)| {
+            let key = key.as_str();
             let vals: Vec<Option<f64>> = evals.iter().map(|e| e.get(key)).collect();
             if vals.iter().all(Option::is_none) {
                 return None;
@@ -400,7 +592,7 @@ fn table_rows(evals: &[&Metrics]) -> Vec<TableRow> {
                     .map(|x| x.0)
             });
             Some(TableRow {
-                label: label.to_owned(),
+                label,
                 values: vals
                     .iter()
                     .map(|v| match v {
@@ -570,27 +762,32 @@ fn pairs(meas: &Measurements, pred: &Measurements, ev: &Metrics) -> Vec<((f64, f
         .collect()
 }
 
-/// Each model's links and trend lines fitted to its predictions (as Evaluate fits them), for the
-/// charts. The close-in line is drawn at the links' median frequency.
+/// Each model's links and trend lines, for the charts: the lines Evaluate fitted to its
+/// predictions (its metrics), with several carriers the lowest carrier's; a model that is its own
+/// line (3GPP) gets the lines fitted to its values here, for the eye. The close-in line is drawn
+/// at that carrier's frequency (else the links' median).
 fn model_series<'a>(
     p: &'a ReportParams,
     series: &'a [Vec<(f64, f64, f64)>],
     freqs: &[Vec<f64>],
+    evals: &[&Metrics],
 ) -> Vec<ModelSeries<'a>> {
     p.models
         .iter()
         .zip(series)
         .zip(freqs)
-        .map(|((name, links), f)| {
+        .zip(evals)
+        .map(|(((name, links), f), ev)| {
             let d: Vec<f64> = links.iter().map(|x| x.0).collect();
             let pl: Vec<f64> = links.iter().map(|x| x.2).collect();
-            let trend = (links.len() >= 2).then(|| fit_power_distance(&d, &pl));
-            let close_in = (!links.is_empty()).then(|| {
-                let mut sorted = f.clone();
-                sorted.sort_by(f64::total_cmp);
-                let f_mid = sorted[sorted.len() / 2];
-                (fspl_db(1.0, f_mid), fit_close_in(&d, &pl, f))
-            });
+            let (trend, close_in) = match evaluated_lines(ev, "", f) {
+                Some((pd, ci)) => (Some(pd), Some(ci)),
+                None => (
+                    (links.len() >= 2).then(|| fit_power_distance(&d, &pl)),
+                    (!links.is_empty())
+                        .then(|| (fspl_db(1.0, median(f)), fit_close_in(&d, &pl, f))),
+                ),
+            };
             ModelSeries {
                 name,
                 links,
@@ -599,6 +796,38 @@ fn model_series<'a>(
             }
         })
         .collect()
+}
+
+/// The median of `v` (upper middle; 0 when empty).
+fn median(v: &[f64]) -> f64 {
+    let mut sorted = v.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    sorted.get(sorted.len() / 2).copied().unwrap_or(0.0)
+}
+
+/// The PD line (α, β) and the CI line (FSPL(f, 1 m), n) an evaluation gives, the model's
+/// (`suffix` "") or the measurements' (`suffix` "_measured"): with one carrier its own, with
+/// several the lowest carrier's; `None` when it gives none.
+fn evaluated_lines(ev: &Metrics, suffix: &str, freqs: &[f64]) -> Option<((f64, f64), (f64, f64))> {
+    let alpha = format!("pd_alpha{suffix}_db");
+    let beta = format!("pd_beta{suffix}");
+    let n = format!("ci_n{suffix}");
+    if let (Some(a), Some(b), Some(n)) = (ev.get(&alpha), ev.get(&beta), ev.get(&n)) {
+        return Some(((a, b), (fspl_db(1.0, median(freqs)), n)));
+    }
+    let lowest = freqs.iter().copied().fold(f64::INFINITY, f64::min);
+    if !lowest.is_finite() {
+        return None;
+    }
+    let at = format!(
+        "f/{}/",
+        crate::stages::eval::evaluate::carrier_label(lowest)
+    );
+    let get = |k: &str| ev.get(&format!("{at}{k}"));
+    Some((
+        (get(&alpha)?, get(&beta)?),
+        (fspl_db(1.0, lowest), get(&n)?),
+    ))
 }
 
 /// The radio map colour-mapped over the orthophoto at the finer of the two resolutions, with a
@@ -620,4 +849,42 @@ fn map_figure(map: &Raster, ortho: Option<&Ortho>) -> Result<Figure, String> {
         ortho,
         Some(layer),
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// With two carriers, each carrier's PD and CI rows follow the pooled CI row, lowest carrier
+    /// first (16.95 sorts after 6.75 by frequency, not by text), and the definitions say how the
+    /// pooled figure is made.
+    #[test]
+    fn carriers_get_their_own_rows_in_order_of_frequency() {
+        let mut m = Metrics::default();
+        for (k, v) in [
+            ("pd_rmse_db", 3.0),
+            ("ci_rmse_db", 3.5),
+            ("carriers", 2.0),
+            ("f/16.95GHz/pd_rmse_db", 4.0),
+            ("f/16.95GHz/ci_rmse_db", 4.5),
+            ("f/6.75GHz/pd_rmse_db", 2.0),
+            ("f/6.75GHz/ci_rmse_db", 2.5),
+        ] {
+            m.set(k, v);
+        }
+        let keys: Vec<String> = table_keys(&[&m]).into_iter().map(|k| k.0).collect();
+        let at = |k: &str| keys.iter().position(|x| x == k).unwrap();
+        assert_eq!(at("f/6.75GHz/pd_rmse_db"), at("ci_rmse_db") + 1);
+        assert_eq!(at("f/6.75GHz/ci_rmse_db"), at("ci_rmse_db") + 2);
+        assert_eq!(at("f/16.95GHz/pd_rmse_db"), at("ci_rmse_db") + 3);
+        let rows = table_rows(&[&m]);
+        let row = rows
+            .iter()
+            .find(|r| r.label == "PD RMSE at 16.95GHz (dB)")
+            .unwrap();
+        assert_eq!(row.values, vec!["4.00".to_string()]);
+        let defs = definitions(&[&m]).join("\n");
+        assert!(defs.contains("fitted per carrier"), "{defs}");
+        assert!(!defs.contains("rf.md"), "{defs}");
+    }
 }

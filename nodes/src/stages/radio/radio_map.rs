@@ -69,7 +69,7 @@ pub struct MapOptions {
     pub scattering_pattern: ScatteringPattern,
     /// Rays shot from the transmitter (> 0). Default 1 000 000.
     pub rays: u32,
-    /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at `freq_hz` (rf.md §5.1).
+    /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at `freq_hz`.
     pub foliage_db_per_m: Option<f64>,
 }
 

@@ -56,7 +56,7 @@ pub struct LinkOptions {
     pub scattering_pattern: ScatteringPattern,
     /// Rays shot from each transmitter to find paths (> 0). Default 1 000 000.
     pub rays: u32,
-    /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at the link's carrier (rf.md §5.1).
+    /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at the link's carrier.
     pub foliage_db_per_m: Option<f64>,
     /// Diffract only where faces turn by at least this many degrees, in [0, 90]. Default 0.
     pub min_wedge_deg: f64,

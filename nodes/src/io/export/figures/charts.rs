@@ -1,5 +1,6 @@
 //! The report's scoring charts: predicted vs measured, the CDF of the absolute error, and path
-//! loss vs distance with each model's power-distance and close-in trend lines (rf.md §6).
+//! loss vs distance with each model's power-distance and close-in trend lines (the lines are
+//! defined, with their sources, on `stages::eval::evaluate::carrier_trends`).
 
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
@@ -8,6 +9,7 @@ use plotters::prelude::*;
 use super::{Draw, FONT, PALETTE, padded_range, plot_err, rgb};
 
 /// One model's links: (distance m, measured loss dB with the offset taken out, predicted dB).
+#[derive(Clone)]
 pub struct ModelSeries<'a> {
     /// Legend name.
     pub name: &'a str,
@@ -217,7 +219,7 @@ impl Draw for PathLossDistance<'_> {
                 chart
                     .draw_series(LineSeries::new(line(a, b), c.stroke_width(3)))
                     .map_err(plot_err)?
-                    .label(format!("{} PD (n = {b:.2})", m.name))
+                    .label(format!("{} PD (β = {b:.2})", m.name))
                     .legend(move |(x, y)| {
                         PathElement::new([(x, y), (x + 30, y)], c.stroke_width(3))
                     });
@@ -273,7 +275,7 @@ mod tests {
             close_in: Some((fspl_1m, n)),
         };
         let fig = render(&PathLossDistance(&[model])).unwrap();
-        for label in ["twin PD (n = 3.00)", "twin CI (n = 3.00)", "measured"] {
+        for label in ["twin PD (β = 3.00)", "twin CI (n = 3.00)", "measured"] {
             assert!(fig.svg.contains(label), "no {label:?} in the SVG");
         }
         // The dashed line is drawn as many short segments, the solid one as one polyline.
