@@ -778,6 +778,73 @@ fn oversized_or_deep_osm_xml_is_refused() {
 }
 
 // ------------------------------------------------------------------------------------------------
+// SRTM .hgt (issue 49): the size and the name are all a tile has to go by.
+
+fn read_hgt_fails(dir: &Path, name: &str, len: usize) -> String {
+    let path = write(dir, name, vec![0u8; len]);
+    fails::<kodama_nodes::stages::ingest::read_raster::ReadRaster>(
+        json!({"path": name, "cell_m": 90.0}),
+        &Inputs::new(),
+        &[path],
+    )
+}
+
+#[test]
+fn hgt_of_the_wrong_size_or_name_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let three = 2 * 1201 * 1201;
+    for len in [0, 1, three - 2, three + 1, 2 * 3601 * 3600] {
+        let e = read_hgt_fails(d, "N40W075.hgt", len);
+        expect_all(
+            &e,
+            &[
+                "N40W075.hgt: size",
+                "3601 x 3601",
+                "1201 x 1201",
+                &format!("found {len} bytes"),
+            ],
+        );
+    }
+    for name in [
+        "dem.hgt",
+        "N4W075.hgt",
+        "X40W075.hgt",
+        "N40W75.hgt",
+        "40N075W.hgt",
+    ] {
+        let e = read_hgt_fails(d, name, three);
+        expect_all(
+            &e,
+            &[name, "file name", "like N40W074.hgt", "south-west corner"],
+        );
+    }
+    let e = read_hgt_fails(d, "N95W075.hgt", three);
+    expect_all(
+        &e,
+        &[
+            "N95W075.hgt: file name",
+            "within 90 S..89 N",
+            "found 95, -75",
+        ],
+    );
+    let e = read_hgt_fails(d, "S10E190.hgt", three);
+    expect_all(
+        &e,
+        &["S10E190.hgt: file name", "180 W..179 E", "found -10, 190"],
+    );
+    // A tile of the right size and name reads (all zeros: sea level).
+    let path = write(d, "N40W075.hgt", vec![0u8; three]);
+    let r: Raster = kodama_nodes::stages::ingest::read_raster::ReadRaster::run(
+        &serde_json::from_value(json!({"path": "N40W075.hgt", "cell_m": 900.0})).unwrap(),
+        &Inputs::new(),
+        &Ctx::new(&site(), &[path]),
+    )
+    .unwrap();
+    assert!(r.data.contains(&0.0));
+}
+
+// ------------------------------------------------------------------------------------------------
 // Errors at the right place
 
 #[test]
