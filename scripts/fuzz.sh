@@ -11,7 +11,7 @@ cd "$(dirname "$0")/.."
 seconds="${FUZZ_SECONDS:-600}"
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-    targets=(ply sionna_xml glb views_json measurements_csv las_header laz_header geotiff_tags)
+    targets=(ply sionna_xml glb views_json measurements_csv las_header laz_header geotiff_tags osm_xml)
 fi
 # The test profile keeps overflow checks on, so an unchecked size shows up as a panic.
 # The test binary runs from a private copy, so cargo's lock and later builds in target/ do not

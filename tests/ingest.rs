@@ -148,3 +148,50 @@ fn views_file_pointing_at_a_missing_image_exits_2() {
         r.stderr
     );
 }
+
+/// ReadLas on a folder of tiles: the folder is the node's input, so adding a tile reruns it and
+/// the cloud grows by the tile (issue 49).
+#[test]
+fn las_folder_is_one_input_and_a_new_tile_reruns_the_node() {
+    let env = Env::new();
+    let las = shared_data().join("autzen/autzen_trim.las");
+    std::fs::create_dir(env.path("tiles")).unwrap();
+    std::fs::copy(&las, env.path("tiles/a.las")).unwrap();
+    let g = env.write(
+        "g.ron",
+        "Graph(\n  site: Site(crs: \"EPSG:32610\", origin: (494000.0, 4877000.0), cell_m: 1.0),\n  nodes: { \"p\": ReadLas(path: \"tiles\"), \"s\": PointStats(points: \"p\") },\n  outputs: { \"s\": \"s\" },\n)\n",
+    );
+    let count = || {
+        let s: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(env.out().join("s.json")).unwrap()).unwrap();
+        s["count"].as_f64().unwrap()
+    };
+    let r = env.run(&g, &[]).ok();
+    assert_eq!(r.status("p"), "ran");
+    assert_eq!(count(), 110_000.0);
+    assert_eq!(env.run(&g, &[]).ok().status("p"), "cached");
+    std::fs::copy(&las, env.path("tiles/b.las")).unwrap();
+    let r = env.run(&g, &[]).ok();
+    assert_eq!(r.status("p"), "ran");
+    assert_eq!(count(), 220_000.0);
+}
+
+/// Broken OSM XML through the CLI: exit 2, the file and the line.
+#[test]
+fn broken_osm_xml_exits_2_naming_the_line() {
+    let env = Env::new();
+    std::fs::write(
+        env.path("b.osm"),
+        "<?xml version=\"1.0\"?>\n<osm version=\"0.6\">\n  <node id=\"1\" lat=\"x\" lon=\"0\"/>\n</osm>\n",
+    )
+    .unwrap();
+    let g = env.write(
+        "g.ron",
+        "Graph(\n  site: Site(crs: \"EPSG:32618\", origin: (583200.0, 4506600.0), cell_m: 1.0),\n  nodes: { \"b\": ReadOsmBuildings(path: \"b.osm\") },\n)\n",
+    );
+    let r = env.run(&g, &[]);
+    // Nothing references node 1, but every node is read: its bad latitude is still an error.
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("b.osm: line 3"), "{}", r.stderr);
+    assert!(r.stderr.contains("a lat in degrees"), "{}", r.stderr);
+}

@@ -236,6 +236,14 @@ fn read_tiff(dir: &Path, bytes: &[u8]) {
     );
 }
 
+fn read_osm_xml(dir: &Path, bytes: &[u8]) {
+    let p = write(dir, "b.osm", bytes);
+    run_stage::<kodama_nodes::stages::ingest::read_osm::ReadOsmBuildings>(
+        json!({"path": "b.osm"}),
+        &[p],
+    );
+}
+
 const TARGETS: &[Target] = &[
     Target {
         name: "ply",
@@ -278,6 +286,12 @@ const TARGETS: &[Target] = &[
         seed: seed_laz,
         head: 400,
         read: read_las,
+    },
+    Target {
+        name: "osm_xml",
+        seed: || OSM_XML.as_bytes().to_vec(),
+        head: 1600,
+        read: read_osm_xml,
     },
     Target {
         name: "geotiff_tags",
@@ -330,6 +344,7 @@ fuzz_target!(measurements_csv_never_panics, "measurements_csv");
 fuzz_target!(las_header_never_panics, "las_header");
 fuzz_target!(laz_header_never_panics, "laz_header");
 fuzz_target!(geotiff_tags_never_panics, "geotiff_tags");
+fuzz_target!(osm_xml_never_panics, "osm_xml");
 
 /// The seeds themselves read (so the fuzzing starts from files the readers accept).
 #[test]

@@ -633,6 +633,218 @@ fn a_tileset_uri_outside_its_folder_or_remote_is_refused() {
 }
 
 // ------------------------------------------------------------------------------------------------
+// OSM XML (issue 49): broken markup, wrong values, oversized markup and deep nesting end in an
+// error naming the file, the line and byte, and what was expected.
+
+fn read_osm_fails(dir: &Path, xml: &str) -> String {
+    let path = write(dir, "b.osm", xml);
+    fails::<kodama_nodes::stages::ingest::read_osm::ReadOsmBuildings>(
+        json!({"path": "b.osm"}),
+        &Inputs::new(),
+        &[path],
+    )
+}
+
+#[test]
+fn osm_xml_seed_reads() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), "b.osm", OSM_XML);
+    let f = kodama_nodes::stages::ingest::read_osm::ReadOsmBuildings::run(
+        &serde_json::from_value(json!({"path": "b.osm"})).unwrap(),
+        &Inputs::new(),
+        &Ctx::new(&site(), &[path]),
+    )
+    .unwrap();
+    let ids: Vec<&str> = f.items.iter().map(|b| b.id.as_str()).collect();
+    assert_eq!(ids, ["w13", "r20"]);
+    assert_eq!(f.items[0].height_m, Some(12.0));
+    assert_eq!(f.items[1].levels, Some(4.0));
+    assert_eq!(f.items[1].polygons.len(), 1);
+    assert_eq!(f.items[1].polygons[0].holes.len(), 1);
+}
+
+#[test]
+fn broken_osm_xml_is_named_by_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // Cut in the middle of a way: the open elements are never closed.
+    let cut = &OSM_XML[..OSM_XML
+        .find("<nd ref=\"6\"/><nd ref=\"7\"/><nd ref=\"5\"/>\n")
+        .unwrap()];
+    let e = read_osm_fails(d, cut);
+    expect_all(
+        &e,
+        &[
+            "b.osm",
+            "line 18",
+            "well-formed OSM XML",
+            "2 elements still open",
+        ],
+    );
+    // A mismatched end tag, on line 13.
+    let e = read_osm_fails(d, &OSM_XML.replacen("</node>", "</way>", 1));
+    expect_all(&e, &["b.osm", "line 13", "well-formed OSM XML"]);
+    // Not OSM at all.
+    let e = read_osm_fails(d, "<?xml version=\"1.0\"?>\n<gpx><trk/></gpx>\n");
+    expect_all(
+        &e,
+        &["b.osm", "line 2", "an <osm> root element, found <gpx>"],
+    );
+    let e = read_osm_fails(d, "<?xml version=\"1.0\"?>\n");
+    expect_all(&e, &["b.osm", "an <osm> root element, found none"]);
+    let e = read_osm_fails(d, &format!("{OSM_XML}<osm/>"));
+    expect_all(&e, &["b.osm", "one <osm> root element"]);
+}
+
+#[test]
+fn wrong_osm_xml_values_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (from, to, parts) in [
+        (
+            r#"lat="40.7003000" lon="-73.9993000""#,
+            r#"lat="north" lon="-73.9993000""#,
+            &[
+                "line 10",
+                "a lat in degrees within ±90 on node 6",
+                "\"north\"",
+            ][..],
+        ),
+        (
+            r#"lon="-73.9990000"/>"#,
+            r#"lon="-273.9990000"/>"#,
+            &["line 6", "a lon in degrees within ±180 on node 2"][..],
+        ),
+        (
+            r#"<way id="12">"#,
+            r#"<way id="twelve">"#,
+            &[
+                "line 16",
+                "<way> with a whole-number id attribute",
+                "\"twelve\"",
+            ][..],
+        ),
+        (
+            r#"<nd ref="7"/><nd ref="5"/></way>"#,
+            r#"<nd/><nd ref="5"/></way>"#,
+            &[
+                "line 16",
+                "<nd> with a whole-number ref attribute, found none",
+            ][..],
+        ),
+        (
+            r#"<member type="way" ref="12""#,
+            r#"<member type="area" ref="12""#,
+            &["line 25", "<member> of type node, way or relation"][..],
+        ),
+        (
+            r#"<tag k="height" v="12 m"/>"#,
+            r#"<tag k="height"/>"#,
+            &["line 20", "<tag> with a v attribute"][..],
+        ),
+        (
+            r#"v="Caf&#233; &amp; bar""#,
+            r#"v="Caf&eacute;""#,
+            &["line 12", "a valid attribute value"][..],
+        ),
+    ] {
+        assert!(OSM_XML.contains(from), "{from}");
+        let e = read_osm_fails(d, &OSM_XML.replacen(from, to, 1));
+        expect_all(&e, &["b.osm"]);
+        expect_all(&e, parts);
+    }
+}
+
+#[test]
+fn oversized_or_deep_osm_xml_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // One tag value of 2 MiB: refused before quick-xml buffers more than about the limit.
+    let huge = OSM_XML.replacen("12 m", &"1".repeat(2 << 20), 1);
+    let e = read_osm_fails(d, &huge);
+    expect_all(&e, &["b.osm", "line 20", "markup of at most 1048576 bytes"]);
+    // Elements nested 1000 deep inside a node.
+    let deep = OSM_XML.replacen(
+        "<tag k=\"name\"",
+        &format!(
+            "{}{}<tag k=\"name\"",
+            "<a>".repeat(1000),
+            "</a>".repeat(1000)
+        ),
+        1,
+    );
+    let e = read_osm_fails(d, &deep);
+    expect_all(&e, &["b.osm", "line 12", "nested at most 32 deep"]);
+}
+
+// ------------------------------------------------------------------------------------------------
+// SRTM .hgt (issue 49): the size and the name are all a tile has to go by.
+
+fn read_hgt_fails(dir: &Path, name: &str, len: usize) -> String {
+    let path = write(dir, name, vec![0u8; len]);
+    fails::<kodama_nodes::stages::ingest::read_raster::ReadRaster>(
+        json!({"path": name, "cell_m": 90.0}),
+        &Inputs::new(),
+        &[path],
+    )
+}
+
+#[test]
+fn hgt_of_the_wrong_size_or_name_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let three = 2 * 1201 * 1201;
+    for len in [0, 1, three - 2, three + 1, 2 * 3601 * 3600] {
+        let e = read_hgt_fails(d, "N40W075.hgt", len);
+        expect_all(
+            &e,
+            &[
+                "N40W075.hgt: size",
+                "3601 x 3601",
+                "1201 x 1201",
+                &format!("found {len} bytes"),
+            ],
+        );
+    }
+    for name in [
+        "dem.hgt",
+        "N4W075.hgt",
+        "X40W075.hgt",
+        "N40W75.hgt",
+        "40N075W.hgt",
+    ] {
+        let e = read_hgt_fails(d, name, three);
+        expect_all(
+            &e,
+            &[name, "file name", "like N40W074.hgt", "south-west corner"],
+        );
+    }
+    let e = read_hgt_fails(d, "N95W075.hgt", three);
+    expect_all(
+        &e,
+        &[
+            "N95W075.hgt: file name",
+            "within 90 S..89 N",
+            "found 95, -75",
+        ],
+    );
+    let e = read_hgt_fails(d, "S10E190.hgt", three);
+    expect_all(
+        &e,
+        &["S10E190.hgt: file name", "180 W..179 E", "found -10, 190"],
+    );
+    // A tile of the right size and name reads (all zeros: sea level).
+    let path = write(d, "N40W075.hgt", vec![0u8; three]);
+    let r: Raster = kodama_nodes::stages::ingest::read_raster::ReadRaster::run(
+        &serde_json::from_value(json!({"path": "N40W075.hgt", "cell_m": 900.0})).unwrap(),
+        &Inputs::new(),
+        &Ctx::new(&site(), &[path]),
+    )
+    .unwrap();
+    assert!(r.data.contains(&0.0));
+}
+
+// ------------------------------------------------------------------------------------------------
 // Errors at the right place
 
 #[test]

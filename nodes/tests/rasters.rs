@@ -403,3 +403,116 @@ fn autzen_orthophoto_registers_with_the_lidar_colours() {
         "{registered} vs {shifted}"
     );
 }
+
+/// An SRTM tile of `side` x `side` posts: `height(row, col)` big-endian, rows from the north.
+fn write_hgt(path: &std::path::Path, side: usize, height: impl Fn(usize, usize) -> i16) {
+    let mut bytes = Vec::with_capacity(2 * side * side);
+    for row in 0..side {
+        for col in 0..side {
+            bytes.extend(height(row, col).to_be_bytes());
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// A synthetic 3 arc-second tile N40W075 whose heights are linear in latitude and longitude
+/// (whole metres at every post, so bilinear reading reproduces the plane exactly), read into
+/// the test site on 90 m cells. Cells are checked against the plane at the latitude and
+/// longitude PROJ gives for their centres (tests/fixtures/hgt_reference.csv, made by
+/// scripts/hgt_reference.py): a tile placed half a post off, flipped, or read little-endian
+/// misses by metres. A block of void posts becomes NaN, and only around it.
+#[test]
+fn srtm_hgt_tile_reads_into_the_site() {
+    // h = 100 + 1200 (lat - 40) + 2400 (lon + 75): post (row, col) is at lat 41 - row/1200,
+    // lon -75 + col/1200.
+    let plane = |lat: f64, lon: f64| 100.0 + 1200.0 * (lat - 40.0) + 2400.0 * (lon + 75.0);
+    let post = |row: usize, col: usize| 100 + 1200 - row as i16 + 2 * col as i16;
+    let void = |row: usize, col: usize| (600..610).contains(&row) && (300..310).contains(&col);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("N40W075.hgt");
+    write_hgt(
+        &path,
+        1201,
+        |r, c| if void(r, c) { -32768 } else { post(r, c) },
+    );
+    let site = site();
+    let mut p = raster_params("N40W075.hgt");
+    p.cell_m = Some(90.0);
+    let r = read_raster(&p, path, &site);
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../tests/fixtures/hgt_reference.csv"),
+    )
+    .unwrap();
+    let mut worst: f64 = 0.0;
+    for line in text.lines().skip(1) {
+        let v: Vec<f64> = line.split(',').map(|f| f.parse().unwrap()).collect();
+        let (x, y, lat, lon) = (v[0], v[1], v[2], v[3]);
+        let (col, row) = r.grid.cell_of(x, y).expect("inside the tile");
+        let c = r.grid.center(col, row);
+        assert!(
+            (c.0 - x).abs() < 1e-6 && (c.1 - y).abs() < 1e-6,
+            "{c:?} is not ({x}, {y})"
+        );
+        let got = r.at(col, row) as f64;
+        let want = plane(lat, lon);
+        assert!(
+            (got - want).abs() < 0.02,
+            "({x}, {y}): {got} m, the plane {want} m"
+        );
+        worst = worst.max((got - want).abs());
+    }
+    println!("worst difference from the plane: {worst:.4} m");
+    // The void: 10 x 10 posts at lat 40.5, lon -74.75; with the bilinear reading's one-post
+    // margin, 11 x 11 posts of 3" (1.02 x 0.78 km, 0.79 km2) in 90 m cells.
+    let wgs = ToSite::new(&Crs::from_epsg(4326).unwrap(), &site).unwrap();
+    let posts = |c: u32, rw: u32| {
+        let (x, y) = r.grid.center(c, rw);
+        let (lon, lat) = wgs.inverse(x, y).unwrap();
+        ((41.0 - lat) * 1200.0, (lon + 75.0) * 1200.0)
+    };
+    // NaN cells inside the tile, away from its edges (the grid's corners lie outside it).
+    let nan: Vec<(f64, f64)> = (0..r.grid.height)
+        .flat_map(|row| (0..r.grid.width).map(move |col| (col, row)))
+        .filter(|&(c, rw)| r.at(c, rw).is_nan())
+        .map(|(c, rw)| posts(c, rw))
+        .filter(|&(row, col)| (2.0..1198.0).contains(&row) && (2.0..1198.0).contains(&col))
+        .collect();
+    assert!(!nan.is_empty(), "the void cells were read as heights");
+    for &(row, col) in &nan {
+        assert!(
+            (598.5..611.5).contains(&row) && (298.5..311.5).contains(&col),
+            "NaN at post ({row:.1}, {col:.1}), away from the void"
+        );
+    }
+    let area = nan.len() as f64 * 90.0 * 90.0;
+    assert!((0.5e6..1.1e6).contains(&area), "{} NaN cells", nan.len());
+}
+
+/// A 1 arc-second tile: posts every 1/3600 degree, the same plane read back at the PROJ points.
+#[test]
+fn srtm_one_arc_second_tile() {
+    let plane = |lat: f64, lon: f64| 100.0 + 3600.0 * (lat - 40.0) + 3600.0 * (lon + 75.0);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("N40W075.hgt");
+    write_hgt(&path, 3601, |r, c| (100 + 3600 - r + c) as i16);
+    let mut p = raster_params("N40W075.hgt");
+    p.cell_m = Some(90.0);
+    let r = read_raster(&p, path, &site());
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../tests/fixtures/hgt_reference.csv"),
+    )
+    .unwrap();
+    for line in text.lines().skip(1) {
+        let v: Vec<f64> = line.split(',').map(|f| f.parse().unwrap()).collect();
+        let (col, row) = r.grid.cell_of(v[0], v[1]).unwrap();
+        let (got, want) = (r.at(col, row) as f64, plane(v[2], v[3]));
+        assert!(
+            (got - want).abs() < 0.05,
+            "({}, {}): {got} vs {want}",
+            v[0],
+            v[1]
+        );
+    }
+}

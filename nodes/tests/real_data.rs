@@ -6,8 +6,11 @@ mod common;
 use common::*;
 
 use kodama_nodes::io::crs::{Crs, ToSite};
-use kodama_nodes::stages::ingest::read_las::{header_crs, read_las};
-use kodama_nodes::{Ctx, Site};
+use std::path::PathBuf;
+
+use kodama_nodes::artifact::PointSet;
+use kodama_nodes::stages::ingest::read_las::{ReadLas, ReadLasParams, header_crs, read_las};
+use kodama_nodes::{Ctx, Inputs, Site, Stage, StageError};
 
 #[test]
 fn delft_ahn3_tile_counts_classes_and_extent() {
@@ -132,4 +135,175 @@ fn reprojection_agrees_with_proj() {
         checked += 1;
     }
     assert_eq!(checked, 9);
+}
+
+// ------------------------------------------------------------------------------------------------
+// ReadLas on a folder of tiles (issue 49)
+
+fn read_las_node(path: PathBuf, crs: Option<&str>, site: &Site) -> Result<PointSet, StageError> {
+    let p = ReadLasParams {
+        path: "tiles".into(),
+        crs: crs.map(Into::into),
+    };
+    ReadLas::run(&p, &Inputs::new(), &Ctx::new(site, &[path]))
+}
+
+fn autzen_site() -> Site {
+    Site {
+        crs: "EPSG:32610".into(),
+        origin: (494000.0, 4877000.0),
+        cell_m: 1.0,
+    }
+}
+
+/// `points` written as a LAS (or LAZ) tile with `header`'s format, scales and VLRs (its CRS).
+fn write_tile(path: &std::path::Path, header: &las::Header, points: &[las::Point], laz: bool) {
+    let mut b = las::Builder::from(header.clone());
+    b.point_format.is_compressed = laz;
+    let mut w = las::Writer::from_path(path, b.into_header().unwrap()).unwrap();
+    for p in points {
+        w.write_point(p.clone()).unwrap();
+    }
+    w.close().unwrap();
+}
+
+/// Autzen cut in two, the first half as LAZ, written by the las crate into a folder (with a file
+/// that is not a tile): the folder reads as exactly the whole file, point by point, with colour.
+/// The second half is named so that it sorts first by name, and its points must come first.
+#[test]
+fn autzen_halves_in_a_folder_read_as_the_whole() {
+    let whole_path = shared("autzen/autzen_trim.las");
+    let mut reader = las::Reader::from_path(&whole_path).unwrap();
+    let header = reader.header().clone();
+    let points: Vec<las::Point> = reader
+        .read_all()
+        .unwrap()
+        .points()
+        .map(Result::unwrap)
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let (first, second) = points.split_at(61_234);
+    write_tile(&dir.path().join("b_first.laz"), &header, first, true);
+    write_tile(&dir.path().join("A_second.LAS"), &header, second, false);
+    std::fs::write(dir.path().join("readme.txt"), "not a tile").unwrap();
+    let site = autzen_site();
+    let whole = read_las_node(whole_path, None, &site).unwrap();
+    let tiles = read_las_node(dir.path().to_path_buf(), None, &site).unwrap();
+    assert_eq!(tiles.len(), 110_000);
+    assert_eq!(tiles.rgb.len(), 110_000);
+    // "A_second.LAS" < "b_first.laz" (byte order): the second half comes first.
+    let n2 = second.len();
+    assert_eq!(tiles.xyz[..n2], whole.xyz[61_234..]);
+    assert_eq!(tiles.xyz[n2..], whole.xyz[..61_234]);
+    let reorder = |v: &[[u16; 3]]| [&v[61_234..], &v[..61_234]].concat();
+    assert_eq!(tiles.rgb.to_vec(), reorder(&whole.rgb));
+    assert_eq!(tiles.class[..n2], whole.class[61_234..]);
+    assert_eq!(tiles.intensity[n2..], whole.intensity[..61_234]);
+}
+
+/// The Delft tile read in place through its folder (which also holds the BGT GeoJSON) is the
+/// same cloud as the file.
+#[test]
+fn delft_folder_of_one_tile_reads_as_the_file() {
+    let site = Site {
+        crs: "EPSG:28992".into(),
+        origin: (84800.0, 447400.0),
+        cell_m: 0.5,
+    };
+    let file = read_las_node(shared("delft/ahn3_tile1.laz"), Some("EPSG:28992"), &site).unwrap();
+    let folder = read_las_node(shared("delft"), Some("EPSG:28992"), &site).unwrap();
+    assert_eq!(folder.len(), 640_510);
+    assert!(folder == file);
+    // Its header records no CRS: without `crs` the tile is named.
+    let e = read_las_node(shared("delft"), None, &site)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("ahn3_tile1.laz: header: no CRS recorded"), "{e}");
+}
+
+/// A header with a GeoKey directory naming one projected EPSG code.
+fn utm_header(epsg: u16) -> las::Header {
+    let keys: Vec<u16> = vec![1, 1, 0, 2, 1024, 0, 1, 1, 3072, 0, 1, epsg];
+    let mut b = las::Builder::from((1, 2));
+    let t = |offset| las::Transform {
+        scale: 0.01,
+        offset,
+    };
+    b.transforms = las::Vector {
+        x: t(583_000.0),
+        y: t(4_506_000.0),
+        z: t(0.0),
+    };
+    b.vlrs.push(las::Vlr {
+        user_id: "LASF_Projection".into(),
+        record_id: 34735,
+        description: "GeoKeyDirectoryTag".into(),
+        data: keys.iter().flat_map(|k| k.to_le_bytes()).collect(),
+    });
+    b.into_header().unwrap()
+}
+
+#[test]
+fn tiles_in_other_crss_are_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |x: f64| las::Point {
+        x,
+        y: 4_506_600.0,
+        z: 1.0,
+        ..Default::default()
+    };
+    write_tile(
+        &dir.path().join("t1.las"),
+        &utm_header(32618),
+        &[p(583_200.0)],
+        false,
+    );
+    write_tile(
+        &dir.path().join("t2.las"),
+        &utm_header(32618),
+        &[p(583_201.0)],
+        false,
+    );
+    write_tile(
+        &dir.path().join("t3.las"),
+        &utm_header(32617),
+        &[p(583_202.0)],
+        false,
+    );
+    let site = site();
+    let e = read_las_node(dir.path().to_path_buf(), None, &site).unwrap_err();
+    assert!(e.is_user_error());
+    let e = e.to_string();
+    for part in [
+        "t3.las: CRS",
+        "first tile t1.las (EPSG:32618)",
+        "found EPSG:32617",
+        "`crs`",
+    ] {
+        assert!(e.contains(part), "{e:?} lacks {part:?}");
+    }
+    // Given in the graph, the CRS overrides every header.
+    let pts = read_las_node(dir.path().to_path_buf(), Some("EPSG:32618"), &site).unwrap();
+    assert_eq!(pts.len(), 3);
+    assert_eq!(pts.xyz[2][0], 2.0);
+    // Without t3 the two tiles agree.
+    std::fs::remove_file(dir.path().join("t3.las")).unwrap();
+    let pts = read_las_node(dir.path().to_path_buf(), None, &site).unwrap();
+    assert_eq!(pts.xyz.to_vec(), vec![[0.0, 0.0, 1.0], [1.0, 0.0, 1.0]]);
+}
+
+#[test]
+fn a_folder_without_tiles_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let site = site();
+    std::fs::create_dir(dir.path().join("sub")).unwrap();
+    std::fs::write(dir.path().join("sub/x.las"), "in a subfolder: not read").unwrap();
+    std::fs::write(dir.path().join("notes.txt"), "").unwrap();
+    let e = read_las_node(dir.path().to_path_buf(), Some("EPSG:32618"), &site).unwrap_err();
+    assert!(e.is_user_error());
+    let e = e.to_string();
+    assert!(
+        e.contains("folder: at least one .las or .laz file directly inside it, found none"),
+        "{e}"
+    );
 }

@@ -676,8 +676,8 @@ impl DataRoot {
 /// Extensions of formats that are always single files: a folder with one where a data file was
 /// meant is refused when the graph loads, not when a stage trips over it.
 const FILE_EXTENSIONS: &[&str] = &[
-    "las", "laz", "csv", "tif", "tiff", "xyz", "txt", "geojson", "pbf", "osm", "xml", "ply", "glb",
-    "b3dm", "json", "jsonl", "png", "jpg", "jpeg", "exr",
+    "las", "laz", "csv", "tif", "tiff", "hgt", "xyz", "txt", "geojson", "pbf", "osm", "xml", "ply",
+    "glb", "b3dm", "json", "jsonl", "png", "jpg", "jpeg", "exr",
 ];
 
 /// A declared input must be a regular file, or a folder holding only regular files and folders.

@@ -1,4 +1,4 @@
-//! Files and frames: the formats artifacts are read from and written to (GeoTIFF, GeoJSON, EXR,
+//! Files and frames: the formats artifacts are read from and written to (GeoTIFF, SRTM .hgt, GeoJSON, OSM XML, EXR,
 //! the street-view folder layout, street imagery from Mapillary and Panoramax, Sionna's Mitsuba XML + PLY, and every `export` format), coordinate
 //! reference systems, ECEF/ENU, and resampling into the site frame. Never imports a stage.
 
@@ -9,9 +9,11 @@ pub mod export;
 pub mod exr_io;
 pub mod geojson;
 pub mod geotiff;
+pub mod hgt;
 /// ONNX models run on view images (feature `onnx`): the runtime found through `ORT_DYLIB_PATH`.
 #[cfg(feature = "onnx")]
 pub mod onnx;
+pub mod osm_xml;
 pub mod safe_name;
 pub mod sionna_xml;
 pub mod street_imagery;

@@ -136,3 +136,38 @@ pub fn tiff(width: u32, height: u32, scale: [f64; 3], tie: [f64; 6]) -> Vec<u8> 
     }
     out
 }
+
+/// OSM XML as the Overpass API writes it, near the test site (EPSG:32618 around 40.70 N, 74.00 W):
+/// a multipolygon building whose outer ring is two ways and whose courtyard is a third, and a
+/// building way inside the courtyard with a height in metres.
+pub const OSM_XML: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<osm version="0.6" generator="Overpass API 0.7.60.4">
+<note>The data included in this document is from www.openstreetmap.org.</note>
+  <bounds minlat="40.6999" minlon="-74.0001" maxlat="40.7011" maxlon="-73.9989"/>
+  <node id="1" lat="40.7000000" lon="-74.0000000"/>
+  <node id="2" lat="40.7000000" lon="-73.9990000"/>
+  <node id="3" lat="40.7010000" lon="-73.9990000"/>
+  <node id="4" lat="40.7010000" lon="-74.0000000"/>
+  <node id="5" lat="40.7003000" lon="-73.9997000"/>
+  <node id="6" lat="40.7003000" lon="-73.9993000"/>
+  <node id="7" lat="40.7007000" lon="-73.9995000">
+    <tag k="name" v="Caf&#233; &amp; bar"/>
+  </node>
+  <way id="10"><nd ref="1"/><nd ref="2"/><nd ref="3"/></way>
+  <way id="11"><nd ref="1"/><nd ref="4"/><nd ref="3"/></way>
+  <way id="12"><nd ref="5"/><nd ref="6"/><nd ref="7"/><nd ref="5"/></way>
+  <way id="13">
+    <nd ref="5"/><nd ref="6"/><nd ref="7"/><nd ref="5"/>
+    <tag k="building" v="yes"/>
+    <tag k="height" v="12 m"/>
+  </way>
+  <relation id="20">
+    <member type="way" ref="10" role="outer"/>
+    <member type="way" ref="11" role="outer"/>
+    <member type="way" ref="12" role="inner"/>
+    <tag k="building" v="apartments"/>
+    <tag k="building:levels" v="4"/>
+    <tag k="type" v="multipolygon"/>
+  </relation>
+</osm>
+"#;

@@ -1,6 +1,7 @@
-//! Ingest of ASPRS LAS/LAZ point clouds (paper Sec. 4: airborne LiDAR) into the site frame.
+//! Ingest of ASPRS LAS/LAZ point clouds (paper Sec. 4: airborne LiDAR) into the site frame: one
+//! file, or a folder of tiles read as one cloud.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use las::Reader;
 use serde::{Deserialize, Serialize};
@@ -13,23 +14,26 @@ use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageErro
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ReadLasParams {
-    /// The `.las` or `.laz` file.
+    /// The `.las` or `.laz` file, or a folder of tiles: every `*.las`/`*.laz` directly inside it
+    /// (not in subfolders), in file-name order, concatenated into one cloud. The whole folder is
+    /// then the node's input: any file added, removed or changed in it reruns the node.
     pub path: String,
     /// The file's CRS (`"EPSG:<code>"` or a `+proj` string). Needed when the header carries none;
-    /// when given, it overrides the header. Default: from the header.
+    /// when given, it overrides the header (of every tile). Default: from the header; the tiles
+    /// of a folder must then all record the same CRS.
     #[serde(default)]
     pub crs: Option<String>,
 }
 
-/// Reads a LAS/LAZ file: positions reprojected into the site frame, with class, intensity, return
-/// numbers and RGB when the point format has them.
+/// Reads a LAS/LAZ file, or a folder of tiles as one cloud: positions reprojected into the site
+/// frame, with class, intensity, return numbers and RGB when the point format has them (for a
+/// folder, when every tile's does).
 pub struct ReadLas;
 
 impl Stage for ReadLas {
     const KIND: &'static str = "ReadLas";
-    const VERSION: u32 = 1;
-    const DOC: &'static str =
-        "LAS/LAZ point cloud (CRS from header or graph) into the site frame, Sec. 4";
+    const VERSION: u32 = 2;
+    const DOC: &'static str = "LAS/LAZ point cloud, one file or a folder of tiles (CRS from header or graph) into the site frame, Sec. 4";
     const INPUTS: &'static [InputSpec] = &[];
     type Params = ReadLasParams;
     type Output = PointSet;
@@ -48,7 +52,11 @@ impl Stage for ReadLas {
 
     fn run(p: &Self::Params, _: &Inputs, ctx: &Ctx) -> Result<PointSet, StageError> {
         let path = ctx.file(0)?;
-        read_las(path, p.crs.as_deref(), ctx)
+        if path.is_dir() {
+            read_las_folder(path, p.crs.as_deref(), ctx)
+        } else {
+            read_las(path, p.crs.as_deref(), ctx)
+        }
     }
 }
 
@@ -361,26 +369,59 @@ fn decoding<T>(path: &Path, place: &str, f: impl FnOnce() -> T) -> Result<T, Sta
 
 /// Reads `path` into the site frame of `ctx`, in batches so progress can be reported.
 pub fn read_las(path: &Path, crs: Option<&str>, ctx: &Ctx) -> Result<PointSet, StageError> {
+    let reader = open_reader(path)?;
+    let tile = tile_of(path, reader.header(), crs)?;
+    ctx.progress.set_total(tile.points);
+    let mut out = PointSet::default();
+    read_tile(path, reader, &tile.crs, ctx, &mut out)?;
+    normalize_rgb(&mut out.rgb);
+    Ok(out)
+}
+
+/// What a tile's header says, checked: its CRS (from `crs` when given), point count and whether
+/// its points carry colour.
+struct Tile {
+    crs: Crs,
+    points: u64,
+    has_color: bool,
+}
+
+fn open_reader(path: &Path) -> Result<Reader, StageError> {
     check_las_header(path)?;
-    let mut reader = decoding(path, "header", || Reader::from_path(path))?
-        .map_err(|e| las_error(path, "header", e))?;
-    let header = reader.header().clone();
+    decoding(path, "header", || Reader::from_path(path))?.map_err(|e| las_error(path, "header", e))
+}
+
+fn tile_of(path: &Path, header: &las::Header, crs: Option<&str>) -> Result<Tile, StageError> {
     let crs = match crs {
         Some(c) => Crs::from_user(c).map_err(|m| StageError::Param(ParamError::new("crs", m)))?,
-        None => header_crs(path, &header)?.ok_or_else(|| {
+        None => header_crs(path, header)?.ok_or_else(|| {
             StageError::bad_input(path, "header", "no CRS recorded (no GeoTIFF keys or WKT record); give it in the graph, e.g. crs: \"EPSG:28992\"")
         })?,
     };
-    let to_site = ToSite::new(&crs, ctx.site).map_err(|m| StageError::bad_input(path, "CRS", m))?;
+    Ok(Tile {
+        crs,
+        points: header.number_of_points(),
+        has_color: header.point_format().has_color,
+    })
+}
+
+/// Appends the points of `path`, in `crs`, to `out` (colours as stored, not yet normalized).
+fn read_tile(
+    path: &Path,
+    mut reader: Reader,
+    crs: &Crs,
+    ctx: &Ctx,
+    out: &mut PointSet,
+) -> Result<(), StageError> {
+    let header = reader.header().clone();
+    let to_site = ToSite::new(crs, ctx.site).map_err(|m| StageError::bad_input(path, "CRS", m))?;
     let n = header.number_of_points();
     // Position, class, intensity, return numbers and colour: 23 bytes a point.
-    crate::params::check_bytes("the points", n as f64, 23)
+    crate::params::check_bytes("the points", (out.xyz.len() as u64 + n) as f64, 23)
         .map_err(|m| StageError::bad_input(path, "header", format!("{m}; tile the data")))?;
     let format = header.point_format();
-    let mut out = PointSet::default();
     // Grown as points arrive: a compressed file's count is not checked against its length.
     out.xyz.reserve(n.min(1 << 22) as usize);
-    ctx.progress.set_total(n);
     const BATCH: u64 = 1 << 20;
     let mut done = 0u64;
     while done < n {
@@ -412,8 +453,85 @@ pub fn read_las(path: &Path, crs: Option<&str>, ctx: &Ctx) -> Result<PointSet, S
         done += pd.len() as u64;
         ctx.progress.advance(pd.len() as u64);
     }
-    normalize_rgb(&mut out.rgb);
+    Ok(())
+}
+
+/// The `.las`/`.laz` files directly inside `dir` (any case), sorted by file name.
+pub fn las_tiles(dir: &Path) -> Result<Vec<PathBuf>, StageError> {
+    let entries =
+        std::fs::read_dir(dir).map_err(|e| StageError::bad_input(dir, "folder", e.to_string()))?;
+    let mut tiles = Vec::new();
+    for e in entries {
+        let e = e.map_err(|e| StageError::bad_input(dir, "folder", e.to_string()))?;
+        let path = e.path();
+        let ext = path.extension().map(|x| x.to_ascii_lowercase());
+        if path.is_file() && (ext == Some("las".into()) || ext == Some("laz".into())) {
+            tiles.push(path);
+        }
+    }
+    tiles.sort_by(|a, b| a.file_name().cmp(&b.file_name()));
+    Ok(tiles)
+}
+
+/// Reads every tile of `dir` (see [`las_tiles`]) into one cloud. Every header is read and checked
+/// first: all tiles must share one CRS (from their headers, or `crs` for all), and the total
+/// must fit the point budget, before any point is decoded. Colours are kept when every tile has
+/// them, each tile's scaled to 16 bits on its own (see [`normalize_rgb`]).
+pub fn read_las_folder(dir: &Path, crs: Option<&str>, ctx: &Ctx) -> Result<PointSet, StageError> {
+    let paths = las_tiles(dir)?;
+    if paths.is_empty() {
+        return Err(StageError::bad_input(
+            dir,
+            "folder",
+            "at least one .las or .laz file directly inside it, found none",
+        ));
+    }
+    let mut tiles: Vec<Tile> = Vec::with_capacity(paths.len());
+    // Headers only: no reader is held open across tiles.
+    for path in &paths {
+        let tile = tile_of(path, open_reader(path)?.header(), crs)?;
+        if let Some(t0) = tiles.first()
+            && !same_crs(&tile.crs, &t0.crs)
+        {
+            return Err(StageError::bad_input(
+                path,
+                "CRS",
+                format!(
+                    "the CRS of the folder's first tile {} ({}), found {} (give `crs` to override every tile's header)",
+                    paths[0].file_name().unwrap_or_default().to_string_lossy(),
+                    t0.crs.label,
+                    tile.crs.label
+                ),
+            ));
+        }
+        tiles.push(tile);
+    }
+    let total: u64 = tiles.iter().map(|t| t.points).sum();
+    crate::params::check_bytes("the points", total as f64, 23).map_err(|m| {
+        StageError::bad_input(
+            dir,
+            "folder",
+            format!("{m} in {} tiles; read fewer", tiles.len()),
+        )
+    })?;
+    let color = tiles.iter().all(|t| t.has_color);
+    ctx.progress.set_total(total);
+    let mut out = PointSet::default();
+    for (path, tile) in paths.iter().zip(&tiles) {
+        let from = out.rgb.len();
+        read_tile(path, open_reader(path)?, &tile.crs, ctx, &mut out)?;
+        normalize_rgb(&mut out.rgb[from..]);
+    }
+    if !color {
+        out.rgb.clear();
+    }
     Ok(out)
+}
+
+/// Whether two CRSs place points alike: the same definition and vertical unit, whatever their
+/// labels (a GeoTIFF key and a WKT record of one CRS are named differently).
+fn same_crs(a: &Crs, b: &Crs) -> bool {
+    a.proj4 == b.proj4 && a.z_to_m == b.z_to_m
 }
 
 /// LAS colours are 16-bit, but many writers store 8-bit values in them. When no channel of any

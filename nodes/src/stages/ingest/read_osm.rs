@@ -1,5 +1,7 @@
-//! Ingest of OpenStreetMap buildings from `.osm.pbf`: the footprints and height tags the peers'
-//! OSM-extruded scenes are built from (paper Sec. 5 baseline).
+//! Ingest of OpenStreetMap buildings from `.osm.pbf` or OSM XML (`.osm`, as the Overpass API and
+//! JOSM write it): the footprints and height tags the peers' OSM-extruded scenes are built from
+//! (paper Sec. 5 baseline). Both formats become the same [`OsmElement`]s, so what is made of
+//! them is written once.
 
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
@@ -10,13 +12,15 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::point_in_ring;
 use crate::artifact::{Footprint, Footprints, Polygon};
 use crate::io::crs::{Crs, ToSite};
+use crate::io::osm_xml::{Member, OsmElement, OsmKind, for_each_xml_element, is_osm_xml};
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, Stage, StageError};
 
 /// Params of [`ReadOsmBuildings`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ReadOsmBuildingsParams {
-    /// The `.osm.pbf` file.
+    /// The `.osm.pbf` or OSM XML (`.osm`) file; the format is told by content (XML starts with
+    /// `<?xml` or `<osm`), not by name. Compressed XML (`.osm.bz2`, `.osm.gz`) is not read.
     pub path: String,
 }
 
@@ -26,8 +30,8 @@ pub struct ReadOsmBuildings;
 
 impl Stage for ReadOsmBuildings {
     const KIND: &'static str = "ReadOsmBuildings";
-    const VERSION: u32 = 1;
-    const DOC: &'static str = "OSM PBF buildings (ways and multipolygons, height/levels tags) into the site frame, Sec. 5";
+    const VERSION: u32 = 2;
+    const DOC: &'static str = "OSM buildings from PBF or XML (ways and multipolygons, height/levels tags) into the site frame, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[];
     type Params = ReadOsmBuildingsParams;
     type Output = Footprints;
@@ -146,34 +150,89 @@ struct Rel {
     tags: Tags,
 }
 
-/// One pass over the file.
-fn for_each_element(path: &Path, f: impl FnMut(Element)) -> Result<(), StageError> {
+/// One pass over the file, PBF or XML (told apart by content, not by name), handing `f` every
+/// element of kind `want`.
+fn for_each_element(
+    path: &Path,
+    want: OsmKind,
+    mut f: impl FnMut(&OsmElement),
+) -> Result<(), StageError> {
+    if is_osm_xml(path)? {
+        return for_each_xml_element(path, want, f);
+    }
+    let mut refs = Vec::new();
     ElementReader::from_path(path)
         .map_err(|e| osm_error(path, e))?
-        .for_each(f)
+        .for_each(|el| match (want, el) {
+            (OsmKind::Node, Element::Node(n)) => f(&OsmElement::Node {
+                id: n.id(),
+                lat: n.lat(),
+                lon: n.lon(),
+            }),
+            (OsmKind::Node, Element::DenseNode(n)) => f(&OsmElement::Node {
+                id: n.id(),
+                lat: n.lat(),
+                lon: n.lon(),
+            }),
+            (OsmKind::Way, Element::Way(w)) => {
+                let tags: Vec<(&str, &str)> = w.tags().collect();
+                refs.clear();
+                refs.extend(w.refs());
+                f(&OsmElement::Way {
+                    id: w.id(),
+                    refs: &refs,
+                    tags: &tags,
+                })
+            }
+            (OsmKind::Relation, Element::Relation(r)) => {
+                let tags: Vec<(&str, &str)> = r.tags().collect();
+                let members: Vec<Member> = r
+                    .members()
+                    .map(|m| Member {
+                        kind: match m.member_type {
+                            RelMemberType::Node => OsmKind::Node,
+                            RelMemberType::Way => OsmKind::Way,
+                            RelMemberType::Relation => OsmKind::Relation,
+                        },
+                        id: m.member_id,
+                        role: m.role().unwrap_or_default(),
+                    })
+                    .collect();
+                f(&OsmElement::Relation {
+                    id: r.id(),
+                    members: &members,
+                    tags: &tags,
+                })
+            }
+            _ => {}
+        })
         .map_err(|e| osm_error(path, e))
 }
 
 fn read_building_relations(path: &Path) -> Result<Vec<Rel>, StageError> {
     let mut rels = Vec::new();
-    for_each_element(path, |el| {
-        if let Element::Relation(r) = el {
-            let mp = r
-                .tags()
-                .any(|(k, v)| k == "type" && (v == "multipolygon" || v == "building"));
-            if mp && is_building(r.tags()) {
+    for_each_element(path, OsmKind::Relation, |el| {
+        if let &OsmElement::Relation {
+            id,
+            members,
+            tags: t,
+        } = el
+        {
+            let it = || t.iter().copied();
+            let mp = it().any(|(k, v)| k == "type" && (v == "multipolygon" || v == "building"));
+            if mp && is_building(it()) {
                 let (mut outer, mut inner) = (Vec::new(), Vec::new());
-                for m in r.members().filter(|m| m.member_type == RelMemberType::Way) {
-                    match m.role() {
-                        Ok("inner") => inner.push(m.member_id),
-                        _ => outer.push(m.member_id),
+                for m in members.iter().filter(|m| m.kind == OsmKind::Way) {
+                    match m.role {
+                        "inner" => inner.push(m.id),
+                        _ => outer.push(m.id),
                     }
                 }
                 rels.push(Rel {
-                    id: r.id(),
+                    id,
                     outer,
                     inner,
-                    tags: tags(r.tags()),
+                    tags: tags(it()),
                 });
             }
         }
@@ -190,20 +249,23 @@ struct Ways {
 }
 
 fn read_ways(path: &Path, members: &HashSet<i64>) -> Result<Ways, StageError> {
-    let mut refs: HashMap<i64, Vec<i64>> = HashMap::new();
+    let mut refs_of: HashMap<i64, Vec<i64>> = HashMap::new();
     let mut buildings = Vec::new();
-    for_each_element(path, |el| {
-        if let Element::Way(w) = el {
-            let building = is_building(w.tags());
-            if building || members.contains(&w.id()) {
-                refs.insert(w.id(), w.refs().collect());
+    for_each_element(path, OsmKind::Way, |el| {
+        if let &OsmElement::Way { id, refs, tags: t } = el {
+            let building = is_building(t.iter().copied());
+            if building || members.contains(&id) {
+                refs_of.insert(id, refs.to_vec());
             }
             if building {
-                buildings.push((w.id(), tags(w.tags())));
+                buildings.push((id, tags(t.iter().copied())));
             }
         }
     })?;
-    Ok(Ways { refs, buildings })
+    Ok(Ways {
+        refs: refs_of,
+        buildings,
+    })
 }
 
 /// Site coordinates of the nodes `ways` use.
@@ -215,11 +277,9 @@ fn read_node_coords(
     let needed: HashSet<i64> = ways.values().flatten().copied().collect();
     let mut nodes: HashMap<i64, [f64; 2]> = HashMap::with_capacity(needed.len());
     let mut failure = None;
-    for_each_element(path, |el| {
-        let (id, lat, lon) = match el {
-            Element::Node(n) => (n.id(), n.lat(), n.lon()),
-            Element::DenseNode(n) => (n.id(), n.lat(), n.lon()),
-            _ => return,
+    for_each_element(path, OsmKind::Node, |el| {
+        let &OsmElement::Node { id, lat, lon } = el else {
+            return;
         };
         if needed.contains(&id) {
             match wgs84.apply(lon, lat, 0.0) {

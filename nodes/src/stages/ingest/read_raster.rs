@@ -1,5 +1,6 @@
-//! Ingest of single-band GeoTIFF rasters (DSM, DEM) into the site frame (paper Sec. 4: each
-//! source becomes a height field H_s on the shared grid, ⊥ where it observed nothing).
+//! Ingest of single-band GeoTIFF rasters (DSM, DEM) and SRTM `.hgt` tiles into the site frame
+//! (paper Sec. 4: each source becomes a height field H_s on the shared grid, ⊥ where it observed
+//! nothing).
 
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -8,6 +9,7 @@ use crate::artifact::{PodVec, Raster};
 use crate::io::crs::ToSite;
 use crate::io::crs::source_crs;
 use crate::io::geotiff::{GeoTiff, read_geotiff};
+use crate::io::hgt::{is_hgt, read_hgt};
 use crate::io::warp::{Resample, SourceMap, covering_grid, sample, windowed};
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -15,7 +17,9 @@ use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageErro
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ReadRasterParams {
-    /// The GeoTIFF.
+    /// The GeoTIFF, or an SRTM `.hgt` tile (told by the extension; 1 or 3 arc-second, its
+    /// south-west corner from its name as in `N40W074.hgt`, EPSG:4326, heights in metres above
+    /// the EGM96 geoid as stored, voids as no-data).
     pub path: String,
     /// The raster's CRS when the file records none (or to override it).
     #[serde(default)]
@@ -46,14 +50,14 @@ fn bilinear() -> Resample {
     Resample::Bilinear
 }
 
-/// Reads one band of a GeoTIFF as a [`Raster`] in the site frame; no-data becomes NaN.
+/// Reads one band of a GeoTIFF, or an SRTM `.hgt` tile, as a [`Raster`] in the site frame;
+/// no-data (an SRTM void) becomes NaN.
 pub struct ReadRaster;
 
 impl Stage for ReadRaster {
     const KIND: &'static str = "ReadRaster";
-    const VERSION: u32 = 2;
-    const DOC: &'static str =
-        "GeoTIFF band (DSM/DEM) into the site frame as a height field H_s, Sec. 4";
+    const VERSION: u32 = 3;
+    const DOC: &'static str = "GeoTIFF band (DSM/DEM) or SRTM .hgt tile into the site frame as a height field H_s, Sec. 4";
     const INPUTS: &'static [InputSpec] = &[];
     type Params = ReadRasterParams;
     type Output = Raster;
@@ -77,7 +81,11 @@ impl Stage for ReadRaster {
 
     fn run(p: &Self::Params, _: &Inputs, ctx: &Ctx) -> Result<Raster, StageError> {
         let path = ctx.file(0)?;
-        let tif = read_geotiff(path)?;
+        let tif = if is_hgt(path) {
+            read_hgt(path)?
+        } else {
+            read_geotiff(path)?
+        };
         if p.band > tif.bands {
             return Err(StageError::bad_input(
                 path,
