@@ -1,0 +1,264 @@
+"""Figures for docs/research/duke.md: the Duke CBRS readings per cell, a deterministic train /
+held-out split by spatial block of the drive tracks (the CSV has no timestamps and its rows are not
+in driving order, so a "track segment" is the stretch of road inside one block), how many readings
+each OSM box covers and how many fall inside a building footprint, the height rasters, and the 3GPP
+UMa score with one offset per cell fitted on the training half and scored on the held-out half.
+
+    python3 scripts/duke_split.py ../shared/data [block_m]
+
+numpy and pyproj. The split rule, to be reimplemented in Rust bit for bit (the proposed rule is "checker"; "hash" is shown for comparison):
+    bx = floor(x_utm / block_m), by = floor(y_utm / block_m)      (EPSG:32617, metres)
+    checker:  held_out = (bx + by) mod 2 == 1   (Euclidean mod: 1 for odd sums, negative too)
+    hash:     key = ((bx & 0xffffffff) << 32) | (by & 0xffffffff)   (u64)
+              held_out = splitmix64(key ^ seed) & 1 == 1              (seed 0)
+"""
+import collections
+import csv
+import json
+import sys
+import xml.etree.ElementTree as ET
+
+import numpy as np
+from pyproj import Transformer
+
+root = sys.argv[1]
+BLOCK = float(sys.argv[2]) if len(sys.argv) > 2 else 100.0
+M64 = (1 << 64) - 1
+to_utm = Transformer.from_crs("EPSG:4326", "EPSG:32617", always_xy=True)
+
+
+def splitmix64(z):
+    z = (z + 0x9E3779B97F4A7C15) & M64
+    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & M64
+    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & M64
+    return z ^ (z >> 31)
+
+
+def held_out(x, y, block, seed=0, rule="checker"):
+    bx, by = int(np.floor(x / block)), int(np.floor(y / block))
+    if rule == "checker":
+        return (bx + by) % 2 == 1
+    key = ((bx & 0xFFFFFFFF) << 32) | (by & 0xFFFFFFFF)
+    return splitmix64(key ^ seed) & 1 == 1
+
+
+cells = {c["pci"]: c for c in json.load(open(f"{root}/rf/duke_cells.json"))["cells"]}
+rows = list(csv.DictReader(open(f"{root}/rf/duke_cbrs.csv")))
+pci = np.array([r["PCI"] for r in rows])
+lon = np.array([float(r["longitude"]) for r in rows])
+lat = np.array([float(r["latitude"]) for r in rows])
+rsrp = np.array([float(r["rsrp"]) for r in rows])
+x, y = to_utm.transform(lon, lat)
+P = sorted(set(pci))
+print(f"readings {len(rows)}, unique positions {len(set(zip(lon, lat)))}; UTM extent "
+      f"{x.min():.0f}..{x.max():.0f} E, {y.min():.0f}..{y.max():.0f} N")
+print("per cell: n, rsrp min/median/max")
+for p in P:
+    k = pci == p
+    print(f"  {p}: {k.sum()}  {rsrp[k].min():.0f} / {np.median(rsrp[k]):.0f} / {rsrp[k].max():.0f}")
+for p in P:
+    c = cells[p]
+    cx, cy = to_utm.transform(c["lon"], c["lat"])
+    d = np.hypot(x[pci == p] - cx, y[pci == p] - cy)
+    print(f"  {p}: site UTM ({cx:.1f}, {cy:.1f}), distance median {np.median(d):.0f} m, max {d.max():.0f} m")
+
+# --- the split ---------------------------------------------------------------------------------
+def split_report(block, rule="checker"):
+    test = np.array([held_out(a, b, block, rule=rule) for a, b in zip(x, y)])
+    blocks = set(zip(np.floor(x / block).astype(int), np.floor(y / block).astype(int)))
+    out = {p: (int((~test & (pci == p)).sum()), int((test & (pci == p)).sum())) for p in P}
+    # Leakage proxy: share of held-out readings with a training reading (any cell) within 10 m.
+    tr = np.stack([x[~test], y[~test]], 1)
+    te = np.stack([x[test], y[test]], 1)
+    g = collections.defaultdict(list)
+    for i, (a, b) in enumerate(tr):
+        g[(int(a // 10), int(b // 10))].append(i)
+    near = 0
+    for a, b in te:
+        gx, gy = int(a // 10), int(b // 10)
+        hit = False
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for i in g.get((gx + dx, gy + dy), ()):
+                    if (tr[i, 0] - a) ** 2 + (tr[i, 1] - b) ** 2 <= 100.0:
+                        hit = True
+                        break
+                if hit:
+                    break
+            if hit:
+                break
+        near += hit
+    return test, len(blocks), out, near / max(len(te), 1)
+
+
+for rule, block in [(r, b) for r in ("hash", "checker") for b in sorted({50.0, 100.0, 200.0, BLOCK})]:
+    test, nb, out, leak = split_report(block, rule)
+    tot = (int((~test).sum()), int(test.sum()))
+    print(f"{rule} block {block:.0f} m: {nb} blocks; train/held-out {tot[0]}/{tot[1]}; "
+          f"held-out readings with a training reading within 10 m: {100 * leak:.1f} %")
+    print("   " + ", ".join(f"{p} {a}/{b}" for p, (a, b) in out.items()))
+rng = np.random.default_rng(0)
+rand = rng.random(len(rows)) < 0.5
+tr = set(zip(np.round(x[~rand]).astype(int), np.round(y[~rand]).astype(int)))
+print("random point split: held-out readings whose rounded position (1 m) also holds a training "
+      f"reading: {100 * np.mean([(int(round(a)), int(round(b))) in tr for a, b in zip(x[rand], y[rand])]):.1f} %")
+GUARD = 5.0
+test, _, _, _ = split_report(BLOCK)
+fx, fy = x - np.floor(x / BLOCK) * BLOCK, y - np.floor(y / BLOCK) * BLOCK
+guard = (fx < GUARD) | (fx > BLOCK - GUARD) | (fy < GUARD) | (fy > BLOCK - GUARD)
+train = ~test & ~guard
+test = test & ~guard
+print(f"proposed: checker {BLOCK:.0f} m, guard {GUARD:.0f} m: {guard.sum()} readings in the guard "
+      f"band (neither half), train/held-out {train.sum()}/{test.sum()}; "
+      + ", ".join(f"{p} {int((train & (pci == p)).sum())}/{int((test & (pci == p)).sum())}" for p in P))
+
+# --- OSM boxes and footprints -------------------------------------------------------------------
+def osm_footprints(path):
+    t = ET.parse(path).getroot()
+    b = t.find("bounds").attrib
+    box = tuple(float(b[k]) for k in ("minlat", "minlon", "maxlat", "maxlon"))
+    nodes = {n.get("id"): (float(n.get("lon")), float(n.get("lat"))) for n in t.iter("node")}
+    ways = {w.get("id"): w for w in t.iter("way")}
+    tags = lambda e: {g.get("k"): g.get("v") for g in e.findall("tag")}
+    polys, hs, nb = [], [], 0
+    for w in ways.values():
+        tg = tags(w)
+        if "building" in tg:
+            nb += 1
+            hs.append(("height" in tg, "building:levels" in tg))
+            polys.append([nodes[n.get("ref")] for n in w.findall("nd") if n.get("ref") in nodes])
+    nrel = 0
+    for r in t.iter("relation"):
+        tg = tags(r)
+        if "building" in tg:
+            nrel += 1
+            hs.append(("height" in tg, "building:levels" in tg))
+            for m in r.findall("member"):
+                if m.get("type") == "way" and m.get("role") == "outer" and m.get("ref") in ways:
+                    polys.append([nodes[n.get("ref")] for n in ways[m.get("ref")].findall("nd")
+                                  if n.get("ref") in nodes])
+    out = []
+    for q in polys:
+        if len(q) >= 3:
+            a = np.array(q)
+            ux, uy = to_utm.transform(a[:, 0], a[:, 1])
+            out.append(np.stack([ux, uy], 1))
+    return box, out, nb, nrel, hs
+
+
+def inside(poly, px, py):
+    xs, ys = poly[:, 0], poly[:, 1]
+    res = np.zeros(len(px), bool)
+    j = len(xs) - 1
+    for i in range(len(xs)):
+        c = ((ys[i] > py) != (ys[j] > py)) & (
+            px < (xs[j] - xs[i]) * (py - ys[i]) / (ys[j] - ys[i] + 1e-300) + xs[i])
+        res ^= c
+        j = i
+    return res
+
+
+in_union = np.zeros(len(rows), bool)
+in_fp = np.zeros(len(rows), bool)
+for name in ("pci_ABCD", "pci_EF", "pci_EF_new"):
+    box, polys, nb, nrel, hs = osm_footprints(f"{root}/duke/osm/{name}.osm")
+    inb = (lat >= box[0]) & (lat <= box[2]) & (lon >= box[1]) & (lon <= box[3])
+    if name != "pci_EF_new":
+        in_union |= inb
+    fp = np.zeros(len(rows), bool)
+    for poly in polys:
+        lo, hi = poly.min(0), poly.max(0)
+        k = (x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])
+        if k.any():
+            idx = np.where(k)[0]
+            fp[idx] |= inside(poly, x[idx], y[idx])
+    in_fp |= fp
+    wh = sum(a for a, _ in hs)
+    wl = sum(b for _, b in hs)
+    print(f"{name}: {nb} building ways + {nrel} relations, {len(polys)} outer rings; "
+          f"with height {wh}, with levels {wl}, neither {sum(1 for a, b in hs if not a and not b)}; "
+          f"readings in box {inb.sum()} ({100 * inb.mean():.1f} %), inside a footprint {fp.sum()}")
+    print("   per cell in box: " + ", ".join(f"{p} {100 * inb[pci == p].mean():.0f} %" for p in P))
+    for p in P:
+        if p in "AE":
+            c = cells[p]
+            cx, cy = to_utm.transform(c["lon"], c["lat"])
+            hit = any(inside(q, np.array([cx]), np.array([cy]))[0] for q in polys)
+            print(f"   site of {p}{'-D' if p == 'A' else '/F'} inside a footprint: {hit}")
+print(f"union of the boxes: {in_union.sum()} ({100 * in_union.mean():.1f} %); inside a footprint "
+      f"{in_fp.sum()} ({100 * in_fp.mean():.1f} %)")
+keep = in_union & ~in_fp
+print("kept (in a box, not in a footprint), train/held-out per cell at "
+      f"{BLOCK:.0f} m: " + ", ".join(
+          f"{p} {int((keep & train & (pci == p)).sum())}/{int((keep & test & (pci == p)).sum())}"
+          for p in P) + f"; all {int((keep & train).sum())}/{int((keep & test).sum())}")
+
+# --- height rasters -----------------------------------------------------------------------------
+for name in ("pci_EF_height_1m", "pci_EF_new_height_1m"):
+    a = np.load(f"{root}/duke/heights/{name}.npy")
+    nz = a[a > 0]
+    print(f"{name}: {a.dtype} {a.shape}, min {a.min()}, max {a.max()}, built share "
+          f"{100 * (a > 0).mean():.1f} %, median of built {np.median(nz):.1f} m")
+
+# --- UMa with offsets fitted on the training half -----------------------------------------------
+H_BS, H_UT, C = 20.0, 1.5, 3.0e8
+
+
+def uma(d2d, fc):
+    d3d = np.sqrt(d2d**2 + (H_BS - H_UT) ** 2)
+    dbp = 4 * (H_BS - 1) * (H_UT - 1) * fc * 1e9 / C
+    los = np.where(d2d <= dbp, 28 + 22 * np.log10(d3d) + 20 * np.log10(fc),
+                   28 + 40 * np.log10(d3d) + 20 * np.log10(fc)
+                   - 9 * np.log10(dbp**2 + (H_BS - H_UT) ** 2))
+    nlos = np.maximum(los, 13.54 + 39.08 * np.log10(d3d) + 20 * np.log10(fc) - 0.6 * (H_UT - 1.5))
+    pr = np.where(d2d <= 18, 1.0, (18 / d2d + np.exp(-d2d / 63) * (1 - 18 / d2d)))
+    return -10 * np.log10(pr * 10 ** (-los / 10) + (1 - pr) * 10 ** (-nlos / 10))
+
+
+def umi(d2d, fc):
+    d3d = np.sqrt(d2d**2 + (H_BS - H_UT) ** 2)
+    dbp = 4 * (H_BS - 1) * (H_UT - 1) * fc * 1e9 / C
+    los = np.where(d2d <= dbp, 32.4 + 21 * np.log10(d3d) + 20 * np.log10(fc),
+                   32.4 + 40 * np.log10(d3d) + 20 * np.log10(fc)
+                   - 9.5 * np.log10(dbp**2 + (H_BS - H_UT) ** 2))
+    nlos = np.maximum(los, 22.4 + 35.3 * np.log10(d3d) + 21.3 * np.log10(fc) - 0.3 * (H_UT - 1.5))
+    pr = np.where(d2d <= 18, 1.0, (18 / d2d + np.exp(-d2d / 36) * (1 - 18 / d2d)))
+    return -10 * np.log10(pr * 10 ** (-los / 10) + (1 - pr) * 10 ** (-nlos / 10))
+
+
+def fspl(d3d, fc):
+    return 20 * np.log10(d3d) + 20 * np.log10(fc * 1e9) - 147.55
+
+
+tx = np.array([to_utm.transform(cells[p]["lon"], cells[p]["lat"]) for p in pci])
+fc = np.array([cells[p]["freq_hz"] / 1e9 for p in pci])
+d2d = np.maximum(np.hypot(x - tx[:, 0], y - tx[:, 1]), 1.0)
+meas = -rsrp  # path loss up to the cell's offset
+# The TR 38.901 sector element (rf/antenna.rs `gain`), tilt 0, at the published bearing turned to
+# grid north (grid bearing = compass bearing - 1.21 deg here, the meridian convergence).
+CONV = 1.21
+bear = np.degrees(np.arctan2(x - tx[:, 0], y - tx[:, 1]))
+az = np.array([cells[p]["azimuth_deg"] for p in pci]) - CONV
+phi = (bear - az + 180.0) % 360.0 - 180.0
+theta = 90.0 + np.degrees(np.arctan2(H_BS - H_UT, d2d))
+a_v = -np.minimum(12 * ((theta - 90) / 65) ** 2, 30)
+a_h = -np.minimum(12 * (phi / 65) ** 2, 30)
+sector_db = -np.minimum(-(a_v + a_h), 30) + 8.0
+offs_all = {p: np.mean(meas[pci == p] - uma(d2d, fc)[pci == p]) for p in P}
+print("UMa offsets fitted on all readings (graphs/duke.ron today): "
+      + ", ".join(f"{p} {v:.2f}" for p, v in offs_all.items()))
+for label, sel in (("all readings", np.ones(len(rows), bool)), ("kept readings", keep)):
+    for mname, pred in (("UMa", uma(d2d, fc)), ("UMi", umi(d2d, fc)),
+                        ("FSPL", fspl(np.hypot(d2d, H_BS - H_UT), fc)),
+                        ("UMa + sector", uma(d2d, fc) - sector_db),
+                        ("FSPL + sector", fspl(np.hypot(d2d, H_BS - H_UT), fc) - sector_db)):
+        errs, line = [], []
+        for p in P:
+            k = sel & (pci == p)
+            off = np.mean(meas[k & train] - pred[k & train])
+            e = pred[k & test] - (meas[k & test] - off)
+            errs.append(e)
+            line.append(f"{p} {np.sqrt(np.mean(e**2)):.2f} (offset {off:.1f})")
+        e = np.concatenate(errs)
+        print(f"{mname} on {label}, offsets on train, held-out P2P RMSE {np.sqrt(np.mean(e**2)):.2f} dB"
+              f" (ME {np.mean(e):.2f}); " + ", ".join(line))
