@@ -21,3 +21,15 @@ impl Metrics {
         self.values.get(name).copied()
     }
 }
+
+/// A carrier's name in metric keys (`f/<label>/pd_rmse_db`, written by Evaluate and read by
+/// Report): GHz to 10 MHz, without trailing zeros ("3.5GHz").
+pub fn carrier_label(freq_hz: f64) -> String {
+    let centi = (freq_hz / 1e7).round() as i64;
+    let (whole, frac) = (centi / 100, centi % 100);
+    match frac {
+        0 => format!("{whole}GHz"),
+        f if f % 10 == 0 => format!("{whole}.{}GHz", f / 10),
+        f => format!("{whole}.{f:02}GHz"),
+    }
+}

@@ -17,7 +17,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Measurements, Metrics, Raster};
-use crate::artifact::{link_distance, measured_loss};
+use crate::artifact::{carrier_label, link_distance, measured_loss};
 use crate::rf::em::fspl_db;
 use crate::rf::pathloss_fit::{fit_close_in, fit_power_distance};
 use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
@@ -348,17 +348,6 @@ pub struct CarrierTrends {
     pub pd_sigma_ss: f64,
     /// Σ (measured − measured CI line)².
     pub ci_sigma_ss: f64,
-}
-
-/// A carrier's name in the metrics: GHz to 10 MHz, without trailing zeros ("3.5GHz").
-pub fn carrier_label(freq_hz: f64) -> String {
-    let centi = (freq_hz / 1e7).round() as i64;
-    let (whole, frac) = (centi / 100, centi % 100);
-    match frac {
-        0 => format!("{whole}GHz"),
-        f if f % 10 == 0 => format!("{whole}.{}GHz", f / 10),
-        f => format!("{whole}.{f:02}GHz"),
-    }
 }
 
 /// The trend lines per carrier (links grouped by [`carrier_label`], in order of frequency), each

@@ -819,10 +819,7 @@ fn evaluated_lines(ev: &Metrics, suffix: &str, freqs: &[f64]) -> Option<((f64, f
     if !lowest.is_finite() {
         return None;
     }
-    let at = format!(
-        "f/{}/",
-        crate::stages::eval::evaluate::carrier_label(lowest)
-    );
+    let at = format!("f/{}/", crate::artifact::carrier_label(lowest));
     let get = |k: &str| ev.get(&format!("{at}{k}"));
     Some((
         (get(&alpha)?, get(&beta)?),
