@@ -13,21 +13,17 @@ import sys
 import numpy as np
 from pyproj import Transformer
 
+from tr38901_reference import UMA, pathloss
+
 root, out = sys.argv[1], sys.argv[2]
 cells = {c["pci"]: c for c in json.load(open(f"{root}/duke_cells.json"))["cells"]}
 rows = list(csv.DictReader(open(f"{root}/duke_cbrs.csv")))
 to_utm = Transformer.from_crs("EPSG:4326", "EPSG:32617", always_xy=True)
-H_BS, H_UT, C = 20.0, 1.5, 3.0e8
+H_BS, H_UT = 20.0, 1.5
 
 
 def uma(d2d, fc):
-    d3d = np.sqrt(d2d**2 + (H_BS - H_UT) ** 2)
-    dbp = 4 * (H_BS - 1) * (H_UT - 1) * fc * 1e9 / C
-    los = np.where(d2d <= dbp, 28 + 22 * np.log10(d3d) + 20 * np.log10(fc),
-                   28 + 40 * np.log10(d3d) + 20 * np.log10(fc) - 9 * np.log10(dbp**2 + (H_BS - H_UT) ** 2))
-    nlos = np.maximum(los, 13.54 + 39.08 * np.log10(d3d) + 20 * np.log10(fc) - 0.6 * (H_UT - 1.5))
-    pr = np.where(d2d <= 18, 1.0, (18 / d2d + np.exp(-d2d / 63) * (1 - 18 / d2d)))
-    return -10 * np.log10(pr * 10 ** (-los / 10) + (1 - pr) * 10 ** (-nlos / 10))
+    return pathloss(d2d, fc, UMA, H_BS, H_UT)
 
 
 pci = np.array([r["PCI"] for r in rows])

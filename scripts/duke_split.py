@@ -21,6 +21,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 from pyproj import Transformer
 
+from tr38901_reference import UMA, UMI, fspl, pathloss
+
 root = sys.argv[1]
 BLOCK = float(sys.argv[2]) if len(sys.argv) > 2 else 100.0
 M64 = (1 << 64) - 1
@@ -201,33 +203,15 @@ for name in ("pci_EF_height_1m", "pci_EF_new_height_1m"):
           f"{100 * (a > 0).mean():.1f} %, median of built {np.median(nz):.1f} m")
 
 # --- UMa with offsets fitted on the training half -----------------------------------------------
-H_BS, H_UT, C = 20.0, 1.5, 3.0e8
+H_BS, H_UT = 20.0, 1.5
 
 
 def uma(d2d, fc):
-    d3d = np.sqrt(d2d**2 + (H_BS - H_UT) ** 2)
-    dbp = 4 * (H_BS - 1) * (H_UT - 1) * fc * 1e9 / C
-    los = np.where(d2d <= dbp, 28 + 22 * np.log10(d3d) + 20 * np.log10(fc),
-                   28 + 40 * np.log10(d3d) + 20 * np.log10(fc)
-                   - 9 * np.log10(dbp**2 + (H_BS - H_UT) ** 2))
-    nlos = np.maximum(los, 13.54 + 39.08 * np.log10(d3d) + 20 * np.log10(fc) - 0.6 * (H_UT - 1.5))
-    pr = np.where(d2d <= 18, 1.0, (18 / d2d + np.exp(-d2d / 63) * (1 - 18 / d2d)))
-    return -10 * np.log10(pr * 10 ** (-los / 10) + (1 - pr) * 10 ** (-nlos / 10))
+    return pathloss(d2d, fc, UMA, H_BS, H_UT)
 
 
 def umi(d2d, fc):
-    d3d = np.sqrt(d2d**2 + (H_BS - H_UT) ** 2)
-    dbp = 4 * (H_BS - 1) * (H_UT - 1) * fc * 1e9 / C
-    los = np.where(d2d <= dbp, 32.4 + 21 * np.log10(d3d) + 20 * np.log10(fc),
-                   32.4 + 40 * np.log10(d3d) + 20 * np.log10(fc)
-                   - 9.5 * np.log10(dbp**2 + (H_BS - H_UT) ** 2))
-    nlos = np.maximum(los, 22.4 + 35.3 * np.log10(d3d) + 21.3 * np.log10(fc) - 0.3 * (H_UT - 1.5))
-    pr = np.where(d2d <= 18, 1.0, (18 / d2d + np.exp(-d2d / 36) * (1 - 18 / d2d)))
-    return -10 * np.log10(pr * 10 ** (-los / 10) + (1 - pr) * 10 ** (-nlos / 10))
-
-
-def fspl(d3d, fc):
-    return 20 * np.log10(d3d) + 20 * np.log10(fc * 1e9) - 147.55
+    return pathloss(d2d, fc, UMI, H_BS, H_UT)
 
 
 tx = np.array([to_utm.transform(cells[p]["lon"], cells[p]["lat"]) for p in pci])
