@@ -200,6 +200,10 @@ BY_HAND = {
 # HTTP: live (urllib) or replayed from recorded responses.
 
 
+# What a request can fail with: an HTTP answer (HTTPError is a URLError), or the network.
+NETWORK_ERRORS = (urllib.error.URLError, TimeoutError, ConnectionError, http.client.HTTPException)
+
+
 class StepFailed(Exception):
     """A step that failed; `records` are the files it did get (SOURCES.md lists them)."""
 
@@ -290,19 +294,24 @@ class LiveHttp(Http):
         print(f"  {shown(url)}: {why}; trying again in {wait} s", file=sys.stderr)
         time.sleep(wait)
 
+    def _retry_or_fail(self, url, attempt, e, note=""):
+        """Waits to try again after a transient failure (a 429 or 5xx answer, a network error);
+        raises StepFailed for any other HTTP answer, or once the tries are spent."""
+        if isinstance(e, urllib.error.HTTPError):
+            if e.code not in (429, 500, 502, 503, 504):
+                raise StepFailed(f"{shown(url)}: HTTP {e.code} {e.reason}") from None
+            self._retry(url, attempt, f"HTTP {e.code} {e.reason}")
+        else:
+            self._retry(url, attempt, f"{getattr(e, 'reason', e)}{note}")
+
     def _fetch(self, url, method, body, headers, content_type):
         for attempt in range(1, TRIES + 1):
             try:
                 req = self._request(url, method, body, dict(headers), content_type)
                 with urllib.request.urlopen(req, timeout=TIMEOUT_S) as r:
                     return r.read()
-            except urllib.error.HTTPError as e:
-                if e.code in (429, 500, 502, 503, 504):
-                    self._retry(url, attempt, f"HTTP {e.code} {e.reason}")
-                    continue
-                raise StepFailed(f"{shown(url)}: HTTP {e.code} {e.reason}") from None
-            except (urllib.error.URLError, TimeoutError, ConnectionError, http.client.HTTPException) as e:
-                self._retry(url, attempt, f"{getattr(e, 'reason', e)}")
+            except NETWORK_ERRORS as e:
+                self._retry_or_fail(url, attempt, e)
         raise AssertionError("unreachable")
 
     def _download(self, url, part, headers):
@@ -340,12 +349,9 @@ class LiveHttp(Http):
                     part.unlink()  # the range is past the end: the .part is stale
                     self._retry(url, attempt, "stale partial file")
                     continue
-                if e.code in (429, 500, 502, 503, 504):
-                    self._retry(url, attempt, f"HTTP {e.code} {e.reason}")
-                    continue
-                raise StepFailed(f"{shown(url)}: HTTP {e.code} {e.reason}") from None
-            except (urllib.error.URLError, TimeoutError, ConnectionError, http.client.HTTPException) as e:
-                self._retry(url, attempt, f"{getattr(e, 'reason', e)} (partial file kept: {part})")
+                self._retry_or_fail(url, attempt, e)
+            except NETWORK_ERRORS as e:
+                self._retry_or_fail(url, attempt, e, f" (partial file kept: {part})")
 
 
 class ReplayHttp(Http):
