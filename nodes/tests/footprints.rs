@@ -61,6 +61,7 @@ fn read_osm(file: std::path::PathBuf) -> Footprints {
     let site = helsinki_site();
     let p = ReadOsmBuildingsParams {
         path: "h.osm.pbf".into(),
+        ..Default::default()
     };
     let files = [file];
     ReadOsmBuildings::run(&p, &Inputs::new(), &Ctx::new(&site, &files)).unwrap()
@@ -157,6 +158,7 @@ fn duke_overpass_xml() {
     };
     let p = ReadOsmBuildingsParams {
         path: "duke.osm".into(),
+        ..Default::default()
     };
     for (file, buildings, with_height) in [
         ("pci_EF.osm", 116, 0),

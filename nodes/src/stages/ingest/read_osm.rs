@@ -13,16 +13,25 @@ use crate::artifact::point_in_ring;
 use crate::artifact::{Footprint, Footprints, Polygon};
 use crate::io::crs::{Crs, ToSite};
 use crate::io::osm_xml::{Member, OsmElement, OsmKind, for_each_xml_element, is_osm_xml};
-use crate::stage::{Ctx, FileRef, InputSpec, Inputs, Stage, StageError};
+use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
-/// Params of [`ReadOsmBuildings`].
-#[derive(Clone, Debug, Serialize, Deserialize)]
+/// Params of [`ReadOsmBuildings`]: `path` for one file, or `paths` for several.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ReadOsmBuildingsParams {
     /// The `.osm.pbf` or OSM XML (`.osm`) file; the format is told by content (XML starts with
     /// `<?xml` or `<osm`), not by name. Compressed XML (`.osm.bz2`, `.osm.gz`) is not read.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
     pub path: String,
+    /// Several extracts read as one, e.g. overlapping boxes of one campus. A building (an OSM way
+    /// or relation id) found in more than one file is taken from the first file that has it, so
+    /// list the file whose tags you trust most first; the duplicates are counted in a warning.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub paths: Vec<String>,
 }
+
+/// The most files one node reads (a bound on what a graph can ask for).
+pub const MAX_OSM_FILES: usize = 64;
 
 /// Reads every closed way and multipolygon relation tagged `building=*` (or `building:part`), with
 /// `height`, `min_height`, `building:levels` and `building:min_level`.
@@ -30,25 +39,80 @@ pub struct ReadOsmBuildings;
 
 impl Stage for ReadOsmBuildings {
     const KIND: &'static str = "ReadOsmBuildings";
-    const VERSION: u32 = 2;
+    // 3: `paths`, several files merged, the first file's copy of a building kept.
+    const VERSION: u32 = 3;
     const DOC: &'static str = "OSM buildings from PBF or XML (ways and multipolygons, height/levels tags) into the site frame, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[];
     type Params = ReadOsmBuildingsParams;
     type Output = Footprints;
 
-    fn files(p: &Self::Params) -> Vec<FileRef> {
-        vec![FileRef {
-            field: "path",
-            path: p.path.clone(),
-        }]
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        match (p.path.is_empty(), p.paths.len()) {
+            (true, 0) => Err(ParamError::new(
+                "path",
+                "expected `path: \"file.osm\"` or `paths: [\"a.osm\", \"b.osm\"]`",
+            )),
+            (false, n) if n > 0 => Err(ParamError::new(
+                "paths",
+                "expected `path` or `paths`, not both",
+            )),
+            (_, n) if n > MAX_OSM_FILES => Err(ParamError::new(
+                "paths",
+                format!("expected at most {MAX_OSM_FILES} files, found {n}"),
+            )),
+            _ => Ok(()),
+        }
     }
 
-    fn run(_: &Self::Params, _: &Inputs, ctx: &Ctx) -> Result<Footprints, StageError> {
-        let path = ctx.file(0)?;
+    fn files(p: &Self::Params) -> Vec<FileRef> {
+        if p.paths.is_empty() {
+            return vec![FileRef {
+                field: "path",
+                path: p.path.clone(),
+            }];
+        }
+        p.paths
+            .iter()
+            .map(|path| FileRef {
+                field: "paths",
+                path: path.clone(),
+            })
+            .collect()
+    }
+
+    fn run(p: &Self::Params, _: &Inputs, ctx: &Ctx) -> Result<Footprints, StageError> {
         let wgs84 = ToSite::new(&Crs::from_epsg(4326).expect("EPSG:4326 is known"), ctx.site)
             .map_err(StageError::Failed)?;
-        read_osm_buildings(path, &wgs84)
+        let files = p.paths.len().max(1);
+        let mut parts = Vec::with_capacity(files);
+        for i in 0..files {
+            parts.push(read_osm_buildings(ctx.file(i)?, &wgs84)?);
+        }
+        let (merged, duplicates) = first_file_wins(parts);
+        if duplicates > 0 {
+            ctx.progress.warn(&format!(
+                "{duplicates} buildings are in more than one file; each was taken from the first \
+                 file listing it"
+            ));
+        }
+        Ok(merged)
     }
+}
+
+/// The buildings of several files as one set, in file order; a building id met again in a later
+/// file is skipped (and counted), so the first file's tags win.
+fn first_file_wins(parts: Vec<Footprints>) -> (Footprints, usize) {
+    let mut seen = HashSet::new();
+    let mut items = Vec::new();
+    let mut duplicates = 0;
+    for f in parts.into_iter().flat_map(|p| p.items) {
+        if seen.insert(f.id.clone()) {
+            items.push(f);
+        } else {
+            duplicates += 1;
+        }
+    }
+    (Footprints { items }, duplicates)
 }
 
 fn is_building<'a>(mut tags: impl Iterator<Item = (&'a str, &'a str)>) -> bool {
@@ -371,6 +435,49 @@ fn relation_footprints(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn building(id: &str, height_m: Option<f64>) -> Footprint {
+        Footprint {
+            id: id.into(),
+            polygons: vec![],
+            height_m,
+            min_height_m: None,
+            levels: None,
+            min_level: None,
+        }
+    }
+
+    #[test]
+    fn the_first_file_listing_a_building_wins() {
+        let a = Footprints {
+            items: vec![building("w1", Some(12.0)), building("w2", None)],
+        };
+        let b = Footprints {
+            items: vec![building("w1", None), building("w3", Some(4.0))],
+        };
+        let (m, dup) = first_file_wins(vec![a, b]);
+        let got: Vec<(&str, Option<f64>)> = m
+            .items
+            .iter()
+            .map(|f| (f.id.as_str(), f.height_m))
+            .collect();
+        assert_eq!(got, [("w1", Some(12.0)), ("w2", None), ("w3", Some(4.0))]);
+        assert_eq!(dup, 1);
+    }
+
+    #[test]
+    fn path_or_paths_one_of_them() {
+        let p = |path: &str, paths: &[&str]| ReadOsmBuildingsParams {
+            path: path.into(),
+            paths: paths.iter().map(|s| s.to_string()).collect(),
+        };
+        assert!(ReadOsmBuildings::validate(&p("a.osm", &[])).is_ok());
+        assert!(ReadOsmBuildings::validate(&p("", &["a.osm", "b.osm"])).is_ok());
+        assert!(ReadOsmBuildings::validate(&p("", &[])).is_err());
+        assert!(ReadOsmBuildings::validate(&p("a.osm", &["b.osm"])).is_err());
+        let many: Vec<&str> = vec!["a.osm"; MAX_OSM_FILES + 1];
+        assert!(ReadOsmBuildings::validate(&p("", &many)).is_err());
+    }
 
     #[test]
     fn lengths() {
