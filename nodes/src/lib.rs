@@ -93,6 +93,7 @@ macro_rules! for_each_stage {
             $crate::stages::street::place_clutter::PlaceClutter,
             $crate::stages::street::canopies::Canopies,
             $crate::stages::heights::coarsen::Coarsen,
+            $crate::stages::heights::flat_ground::FlatGround,
             $crate::stages::heights::gaussian_blur::GaussianBlur,
             $crate::stages::heights::clamp::Clamp,
             $crate::stages::heights::difference::Difference,

@@ -444,6 +444,74 @@ pub fn source_crs(
     }
 }
 
+/// A box in WGS 84 degrees, sides named so that no axis order has to be remembered: what a user
+/// copies from a map or from an OSM extract's `<bounds>` (minlat, minlon, maxlat, maxlon).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LonLatBox {
+    /// Western longitude, degrees east.
+    pub west: f64,
+    /// Southern latitude, degrees north.
+    pub south: f64,
+    /// Eastern longitude, degrees east.
+    pub east: f64,
+    /// Northern latitude, degrees north.
+    pub north: f64,
+}
+
+impl LonLatBox {
+    /// Checks the sides: finite, latitudes within ±90, longitudes within ±180, each min below its
+    /// max (a box across the antimeridian is not supported).
+    pub fn check(&self) -> Result<(), String> {
+        let ok = [self.west, self.south, self.east, self.north]
+            .iter()
+            .all(|v| v.is_finite())
+            && (-90.0..=90.0).contains(&self.south)
+            && (-90.0..=90.0).contains(&self.north)
+            && (-180.0..=180.0).contains(&self.west)
+            && (-180.0..=180.0).contains(&self.east)
+            && self.west < self.east
+            && self.south < self.north;
+        if ok {
+            Ok(())
+        } else {
+            Err(format!(
+                "expected (west, south, east, north) in degrees, west < east within ±180, south < \
+                 north within ±90; found ({}, {}, {}, {})",
+                self.west, self.south, self.east, self.north
+            ))
+        }
+    }
+
+    /// The site-frame rectangle (x_min, y_min, x_max, y_max) holding the box: its edges are
+    /// sampled (16 points a side), since a meridian or parallel is curved in a projected CRS.
+    pub fn site_window(&self, site: &Site) -> Result<(f64, f64, f64, f64), String> {
+        self.check()?;
+        let wgs84 = ToSite::new(&Crs::from_epsg(4326)?, site)?;
+        let (mut lo, mut hi) = (
+            (f64::INFINITY, f64::INFINITY),
+            (f64::NEG_INFINITY, f64::NEG_INFINITY),
+        );
+        const STEPS: usize = 16;
+        for i in 0..=STEPS {
+            let t = i as f64 / STEPS as f64;
+            let lon = self.west + t * (self.east - self.west);
+            let lat = self.south + t * (self.north - self.south);
+            for (x, y) in [
+                (lon, self.south),
+                (lon, self.north),
+                (self.west, lat),
+                (self.east, lat),
+            ] {
+                let (sx, sy, _) = wgs84.apply(x, y, 0.0)?;
+                lo = (lo.0.min(sx), lo.1.min(sy));
+                hi = (hi.0.max(sx), hi.1.max(sy));
+            }
+        }
+        Ok((lo.0, lo.1, hi.0, hi.1))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
