@@ -281,6 +281,19 @@ fn faces_intersect(mesh: &Mesh, tris: &[[P3; 3]], i: usize, j: usize) -> bool {
             .any(|&(p, q)| segment_crosses(p, q, a))
 }
 
+/// What a stage does with a solid that fails [`check_solid`]: stop the run, leave the object out
+/// (counted and warned about), or try to mend it first (how is the stage's to say) and leave it
+/// out only if that fails.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum OnInvalid {
+    /// The stage fails, naming the object and the check it failed.
+    Fail,
+    /// The object is left out, counted in the stage's report and warned about.
+    Drop,
+    /// The stage tries its repairs, in its stated order; what none mends is dropped.
+    Repair,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,11 +6,11 @@ use std::collections::BTreeSet;
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, ObjectClass, Raster, Scene, SceneObject};
+use crate::artifact::{ArtifactType, Metrics, ObjectClass, Raster, Scene, SceneObject, Typed};
 use crate::artifact::{Material, default_material};
-use crate::geom::mesh_check::check_solid;
+use crate::geom::mesh_check::{OnInvalid, check_solid};
 use crate::geom::terrain_mesh::terrain_mesh;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, ReportSpec, Reported, Stage, StageError};
 
 /// Params of [`AssembleScene`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -21,6 +21,10 @@ pub struct AssembleSceneParams {
     pub terrain_step_m: Option<f64>,
     /// Material of the terrain. Default the terrain class's: medium dry ground.
     pub terrain_material: Material,
+    /// A building that fails the solid check: `Fail` (default: a bad solid from our own stages
+    /// is a bug to see) or `Drop` (left out, counted in the report `counts` and warned about).
+    /// Repairs belong to the stage that made the solid (OsmBaseline's `on_invalid`).
+    pub on_invalid: OnInvalid,
 }
 
 impl Default for AssembleSceneParams {
@@ -28,6 +32,7 @@ impl Default for AssembleSceneParams {
         AssembleSceneParams {
             terrain_step_m: Some(2.0),
             terrain_material: default_material(ObjectClass::Terrain),
+            on_invalid: OnInvalid::Fail,
         }
     }
 }
@@ -38,7 +43,8 @@ pub struct AssembleScene;
 
 impl Stage for AssembleScene {
     const KIND: &'static str = "AssembleScene";
-    const VERSION: u32 = 1;
+    // 2: `on_invalid` (Fail or Drop) and the report `counts`.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "the RF scene: terrain mesh + objects (buildings, vegetation, clutter) with ids, classes and ITU materials";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("terrain", ArtifactType::Raster, "the terrain T"),
@@ -62,43 +68,105 @@ impl Stage for AssembleScene {
     }
 
     fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Scene, StageError> {
-        let terrain: &Raster = inputs.one("terrain")?;
-        let scenes: Vec<&Scene> = inputs.many("objects")?;
-        let mesh = terrain_mesh(
-            terrain,
-            p.terrain_step_m.unwrap_or(terrain.grid.cell_m),
-            p.terrain_material,
-        )
-        .map_err(StageError::Failed)?;
-        let mut objects = vec![SceneObject {
-            id: "terrain".into(),
-            class: ObjectClass::Terrain,
-            mesh,
-        }];
-        let mut ids: BTreeSet<String> = BTreeSet::from(["terrain".to_string()]);
-        let total: usize = scenes.iter().map(|s| s.objects.len()).sum();
-        ctx.progress.set_total(total as u64);
-        // A terrain inside an input scene (one carved or painted from a whole scene) gives way
-        // to the mesh of `terrain`.
-        for o in scenes
-            .iter()
-            .flat_map(|s| &s.objects)
-            .filter(|o| o.class != ObjectClass::Terrain)
+        Ok(assemble(p, inputs, ctx)?.0)
+    }
+
+    const REPORTS: &'static [ReportSpec] = &[ReportSpec {
+        name: "counts",
+        ty: ArtifactType::Metrics,
+        doc: "objects in the scene by class, and buildings dropped for failing the solid check",
+    }];
+
+    fn run_reported(
+        p: &Self::Params,
+        inputs: &Inputs,
+        ctx: &Ctx,
+    ) -> Result<Reported<Scene>, StageError> {
+        let (scene, dropped) = assemble(p, inputs, ctx)?;
+        let mut m = Metrics::default();
+        m.set("objects", scene.objects.len() as f64);
+        for class in [
+            ObjectClass::Terrain,
+            ObjectClass::Building,
+            ObjectClass::Vegetation,
+            ObjectClass::Clutter,
+            ObjectClass::Unsegmented,
+        ] {
+            let n = scene.objects.iter().filter(|o| o.class == class).count();
+            m.set(format!("objects/{}", class_name(class)), n as f64);
+        }
+        m.set("buildings_dropped", dropped as f64);
+        Ok(Reported {
+            output: scene,
+            reports: vec![("counts", m.into_artifact())],
+        })
+    }
+}
+
+/// The lower-case name of a class, for metric names.
+fn class_name(c: ObjectClass) -> String {
+    format!("{c:?}").to_lowercase()
+}
+
+/// The scene and how many buildings were dropped.
+fn assemble(
+    p: &AssembleSceneParams,
+    inputs: &Inputs,
+    ctx: &Ctx,
+) -> Result<(Scene, usize), StageError> {
+    let terrain: &Raster = inputs.one("terrain")?;
+    let scenes: Vec<&Scene> = inputs.many("objects")?;
+    let mesh = terrain_mesh(
+        terrain,
+        p.terrain_step_m.unwrap_or(terrain.grid.cell_m),
+        p.terrain_material,
+    )
+    .map_err(StageError::Failed)?;
+    let mut objects = vec![SceneObject {
+        id: "terrain".into(),
+        class: ObjectClass::Terrain,
+        mesh,
+    }];
+    let mut ids: BTreeSet<String> = BTreeSet::from(["terrain".to_string()]);
+    let total: usize = scenes.iter().map(|s| s.objects.len()).sum();
+    ctx.progress.set_total(total as u64);
+    let mut dropped: Vec<String> = Vec::new();
+    // A terrain inside an input scene (one carved or painted from a whole scene) gives way
+    // to the mesh of `terrain`.
+    for o in scenes
+        .iter()
+        .flat_map(|s| &s.objects)
+        .filter(|o| o.class != ObjectClass::Terrain)
+    {
+        ctx.progress.advance(1);
+        if !ids.insert(o.id.clone()) {
+            return Err(StageError::Failed(format!(
+                "two objects are called {:?}: give each input scene distinct ids",
+                o.id
+            )));
+        }
+        if o.class == ObjectClass::Building
+            && let Err(e) = check_solid(&o.mesh)
         {
-            if !ids.insert(o.id.clone()) {
+            let why = format!("{}: {e}", o.id);
+            if p.on_invalid == OnInvalid::Fail {
                 return Err(StageError::Failed(format!(
-                    "two objects are called {:?}: give each input scene distinct ids",
-                    o.id
+                    "{why} (on_invalid: Drop leaves such buildings out, counted)"
                 )));
             }
-            if o.class == ObjectClass::Building {
-                check_solid(&o.mesh).map_err(|e| StageError::Failed(format!("{}: {e}", o.id)))?;
-            }
-            objects.push(o.clone());
-            ctx.progress.advance(1);
+            dropped.push(why);
+            continue;
         }
-        Ok(Scene { objects })
+        objects.push(o.clone());
     }
+    if !dropped.is_empty() {
+        ctx.progress.warn(&format!(
+            "{} buildings are not valid solids and were left out (first: {})",
+            dropped.len(),
+            dropped[..dropped.len().min(3)].join("; ")
+        ));
+    }
+    Ok((Scene { objects }, dropped.len()))
 }
 
 #[cfg(test)]
