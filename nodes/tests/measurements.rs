@@ -37,6 +37,7 @@ fn duke_cbrs_drive_test() {
     let layout = Layout::DukeCbrs {
         cells: "cells.json".into(),
         tx_height_m: 20.0,
+        tx_heights_m: [("E".to_string(), 15.0), ("F".to_string(), 15.0)].into(),
         rx_height_m: 1.5,
     };
     let m = read(
@@ -73,6 +74,34 @@ fn duke_cbrs_drive_test() {
     assert!(max_d > 100.0 && max_d < 3000.0, "{max_d}");
     assert_eq!(m.links[0].rx.z, Height::AboveGround(1.5));
     assert_eq!(m.links[0].rx_power_dbm, Some(-124.0));
+    // Heights by cell override the one for all.
+    for l in &m.links {
+        let want = if l.tx.id == "E" || l.tx.id == "F" {
+            15.0
+        } else {
+            20.0
+        };
+        assert_eq!(l.tx.z, Height::AboveGround(want), "cell {}", l.tx.id);
+    }
+}
+
+/// A height for a cell the file does not have is a typo, said as such.
+#[test]
+fn duke_heights_for_an_unknown_cell_are_refused() {
+    let layout = Layout::DukeCbrs {
+        cells: "cells.json".into(),
+        tx_height_m: 20.0,
+        tx_heights_m: [("G".to_string(), 15.0)].into(),
+        rx_height_m: 1.5,
+    };
+    let Err(e) = read(
+        layout,
+        &[shared("rf/duke_cbrs.csv"), shared("rf/duke_cells.json")],
+        &durham(),
+    ) else {
+        panic!("a height for cell G was accepted");
+    };
+    assert!(format!("{e}").contains("\"G\""), "{e}");
 }
 
 #[test]

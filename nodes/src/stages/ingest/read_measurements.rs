@@ -9,7 +9,7 @@
 //!   file (`{"cells": [{"pci", "lat", "lon", "azimuth_deg", "freq_hz"}]}`): RSRP as received power,
 //!   EIRP unknown, transmitter and receiver heights from the params (not published).
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -30,11 +30,18 @@ pub enum Layout {
         /// Antenna height above ground of every cell, metres (not published). Default 20.
         #[serde(default = "default_tx_height")]
         tx_height_m: f64,
+        /// Heights of single cells by PCI, overriding `tx_height_m` for them, e.g. the antennas
+        /// of two sites on roofs of different heights. Every key must be a cell of the file.
+        #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+        tx_heights_m: BTreeMap<String, f64>,
         /// Phone height above ground, metres. Default 1.5.
         #[serde(default = "default_rx_height")]
         rx_height_m: f64,
     },
 }
+
+/// The highest antenna above ground a layout may state: above the tallest masts.
+const MAX_ANTENNA_HEIGHT_M: f64 = 1000.0;
 
 fn default_tx_height() -> f64 {
     20.0
@@ -63,7 +70,8 @@ pub struct ReadMeasurements;
 
 impl Stage for ReadMeasurements {
     const KIND: &'static str = "ReadMeasurements";
-    const VERSION: u32 = 1;
+    // 2: DukeCbrs `tx_heights_m`, heights by cell.
+    const VERSION: u32 = 2;
     const DOC: &'static str =
         "drive-test measurements CSV (links, or the Duke CBRS layout) into the site frame, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[];
@@ -73,18 +81,25 @@ impl Stage for ReadMeasurements {
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         if let Layout::DukeCbrs {
             tx_height_m,
+            tx_heights_m,
             rx_height_m,
             ..
-        } = p.layout
-            && !(tx_height_m >= 0.0
-                && rx_height_m >= 0.0
-                && tx_height_m.is_finite()
-                && rx_height_m.is_finite())
+        } = &p.layout
         {
-            return Err(ParamError::new(
-                "layout",
-                "expected non-negative, finite heights",
-            ));
+            let heights = [*tx_height_m, *rx_height_m]
+                .into_iter()
+                .chain(tx_heights_m.values().copied());
+            for h in heights {
+                if !(0.0..=MAX_ANTENNA_HEIGHT_M).contains(&h) {
+                    return Err(ParamError::new(
+                        "layout",
+                        format!(
+                            "expected antenna heights from 0 to {MAX_ANTENNA_HEIGHT_M} m above \
+                             ground, found {h}"
+                        ),
+                    ));
+                }
+            }
         }
         Ok(())
     }
@@ -111,9 +126,16 @@ impl Stage for ReadMeasurements {
             Layout::Links => read_links(path, &wgs84),
             Layout::DukeCbrs {
                 tx_height_m,
+                tx_heights_m,
                 rx_height_m,
                 ..
-            } => read_duke(path, ctx.file(1)?, &wgs84, *tx_height_m, *rx_height_m),
+            } => {
+                let heights = CellHeights {
+                    all: *tx_height_m,
+                    by_pci: tx_heights_m,
+                };
+                read_duke(path, ctx.file(1)?, &wgs84, &heights, *rx_height_m)
+            }
         }
     }
 }
@@ -422,11 +444,17 @@ struct DukeCell {
     freq_hz: f64,
 }
 
+/// The cells' antenna heights: one for all, some by PCI.
+struct CellHeights<'a> {
+    all: f64,
+    by_pci: &'a BTreeMap<String, f64>,
+}
+
 fn read_duke(
     path: &Path,
     cells_path: &Path,
     wgs84: &ToSite,
-    tx_h: f64,
+    tx_h: &CellHeights,
     rx_h: f64,
 ) -> Result<Measurements, StageError> {
     let text = std::fs::read_to_string(cells_path)
@@ -451,10 +479,18 @@ fn read_duke(
             id: c.pci.clone(),
             x,
             y,
-            z: Height::AboveGround(tx_h),
+            z: Height::AboveGround(tx_h.by_pci.get(&c.pci).copied().unwrap_or(tx_h.all)),
             azimuth_deg: Some(c.azimuth_deg),
         };
         by_pci.insert(c.pci.clone(), (tx, c.freq_hz));
+    }
+    if let Some(pci) = tx_h.by_pci.keys().find(|k| !by_pci.contains_key(*k)) {
+        let mut known: Vec<&String> = by_pci.keys().collect();
+        known.sort();
+        return Err(StageError::Failed(format!(
+            "layout: tx_heights_m names cell {pci:?}, which {} does not list (its cells: {known:?})",
+            cells_path.display()
+        )));
     }
     let (t, mut r) = Table::open(path)?;
     let (pci, lat, lon, rsrp) = (
