@@ -32,3 +32,14 @@ def pathloss(d2d, fc, s, h_bs, h_ut):
 def fspl(d3d, fc):
     """Free-space path loss (dB) at 3-D distances `d3d`."""
     return 20 * np.log10(d3d) + 20 * np.log10(fc * 1e9) - 147.55
+
+
+def sector_gain_db(bearing_deg, boresight_deg, down_deg):
+    """The TR 38.901 sector element's gain (dBi, Table 7.3-1: 65° beamwidths, 30 dB front-to-back,
+    8 dBi peak) toward grid bearing `bearing_deg` and `down_deg` below the horizon, for a boresight
+    at grid bearing `boresight_deg` with no tilt (nodes/src/rf/antenna.rs `gain`)."""
+    phi = (np.asarray(bearing_deg) - boresight_deg + 180.0) % 360.0 - 180.0
+    theta = 90.0 + np.asarray(down_deg)
+    a_v = -np.minimum(12 * ((theta - 90) / 65) ** 2, 30)
+    a_h = -np.minimum(12 * (phi / 65) ** 2, 30)
+    return -np.minimum(-(a_v + a_h), 30) + 8.0

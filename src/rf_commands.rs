@@ -10,7 +10,7 @@ use glam::DVec3;
 
 use kodama_nodes::io::export::{Encoded, encode};
 use kodama_nodes::io::sionna_xml::read_scene_with_thickness;
-use kodama_nodes::rf::antenna::Antenna;
+use kodama_nodes::rf::antenna::{Antenna, Pattern};
 use kodama_nodes::rf::links_csv::{read_links, write_results};
 use kodama_nodes::rf::map_plane::default_plane;
 use kodama_nodes::rf::path::{LinkEnds, LinkPaths, TraceOptions};
@@ -106,6 +106,11 @@ pub struct TraceArgs {
     links: PathBuf,
     #[command(flatten)]
     interactions: Interactions,
+    /// Transmit antenna: `iso`, `dipole` or `tr38901:BEARING_DEG:TILT_DEG` (the TR 38.901 sector,
+    /// boresight at a compass bearing clockwise from the scene's +y, downtilt below the horizon).
+    /// The receivers stay isotropic.
+    #[arg(long, value_parser = parse_antenna, default_value = "iso")]
+    tx_antenna: Antenna,
     /// Where to write the links with path_gain_db (CSV).
     #[arg(long)]
     out: PathBuf,
@@ -132,6 +137,10 @@ pub struct RadiomapArgs {
     /// Height of the measurement plane, metres.
     #[arg(long, default_value_t = 1.5)]
     height_m: f64,
+    /// Transmit antenna: `iso`, `dipole` or `tr38901:BEARING_DEG:TILT_DEG` (the TR 38.901 sector,
+    /// boresight at a compass bearing clockwise from the scene's +y, downtilt below the horizon).
+    #[arg(long, value_parser = parse_antenna, default_value = "iso")]
+    tx_antenna: Antenna,
     /// The map: .tif (GeoTIFF, scene frame), .exr or .png (with a colour bar); path gain in dB.
     #[arg(long)]
     out: PathBuf,
@@ -147,6 +156,33 @@ fn parse_point(s: &str) -> Result<[f64; 3], String> {
         })
         .collect::<Result<_, _>>()?;
     <[f64; 3]>::try_from(v).map_err(|_| "expected X,Y,Z".to_string())
+}
+
+/// `iso`, `dipole` or `tr38901:BEARING_DEG:TILT_DEG`, vertically polarised.
+fn parse_antenna(s: &str) -> Result<Antenna, String> {
+    let expected = "expected iso, dipole or tr38901:BEARING_DEG:TILT_DEG";
+    let pattern = |pattern| Antenna {
+        pattern,
+        ..Antenna::default()
+    };
+    let parts: Vec<&str> = s.split(':').map(str::trim).collect();
+    match parts.as_slice() {
+        ["iso"] => Ok(pattern(Pattern::Isotropic)),
+        ["dipole"] => Ok(pattern(Pattern::Dipole)),
+        ["tr38901", bearing, tilt] => {
+            let num = |name: &str, v: &str| match v.parse::<f64>() {
+                Ok(x) if x.is_finite() => Ok(x),
+                _ => Err(format!("{name} {v:?} is not a finite number of degrees")),
+            };
+            Ok(Antenna {
+                azimuth_deg: num("bearing", bearing)?,
+                tilt_deg: num("tilt", tilt)?,
+                ..pattern(Pattern::Tr38901)
+            })
+        }
+        ["tr38901", ..] => Err(format!("{expected}: the sector needs a bearing and a tilt")),
+        _ => Err(format!("{expected}, found {s:?}")),
+    }
 }
 
 type Fail = (u8, String);
@@ -238,7 +274,7 @@ pub fn trace(a: TraceArgs) -> Result<u8, Fail> {
     drop(task);
     note_unmodelled(&a.interactions);
     let t = Instant::now();
-    let ant = Antenna::default();
+    let rx_ant = Antenna::default();
     // Links sharing a transmitter share its ray search, so the steps split by transmitter.
     let mut txs: Vec<[u64; 3]> = links.iter().map(|l| l.0.map(f64::to_bits)).collect();
     txs.sort_unstable();
@@ -262,8 +298,8 @@ pub fn trace(a: TraceArgs) -> Result<u8, Fail> {
         let traced = trace_links(
             &scene,
             &pairs,
-            &ant,
-            &ant,
+            &a.tx_antenna,
+            &rx_ant,
             &a.interactions.options(),
             a.interactions.freq_hz,
         );
@@ -359,7 +395,7 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
     let map = radio_map(
         &scene,
         DVec3::from(a.tx),
-        &Antenna::default(),
+        &a.tx_antenna,
         &plane,
         &a.interactions.options(),
         a.interactions.freq_hz,

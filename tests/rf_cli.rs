@@ -234,3 +234,86 @@ fn bad_links_exit_2_naming_the_file_and_write_nothing() {
     assert_eq!(r.code, 2, "{}", r.stderr);
     assert!(r.stderr.contains("GHz"), "{}", r.stderr);
 }
+
+/// The line-of-sight gain (dB) of one street-canyon link traced with `--tx-antenna antenna`.
+fn los_gain(env: &Env, tx: [f64; 3], rx: [f64; 3], antenna: &str) -> Run {
+    let links = env.write(
+        "los.csv",
+        &format!(
+            "tx_x,tx_y,tx_z,rx_x,rx_y,rx_z\n{},{},{},{},{},{}\n",
+            tx[0], tx[1], tx[2], rx[0], rx[1], rx[2]
+        ),
+    );
+    let out = env.path("los_out.csv");
+    let _ = std::fs::remove_file(&out);
+    env.cli(&[
+        "trace",
+        "--scene",
+        canyon().to_str().unwrap(),
+        "--links",
+        links.to_str().unwrap(),
+        "--freq-hz",
+        "3.5e9",
+        "--rays",
+        "1000",
+        "--no-reflection",
+        "--no-transmission",
+        "--tx-antenna",
+        antenna,
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
+#[test]
+fn tx_antenna_points_a_sector_by_compass_bearing_and_refuses_bad_values() {
+    let env = Env::new();
+    // A line-of-sight link of the Sionna fixture: a sector whose boresight (compass bearing
+    // clockwise from +y, downtilt) points at the receiver adds its 8 dBi peak to the LOS gain.
+    let (tx, rx): ([f64; 3], [f64; 3]) = (
+        [-33.0, 0.0, 32.0],
+        [-55.72472001627618, -3.6680258971450135, 1.5],
+    );
+    let (dx, dy, dz) = (rx[0] - tx[0], rx[1] - tx[1], rx[2] - tx[2]);
+    let bearing = dx.atan2(dy).to_degrees();
+    let tilt = (-dz).atan2(dx.hypot(dy)).to_degrees();
+    let gain = |antenna: &str| {
+        let r = los_gain(&env, tx, rx, antenna);
+        assert_eq!(r.code, 0, "{antenna}: {}", r.stderr);
+        let text = std::fs::read_to_string(env.path("los_out.csv")).unwrap();
+        let row = text.lines().nth(1).unwrap().to_owned();
+        row.split(',').nth(6).unwrap().parse::<f64>().unwrap()
+    };
+    let iso = gain("iso");
+    assert!(iso.is_finite(), "the link has a line of sight");
+    let sector = gain(&format!("tr38901:{bearing}:{tilt}"));
+    assert!(
+        (sector - iso - 8.0).abs() < 2e-4,
+        "iso {iso}, sector {sector}"
+    );
+    // Bad values exit 2 before any tracing, saying what was expected.
+    for (bad, says) in [
+        ("tr38901:nan:0", "finite"),
+        ("tr38901:30:inf", "finite"),
+        ("tr38901:north:0", "bearing"),
+        ("tr38901:30", "a bearing and a tilt"),
+        (
+            "patch",
+            "expected iso, dipole or tr38901:BEARING_DEG:TILT_DEG",
+        ),
+    ] {
+        let r = los_gain(&env, tx, rx, bad);
+        assert_eq!(r.code, 2, "{bad}: {}", r.stderr);
+        assert!(
+            r.stderr.contains("--tx-antenna") && r.stderr.contains(says),
+            "{bad}: {}",
+            r.stderr
+        );
+        assert!(!env.path("los_out.csv").exists());
+    }
+    let map = env.path("map.tif");
+    let r = canyon_map(&env, &["--tx-antenna", "tr38901:90:x"], &map);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("tilt"), "{}", r.stderr);
+    assert!(!map.exists());
+}

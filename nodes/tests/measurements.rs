@@ -74,6 +74,17 @@ fn duke_cbrs_drive_test() {
     assert!(max_d > 100.0 && max_d < 3000.0, "{max_d}");
     assert_eq!(m.links[0].rx.z, Height::AboveGround(1.5));
     assert_eq!(m.links[0].rx_power_dbm, Some(-124.0));
+    // The cells' true bearings become grid bearings: less the meridian convergence at the site,
+    // 1.211° at A-D (pyproj's `get_factors`), 1.213° at E/F.
+    for (pci, true_deg, gamma) in [
+        ("A", 212.0, 1.2113),
+        ("C", 30.0, 1.2113),
+        ("E", 216.0, 1.2130),
+    ] {
+        let l = m.links.iter().find(|l| l.tx.id == pci).unwrap();
+        let grid = l.tx.azimuth_deg.unwrap();
+        assert!((grid - (true_deg - gamma)).abs() < 1e-3, "{pci}: {grid}");
+    }
     // Heights by cell override the one for all.
     for l in &m.links {
         let want = if l.tx.id == "E" || l.tx.id == "F" {
@@ -110,9 +121,9 @@ fn links_layout_in_site_and_geographic_coordinates_round_trips_through_export() 
     let csv = dir.path().join("m.csv");
     std::fs::write(
         &csv,
-        "tx_id,tx_lat,tx_lon,tx_height_m,rx_x,rx_y,rx_z,freq_hz,rx_power_dbm,tx_eirp_dbm,los\n\
-         A,35.9992,-78.9398,25,10.5,-20.25,101.5,3.5e9,-80.5,46,1\n\
-         A,35.9992,-78.9398,25,30,40,99,3.5e9,-95,46,0\n",
+        "tx_id,tx_lat,tx_lon,tx_height_m,tx_azimuth_deg,rx_x,rx_y,rx_z,freq_hz,rx_power_dbm,tx_eirp_dbm,los\n\
+         A,35.9992,-78.9398,25,0.5,10.5,-20.25,101.5,3.5e9,-80.5,46,1\n\
+         A,35.9992,-78.9398,25,,30,40,99,3.5e9,-95,46,0\n",
     )
     .unwrap();
     let site = durham();
@@ -134,6 +145,11 @@ fn links_layout_in_site_and_geographic_coordinates_round_trips_through_export() 
         ),
         (10.5, -20.25, 3.5e9, Some(-80.5), Some(46.0), Some(true))
     );
+    // Beside a latitude and longitude the bearing is true: less 1.211° of convergence, it is a
+    // grid bearing, wrapped into [0, 360).
+    let grid = l.tx.azimuth_deg.unwrap();
+    assert!((grid - (360.0 + 0.5 - 1.2113)).abs() < 1e-3, "{grid}");
+    assert_eq!(m.links[1].tx.azimuth_deg, None);
     assert_eq!(
         kodama_nodes::io::export::formats(kodama_nodes::ArtifactType::Measurements),
         ["csv"]
@@ -156,6 +172,8 @@ fn links_layout_in_site_and_geographic_coordinates_round_trips_through_export() 
             (a.tx.z, a.rx.z, a.rx_power_dbm, a.los),
             (b.tx.z, b.rx.z, b.rx_power_dbm, b.los)
         );
+        // Export writes the grid bearing beside site coordinates, read back as it is.
+        assert_eq!(a.tx.azimuth_deg, b.tx.azimuth_deg);
     }
 }
 

@@ -25,7 +25,9 @@ pub struct Endpoint {
     pub y: f64,
     /// Height.
     pub z: Height,
-    /// Antenna azimuth, degrees clockwise from north, when known.
+    /// Antenna azimuth, when known: a grid bearing, degrees clockwise from grid north (the site
+    /// frame's +y), not from true north (`ReadMeasurements` subtracts the meridian convergence
+    /// from the true bearings it reads). The same convention as `Antenna::azimuth_deg`.
     pub azimuth_deg: Option<f64>,
 }
 

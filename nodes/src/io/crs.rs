@@ -396,6 +396,29 @@ impl ToSite {
     }
 }
 
+impl ToSite {
+    /// The meridian convergence γ at a site-frame point, degrees: the angle from true north to
+    /// grid north (the site frame's +y), clockwise, so a true bearing b is the grid bearing
+    /// b − γ. Found numerically: the point's meridian is projected a step either side of its
+    /// latitude (about 11 m), and γ is minus the grid bearing of that chord. The source must be
+    /// geographic (it names the meridians).
+    ///
+    /// # References
+    /// Snyder, *Map Projections: A Working Manual* (USGS PP 1395, 1987), §8: γ is the angle
+    /// between the projected meridian and grid north. About 1.21° at Duke in UTM 17N.
+    pub fn convergence_deg(&self, x: f64, y: f64) -> Result<f64, String> {
+        if !matches!(self.src, Some((_, true))) {
+            return Err("meridian convergence needs a geographic source CRS".into());
+        }
+        let (lon, lat) = self.inverse(x, y)?;
+        let h = 1e-4;
+        let (s, n) = ((lat - h).max(-90.0), (lat + h).min(90.0));
+        let (xs, ys, _) = self.apply(lon, s, 0.0)?;
+        let (xn, yn, _) = self.apply(lon, n, 0.0)?;
+        Ok(-(xn - xs).atan2(yn - ys).to_degrees())
+    }
+}
+
 /// An optional CRS must be one we can build (`EPSG:<code>` or a `+proj` string).
 pub fn check_crs_param(crs: &Option<String>) -> Result<(), ParamError> {
     if let Some(c) = crs {
@@ -583,6 +606,35 @@ mod tests {
                 .contains("units of 0.3048 m")
         );
         assert!(check_site_crs("EPSG:32618").is_ok());
+    }
+
+    #[test]
+    fn meridian_convergence_at_duke_is_1_21_degrees() {
+        let t = ToSite::new(
+            &Crs::from_epsg(4326).unwrap(),
+            &site("EPSG:32617", (687000.0, 3985000.0)),
+        )
+        .unwrap();
+        // The Duke A-D site, 2.06° east of UTM 17N's central meridian (81° W): γ ≈ Δλ sin φ
+        // = 1.211° (the sphere's first term; pyproj gives 1.21).
+        let (lat, lon) = (35.999186, -78.939786);
+        let (x, y, _) = t.apply(lon, lat, 0.0).unwrap();
+        let g = t.convergence_deg(x, y).unwrap();
+        let first_term = (lon + 81.0f64) * lat.to_radians().sin();
+        assert!((g - 1.21).abs() < 0.005, "{g}");
+        assert!((g - first_term).abs() < 0.005, "{g} vs {first_term}");
+        // Zero on the central meridian, negative west of it.
+        let (x, y, _) = t.apply(-81.0, lat, 0.0).unwrap();
+        assert!(t.convergence_deg(x, y).unwrap().abs() < 1e-6);
+        let (x, y, _) = t.apply(-82.0, lat, 0.0).unwrap();
+        assert!(t.convergence_deg(x, y).unwrap() < -0.5);
+        // A projected source names no meridians.
+        let same = ToSite::new(
+            &Crs::from_user("EPSG:32617").unwrap(),
+            &site("EPSG:32617", (0.0, 0.0)),
+        )
+        .unwrap();
+        assert!(same.convergence_deg(0.0, 0.0).is_err());
     }
 
     #[test]

@@ -25,15 +25,18 @@ pub enum Polarization {
     H,
 }
 
-/// An antenna: pattern, polarisation, and where its boresight points (azimuth from +x towards
-/// +y, and downtilt, degrees).
+/// An antenna: pattern, polarisation, and where its boresight points (a compass bearing in the
+/// site frame, and a downtilt, degrees).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Antenna {
     /// The pattern.
     pub pattern: Pattern,
     /// The polarisation.
     pub polarization: Polarization,
-    /// Boresight azimuth, degrees counter-clockwise from +x (east).
+    /// Boresight azimuth: a compass bearing, degrees clockwise from grid north (the site frame's
+    /// +y), so 0 points along +y and 90 along +x. Grid north is not true north: a true bearing
+    /// becomes a grid bearing by subtracting the meridian convergence (`ReadMeasurements` does so
+    /// for the bearings it reads).
     pub azimuth_deg: f64,
     /// Downtilt, degrees below the horizon.
     pub tilt_deg: f64,
@@ -73,13 +76,7 @@ impl Antenna {
     /// horizontal in the site frame; the pattern is evaluated in the antenna's rotated frame).
     #[inline]
     pub fn field(&self, k: [f64; 3]) -> [f64; 3] {
-        let g = match self.pattern {
-            Pattern::Isotropic => 1.0,
-            p => {
-                let (theta, phi) = self.local_angles(k);
-                gain(p, theta, phi).sqrt()
-            }
-        };
+        let g = self.gain_toward(k).sqrt();
         let (th, ph) = spherical_basis(k);
         let e = match self.polarization {
             Polarization::V => th,
@@ -88,10 +85,24 @@ impl Antenna {
         e.map(|v| v * g)
     }
 
-    /// Zenith and azimuth of `k` in the antenna frame: rotate by -azimuth about z, then by -tilt
+    /// Power gain (linear) toward the unit direction `k` (site frame, away from the antenna):
+    /// the pattern evaluated in the antenna's rotated frame.
+    #[inline]
+    pub fn gain_toward(&self, k: [f64; 3]) -> f64 {
+        match self.pattern {
+            Pattern::Isotropic => 1.0,
+            p => {
+                let (theta, phi) = self.local_angles(k);
+                gain(p, theta, phi)
+            }
+        }
+    }
+
+    /// Zenith and azimuth of `k` in the antenna frame: rotate about z by -(90° - bearing) (the
+    /// bearing, clockwise from +y, is 90° - the angle counter-clockwise from +x), then by -tilt
     /// about the new y axis (a downtilt points boresight below the horizon).
     fn local_angles(&self, k: [f64; 3]) -> (f64, f64) {
-        let (sa, ca) = (-self.azimuth_deg.to_radians()).sin_cos();
+        let (sa, ca) = (self.azimuth_deg - 90.0).to_radians().sin_cos();
         let x1 = ca * k[0] - sa * k[1];
         let y1 = sa * k[0] + ca * k[1];
         let z1 = k[2];
@@ -169,13 +180,46 @@ mod tests {
             azimuth_deg: 90.0,
             tilt_deg: 10.0,
         };
-        let bore = [0.0, 10f64.to_radians().cos(), -10f64.to_radians().sin()];
+        // Bearing 90°: east, +x.
+        let bore = [10f64.to_radians().cos(), 0.0, -10f64.to_radians().sin()];
         let e = a.field(bore);
         let g = e.iter().map(|v| v * v).sum::<f64>();
         assert!((10.0 * g.log10() - 8.0).abs() < 1e-9, "{g}");
-        // Vertical polarisation: the field lies in the vertical plane through k (no x part
+        // Vertical polarisation: the field lies in the vertical plane through k (no y part
         // here), across k.
-        assert!(e[0].abs() < 1e-12, "{e:?}");
-        assert!((e[1] * bore[1] + e[2] * bore[2]).abs() < 1e-12);
+        assert!(e[1].abs() < 1e-12, "{e:?}");
+        assert!((e[0] * bore[0] + e[2] * bore[2]).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bearing_zero_points_to_grid_north_and_bearings_turn_clockwise() {
+        let sector = |azimuth_deg: f64| Antenna {
+            pattern: Pattern::Tr38901,
+            polarization: Polarization::V,
+            azimuth_deg,
+            tilt_deg: 0.0,
+        };
+        let db = |a: &Antenna, k: [f64; 3]| 10.0 * a.gain_toward(k).log10();
+        // Along the bearing: the element's peak, 8 dBi.
+        assert!((db(&sector(0.0), [0.0, 1.0, 0.0]) - 8.0).abs() < 1e-9);
+        assert!((db(&sector(90.0), [1.0, 0.0, 0.0]) - 8.0).abs() < 1e-9);
+        assert!((db(&sector(210.79), bearing(210.79)) - 8.0).abs() < 1e-9);
+        // 90° off boresight (east of a north-pointing sector, and west of it): the closed form
+        // 8 - min(12 (90/65)², 30) dB = 8 - 23.0 dB, the same on both sides.
+        let off = 8.0 - 12.0 * (90.0f64 / 65.0).powi(2);
+        assert!((off - (8.0 - 23.005_917)).abs() < 1e-5, "{off}");
+        for k in [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]] {
+            assert!((db(&sector(0.0), k) - off).abs() < 1e-9, "{k:?}");
+        }
+        assert!((db(&sector(30.0), bearing(120.0)) - off).abs() < 1e-9);
+        assert!((db(&sector(30.0), bearing(300.0)) - off).abs() < 1e-9);
+        // Behind: 30 dB below the peak.
+        assert!((db(&sector(0.0), [0.0, -1.0, 0.0]) - (8.0 - 30.0)).abs() < 1e-9);
+    }
+
+    /// The horizontal unit vector at compass bearing `b` degrees (clockwise from +y).
+    fn bearing(b: f64) -> [f64; 3] {
+        let (s, c) = b.to_radians().sin_cos();
+        [s, c, 0.0]
     }
 }

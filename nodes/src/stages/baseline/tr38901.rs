@@ -4,8 +4,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Measurements, Raster};
-use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
+use crate::artifact::{ArtifactType, Endpoint, Measurements, Raster};
+use crate::rf::antenna::Antenna;
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// A TR 38.901 scenario.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -124,16 +125,25 @@ pub fn los_probability(s: Scenario, d2d: f64, h_ut: f64) -> f64 {
 pub struct Tr38901Params {
     /// The scenario.
     pub scenario: Scenario,
+    /// Transmit antenna: its gain toward each receiver is added to the link (the path loss falls
+    /// by it). Its `azimuth_deg` is a compass bearing from grid north (the site frame's +y); a
+    /// link's own azimuth (`Endpoint::azimuth_deg`) replaces it, as in `Trace`. Default none:
+    /// the TR 38.901 formulas alone (an isotropic antenna).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tx_antenna: Option<Antenna>,
 }
 
 /// Predicted path loss per link by TR 38.901. With a `los` input (a `Trace` of the scene), each
 /// link takes the LOS or NLOS formula by whether the trace found a line-of-sight path; without,
-/// the LOS and NLOS losses are mixed by the LOS probability (power-weighted).
+/// the LOS and NLOS losses are mixed by the LOS probability (power-weighted). With a
+/// `tx_antenna`, its gain toward the receiver (along the straight line between the two, at their
+/// site-frame heights) is subtracted from the loss.
 pub struct Tr38901;
 
 impl Stage for Tr38901 {
     const KIND: &'static str = "Tr38901";
-    const VERSION: u32 = 1;
+    // 2: an optional transmit antenna (no change without one).
+    const VERSION: u32 = 2;
     const DOC: &'static str =
         "3GPP TR 38.901 UMa/UMi/RMa path loss per link, LOS from a trace or the LOS probability";
     const INPUTS: &'static [InputSpec] = &[
@@ -152,6 +162,13 @@ impl Stage for Tr38901 {
     type Params = Tr38901Params;
     type Output = Measurements;
 
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        match &p.tx_antenna {
+            Some(a) => crate::rf::antenna::check_antenna("tx_antenna", a),
+            None => Ok(()),
+        }
+    }
+
     fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Measurements, StageError> {
         let links: &Measurements = inputs.one("links")?;
         let los: Option<&Measurements> = inputs.optional("los")?;
@@ -164,9 +181,9 @@ impl Stage for Tr38901 {
             ));
         }
         // Absolute heights stand on the terrain, or on z = 0 without one.
-        let height = |e: &crate::artifact::Endpoint| {
-            let ground = terrain.and_then(|t| t.bilinear(e.x, e.y)).unwrap_or(0.0);
-            e.above_ground(Some(ground))
+        let ground = |e: &Endpoint| terrain.and_then(|t| t.bilinear(e.x, e.y)).unwrap_or(0.0);
+        let height = |e: &Endpoint| {
+            e.above_ground(Some(ground(e)))
                 .expect("a ground height is given")
         };
         let mut out = links.clone();
@@ -185,12 +202,44 @@ impl Stage for Tr38901 {
                         .log10()
                 }
             };
-            l.path_loss_db = Some(pl);
+            let g_db = match &p.tx_antenna {
+                Some(a) => antenna_gain_db(a, &l.tx, &l.rx, &ground),
+                None => 0.0,
+            };
+            l.path_loss_db = Some(pl - g_db);
             l.rx_power_dbm = None;
             l.los = los.and_then(|m| m.links[i].los);
         }
         Ok(out)
     }
+}
+
+/// The gain (dBi) of `antenna` at `tx` toward `rx`, along the straight line between their
+/// site-frame positions (heights on the ground under each). `tx`'s own azimuth, when it has
+/// one, replaces the antenna's, as in `Trace`. Straight down when the two coincide in plan and
+/// height.
+fn antenna_gain_db(
+    antenna: &Antenna,
+    tx: &Endpoint,
+    rx: &Endpoint,
+    ground: &dyn Fn(&Endpoint) -> f64,
+) -> f64 {
+    let mut a = *antenna;
+    if let Some(az) = tx.azimuth_deg.filter(|v| v.is_finite()) {
+        a.azimuth_deg = az;
+    }
+    let z = |e: &Endpoint| {
+        e.absolute_z(Some(ground(e)))
+            .expect("a ground height is given")
+    };
+    let d = [rx.x - tx.x, rx.y - tx.y, z(rx) - z(tx)];
+    let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let k = if n > 0.0 {
+        d.map(|v| v / n)
+    } else {
+        [0.0, 0.0, -1.0]
+    };
+    10.0 * a.gain_toward(k).log10()
 }
 
 #[cfg(test)]
@@ -246,5 +295,93 @@ mod tests {
         close(los_probability(Scenario::UMa, 200.0, 1.5), 0.1280);
         close(los_probability(Scenario::RMa, 1000.0, 1.5), 0.3716);
         close(los_probability(Scenario::UMa, 200.0, 20.0), 0.3257);
+    }
+
+    #[test]
+    fn a_sector_antenna_adds_its_gain_toward_each_receiver() {
+        use crate::artifact::{Height, Link};
+        use crate::rf::antenna::{Pattern, Polarization};
+        use crate::stage::Slot;
+        use crate::{Artifact, Site};
+        use std::sync::Arc;
+        let end = |x: f64, y: f64, azimuth_deg: Option<f64>| Endpoint {
+            id: String::new(),
+            x,
+            y,
+            z: Height::Absolute(10.0),
+            azimuth_deg,
+        };
+        let link = |rx: Endpoint, az: Option<f64>| Link {
+            tx: end(0.0, 0.0, az),
+            rx,
+            freq_hz: 3.5e9,
+            path_loss_db: None,
+            rx_power_dbm: Some(-90.0),
+            tx_eirp_dbm: None,
+            los: None,
+        };
+        // Level links (both ends 10 m up): along the bearing, 90° off it, and one whose own
+        // azimuth (east) replaces the antenna's (north).
+        let links = Measurements {
+            links: vec![
+                link(end(0.0, 200.0, None), None),
+                link(end(200.0, 0.0, None), None),
+                link(end(200.0, 0.0, None), Some(90.0)),
+            ],
+        };
+        let inputs =
+            Inputs::new().with("links", Slot::One(Arc::new(Artifact::Measurements(links))));
+        let site = Site {
+            crs: "EPSG:32617".into(),
+            origin: (0.0, 0.0),
+            cell_m: 1.0,
+        };
+        let ctx = Ctx::new(&site, &[]);
+        let run = |tx_antenna| {
+            let p = Tr38901Params {
+                scenario: Scenario::UMa,
+                tx_antenna,
+            };
+            Tr38901::validate(&p).unwrap();
+            let m = Tr38901::run(&p, &inputs, &ctx).unwrap();
+            m.links
+                .iter()
+                .map(|l| l.path_loss_db.unwrap())
+                .collect::<Vec<_>>()
+        };
+        let omni = run(None);
+        let sector = run(Some(Antenna {
+            pattern: Pattern::Tr38901,
+            polarization: Polarization::V,
+            azimuth_deg: 0.0,
+            tilt_deg: 0.0,
+        }));
+        let off = 8.0 - 12.0 * (90.0f64 / 65.0).powi(2);
+        assert!(
+            (omni[0] - sector[0] - 8.0).abs() < 1e-9,
+            "{omni:?} {sector:?}"
+        );
+        assert!(
+            (omni[1] - sector[1] - off).abs() < 1e-9,
+            "{omni:?} {sector:?}"
+        );
+        assert!(
+            (omni[2] - sector[2] - 8.0).abs() < 1e-9,
+            "{omni:?} {sector:?}"
+        );
+        // Without the param the params serialize as before (no `tx_antenna` key).
+        let p = Tr38901Params {
+            scenario: Scenario::UMa,
+            tx_antenna: None,
+        };
+        assert_eq!(serde_json::to_string(&p).unwrap(), r#"{"scenario":"UMa"}"#);
+        let bad = Tr38901Params {
+            scenario: Scenario::UMa,
+            tx_antenna: Some(Antenna {
+                azimuth_deg: f64::NAN,
+                ..Antenna::default()
+            }),
+        };
+        assert_eq!(Tr38901::validate(&bad).unwrap_err().field, "tx_antenna");
     }
 }

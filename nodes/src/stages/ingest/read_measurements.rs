@@ -4,10 +4,16 @@
 //! - `Links`: the project's CSV, one row per link. Transmitter `tx_x, tx_y, tx_z` (site frame) or
 //!   `tx_lat, tx_lon, tx_height_m` (WGS84, height above ground); the same for `rx_`; `freq_hz`;
 //!   `path_loss_db`, or `rx_power_dbm` with optional `tx_eirp_dbm`; optional `tx_id`, `rx_id`,
-//!   `tx_azimuth_deg`, `los` (0/1).
+//!   `tx_azimuth_deg`, `los` (0/1). The azimuth is a compass bearing: true north beside
+//!   `tx_lat, tx_lon` (turned to grid north here), grid north beside `tx_x, tx_y` (as Export
+//!   writes it).
 //! - `DukeCbrs`: the Duke CBRS drive test (`PCI, latitude, longitude, device, rsrp`) with its cells
 //!   file (`{"cells": [{"pci", "lat", "lon", "azimuth_deg", "freq_hz"}]}`): RSRP as received power,
-//!   EIRP unknown, transmitter and receiver heights from the params (not published).
+//!   EIRP unknown, transmitter and receiver heights from the params (not published). The cells'
+//!   azimuths are true bearings, turned to grid bearings here.
+//!
+//! Every `Endpoint::azimuth_deg` read is a grid bearing (clockwise from the site frame's +y):
+//! a true bearing less the meridian convergence at the transmitter (`ToSite::convergence_deg`).
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -70,7 +76,8 @@ pub struct ReadMeasurements;
 
 impl Stage for ReadMeasurements {
     const KIND: &'static str = "ReadMeasurements";
-    // 2: DukeCbrs `tx_heights_m`, heights by cell.
+    // 2: DukeCbrs `tx_heights_m`, heights by cell; azimuths read as true bearings become grid
+    // bearings (less the meridian convergence).
     const VERSION: u32 = 2;
     const DOC: &'static str =
         "drive-test measurements CSV (links, or the Duke CBRS layout) into the site frame, Sec. 5";
@@ -375,7 +382,13 @@ fn read_links(path: &Path, wgs84: &ToSite) -> Result<Measurements, StageError> {
     for row in r.records() {
         let (rec, line) = record(row, path)?;
         let mut tx_end = endpoint(&t, &rec, line, &tx, id(&rec, "tx_id"), wgs84)?;
-        tx_end.azimuth_deg = t.optional_number(&rec, line, az)?;
+        tx_end.azimuth_deg = match (t.optional_number(&rec, line, az)?, &tx) {
+            (Some(b), Place::Geo { .. }) => Some(
+                grid_bearing(b, wgs84, tx_end.x, tx_end.y)
+                    .map_err(|m| StageError::bad_input(path, format!("line {line}"), m))?,
+            ),
+            (b, _) => b,
+        };
         if tx_end.id.is_empty() {
             tx_end.id = format!("{:.1},{:.1}", tx_end.x, tx_end.y);
         }
@@ -398,6 +411,12 @@ fn read_links(path: &Path, wgs84: &ToSite) -> Result<Measurements, StageError> {
         out.links.push(link);
     }
     Ok(out)
+}
+
+/// A true bearing (degrees clockwise from true north) at a site-frame point as a grid bearing
+/// (clockwise from the site frame's +y), in [0, 360).
+fn grid_bearing(true_deg: f64, wgs84: &ToSite, x: f64, y: f64) -> Result<f64, String> {
+    Ok((true_deg - wgs84.convergence_deg(x, y)?).rem_euclid(360.0))
 }
 
 /// A latitude and longitude a projection can take (proj gives garbage, not errors, past them).
@@ -480,7 +499,10 @@ fn read_duke(
             x,
             y,
             z: Height::AboveGround(tx_h.by_pci.get(&c.pci).copied().unwrap_or(tx_h.all)),
-            azimuth_deg: Some(c.azimuth_deg),
+            azimuth_deg: Some(
+                grid_bearing(c.azimuth_deg, wgs84, x, y)
+                    .map_err(|m| StageError::bad_input(cells_path, format!("cell {}", c.pci), m))?,
+            ),
         };
         by_pci.insert(c.pci.clone(), (tx, c.freq_hz));
     }

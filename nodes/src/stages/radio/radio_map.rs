@@ -30,7 +30,8 @@ pub struct RadioMapParams {
     /// Interactions and the number of rays. Default: every field's default.
     #[serde(default)]
     pub options: MapOptions,
-    /// The transmit antenna. Default isotropic, vertical.
+    /// The transmit antenna; its `azimuth_deg` is a compass bearing, degrees clockwise from grid
+    /// north (the site frame's +y). Default isotropic, vertical.
     #[serde(default)]
     pub antenna: Antenna,
     /// Use P.2040 laws outside their frequency ranges. Default false. Ground above 10 GHz needs
@@ -134,7 +135,9 @@ impl Stage for RadioMap {
     // 8: a face's reflection term capped at half a strip's peak, as the UTD's at a boundary.
     // 9: an edge's length for that bound is its run across material changes.
     // 10: ground above 10 GHz is ITU-R P.527 soil, not an error or P.2040 extrapolated (rf::p527).
-    const VERSION: u32 = 10;
+    // 11: the antenna's azimuth is a compass bearing from grid north, not an angle from +x
+    //     (rf::antenna).
+    const VERSION: u32 = 11;
     const DOC: &'static str = "radio map (path gain, dB) by shooting and bouncing rays, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),

@@ -19,10 +19,11 @@ use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 pub struct TraceParams {
     /// Interactions and effort. Default: every field's default.
     pub options: LinkOptions,
-    /// Transmit antenna; a link's own azimuth (from the measurements) turns it. Default
-    /// isotropic, vertical.
+    /// Transmit antenna; its `azimuth_deg` is a compass bearing, degrees clockwise from grid north
+    /// (the site frame's +y). A link's own azimuth (the measurements' `Endpoint::azimuth_deg`, a
+    /// grid bearing too) replaces it. Default isotropic, vertical.
     pub tx_antenna: Antenna,
-    /// Receive antenna. Default isotropic, vertical.
+    /// Receive antenna (bearing as `tx_antenna`'s). Default isotropic, vertical.
     pub rx_antenna: Antenna,
     /// Report the coherent sum |Σ a e^{-j2πfτ}|² instead of Σ |a|². Default false.
     pub coherent: bool,
@@ -122,7 +123,9 @@ impl Stage for Trace {
     // 12: a face's reflection term capped at half a strip's peak, as the UTD's at a boundary.
     // 13: an edge's length for that bound is its run across material changes.
     // 14: ground above 10 GHz is ITU-R P.527 soil, not an error or P.2040 extrapolated (rf::p527).
-    const VERSION: u32 = 14;
+    // 15: antenna azimuths are compass bearings from grid north, as the links' azimuths already
+    //     were (rf::antenna); the links' azimuths are grid, not true, bearings (ReadMeasurements).
+    const VERSION: u32 = 15;
     const DOC: &'static str = "predicted path loss per link: LOS, specular reflection, slab transmission, foliage loss, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the scene to trace"),
@@ -162,12 +165,13 @@ impl Stage for Trace {
                     ))
                 })
         };
-        // One scene per carrier, one trace per (carrier, transmitter azimuth).
+        // One scene per carrier, one trace per (carrier, transmitter azimuth). The links' azimuths
+        // and the antenna's are both grid bearings: no conversion.
         let mut groups: BTreeMap<(u64, u64), Vec<usize>> = BTreeMap::new();
         let mut ends = Vec::with_capacity(links.links.len());
         for (i, l) in links.links.iter().enumerate() {
             ends.push(([l.tx.x, l.tx.y, z(&l.tx)?], [l.rx.x, l.rx.y, z(&l.rx)?]));
-            let az = l.tx.azimuth_deg.map_or(f64::NAN, |a| 90.0 - a);
+            let az = l.tx.azimuth_deg.unwrap_or(f64::NAN);
             groups
                 .entry((l.freq_hz.to_bits(), az.to_bits()))
                 .or_default()
