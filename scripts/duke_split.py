@@ -4,7 +4,11 @@ in driving order, so a "track segment" is the stretch of road inside one block),
 each OSM box covers and how many fall inside a building footprint, the height rasters, and the 3GPP
 UMa score with one offset per cell fitted on the training half and scored on the held-out half.
 
-    python3 scripts/duke_split.py ../shared/data [block_m]
+    python3 scripts/duke_split.py ../shared/data [block_m] [--fixture tests/fixtures/duke_split_reference.csv]
+
+With --fixture it also writes the reference tests/duke.rs checks graphs/duke_baselines.ron
+against: 3GPP UMa and UMi (omni, cells 20 m, phones 1.5 m), scored as Evaluate's `split`,
+`windows` and `exclude_footprints` score them (see `fixture` below for the exact tests).
 
 numpy and pyproj. The split rule, to be reimplemented in Rust bit for bit (the proposed rule is "checker"; "hash" is shown for comparison):
     bx = floor(x_utm / block_m), by = floor(y_utm / block_m)      (EPSG:32617, metres)
@@ -23,8 +27,14 @@ from pyproj import Transformer
 
 from tr38901_reference import UMA, UMI, fspl, pathloss
 
-root = sys.argv[1]
-BLOCK = float(sys.argv[2]) if len(sys.argv) > 2 else 100.0
+args = sys.argv[1:]
+FIXTURE = None
+if "--fixture" in args:
+    k = args.index("--fixture")
+    FIXTURE = args[k + 1]
+    del args[k:k + 2]
+root = args[0]
+BLOCK = float(args[1]) if len(args) > 1 else 100.0
 M64 = (1 << 64) - 1
 to_utm = Transformer.from_crs("EPSG:4326", "EPSG:32617", always_xy=True)
 
@@ -246,3 +256,121 @@ for label, sel in (("all readings", np.ones(len(rows), bool)), ("kept readings",
         e = np.concatenate(errs)
         print(f"{mname} on {label}, offsets on train, held-out P2P RMSE {np.sqrt(np.mean(e**2)):.2f} dB"
               f" (ME {np.mean(e):.2f}); " + ", ".join(line))
+
+
+# --- the fixture for tests/duke.rs ---------------------------------------------------------------
+# The same scoring as graphs/duke_baselines.ron's Evaluate nodes, test for test:
+#  - site frame: EPSG:32617 minus the origin (687000, 3985000); the blocks use the CRS coordinates.
+#  - windows: for each box file, the smallest whole-metre rectangle in the site frame holding its
+#    <bounds> lat/lon box: its four corners projected, then floor of the minima and ceil of the
+#    maxima. A reading is in when x_min <= x <= x_max and y_min <= y <= y_max for some window.
+#    (The lat/lon box is not a rectangle in UTM, turned by the 1.21 deg meridian convergence, so
+#    this keeps a few readings the lat/lon test drops; the count is printed.)
+#  - footprints: ReadOsmBuildings' rule, closed ways tagged building (not "no") or building:part,
+#    both files' outer rings; a reading inside one (even-odd) is left out. Counted only among the
+#    readings inside a window, as Evaluate does.
+#  - the split: block_m 100, guard 5, as above; offsets on the training half per cell, scores on
+#    the held-out half.
+ORIGIN = (687000.0, 3985000.0)
+BOX_FILES = ("pci_ABCD", "pci_EF_new")
+
+
+def window_of(box):
+    lat0, lon0, lat1, lon1 = box
+    cx, cy = to_utm.transform([lon0, lon1, lon0, lon1], [lat0, lat0, lat1, lat1])
+    cx, cy = np.array(cx) - ORIGIN[0], np.array(cy) - ORIGIN[1]
+    return (float(np.floor(cx.min())), float(np.floor(cy.min())),
+            float(np.ceil(cx.max())), float(np.ceil(cy.max())))
+
+
+def building_rings(path):
+    """Outer rings (EPSG:32617) of the buildings ReadOsmBuildings reads: closed ways only (the
+    files have no building relations; checked)."""
+    t = ET.parse(path).getroot()
+    nodes = {n.get("id"): (float(n.get("lon")), float(n.get("lat"))) for n in t.iter("node")}
+    tags = lambda e: {g.get("k"): g.get("v") for g in e.findall("tag")}
+    for r in t.iter("relation"):
+        tg = tags(r)
+        assert not (("building" in tg or "building:part" in tg)
+                    and tg.get("type") in ("multipolygon", "building")), "relations not handled"
+    rings = []
+    for w in t.iter("way"):
+        tg = tags(w)
+        if not (tg.get("building", "no") != "no" or "building:part" in tg):
+            continue
+        refs = [n.get("ref") for n in w.findall("nd")]
+        if len(refs) < 4 or refs[0] != refs[-1]:
+            continue
+        a = np.array([nodes[r] for r in refs])
+        ux, uy = to_utm.transform(a[:, 0], a[:, 1])
+        rings.append(np.stack([ux, uy], 1))
+    return rings
+
+
+def fixture(path):
+    sx, sy = x - ORIGIN[0], y - ORIGIN[1]
+    windows, rings, in_latlon = [], [], np.zeros(len(rows), bool)
+    for name in BOX_FILES:
+        box, _, _, _, _ = osm_footprints(f"{root}/duke/osm/{name}.osm")
+        windows.append(window_of(box))
+        in_latlon |= (lat >= box[0]) & (lat <= box[2]) & (lon >= box[1]) & (lon <= box[3])
+        rings += building_rings(f"{root}/duke/osm/{name}.osm")
+    in_win = np.zeros(len(rows), bool)
+    for x0, y0, x1, y1 in windows:
+        in_win |= (sx >= x0) & (sx <= x1) & (sy >= y0) & (sy <= y1)
+    in_ring = np.zeros(len(rows), bool)
+    for ring in rings:
+        lo, hi = ring.min(0), ring.max(0)
+        k = (x >= lo[0]) & (x <= hi[0]) & (y >= lo[1]) & (y <= hi[1])
+        if k.any():
+            idx = np.where(k)[0]
+            in_ring[idx] |= inside(ring, x[idx], y[idx])
+    kept = in_win & ~in_ring
+    print("fixture windows (site metres, origin 687000, 3985000): "
+          + ", ".join(f"{n} {w}" for n, w in zip(BOX_FILES, windows))
+          + f"; readings in a window {in_win.sum()}, in a lat/lon box {in_latlon.sum()}, "
+          f"in one and not the other {(in_win != in_latlon).sum()}")
+    bx, by = np.floor(x / BLOCK), np.floor(y / BLOCK)
+    fx, fy = x - bx * BLOCK, y - by * BLOCK
+    guard = (fx < GUARD) | (fx > BLOCK - GUARD) | (fy < GUARD) | (fy > BLOCK - GUARD)
+    odd = np.mod(bx + by, 2) == 1
+    tr, te, gd = kept & ~guard & ~odd, kept & ~guard & odd, kept & guard
+    out = []
+    for node, model in (("uma_eval", uma), ("umi_eval", umi)):
+        pred = model(d2d, fc)
+        rec = lambda k, v: out.append(f"{node},{k},{v:.6f}")
+        rec("links", len(rows))
+        rec("links_outside_window", (~in_win).sum())
+        rec("links_in_footprint", (in_win & in_ring).sum())
+        rec("links_guard", gd.sum())
+        rec("links_train", tr.sum())
+        rec("links_held_out", te.sum())
+        errs, train_errs, no_offset = [], [], 0
+        for p in P:
+            c = pci == p
+            if not (tr & c).any():
+                no_offset += (te & c).sum()
+                continue
+            off = np.mean(meas[tr & c] - pred[tr & c])
+            rec(f"offset_db/{p}", off)
+            rec(f"offset_n/{p}", (tr & c).sum())
+            e = pred[te & c] - (meas[te & c] - off)
+            train_errs.append(pred[tr & c] - (meas[tr & c] - off))
+            errs.append(e)
+            rec(f"tx/{p}/n", len(e))
+            rec(f"tx/{p}/p2p_rmse_db", np.sqrt(np.mean(e**2)))
+        e = np.concatenate(errs)
+        rec("links_no_offset", no_offset)
+        rec("links_scored", len(e))
+        rec("p2p_rmse_db", np.sqrt(np.mean(e**2)))
+        rec("p2p_me_db", np.mean(e))
+        rec("train/p2p_rmse_db", np.sqrt(np.mean(np.concatenate(train_errs) ** 2)))
+        print(f"fixture {node}: held-out P2P RMSE {np.sqrt(np.mean(e**2)):.2f} dB over {len(e)} "
+              f"readings (train {tr.sum()}, guard {gd.sum()}, outside {(~in_win).sum()}, "
+              f"in a footprint {(in_win & in_ring).sum()})")
+    with open(path, "w") as f:
+        f.write("evaluation,metric,value\n" + "\n".join(out) + "\n")
+
+
+if FIXTURE:
+    fixture(FIXTURE)

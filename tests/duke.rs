@@ -40,3 +40,93 @@ fn duke_scores_match_the_numpy_reference() {
     );
     assert!(env.out().join("report/report.md").exists());
 }
+
+/// The real data, read in place; `None` (after saying so) when it is not here, except in CI.
+fn shared_data(root: &Path) -> Option<std::path::PathBuf> {
+    let data = root.join("../shared/data");
+    if data.join("rf/duke_cbrs.csv").is_file() && data.join("duke/osm").is_dir() {
+        return Some(data);
+    }
+    if matches!(std::env::var("CI").as_deref(), Ok("true")) {
+        panic!(
+            "real test data missing: {}; CI must run this",
+            data.display()
+        );
+    }
+    println!("skipped: real test data missing at {}", data.display());
+    None
+}
+
+/// graphs/duke_baselines.ron (UMa and UMi; offsets on the training blocks, scores on the held-out
+/// ones, readings outside the OSM boxes or inside a footprint left out) against
+/// scripts/duke_split.py --fixture, which applies the same tests with PROJ: per-cell and overall
+/// held-out P2P RMSE to 0.01 dB, every count exact.
+#[test]
+fn duke_split_scores_match_the_numpy_reference() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let Some(data) = shared_data(root) else {
+        return;
+    };
+    let env = Env::new();
+    let run = env.run(
+        &root.join("graphs/duke_baselines.ron"),
+        &["--data", data.to_str().unwrap()],
+    );
+    assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
+    let eval = |name: &str| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(env.out().join(format!("{name}.json"))).unwrap())
+            .unwrap()
+    };
+    let ours = [
+        ("uma_eval", eval("uma_eval")),
+        ("umi_eval", eval("umi_eval")),
+    ];
+    let reference =
+        std::fs::read_to_string(root.join("tests/fixtures/duke_split_reference.csv")).unwrap();
+    let mut compared = 0;
+    for line in reference.lines().skip(1) {
+        let mut cells = line.split(',');
+        let (node, key, value) = (
+            cells.next().unwrap(),
+            cells.next().unwrap(),
+            cells.next().unwrap(),
+        );
+        let want: f64 = value.parse().unwrap();
+        let got = ours.iter().find(|(n, _)| *n == node).unwrap().1[key]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{node} {key} missing"));
+        if key.starts_with("links") || key.ends_with("/n") || key.starts_with("offset_n/") {
+            assert_eq!(got, want, "{node} {key}: ours {got}, numpy {want}");
+        } else {
+            assert!(
+                (got - want).abs() < 0.01,
+                "{node} {key}: ours {got}, numpy {want}"
+            );
+        }
+        compared += 1;
+    }
+    assert_eq!(compared, 2 * 35);
+    for (node, m) in &ours {
+        println!(
+            "duke split: {node} held-out P2P RMSE {:.2} dB over {:.0} readings (train {:.0}, \
+             guard {:.0}); matches numpy",
+            m["p2p_rmse_db"].as_f64().unwrap(),
+            m["links_held_out"].as_f64().unwrap(),
+            m["links_train"].as_f64().unwrap(),
+            m["links_guard"].as_f64().unwrap()
+        );
+    }
+    // The report says where the links that are not scored went, per model.
+    let md = std::fs::read_to_string(env.out().join("report/report.md")).unwrap();
+    let left_out = md
+        .split("## Links left out of the scores")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no table of links left out: {md}"));
+    for row in [
+        "| outside every window | 3687 | 3687 |",
+        "| inside a building footprint | 1745 | 1745 |",
+        "| scored | 15682 | 15682 |",
+    ] {
+        assert!(left_out.contains(row), "{row}: {left_out}");
+    }
+}

@@ -31,7 +31,7 @@ pub use material_layers::{
     ChartMaterials, MaterialLayers, MaterialSource, MaterialStats, NO_MATERIAL,
 };
 pub use measurements::{Endpoint, Height, Link, Measurements, link_distance, measured_loss};
-pub use metrics::{Metrics, carrier_label};
+pub use metrics::{Half, Metrics, block_half, carrier_label};
 pub use ortho::Ortho;
 pub use points::PointSet;
 pub use raster::{Grid, Raster};

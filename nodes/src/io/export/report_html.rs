@@ -57,6 +57,8 @@ pub struct Page<'a> {
     pub models: &'a [String],
     /// Table 1.
     pub table: &'a [TableRow],
+    /// Why links were left out of the scores, per model (same columns); nothing when empty.
+    pub left_out: &'a [TableRow],
     /// Plot files, relative to the page.
     pub plots: &'a [&'a str],
     /// Scenes to draw, by name; the first is shown at load, and its terrain carries the map and
@@ -69,6 +71,28 @@ pub struct Page<'a> {
     /// Stages' reports (a carve's outcomes, the clutter's counts), by name: what each stage
     /// did, shown after the plots.
     pub evidence: &'a [(&'a str, &'a Metrics)],
+}
+
+/// A table of rows by model, each row's best value marked.
+fn model_table(models: &[String], rows: &[TableRow]) -> String {
+    let mut table = String::from("<table><thead><tr><th>metric</th>");
+    for m in models {
+        table += &format!("<th>{}</th>", esc(m));
+    }
+    table += "</tr></thead><tbody>";
+    for r in rows {
+        table += &format!("<tr><td>{}</td>", esc(&r.label));
+        for (k, v) in r.values.iter().enumerate() {
+            if r.best == Some(k) {
+                table += &format!("<td class=\"best\">{}</td>", esc(v));
+            } else {
+                table += &format!("<td>{}</td>", esc(v));
+            }
+        }
+        table += "</tr>";
+    }
+    table += "</tbody></table>";
+    table
 }
 
 /// The definitions under Table 1 as a list; nothing without any.
@@ -311,23 +335,15 @@ pub fn report_html(p: &Page) -> Result<String, String> {
         .map_err(|e| e.to_string())?
         .replace("</", "<\\/");
 
-    let mut table = String::from("<table><thead><tr><th>metric</th>");
-    for m in p.models {
-        table += &format!("<th>{}</th>", esc(m));
-    }
-    table += "</tr></thead><tbody>";
-    for r in p.table {
-        table += &format!("<tr><td>{}</td>", esc(&r.label));
-        for (k, v) in r.values.iter().enumerate() {
-            if r.best == Some(k) {
-                table += &format!("<td class=\"best\">{}</td>", esc(v));
-            } else {
-                table += &format!("<td>{}</td>", esc(v));
-            }
-        }
-        table += "</tr>";
-    }
-    table += "</tbody></table>";
+    let table = model_table(p.models, p.table);
+    let left_out_links = if p.left_out.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "<h3>Links left out of the scores</h3>{}",
+            model_table(p.models, p.left_out)
+        )
+    };
     let plots: String = p
         .plots
         .iter()
@@ -365,7 +381,7 @@ footer{{max-width:1200px;margin:0 auto;padding:12px 24px 40px;color:#667;font-si
 </style></head>
 <body>
 <header><h1>KODAMA report: {site}</h1><p>{intro}</p></header>
-<section><h2>Table 1</h2>{table}{definitions}</section>
+<section><h2>Table 1</h2>{table}{definitions}{left_out_links}</section>
 <section><h2>The twin in 3D</h2>
 <p>Drag to orbit, right-drag (or shift-drag) to pan, wheel to zoom; click a measured point for its link.</p>
 <div id="viewer"><canvas id="c"></canvas><div id="panel"></div><div id="info"></div><div id="legend"></div></div>

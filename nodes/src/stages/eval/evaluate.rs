@@ -11,16 +11,24 @@
 //! flag where it has one, else by a stated reference trace (`los_reference`), never by the model
 //! being scored. Predictions past the floor are scored as the floor, in P2P and in the trend
 //! lines alike; they are counted.
+//!
+//! With a `split`, the offsets are fitted on the training half of a checkerboard of blocks and
+//! every reported score is computed on the held-out half ([`block_half`]); `windows` and
+//! `exclude_footprints` leave out receivers outside the scored area or inside a building. Every
+//! link left out is counted under its reason.
 
 use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Measurements, Metrics, Raster};
-use crate::artifact::{carrier_label, link_distance, measured_loss};
+use crate::artifact::{ArtifactType, Footprints, Measurements, Metrics, Raster};
+use crate::artifact::{
+    Half, block_half, carrier_label, link_distance, measured_loss, point_in_ring,
+};
+use crate::params::check_window;
 use crate::rf::em::fspl_db;
 use crate::rf::pathloss_fit::{fit_close_in, fit_power_distance};
-use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`Evaluate`].
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -37,7 +45,43 @@ pub struct EvaluateParams {
     /// scored on the same links. Default none: predictions are taken as they are and links a
     /// model finds no path for are left out of its scores (`links_no_path`).
     pub floor_db: Option<f64>,
+    /// Fit the offsets on one half of the links and score on the other. Default none: fitted and
+    /// scored on all links, as before.
+    pub split: Option<Split>,
+    /// Score only receivers inside one of these boxes, (x_min, y_min, x_max, y_max) in site
+    /// metres, edges included; the others are left out and counted (`links_outside_window`).
+    /// Default none: everywhere.
+    pub windows: Option<Vec<(f64, f64, f64, f64)>>,
 }
+
+/// How [`EvaluateParams::split`] divides the links.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub enum Split {
+    /// A checkerboard of `block_m` squares in the site's CRS ([`block_half`]): offsets fitted on
+    /// the even blocks, scores on the odd ones, receivers within `guard_m` of a block's edge in
+    /// neither. A drive test has no time stamps to split by track segment; the stretch of road
+    /// inside a block is the segment, and every reading at one place is in one half.
+    Blocks {
+        /// The block's side, metres. Default 100.
+        #[serde(default = "block_m")]
+        block_m: f64,
+        /// The guard band inside each block's edge, metres, in [0, block_m / 2). Default 5.
+        #[serde(default = "guard_m")]
+        guard_m: f64,
+    },
+}
+
+fn block_m() -> f64 {
+    100.0
+}
+
+fn guard_m() -> f64 {
+    5.0
+}
+
+/// The most boxes `windows` may list.
+const MAX_WINDOWS: usize = 64;
 
 /// Point-to-point statistics of errors e_i = predicted − measured.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -76,7 +120,9 @@ impl Stage for Evaluate {
     // 5: PD/CI RMSE = RMS gap between the model's line and the measurements' line (the old
     // figure is pd/ci_scatter_db), lines per carrier (f/<carrier>/...), floor-clamped links in
     // the fits at the floor as in P2P, the measurements' own σ about their lines.
-    const VERSION: u32 = 5;
+    // 6: `split` (offsets on the training blocks, scores on the held-out ones), `windows`,
+    // `exclude_footprints`; without them the same metrics as 5.
+    const VERSION: u32 = 6;
     const DOC: &'static str = "P2P error, and power-distance and close-in trend RMSE (the model's line against the measurements' line, per carrier) of predictions against measurements (per-tx offsets when EIRP is unknown; LOS/NLOS)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -100,15 +146,58 @@ impl Stage for Evaluate {
             "a trace of the same links through one stated reference scene: its LOS flags group \
              the links whose measurement has none (give every model's Evaluate the same one)",
         ),
+        InputSpec::many(
+            "exclude_footprints",
+            ArtifactType::Footprints,
+            "buildings: receivers inside one's outer ring are left out and counted              (`links_in_footprint`)",
+        ),
     ];
     type Params = EvaluateParams;
     type Output = Metrics;
 
-    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Metrics, StageError> {
+    fn validate(p: &Self::Params) -> Result<(), ParamError> {
+        if let Some(Split::Blocks { block_m, guard_m }) = p.split {
+            if !(block_m.is_finite() && block_m > 0.0) {
+                return Err(ParamError::new(
+                    "split",
+                    format!("expected a positive, finite block_m in metres; found {block_m}"),
+                ));
+            }
+            if !(guard_m >= 0.0 && guard_m < block_m / 2.0) {
+                return Err(ParamError::new(
+                    "split",
+                    format!(
+                        "expected guard_m in [0, block_m / 2) = [0, {}) metres; found {guard_m}",
+                        block_m / 2.0
+                    ),
+                ));
+            }
+        }
+        if let Some(w) = &p.windows {
+            if w.is_empty() || w.len() > MAX_WINDOWS {
+                return Err(ParamError::new(
+                    "windows",
+                    format!(
+                        "expected 1 to {MAX_WINDOWS} boxes; found {} (leave `windows` out to \
+                         score everywhere)",
+                        w.len()
+                    ),
+                ));
+            }
+            for (k, b) in w.iter().enumerate() {
+                check_window(Some(*b))
+                    .map_err(|e| ParamError::new("windows", format!("box {k}: {}", e.message)))?;
+            }
+        }
+        Ok(())
+    }
+
+    fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Metrics, StageError> {
         let pred: &Measurements = inputs.one("predictions")?;
         let meas: &Measurements = inputs.one("measurements")?;
         let terrain: Option<&Raster> = inputs.optional("terrain")?;
         let reference: Option<&Measurements> = inputs.optional("los_reference")?;
+        let footprints: Vec<&Footprints> = inputs.many("exclude_footprints")?;
         for (what, m) in [("predictions", Some(pred)), ("los_reference", reference)] {
             if let Some(m) = m
                 && m.links.len() != meas.links.len()
@@ -125,15 +214,24 @@ impl Stage for Evaluate {
                 .iter()
                 .any(|l| l.path_loss_db.is_none() && l.tx_eirp_dbm.is_none())
         });
-        let mut links = scored_links(p, pred, meas, reference, terrain);
+        let links = scored_links(p, pred, meas, reference, terrain);
         let mut m = Metrics::default();
-        set_link_counts(&mut m, p, pred, meas, links.len());
+        set_link_counts(&mut m, p, pred, meas);
         set_los_sources(&mut m, meas, reference);
+        let mut links = in_scope(&mut m, p, links, &footprints);
+        if let Some(Split::Blocks { block_m, guard_m }) = p.split {
+            let (x0, y0) = ctx.site.origin;
+            links = held_out(&mut m, links, fit_offsets, |l| {
+                block_half(l.rx[0] + x0, l.rx[1] + y0, block_m, guard_m)
+            });
+            m.set("split/block_m", block_m);
+            m.set("split/guard_m", guard_m);
+        } else if fit_offsets && !links.is_empty() {
+            take_out_tx_offsets(&mut m, &mut links);
+        }
+        m.set("links_scored", links.len() as f64);
         if links.is_empty() {
             return Ok(m);
-        }
-        if fit_offsets {
-            take_out_tx_offsets(&mut m, &mut links);
         }
         set_per_tx_p2p(&mut m, &links);
         // All links, then LOS, then NLOS.
@@ -166,6 +264,8 @@ struct ScoredLink {
     measured_db: f64,
     /// Line of sight, by the measurement, else by the reference trace.
     los: Option<bool>,
+    /// The receiver's place in the site frame, metres.
+    rx: [f64; 2],
 }
 
 /// The links, in order, with a usable prediction and measurement; a prediction beyond the floor
@@ -203,18 +303,13 @@ fn scored_links(
             at_floor,
             measured_db: measured,
             los: ml.los.or_else(|| reference.and_then(|r| r.links[i].los)),
+            rx: [ml.rx.x, ml.rx.y],
         });
     }
     links
 }
 
-fn set_link_counts(
-    m: &mut Metrics,
-    p: &EvaluateParams,
-    pred: &Measurements,
-    meas: &Measurements,
-    scored: usize,
-) {
+fn set_link_counts(m: &mut Metrics, p: &EvaluateParams, pred: &Measurements, meas: &Measurements) {
     if let Some(f) = p.floor_db {
         m.set("floor_db", f);
     } else {
@@ -226,7 +321,6 @@ fn set_link_counts(
         m.set("links_no_path", no_path as f64);
     }
     m.set("links", meas.links.len() as f64);
-    m.set("links_scored", scored as f64);
     // Measured links the model says nothing about (no value, or NaN) are left out of every score;
     // counted, so a model that fails where it is hard cannot look better for it.
     let unpredicted = pred
@@ -259,21 +353,153 @@ fn set_los_sources(m: &mut Metrics, meas: &Measurements, reference: Option<&Meas
     );
 }
 
+/// The links a score may use: receivers outside every `windows` box (`links_outside_window`),
+/// then inside a footprint's outer ring (`links_in_footprint`), are left out and counted; each
+/// count is written only when its filter is given. Counted among the links that have both a
+/// prediction and a measurement, so no link is counted under two reasons.
+fn in_scope(
+    m: &mut Metrics,
+    p: &EvaluateParams,
+    links: Vec<ScoredLink>,
+    footprints: &[&Footprints],
+) -> Vec<ScoredLink> {
+    let (mut outside, mut inside) = (0usize, 0usize);
+    let rings = RingIndex::new(footprints);
+    let kept = links
+        .into_iter()
+        .filter(|l| {
+            let [x, y] = l.rx;
+            if let Some(w) = &p.windows
+                && !w
+                    .iter()
+                    .any(|&(x0, y0, x1, y1)| x >= x0 && x <= x1 && y >= y0 && y <= y1)
+            {
+                outside += 1;
+                return false;
+            }
+            if rings.contains(l.rx) {
+                inside += 1;
+                return false;
+            }
+            true
+        })
+        .collect();
+    if p.windows.is_some() {
+        m.set("links_outside_window", outside as f64);
+    }
+    if !footprints.is_empty() {
+        m.set("links_in_footprint", inside as f64);
+    }
+    kept
+}
+
+/// The outer rings of every footprint, each with its bounding box.
+struct RingIndex<'a> {
+    rings: Vec<([f64; 4], &'a [[f64; 2]])>,
+}
+
+impl<'a> RingIndex<'a> {
+    fn new(footprints: &[&'a Footprints]) -> Self {
+        let rings = footprints
+            .iter()
+            .flat_map(|f| &f.items)
+            .flat_map(|f| &f.polygons)
+            .map(|p| {
+                let b = p.exterior.iter().fold(
+                    [
+                        f64::INFINITY,
+                        f64::INFINITY,
+                        f64::NEG_INFINITY,
+                        f64::NEG_INFINITY,
+                    ],
+                    |b, q| {
+                        [
+                            b[0].min(q[0]),
+                            b[1].min(q[1]),
+                            b[2].max(q[0]),
+                            b[3].max(q[1]),
+                        ]
+                    },
+                );
+                (b, p.exterior.as_slice())
+            })
+            .collect();
+        RingIndex { rings }
+    }
+
+    /// `p` is inside some outer ring (holes are not looked at: a courtyard is not a street).
+    fn contains(&self, p: [f64; 2]) -> bool {
+        self.rings.iter().any(|(b, ring)| {
+            p[0] >= b[0] && p[0] <= b[2] && p[1] >= b[1] && p[1] <= b[3] && point_in_ring(p, ring)
+        })
+    }
+}
+
+/// The held-out links of a split, each labelled by `half`: counted by half (`links_train`,
+/// `links_held_out`, `links_guard`); with `fit_offsets` the offsets fitted on the training links
+/// and taken out of the held-out ones, whose transmitter has no training link left out and
+/// counted (`links_no_offset`); the training links' P2P after their offsets, in-sample, as
+/// `train/p2p_rmse_db`.
+fn held_out(
+    m: &mut Metrics,
+    links: Vec<ScoredLink>,
+    fit_offsets: bool,
+    half: impl Fn(&ScoredLink) -> Half,
+) -> Vec<ScoredLink> {
+    let (mut train, mut test, mut guard) = (Vec::new(), Vec::new(), 0usize);
+    for l in links {
+        match half(&l) {
+            Half::Train => train.push(l),
+            Half::HeldOut => test.push(l),
+            Half::Guard => guard += 1,
+        }
+    }
+    m.set("links_train", train.len() as f64);
+    m.set("links_held_out", test.len() as f64);
+    m.set("links_guard", guard as f64);
+    if fit_offsets {
+        let fitted = take_out_tx_offsets(m, &mut train);
+        for (tx, (off, n)) in &fitted {
+            m.set(format!("offset_n/{tx}"), *n as f64);
+            for l in test.iter_mut().filter(|l| &l.tx == tx) {
+                l.measured_db -= off;
+            }
+        }
+        let before = test.len();
+        test.retain(|l| fitted.contains_key(&l.tx));
+        m.set("links_no_offset", (before - test.len()) as f64);
+    }
+    if !train.is_empty() {
+        let e: Vec<f64> = train
+            .iter()
+            .map(|l| l.predicted_db - l.measured_db)
+            .collect();
+        m.set("train/p2p_rmse_db", p2p(&e).rmse);
+    }
+    test
+}
+
 /// Per-transmitter offsets: the mean of measured − predicted, taken out of the measurements.
-fn take_out_tx_offsets(m: &mut Metrics, links: &mut [ScoredLink]) {
+/// Returns each offset with the number of links behind it.
+fn take_out_tx_offsets(
+    m: &mut Metrics,
+    links: &mut [ScoredLink],
+) -> BTreeMap<String, (f64, usize)> {
     let mut by_tx: BTreeMap<String, (f64, usize)> = BTreeMap::new();
     for l in links.iter() {
         let e = by_tx.entry(l.tx.clone()).or_default();
         e.0 += l.measured_db - l.predicted_db;
         e.1 += 1;
     }
-    for (tx, (sum, n)) in &by_tx {
-        let off = sum / *n as f64;
+    for (tx, (sum, n)) in by_tx.iter_mut() {
+        let off = *sum / *n as f64;
         m.set(format!("offset_db/{tx}"), off);
         for l in links.iter_mut().filter(|l| &l.tx == tx) {
             l.measured_db -= off;
         }
+        *sum = off;
     }
+    by_tx
 }
 
 /// Per transmitter (a cell of a drive test): P2P after its offset.
@@ -593,7 +819,8 @@ mod tests {
             .with(
                 "measurements",
                 Slot::One(Arc::new(Artifact::Measurements(meas))),
-            );
+            )
+            .with("exclude_footprints", Slot::Many(Vec::new()));
         if let Some(r) = reference {
             inputs = inputs.with(
                 "los_reference",
@@ -891,5 +1118,268 @@ mod tests {
         close(&m, "pd_rmse_db", 1.0);
         assert!(m.get("pd_beta").is_none());
         close(&m, "pd_beta_measured", 2.0);
+    }
+
+    /// The checkerboard by hand at 100 m blocks with a 5 m guard, negative coordinates included:
+    /// bx + by odd is held out, even is training (Euclidean remainder: -1 is odd), and a receiver
+    /// closer than 5 m to its block's edge is in neither half.
+    #[test]
+    fn block_halves_by_hand() {
+        let h = |x, y| block_half(x, y, 100.0, 5.0);
+        assert_eq!(h(50.0, 50.0), Half::Train); // (0, 0)
+        assert_eq!(h(150.0, 50.0), Half::HeldOut); // (1, 0)
+        assert_eq!(h(-50.0, 50.0), Half::HeldOut); // (-1, 0): -1 is odd
+        assert_eq!(h(-150.0, 50.0), Half::Train); // (-2, 0)
+        assert_eq!(h(-50.0, -50.0), Half::Train); // (-1, -1)
+        assert_eq!(h(-50.0, -150.0), Half::HeldOut); // (-1, -2)
+        assert_eq!(h(-3.0, 50.0), Half::Guard); // 3 m west of x = 0, in block -1 at 97 m
+        assert_eq!(h(2.0, 50.0), Half::Guard); // 2 m into block 0
+        assert_eq!(h(50.0, 95.0), Half::Train); // exactly 5 m from the edge: in
+        assert_eq!(h(50.0, 95.5), Half::Guard);
+        assert_eq!(h(50.0, -104.0), Half::Guard); // block (0, -2) at 96 m up: 4 m from its top edge
+        assert_eq!(block_half(-0.5, 0.5, 100.0, 0.0), Half::HeldOut); // no guard: (-1, 0)
+    }
+
+    /// Links from transmitter `tx` at the site frame's (-1000, 0) to receivers at `rx`, with the
+    /// given path losses (no LOS flags).
+    fn placed(tx: &str, rx: &[(f64, f64)], pl: &[f64]) -> Measurements {
+        let end = |id: &str, x: f64, y: f64| Endpoint {
+            id: id.into(),
+            x,
+            y,
+            z: Height::Absolute(0.0),
+            azimuth_deg: None,
+        };
+        Measurements {
+            links: rx
+                .iter()
+                .zip(pl)
+                .map(|(&(x, y), &v)| Link {
+                    tx: end(tx, -1000.0, 0.0),
+                    rx: end("", x, y),
+                    freq_hz: 3.5e9,
+                    path_loss_db: Some(v),
+                    rx_power_dbm: None,
+                    tx_eirp_dbm: None,
+                    los: None,
+                })
+                .collect(),
+        }
+    }
+
+    /// Evaluate on a site whose origin is `origin`, with `footprints` to exclude.
+    fn evaluate_at(
+        p: &EvaluateParams,
+        pred: Measurements,
+        meas: Measurements,
+        footprints: Vec<Footprints>,
+        origin: (f64, f64),
+    ) -> Result<Metrics, StageError> {
+        let inputs = Inputs::new()
+            .with(
+                "predictions",
+                Slot::One(Arc::new(Artifact::Measurements(pred))),
+            )
+            .with(
+                "measurements",
+                Slot::One(Arc::new(Artifact::Measurements(meas))),
+            )
+            .with(
+                "exclude_footprints",
+                Slot::Many(
+                    footprints
+                        .into_iter()
+                        .map(|f| Arc::new(Artifact::Footprints(f)))
+                        .collect(),
+                ),
+            );
+        let site = Site {
+            crs: "EPSG:32617".into(),
+            origin,
+            cell_m: 1.0,
+        };
+        Evaluate::run(p, &inputs, &Ctx::new(&site, &[]))
+    }
+
+    fn split_params() -> EvaluateParams {
+        EvaluateParams {
+            fit_offsets: Some(true),
+            split: Some(Split::Blocks {
+                block_m: 100.0,
+                guard_m: 5.0,
+            }),
+            ..Default::default()
+        }
+    }
+
+    /// The site origin is (1000, -200), so a receiver at the frame's (-950, 250) is at (50, 50)
+    /// in the CRS: its block is (0, 0), whatever the frame says. Transmitter a: training links at
+    /// CRS (50, 50) and (-150, 50) with measured − predicted 10 and 14 (offset 12, from 2 links);
+    /// held-out links at (150, 50) and (-50, 50) with measured − predicted 13 and 12, errors
+    /// pred − (meas − 12) = −1 and 0: P2P ME −0.5, RMSE sqrt(1/2); one at (98, 50) in the guard.
+    /// Transmitter b has one held-out link at (50, 150) and no training link: no offset, left out.
+    /// In-sample, the training errors are 2 and −2: RMSE 2.
+    #[test]
+    fn split_fits_on_training_blocks_and_scores_held_out_ones_by_hand() {
+        let a_rx = [
+            (-950.0, 250.0),
+            (-850.0, 250.0),
+            (-1050.0, 250.0),
+            (-1150.0, 250.0),
+            (-902.0, 250.0),
+        ];
+        let meas = joined(
+            placed("a", &a_rx, &[100.0, 105.0, 110.0, 104.0, 120.0]),
+            placed("b", &[(-950.0, 350.0)], &[100.0]),
+        );
+        let pred = joined(
+            placed("a", &a_rx, &[90.0, 92.0, 98.0, 90.0, 100.0]),
+            placed("b", &[(-950.0, 350.0)], &[95.0]),
+        );
+        let m = evaluate_at(&split_params(), pred, meas, vec![], (1000.0, -200.0)).unwrap();
+        for (k, v) in [
+            ("links", 6.0),
+            ("links_train", 2.0),
+            ("links_held_out", 3.0),
+            ("links_guard", 1.0),
+            ("links_no_offset", 1.0),
+            ("links_scored", 2.0),
+            ("offset_db/a", 12.0),
+            ("offset_n/a", 2.0),
+            ("n", 2.0),
+            ("p2p_me_db", -0.5),
+            ("p2p_rmse_db", 0.5f64.sqrt()),
+            ("train/p2p_rmse_db", 2.0),
+            ("split/block_m", 100.0),
+            ("split/guard_m", 5.0),
+        ] {
+            close(&m, k, v);
+        }
+        assert!(m.get("offset_db/b").is_none() && m.get("offset_n/b").is_none());
+        assert!(m.get("links_outside_window").is_none() && m.get("links_in_footprint").is_none());
+    }
+
+    /// Without `split`, `windows` or footprints the metrics are those of version 5: none of the
+    /// new names appear.
+    #[test]
+    fn without_the_new_params_no_new_metrics() {
+        let rx = [(-950.0, 250.0), (-850.0, 250.0), (-1050.0, 250.0)];
+        let meas = placed("a", &rx, &[100.0, 105.0, 110.0]);
+        let pred = placed("a", &rx, &[90.0, 92.0, 98.0]);
+        let p = EvaluateParams {
+            fit_offsets: Some(true),
+            ..Default::default()
+        };
+        let m = evaluate_at(&p, pred, meas, vec![], (1000.0, -200.0)).unwrap();
+        close(&m, "offset_db/a", (10.0 + 13.0 + 12.0) / 3.0);
+        close(&m, "links_scored", 3.0);
+        for k in m.values.keys() {
+            assert!(
+                ![
+                    "split/",
+                    "links_train",
+                    "links_held",
+                    "links_guard",
+                    "offset_n/",
+                    "train/"
+                ]
+                .iter()
+                .any(|n| k.starts_with(n))
+                    && k != "links_outside_window"
+                    && k != "links_in_footprint"
+                    && k != "links_no_offset",
+                "{k}"
+            );
+        }
+    }
+
+    /// Receivers outside every window, then inside a footprint's outer ring (not its hole's
+    /// business), are left out and counted, each once.
+    #[test]
+    fn windows_and_footprints_leave_out_and_count() {
+        use crate::artifact::{Footprint, Polygon};
+        // Receivers: in window 0, in window 1, in neither, in window 0 and in the building.
+        let rx = [(10.0, 10.0), (210.0, 10.0), (110.0, 10.0), (50.0, 50.0)];
+        let meas = placed("a", &rx, &[100.0, 101.0, 102.0, 103.0]);
+        let pred = placed("a", &rx, &[90.0, 91.0, 92.0, 93.0]);
+        let square =
+            |x0: f64, y0: f64, s: f64| vec![[x0, y0], [x0 + s, y0], [x0 + s, y0 + s], [x0, y0 + s]];
+        let building = Footprints {
+            items: vec![Footprint {
+                id: "w1".into(),
+                polygons: vec![Polygon {
+                    exterior: square(40.0, 40.0, 20.0),
+                    holes: vec![square(45.0, 45.0, 10.0)],
+                }],
+                height_m: None,
+                min_height_m: None,
+                levels: None,
+                min_level: None,
+            }],
+        };
+        let p = EvaluateParams {
+            fit_offsets: Some(true),
+            windows: Some(vec![(0.0, 0.0, 100.0, 100.0), (200.0, 0.0, 300.0, 100.0)]),
+            ..Default::default()
+        };
+        let m = evaluate_at(&p, pred, meas, vec![building.clone()], (0.0, 0.0)).unwrap();
+        close(&m, "links_outside_window", 1.0);
+        close(&m, "links_in_footprint", 1.0);
+        close(&m, "links_scored", 2.0);
+        // An empty footprint set still writes its (zero) count.
+        let m = evaluate_at(
+            &p,
+            placed("a", &rx, &[90.0; 4]),
+            placed("a", &rx, &[90.0; 4]),
+            vec![Footprints::default()],
+            (0.0, 0.0),
+        )
+        .unwrap();
+        close(&m, "links_in_footprint", 0.0);
+    }
+
+    /// Bad split and window params are refused with the field and what was expected.
+    #[test]
+    fn bad_split_and_window_params_are_refused() {
+        let with = |split: Option<Split>, windows: Option<Vec<(f64, f64, f64, f64)>>| {
+            Evaluate::validate(&EvaluateParams {
+                split,
+                windows,
+                ..Default::default()
+            })
+        };
+        let blocks = |block_m, guard_m| Some(Split::Blocks { block_m, guard_m });
+        assert!(with(blocks(100.0, 5.0), None).is_ok());
+        assert!(with(blocks(100.0, 0.0), None).is_ok());
+        for (b, g) in [
+            (0.0, 0.0),
+            (f64::NAN, 1.0),
+            (100.0, 50.0),
+            (100.0, -1.0),
+            (100.0, f64::NAN),
+        ] {
+            assert_eq!(
+                with(blocks(b, g), None).unwrap_err().field,
+                "split",
+                "{b} {g}"
+            );
+        }
+        assert!(with(None, Some(vec![(0.0, 0.0, 1.0, 1.0)])).is_ok());
+        for w in [
+            vec![],
+            vec![(0.0, 0.0, 1.0, 1.0), (1.0, 0.0, 0.0, 1.0)],
+            vec![(0.0, f64::NAN, 1.0, 1.0)],
+            vec![(0.0, 0.0, 1.0, 1.0); MAX_WINDOWS + 1],
+        ] {
+            let e = with(None, Some(w)).unwrap_err();
+            assert_eq!(e.field, "windows", "{}", e.message);
+        }
+        let e = with(None, Some(vec![(0.0, 0.0, 1.0, 1.0), (1.0, 0.0, 0.0, 1.0)])).unwrap_err();
+        assert!(e.message.starts_with("box 1:"), "{}", e.message);
+        // The defaults, as a graph leaves them out.
+        let p: EvaluateParams = serde_json::from_str(r#"{"split": {"Blocks": {}}}"#).unwrap();
+        assert!(
+            matches!(p.split, Some(Split::Blocks { block_m, guard_m }) if block_m == 100.0 && guard_m == 5.0)
+        );
     }
 }

@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{
     ArtifactType, Height, Link, Measurements, Metrics, Ortho, Raster, ReportFiles, Scene,
 };
-use crate::artifact::{link_distance, measured_loss};
+use crate::artifact::{Half, block_half, link_distance, measured_loss};
 use crate::io::csv_text;
 use crate::io::export::figures::charts::{ErrorCdf, ModelSeries, PathLossDistance, Scatter};
 use crate::io::export::figures::maps::{Layer, MapFigure, Palette, robust_range, view_grid};
@@ -43,7 +43,7 @@ fn site() -> String {
 
 /// The table's rows: (metric key in the evaluations, label). The rows of each carrier's PD and
 /// CI follow the pooled ones when the links have more than one carrier ([`table_keys`]).
-const ROWS: [(&str, &str); 20] = [
+const ROWS: [(&str, &str); 21] = [
     ("p2p_rmse_db", "P2P RMSE (dB)"),
     ("p2p_me_db", "P2P mean error (dB)"),
     ("p2p_std_db", "P2P std (dB)"),
@@ -75,6 +75,10 @@ const ROWS: [(&str, &str); 20] = [
         "links the model gave no value (left out)",
     ),
     (
+        "links_no_path",
+        "links the model found no path for (left out)",
+    ),
+    (
         "floor_clamped",
         "links predicted past the floor (scored at the floor)",
     ),
@@ -82,9 +86,10 @@ const ROWS: [(&str, &str); 20] = [
 ];
 
 /// Rows that count links, printed without decimals.
-const COUNT_ROWS: [&str; 4] = [
+const COUNT_ROWS: [&str; 5] = [
     "links_scored",
     "links_unpredicted",
+    "links_no_path",
     "floor_clamped",
     "trend_links",
 ];
@@ -140,8 +145,11 @@ impl Stage for Report {
     // 8: links.csv, every link as scored; 9: stages' reports (`evidence`) as tables;
     // 10: Evaluate 5's PD/CI (the gap between the model's and the measured lines), per-carrier
     // rows, the definitions under the table, the chart's lines from the evaluations with the
-    // measured lines; 11: the PD/CI <= P2P sentence says "on those links".
-    const VERSION: u32 = 11;
+    // measured lines; 11: the PD/CI <= P2P sentence says "on those links"; 12: the links with no
+    // path get their row (they were left out unseen beside "no value: 0"), links.csv's
+    // offset_db and half columns, the table of links left out (Evaluate 6's split, windows,
+    // footprints).
+    const VERSION: u32 = 12;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -204,7 +212,7 @@ impl Stage for Report {
         Ok(())
     }
 
-    fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<ReportFiles, StageError> {
+    fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<ReportFiles, StageError> {
         let meas: &Measurements = inputs.one("measurements")?;
         let preds: Vec<&Measurements> = inputs.many("predictions")?;
         let evals: Vec<&Metrics> = inputs.many("evaluations")?;
@@ -236,9 +244,10 @@ impl Stage for Report {
         let intro = intro(meas);
         let defs = definitions(&evals);
         let mut md = format!(
-            "# KODAMA report: {}\n\n{intro}\n\n{md_table}\n{}\n",
+            "# KODAMA report: {}\n\n{intro}\n\n{md_table}\n{}\n{}",
             p.site,
-            definitions_markdown(&defs)
+            definitions_markdown(&defs),
+            left_out_markdown(p, &evals)
         );
         for (name, _) in plots.iter().filter(|(n, _)| n.ends_with(".png")) {
             md.push_str(&format!("![{name}]({name})\n\n"));
@@ -248,7 +257,7 @@ impl Stage for Report {
         files.push(("table.csv".to_string(), csv.into_bytes()));
         files.push((
             "links.csv".to_string(),
-            links_csv(&p.models, meas, &preds, &evals).into_bytes(),
+            links_csv(&p.models, meas, &preds, &evals, ctx.site.origin).into_bytes(),
         ));
         files.push(("metrics.json".to_string(), metrics_json(p, &evals)?));
         let page = PageInputs {
@@ -471,6 +480,19 @@ fn definitions(evals: &[&Metrics]) -> Vec<String> {
          stated reference trace, the same for every model."
             .to_string(),
     );
+    if let Some((b, g)) = evals
+        .iter()
+        .find_map(|e| Some((e.get("split/block_m")?, e.get("split/guard_m")?)))
+    {
+        out.push(format!(
+            "Split: the receivers are divided by a checkerboard of {b} m blocks in the site's \
+             CRS; the offsets are fitted on the even blocks (the training half) and every figure \
+             of Table 1 is computed on the odd ones (held out); a receiver within {g} m of its \
+             block's edge is in neither half. \"links scored\" counts the held-out links; the \
+             table under this list says where the others went. The plots and links.csv show \
+             every link, with its half in links.csv."
+        ));
+    }
     out
 }
 
@@ -526,6 +548,7 @@ impl PageInputs<'_> {
             definitions: self.definitions,
             models: &p.models,
             table: &table_rows(self.evals),
+            left_out: &left_out_rows(self.evals),
             plots: &plot_names,
             scenes: &named,
             radio_map: self.radio_map,
@@ -571,6 +594,76 @@ fn evidence_markdown(evidence: &[(&str, &Metrics)]) -> String {
         }
         md.push('\n');
     }
+    md
+}
+
+/// Why links are not in a model's scores, as Evaluate counts them: (metric, label). Shown when
+/// some evaluation has a split, windows or footprints (`left_out_rows`); together with the
+/// scored links they account for every measured link that has a measurement.
+const LEFT_OUT: [(&str, &str); 8] = [
+    ("links_outside_window", "outside every window"),
+    ("links_in_footprint", "inside a building footprint"),
+    ("links_guard", "in a split's guard band"),
+    ("links_train", "in the training half (fit the offsets)"),
+    (
+        "links_no_offset",
+        "held out, but the cell has no training link",
+    ),
+    ("links_unpredicted", "no value from the model"),
+    ("links_no_path", "no path found by the model"),
+    ("links_scored", "scored"),
+];
+
+/// The "left out" table's rows: every [`LEFT_OUT`] count some model has, a dash where a model
+/// has none; no rows when no evaluation has a split, windows or footprints (the table would
+/// only repeat Table 1).
+fn left_out_rows(evals: &[&Metrics]) -> Vec<TableRow> {
+    let any = |k: &str| evals.iter().any(|e| e.get(k).is_some());
+    if !["links_outside_window", "links_in_footprint", "links_guard"]
+        .iter()
+        .any(|k| any(k))
+    {
+        return Vec::new();
+    }
+    LEFT_OUT
+        .iter()
+        .filter(|(k, _)| any(k))
+        .map(|(k, label)| TableRow {
+            label: label.to_string(),
+            values: evals
+                .iter()
+                .map(|e| e.get(k).map_or("–".into(), |v| format!("{v:.0}")))
+                .collect(),
+            best: None,
+        })
+        .collect()
+}
+
+/// report.md's table of links left out, per model; nothing without a split, windows or
+/// footprints.
+fn left_out_markdown(p: &ReportParams, evals: &[&Metrics]) -> String {
+    let rows = left_out_rows(evals);
+    if rows.is_empty() {
+        return String::new();
+    }
+    let mut md = format!(
+        "## Links left out of the scores
+
+| links | {} |
+|---|{}
+",
+        p.models.join(" | "),
+        "---:|".repeat(p.models.len())
+    );
+    for r in rows {
+        md.push_str(&format!(
+            "| {} | {} |
+",
+            r.label,
+            r.values.join(" | ")
+        ));
+    }
+    md.push('\n');
     md
 }
 
@@ -671,13 +764,20 @@ fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
 }
 
 /// Every measured link, one row each, as the evaluations scored it: where it is, the measured
-/// path loss, and per model the prediction (at most the floor) and its error against the
-/// measurement with that model's offset taken out; empty where a model was not scored there.
+/// path loss, its half of the split (the first evaluation's that has one, by the same rule;
+/// empty without a split), and per model the prediction (at most the floor), the offset taken
+/// out of its transmitter's measurements, and the error against the measurement with it taken
+/// out; empty where a model was not scored there or fitted no offset for that transmitter.
+/// `origin` is the site's: the split's blocks are in its CRS.
+///
+/// Links left out by Evaluate's `windows` or `exclude_footprints` are not marked (its metrics
+/// only count them): their half is where the block rule puts them.
 fn links_csv(
     models: &[String],
     meas: &Measurements,
     preds: &[&Measurements],
     evals: &[&Metrics],
+    origin: (f64, f64),
 ) -> String {
     let mut header: Vec<String> = [
         "tx_id",
@@ -689,6 +789,7 @@ fn links_csv(
         "distance_m",
         "freq_hz",
         "los",
+        "half",
         "measured_db",
     ]
     .map(String::from)
@@ -696,7 +797,11 @@ fn links_csv(
     for m in models {
         header.push(format!("{m} predicted_db"));
         header.push(format!("{m} error_db"));
+        header.push(format!("{m} offset_db"));
     }
+    let split = evals
+        .iter()
+        .find_map(|e| Some((e.get("split/block_m")?, e.get("split/guard_m")?)));
     let mut out = csv_text::row(&header) + "\n";
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.3}"));
     for (k, m) in meas.links.iter().enumerate() {
@@ -711,14 +816,21 @@ fn links_csv(
             format!("{:.3}", link_distance(m, None)),
             format!("{}", m.freq_hz),
             m.los.map_or(String::new(), |l| u8::from(l).to_string()),
+            split.map_or(String::new(), |(block_m, guard_m)| {
+                half(m, origin, block_m, guard_m).name().to_string()
+            }),
             opt(measured),
         ];
         for (pr, ev) in preds.iter().zip(evals) {
             let predicted = pr.links.get(k).and_then(|l| scored_prediction(l, ev));
-            let offset = tx_offset(ev, &m.tx.id);
-            let error = predicted.zip(measured).map(|(p, q)| p - (q - offset));
+            let offset = fitted_offset(ev, &m.tx.id);
+            let error = predicted
+                .zip(measured)
+                .zip(offset)
+                .map(|((p, q), o)| p - (q - o));
             row.push(opt(predicted));
             row.push(opt(error));
+            row.push(opt(offset.filter(|_| fits_offsets(ev))));
         }
         out += &csv_text::row(&row);
         out.push('\n');
@@ -735,6 +847,26 @@ fn scored_prediction(l: &Link, ev: &Metrics) -> Option<f64> {
             Some(f) => Some(v.min(f)),
             None => v.is_finite().then_some(v),
         })
+}
+
+/// The receiver's half of the split of `block_m` blocks and `guard_m` guard, in the site CRS.
+fn half(l: &Link, origin: (f64, f64), block_m: f64, guard_m: f64) -> Half {
+    block_half(l.rx.x + origin.0, l.rx.y + origin.1, block_m, guard_m)
+}
+
+/// Evaluate fitted offsets (the EIRP was unknown).
+fn fits_offsets(ev: &Metrics) -> bool {
+    ev.values.keys().any(|k| k.starts_with("offset_db/"))
+}
+
+/// The offset taken out of transmitter `tx`'s measurements: 0 when Evaluate fitted none at all,
+/// `None` when it fitted some but none for `tx` (a split whose training half misses `tx`).
+fn fitted_offset(ev: &Metrics, tx: &str) -> Option<f64> {
+    match ev.get(&format!("offset_db/{tx}")) {
+        Some(v) => Some(v),
+        None if fits_offsets(ev) => None,
+        None => Some(0.0),
+    }
 }
 
 /// The offset taken out of transmitter `tx`'s measurements while its EIRP is unknown (0 when
@@ -883,5 +1015,95 @@ mod tests {
         let defs = definitions(&[&m]).join("\n");
         assert!(defs.contains("fitted per carrier"), "{defs}");
         assert!(!defs.contains("rf.md"), "{defs}");
+    }
+
+    /// links.csv: each model's offset next to its error, empty (and no error) for a transmitter
+    /// the split gave no training link; the half by the block rule in the site CRS (origin
+    /// (1000, -200): the receiver at the frame's (-950, 250) is at (50, 50), block (0, 0),
+    /// training; at (-850, 250) it is at (150, 50), held out).
+    #[test]
+    fn links_csv_has_offsets_and_halves() {
+        use crate::artifact::Endpoint;
+        let end = |id: &str, x: f64, y: f64| Endpoint {
+            id: id.into(),
+            x,
+            y,
+            z: Height::Absolute(0.0),
+            azimuth_deg: None,
+        };
+        let link = |tx: &str, x: f64, pl: f64| Link {
+            tx: end(tx, -1000.0, 0.0),
+            rx: end("", x, 250.0),
+            freq_hz: 3.5e9,
+            path_loss_db: Some(pl),
+            rx_power_dbm: None,
+            tx_eirp_dbm: None,
+            los: None,
+        };
+        let meas = Measurements {
+            links: vec![link("a", -950.0, 100.0), link("b", -850.0, 100.0)],
+        };
+        let pred = Measurements {
+            links: vec![link("a", -950.0, 90.0), link("b", -850.0, 95.0)],
+        };
+        let mut ev = Metrics::default();
+        for (k, v) in [
+            ("offset_db/a", 12.0),
+            ("split/block_m", 100.0),
+            ("split/guard_m", 5.0),
+            ("links_guard", 0.0),
+            ("links_scored", 1.0),
+        ] {
+            ev.set(k, v);
+        }
+        let csv = links_csv(&["M".into()], &meas, &[&pred], &[&ev], (1000.0, -200.0));
+        let lines: Vec<&str> = csv.lines().collect();
+        assert!(
+            lines[0].ends_with("los,half,measured_db,M predicted_db,M error_db,M offset_db"),
+            "{}",
+            lines[0]
+        );
+        assert!(
+            lines[1].ends_with(",train,100.000,90.000,2.000,12.000"),
+            "{}",
+            lines[1]
+        );
+        assert!(
+            lines[2].ends_with(",held_out,100.000,95.000,,"),
+            "{}",
+            lines[2]
+        );
+        // Without a split or offsets: no half, no offset, the error as before.
+        let csv = links_csv(
+            &["M".into()],
+            &meas,
+            &[&pred],
+            &[&Metrics::default()],
+            (0.0, 0.0),
+        );
+        assert!(
+            csv.lines()
+                .nth(1)
+                .unwrap()
+                .ends_with(",,100.000,90.000,-10.000,"),
+            "{csv}"
+        );
+        // The table of links left out: only with a split, windows or footprints; a dash where a
+        // model has no such count.
+        assert!(left_out_rows(&[&Metrics::default()]).is_empty());
+        let rows = left_out_rows(&[&ev, &Metrics::default()]);
+        let labels: Vec<&str> = rows.iter().map(|r| r.label.as_str()).collect();
+        assert_eq!(labels, ["in a split's guard band", "scored"]);
+        assert_eq!(rows[1].values, ["1", "–"]);
+        let md = left_out_markdown(
+            &ReportParams {
+                models: vec!["M".into(), "N".into()],
+                site: "s".into(),
+                scene_names: vec![],
+                evidence_names: vec![],
+            },
+            &[&ev, &Metrics::default()],
+        );
+        assert!(md.contains("| scored | 1 | – |"), "{md}");
     }
 }
