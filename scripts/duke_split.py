@@ -23,9 +23,9 @@ import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
-from pyproj import Transformer
+from pyproj import Proj, Transformer
 
-from tr38901_reference import UMA, UMI, fspl, pathloss
+from tr38901_reference import UMA, UMI, fspl, pathloss, sector_gain_db
 
 args = sys.argv[1:]
 FIXTURE = None
@@ -228,16 +228,23 @@ tx = np.array([to_utm.transform(cells[p]["lon"], cells[p]["lat"]) for p in pci])
 fc = np.array([cells[p]["freq_hz"] / 1e9 for p in pci])
 d2d = np.maximum(np.hypot(x - tx[:, 0], y - tx[:, 1]), 1.0)
 meas = -rsrp  # path loss up to the cell's offset
-# The TR 38.901 sector element (rf/antenna.rs `gain`), tilt 0, at the published bearing turned to
-# grid north (grid bearing = compass bearing - 1.21 deg here, the meridian convergence).
-CONV = 1.21
+# The TR 38.901 sector element (tr38901_reference.sector_gain_db: rf/antenna.rs `gain`), tilt 0,
+# at each cell's published true bearing turned to a grid bearing by the meridian convergence of UTM
+# 17N at its site (PROJ's `get_factors`, as scripts/tr38901_sector_fixture.py; about 1.21 deg here),
+# toward the phone along the straight 3-D line between the two (the Tr38901 stage's rule: the
+# unclamped plan distance, so a phone under the cell sees straight down).
+utm = Proj("EPSG:32617")
+grid_az = {p: (cells[p]["azimuth_deg"]
+               - utm.get_factors(cells[p]["lon"], cells[p]["lat"]).meridian_convergence) % 360.0
+           for p in P}
 bear = np.degrees(np.arctan2(x - tx[:, 0], y - tx[:, 1]))
-az = np.array([cells[p]["azimuth_deg"] for p in pci]) - CONV
-phi = (bear - az + 180.0) % 360.0 - 180.0
-theta = 90.0 + np.degrees(np.arctan2(H_BS - H_UT, d2d))
-a_v = -np.minimum(12 * ((theta - 90) / 65) ** 2, 30)
-a_h = -np.minimum(12 * (phi / 65) ** 2, 30)
-sector_db = -np.minimum(-(a_v + a_h), 30) + 8.0
+down = np.degrees(np.arctan2(H_BS - H_UT, np.hypot(x - tx[:, 0], y - tx[:, 1])))
+sector_db = np.empty(len(rows))
+for p in P:
+    k = pci == p
+    sector_db[k] = sector_gain_db(bear[k], grid_az[p], down[k])
+print("grid bearings (published true bearing less the convergence at the site): "
+      + ", ".join(f"{p} {cells[p]['azimuth_deg']:.0f} -> {grid_az[p]:.3f}" for p in P))
 offs_all = {p: np.mean(meas[pci == p] - uma(d2d, fc)[pci == p]) for p in P}
 print("UMa offsets fitted on all readings (graphs/duke.ron today): "
       + ", ".join(f"{p} {v:.2f}" for p, v in offs_all.items()))
