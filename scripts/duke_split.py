@@ -7,7 +7,8 @@ UMa score with one offset per cell fitted on the training half and scored on the
     python3 scripts/duke_split.py ../shared/data [block_m] [--fixture tests/fixtures/duke_split_reference.csv]
 
 With --fixture it also writes the reference tests/duke.rs checks graphs/duke_baselines.ron
-against: 3GPP UMa and UMi (omni, cells 20 m, phones 1.5 m), scored as Evaluate's `split`,
+against: 3GPP UMa and UMi, omni and with the TR 38.901 sector (65°, 8 dBi, tilt 0, at each cell's
+published bearing turned to grid north; cells 20 m, phones 1.5 m), scored as Evaluate's `split`,
 `windows` and `exclude_footprints` score them (see `fixture` below for the exact tests).
 
 numpy and pyproj. The split rule, to be reimplemented in Rust bit for bit (the proposed rule is "checker"; "hash" is shown for comparison):
@@ -278,6 +279,8 @@ for label, sel in (("all readings", np.ones(len(rows), bool)), ("kept readings",
 #    readings inside a window, as Evaluate does.
 #  - the split: block_m 100, guard 5, as above; offsets on the training half per cell, scores on
 #    the held-out half.
+#  - the models: uma_eval and umi_eval omni; uma_s_eval and umi_s_eval the same less `sector_db`
+#    (the sector's gain toward each phone, above), as graphs/duke_baselines.ron's uma_s and umi_s.
 ORIGIN = (687000.0, 3985000.0)
 BOX_FILES = ("pci_ABCD", "pci_EF_new")
 
@@ -343,8 +346,9 @@ def fixture(path):
     odd = np.mod(bx + by, 2) == 1
     tr, te, gd = kept & ~guard & ~odd, kept & ~guard & odd, kept & guard
     out = []
-    for node, model in (("uma_eval", uma), ("umi_eval", umi)):
-        pred = model(d2d, fc)
+    for node, pred in (("uma_eval", uma(d2d, fc)), ("umi_eval", umi(d2d, fc)),
+                       ("uma_s_eval", uma(d2d, fc) - sector_db),
+                       ("umi_s_eval", umi(d2d, fc) - sector_db)):
         rec = lambda k, v: out.append(f"{node},{k},{v:.6f}")
         rec("links", len(rows))
         rec("links_outside_window", (~in_win).sum())

@@ -57,8 +57,9 @@ fn shared_data(root: &Path) -> Option<std::path::PathBuf> {
     None
 }
 
-/// graphs/duke_baselines.ron (UMa and UMi; offsets on the training blocks, scores on the held-out
-/// ones, readings outside the OSM boxes or inside a footprint left out) against
+/// graphs/duke_baselines.ron (UMa and UMi, omni and with the TR 38.901 sector at each cell's grid
+/// bearing; offsets on the training blocks, scores on the held-out ones, readings outside the OSM
+/// boxes or inside a footprint left out) against
 /// scripts/duke_split.py --fixture, which applies the same tests with PROJ: per-cell and overall
 /// held-out P2P RMSE to 0.01 dB, every count exact.
 #[test]
@@ -80,6 +81,8 @@ fn duke_split_scores_match_the_numpy_reference() {
     let ours = [
         ("uma_eval", eval("uma_eval")),
         ("umi_eval", eval("umi_eval")),
+        ("uma_s_eval", eval("uma_s_eval")),
+        ("umi_s_eval", eval("umi_s_eval")),
     ];
     let reference =
         std::fs::read_to_string(root.join("tests/fixtures/duke_split_reference.csv")).unwrap();
@@ -92,7 +95,11 @@ fn duke_split_scores_match_the_numpy_reference() {
             cells.next().unwrap(),
         );
         let want: f64 = value.parse().unwrap();
-        let got = ours.iter().find(|(n, _)| *n == node).unwrap().1[key]
+        let got = ours
+            .iter()
+            .find(|(n, _)| *n == node)
+            .unwrap_or_else(|| panic!("{node}: not an evaluation of the graph"))
+            .1[key]
             .as_f64()
             .unwrap_or_else(|| panic!("{node} {key} missing"));
         if key.starts_with("links") || key.ends_with("/n") || key.starts_with("offset_n/") {
@@ -105,7 +112,7 @@ fn duke_split_scores_match_the_numpy_reference() {
         }
         compared += 1;
     }
-    assert_eq!(compared, 2 * 35);
+    assert_eq!(compared, 4 * 35);
     for (node, m) in &ours {
         println!(
             "duke split: {node} held-out P2P RMSE {:.2} dB over {:.0} readings (train {:.0}, \
@@ -123,9 +130,9 @@ fn duke_split_scores_match_the_numpy_reference() {
         .nth(1)
         .unwrap_or_else(|| panic!("no table of links left out: {md}"));
     for row in [
-        "| outside every window | 3687 | 3687 |",
-        "| inside a building footprint | 1745 | 1745 |",
-        "| scored | 15682 | 15682 |",
+        "| outside every window | 3687 | 3687 | 3687 | 3687 |",
+        "| inside a building footprint | 1745 | 1745 | 1745 | 1745 |",
+        "| scored | 15682 | 15682 | 15682 | 15682 |",
     ] {
         assert!(left_out.contains(row), "{row}: {left_out}");
     }
