@@ -1,4 +1,4 @@
-"""An independent computation of graphs/duke.ron's scores, with numpy and pyproj: the 3GPP
+"""An independent computation of graphs/duke_uma_all_readings.ron's scores, with numpy and pyproj: the 3GPP
 TR 38.901 UMa baseline (LOS and NLOS mixed by the LOS probability, power-weighted) at every reading
 of the Duke CBRS drive test, one offset per cell (measured - predicted, averaged), and the P2P
 RMSE / standard deviation overall and per cell. tests/duke.rs compares the graph's metrics with

@@ -247,7 +247,7 @@ for p in P:
 print("grid bearings (published true bearing less the convergence at the site): "
       + ", ".join(f"{p} {cells[p]['azimuth_deg']:.0f} -> {grid_az[p]:.3f}" for p in P))
 offs_all = {p: np.mean(meas[pci == p] - uma(d2d, fc)[pci == p]) for p in P}
-print("UMa offsets fitted on all readings (graphs/duke.ron today): "
+print("UMa offsets fitted on all readings (graphs/duke_uma_all_readings.ron): "
       + ", ".join(f"{p} {v:.2f}" for p, v in offs_all.items()))
 for label, sel in (("all readings", np.ones(len(rows), bool)), ("kept readings", keep)):
     for mname, pred in (("UMa", uma(d2d, fc)), ("UMi", umi(d2d, fc)),

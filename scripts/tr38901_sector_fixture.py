@@ -5,7 +5,7 @@ runs the Tr38901 stage with `tx_antenna` on the same readings and compares per l
 
     python3 scripts/tr38901_sector_fixture.py ../shared/data/rf tests/fixtures/tr38901_sector_links.csv
 
-Cells 20 m above the ground, phones 1.5 m, flat ground (graphs/duke.ron's assumptions). The cells'
+Cells 20 m above the ground, phones 1.5 m, flat ground (graphs/duke_baselines.ron's assumptions). The cells'
 azimuths are true bearings; the grid bearing is the true bearing less the meridian convergence of
 UTM 17N at the cell (PROJ's `get_factors`, not the Rust side's numerical chord).
 """
@@ -20,7 +20,7 @@ from tr38901_reference import UMA, pathloss, sector_gain_db
 
 root, out = sys.argv[1], sys.argv[2]
 STEP = 1000
-ORIGIN = (687000.0, 3985000.0)  # graphs/duke.ron's site origin
+ORIGIN = (687000.0, 3985000.0)  # the Duke graphs' site origin
 H_BS, H_UT = 20.0, 1.5
 cells = {c["pci"]: c for c in json.load(open(f"{root}/duke_cells.json"))["cells"]}
 rows = list(csv.DictReader(open(f"{root}/duke_cbrs.csv")))[::STEP]
