@@ -4,7 +4,7 @@
 //!
 //! # Equations
 //!
-//! Per cell, for transmitter k with path gain G_k (dB, the [`RadioMap`] of k) and EIRP per
+//! Per cell, for transmitter k with path gain G_k (dB, the `RadioMap` of k) and EIRP per
 //! resource element EIRP_k (dBm):
 //!
 //! - RSRP_k = EIRP_k + G_k (dBm), the reference-signal power of one resource element.
@@ -29,8 +29,6 @@
 //!
 //! `RadioMapSolver`'s path gain is our G_k; its RSS with a transmit power of EIRP_k per resource
 //! element is our RSRP_k; its SINR is ours with every transmitter co-channel and its noise power.
-//!
-//! [`RadioMap`]: crate::stages::radio::radio_map::RadioMap
 
 use serde::{Deserialize, Serialize};
 

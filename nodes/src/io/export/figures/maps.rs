@@ -382,7 +382,7 @@ impl<'a> MapFigure<'a> {
                 let (lx, ly) = (x + SIDE_PX + 4, y + SIDE_PX);
                 let w = 13 * s.label.chars().count() as i32 + 8;
                 root.draw(&Rectangle::new(
-                    [(lx, ly), (lx + w, ly + 28)],
+                    [(lx, ly - 4), (lx + w, ly + 28)],
                     WHITE.mix(0.8).filled(),
                 ))
                 .map_err(plot_err)?;
