@@ -170,8 +170,7 @@ impl Stage for MapPlot {
         if let Some(m) = inputs.optional::<Measurements>("transmitters")? {
             fig.sites = transmitter_sites(m);
             if !fig.sites.is_empty() {
-                fig.legend
-                    .push(("transmitters (line: bearing)".into(), [0, 0, 0]));
+                fig.legend.push(("transmitter, bearing".into(), [0, 0, 0]));
             }
         }
         let rings = |f: &Footprints, color: [u8; 3], width: u32| -> Vec<Path> {
@@ -526,7 +525,7 @@ mod tests {
             String::from_utf8(f.files[0].1.clone()).unwrap(),
             &f.files[1].1,
         );
-        for label in ["A,B", "transmitters (line: bearing)"] {
+        for label in ["A,B", "transmitter, bearing"] {
             assert!(svg.contains(label), "{label} not in the SVG");
         }
         // The view has whole pixels per 5 m cell; sample cell centres away from the markers.
