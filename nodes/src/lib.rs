@@ -99,6 +99,7 @@ macro_rules! for_each_stage {
             $crate::stages::heights::difference::Difference,
             $crate::stages::radio::trace::Trace,
             $crate::stages::radio::radio_map::RadioMap,
+            $crate::stages::radio::coverage::Coverage,
             $crate::stages::baseline::tr38901::Tr38901,
             $crate::stages::eval::evaluate::Evaluate,
             $crate::stages::eval::report::Report,

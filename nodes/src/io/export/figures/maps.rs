@@ -17,13 +17,41 @@ pub enum Palette {
     Viridis,
     /// Blue through white to red, symmetric about zero (signed errors).
     Diverging,
+    /// One distinct colour per whole value 0, 1, 2, ... (a best-server map's transmitter
+    /// index), cycling after ten; other values are not drawn. The colour bar becomes a legend of
+    /// the categories.
+    Categorical,
+}
+
+/// Ten distinct colours (matplotlib's tab10), for [`Palette::Categorical`].
+pub const CATEGORICAL: [[u8; 3]; 10] = [
+    [31, 119, 180],
+    [255, 127, 14],
+    [44, 160, 44],
+    [214, 39, 40],
+    [148, 103, 189],
+    [140, 86, 75],
+    [227, 119, 194],
+    [127, 127, 127],
+    [188, 189, 34],
+    [23, 190, 207],
+];
+
+/// The most categories a categorical legend lists.
+pub const MAX_CATEGORIES: usize = 64;
+
+/// The category of a categorical value: a whole number in [0, [`MAX_CATEGORIES`]).
+pub fn category(v: f64) -> Option<usize> {
+    (v.is_finite() && v >= 0.0 && v.fract() == 0.0 && v < MAX_CATEGORIES as f64)
+        .then_some(v as usize)
 }
 
 impl Palette {
-    /// The colour of `t` in [0, 1].
+    /// The colour of `t` in [0, 1]; for `Categorical`, `t` is the category (0, 1, 2, ...).
     pub fn at(self, t: f64) -> [u8; 3] {
         match self {
             Palette::Viridis => viridis(t),
+            Palette::Categorical => CATEGORICAL[category(t).unwrap_or(0) % CATEGORICAL.len()],
             Palette::Diverging => {
                 let t = t.clamp(0.0, 1.0);
                 let (lo, mid, hi) = (
@@ -72,6 +100,7 @@ pub fn robust_range(r: &Raster, palette: Palette) -> (f64, f64) {
         }
         Palette::Viridis if hi > lo => (lo, hi),
         Palette::Viridis => (lo - 0.5, lo + 0.5),
+        Palette::Categorical => (0.0, v[v.len() - 1].max(1.0) as f64),
     }
 }
 
@@ -101,6 +130,17 @@ pub struct Markers {
     pub label: String,
 }
 
+/// A transmitter site: a filled triangle at `at` with a short line along each antenna's
+/// bearing, and a label.
+pub struct SiteMarker {
+    /// Position, site metres.
+    pub at: [f64; 2],
+    /// Compass bearings of its antennas, degrees clockwise from grid north (+y).
+    pub bearings_deg: Vec<f64>,
+    /// The label beside it (its transmitters' ids).
+    pub label: String,
+}
+
 /// A map figure.
 pub struct MapFigure<'a> {
     /// Title above the map.
@@ -113,6 +153,10 @@ pub struct MapFigure<'a> {
     pub paths: Vec<Path>,
     /// Drawn over the paths.
     pub markers: Vec<Markers>,
+    /// Transmitter sites, drawn over the markers.
+    pub sites: Vec<SiteMarker>,
+    /// The names of a categorical layer's categories, by value (the value itself where none).
+    pub categories: Vec<String>,
     layer: Option<Layer<'a>>,
     background: Background,
 }
@@ -166,6 +210,9 @@ impl<'a> MapFigure<'a> {
                 let over = layer.as_ref().and_then(|l| {
                     let (c, r) = l.raster.grid.cell_of(x, y)?;
                     let v = l.raster.at(c, r) as f64;
+                    if l.palette == Palette::Categorical {
+                        return category(v).map(|k| (l.palette.at(k as f64), l.alpha));
+                    }
                     v.is_finite().then(|| {
                         let (lo, hi) = l.range;
                         (l.palette.at((v - lo) / (hi - lo)), l.alpha)
@@ -183,6 +230,8 @@ impl<'a> MapFigure<'a> {
             legend: Vec::new(),
             paths: Vec::new(),
             markers: Vec::new(),
+            sites: Vec::new(),
+            categories: Vec::new(),
             background: Background {
                 at: (LEFT, TOP),
                 width: view.width,
@@ -211,6 +260,9 @@ impl<'a> MapFigure<'a> {
         let h = (self.view.height as i32 - 80).clamp(120, 700);
         root.draw(&Text::new(l.units.clone(), (x, TOP as i32), (FONT, 24)))
             .map_err(plot_err)?;
+        if l.palette == Palette::Categorical {
+            return self.category_legend(root, l, x, top);
+        }
         // One band per pixel row would make thousands of SVG elements: 128 bands read smooth.
         let bands = 128;
         for b in 0..bands {
@@ -247,6 +299,96 @@ impl<'a> MapFigure<'a> {
             ))
             .map_err(plot_err)?;
             v += step;
+        }
+        Ok(())
+    }
+
+    /// The categories present in a categorical layer, or named, as swatches with their names.
+    fn category_legend<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+        l: &Layer,
+        x: i32,
+        top: i32,
+    ) -> Result<(), String> {
+        let mut present = [false; MAX_CATEGORIES];
+        for &v in l.raster.data.iter() {
+            if let Some(k) = category(v as f64) {
+                present[k] = true;
+            }
+        }
+        let n = (present.iter().rposition(|&p| p).map_or(0, |k| k + 1))
+            .max(self.categories.len())
+            .min(MAX_CATEGORIES);
+        let h = (self.view.height as i32 - 80).clamp(120, 700);
+        let row = (h / n.max(1) as i32).clamp(14, 32);
+        for k in 0..n {
+            let y = top + row * k as i32;
+            root.draw(&Rectangle::new(
+                [(x, y), (x + 36, y + row - 4)],
+                rgb(l.palette.at(k as f64)).filled(),
+            ))
+            .map_err(plot_err)?;
+            let name = self
+                .categories
+                .get(k)
+                .cloned()
+                .unwrap_or_else(|| k.to_string());
+            root.draw(&Text::new(
+                name,
+                (x + 46, y + (row - 4) / 2),
+                TextStyle::from((FONT, 22)).pos(Pos::new(HPos::Left, VPos::Center)),
+            ))
+            .map_err(plot_err)?;
+        }
+        Ok(())
+    }
+
+    /// Each site's bearing lines, its triangle and its label on a light box.
+    fn draw_sites<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        const LINE_PX: f64 = 55.0;
+        const SIDE_PX: i32 = 14;
+        for s in &self.sites {
+            // A site off the map would be drawn over the margins: left out.
+            if self.view.cell_of(s.at[0], s.at[1]).is_none() {
+                continue;
+            }
+            let (x, y) = self.px(s.at);
+            for b in &s.bearings_deg {
+                // Clockwise from grid north; pixel rows grow southwards.
+                let (sin, cos) = b.to_radians().sin_cos();
+                let end = (
+                    x + (LINE_PX * sin).round() as i32,
+                    y - (LINE_PX * cos).round() as i32,
+                );
+                root.draw(&PathElement::new([(x, y), end], WHITE.stroke_width(6)))
+                    .map_err(plot_err)?;
+                root.draw(&PathElement::new([(x, y), end], BLACK.stroke_width(3)))
+                    .map_err(plot_err)?;
+            }
+            let tri = [
+                (x, y - SIDE_PX),
+                (x - SIDE_PX, y + SIDE_PX * 2 / 3),
+                (x + SIDE_PX, y + SIDE_PX * 2 / 3),
+            ];
+            root.draw(&Polygon::new(tri, BLACK.filled()))
+                .map_err(plot_err)?;
+            root.draw(&PathElement::new(
+                [tri[0], tri[1], tri[2], tri[0]],
+                WHITE.stroke_width(2),
+            ))
+            .map_err(plot_err)?;
+            if !s.label.is_empty() {
+                let (lx, ly) = (x + SIDE_PX + 4, y + SIDE_PX);
+                let w = 13 * s.label.chars().count() as i32 + 8;
+                root.draw(&Rectangle::new(
+                    [(lx, ly - 4), (lx + w, ly + 28)],
+                    WHITE.mix(0.8).filled(),
+                ))
+                .map_err(plot_err)?;
+                root.draw(&Text::new(s.label.clone(), (lx + 4, ly + 2), (FONT, 22)))
+                    .map_err(plot_err)?;
+            }
         }
         Ok(())
     }
@@ -337,6 +479,7 @@ impl Draw for MapFigure<'_> {
                     .map_err(plot_err)?;
             }
         }
+        self.draw_sites(root)?;
         root.draw(&Rectangle::new(
             [
                 (LEFT as i32, TOP as i32),
