@@ -78,7 +78,9 @@ impl Stage for ReadMeasurements {
     const KIND: &'static str = "ReadMeasurements";
     // 2: DukeCbrs `tx_heights_m`, heights by cell; azimuths read as true bearings become grid
     // bearings (less the meridian convergence).
-    const VERSION: u32 = 2;
+    // 3: the same, renumbered: the two changes were each numbered 2 on their own branches, so a
+    // cache filled by either branch must not answer for both.
+    const VERSION: u32 = 3;
     const DOC: &'static str =
         "drive-test measurements CSV (links, or the Duke CBRS layout) into the site frame, Sec. 5";
     const INPUTS: &'static [InputSpec] = &[];
