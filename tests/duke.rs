@@ -150,15 +150,18 @@ fn duke_osm_twin_accounts_for_every_reading() {
         return;
     };
     let env = Env::new();
-    let run = env.run(
-        &root.join("graphs/duke.ron"),
-        &[
-            "--data",
-            data.to_str().unwrap(),
-            "--set",
-            "twin.options=(max_depth: 2, diffraction: true, rays: 20000)",
-        ],
-    );
+    let mut args = vec![
+        "--data".to_string(),
+        data.to_str().unwrap().to_string(),
+        "--set".into(),
+        "twin.options=(max_depth: 2, diffraction: true, rays: 20000)".into(),
+    ];
+    for cell in ["a", "b", "c", "d", "e", "f"] {
+        args.push("--set".into());
+        args.push(format!("map_{cell}.options=(max_depth: 1, rays: 5000)"));
+    }
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let run = env.run(&root.join("graphs/duke.ron"), &args);
     assert_eq!(run.code, 0, "{}\n{}", run.stdout, run.stderr);
     let eval = |name: &str| -> serde_json::Value {
         serde_json::from_slice(&std::fs::read(env.out().join(format!("{name}.json"))).unwrap())

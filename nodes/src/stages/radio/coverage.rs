@@ -45,7 +45,9 @@ pub struct CoverageTx {
     /// Its id (unique; names the `Rsrp` layer and the `serving_fraction/<id>` metric).
     pub id: String,
     /// EIRP of one resource element (the reference signal), dBm, in [-100, 100]: the carrier's
-    /// EIRP less 10 log10 of its subcarriers (46 dBm over 1200 subcarriers: 15.2 dBm).
+    /// EIRP less 10 log10 of its subcarriers (46 dBm over 1200 subcarriers: 15.2 dBm). With the
+    /// input `offsets`, what is added to the fitted EIRP (default 0).
+    #[serde(default)]
     pub eirp_dbm: f64,
     /// Carrier frequency, Hz (> 0): which transmitters interfere (`co_channel_hz`).
     pub freq_hz: f64,
@@ -68,7 +70,7 @@ pub enum CoverageLayer {
 }
 
 /// Params of [`Coverage`].
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CoverageParams {
     /// The transmitters, one per map of `maps`, in the same order.
@@ -113,13 +115,21 @@ pub struct Coverage;
 
 impl Stage for Coverage {
     const KIND: &'static str = "Coverage";
-    const VERSION: u32 = 1;
+    // 2: the optional input `offsets` (an Evaluate's fitted offsets as each transmitter's EIRP).
+    const VERSION: u32 = 2;
     const DOC: &'static str = "network-planning layer of several transmitters' path-gain maps: RSRP per transmitter, best-server RSRP, best server, SINR or coverage above a threshold, with a stated floor";
-    const INPUTS: &'static [InputSpec] = &[InputSpec::many(
-        "maps",
-        ArtifactType::Raster,
-        "path gain (dB, NaN where no ray arrived) of each transmitter, on one grid, in the order of `transmitters` (RadioMap)",
-    )];
+    const INPUTS: &'static [InputSpec] = &[
+        InputSpec::many(
+            "maps",
+            ArtifactType::Raster,
+            "path gain (dB, NaN where no ray arrived) of each transmitter, on one grid, in the order of `transmitters` (RadioMap)",
+        ),
+        InputSpec::optional(
+            "offsets",
+            ArtifactType::Metrics,
+            "an Evaluate's metrics: each transmitter's EIRP is its eirp_dbm less the offset fitted for its id (offset_db/<id>), the EIRP the measurements imply",
+        ),
+    ];
     type Params = CoverageParams;
     type Output = Raster;
 
@@ -128,7 +138,8 @@ impl Stage for Coverage {
     }
 
     fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Raster, StageError> {
-        Ok(coverage(p, &inputs.many("maps")?)?.0)
+        let p = with_offsets(p, inputs.optional("offsets")?)?;
+        Ok(coverage(&p, &inputs.many("maps")?)?.0)
     }
 
     const REPORTS: &'static [ReportSpec] = &[ReportSpec {
@@ -142,12 +153,41 @@ impl Stage for Coverage {
         inputs: &Inputs,
         _: &Ctx,
     ) -> Result<Reported<Raster>, StageError> {
-        let (output, stats) = coverage(p, &inputs.many("maps")?)?;
+        let p = with_offsets(p, inputs.optional("offsets")?)?;
+        let (output, mut stats) = coverage(&p, &inputs.many("maps")?)?;
+        for t in &p.transmitters {
+            stats.set(format!("eirp_dbm/{}", t.id), t.eirp_dbm);
+        }
         Ok(Reported {
             output,
             reports: vec![("stats", stats.into_artifact())],
         })
     }
+}
+
+/// The params with each transmitter's EIRP taken from fitted offsets, when given: Evaluate fits,
+/// per transmitter, the mean of measured minus predicted path loss, and for RSRP readings without
+/// an EIRP the measured path loss is −RSRP, so the offset is −EIRP per resource element.
+fn with_offsets(
+    p: &CoverageParams,
+    offsets: Option<&Metrics>,
+) -> Result<CoverageParams, StageError> {
+    let Some(m) = offsets else {
+        return Ok(p.clone());
+    };
+    let mut p = p.clone();
+    for t in &mut p.transmitters {
+        let key = format!("offset_db/{}", t.id);
+        let offset = m.get(&key).filter(|v| v.is_finite()).ok_or_else(|| {
+            StageError::Failed(format!(
+                "offsets: no finite {key}: the evaluation fitted no offset for transmitter {:?}",
+                t.id
+            ))
+        })?;
+        t.eirp_dbm -= offset;
+    }
+    validate(&p).map_err(StageError::Param)?;
+    Ok(p)
 }
 
 /// The params' check: counts, values and ids.
@@ -415,6 +455,24 @@ mod tests {
             floor_dbm: -140.0,
             co_channel_hz: 10e6,
         }
+    }
+
+    /// Evaluate's offsets are −EIRP: A's offset 7.5 dB on eirp_dbm 10 gives 2.5 dBm; an id the
+    /// evaluation did not fit is an error naming it.
+    #[test]
+    fn fitted_offsets_become_each_transmitters_eirp() {
+        let p = params(CoverageLayer::BestRsrp);
+        let mut m = Metrics::default();
+        for (id, off) in [("A", 7.5), ("B", -3.0), ("C", 0.0)] {
+            m.set(format!("offset_db/{id}"), off);
+        }
+        let q = with_offsets(&p, Some(&m)).unwrap();
+        let eirp: Vec<f64> = q.transmitters.iter().map(|t| t.eirp_dbm).collect();
+        assert_eq!(eirp, [2.5, 13.0, 0.0]);
+        assert_eq!(with_offsets(&p, None).unwrap(), p);
+        m.values.remove("offset_db/B");
+        let e = with_offsets(&p, Some(&m)).unwrap_err();
+        assert!(format!("{e}").contains("offset_db/B"), "{e}");
     }
 
     fn run(p: &CoverageParams) -> (Vec<f32>, Metrics) {
