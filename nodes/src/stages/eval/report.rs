@@ -271,8 +271,13 @@ impl Stage for Report {
             links_csv(&p.models, meas, &preds, &evals, ctx.site.origin).into_bytes(),
         ));
         files.push(("metrics.json".to_string(), metrics_json(p, &evals)?));
+        let plot_notes: Vec<(&str, String)> = power_note
+            .map(|n| ("plots/path_loss_distance.png", n))
+            .into_iter()
+            .collect();
         let page = PageInputs {
             p,
+            plot_notes: &plot_notes,
             intro: &intro,
             definitions: &defs,
             meas,
@@ -523,6 +528,8 @@ fn definitions_markdown(defs: &[String]) -> String {
 /// What report.html is made of besides its plots.
 struct PageInputs<'a> {
     p: &'a ReportParams,
+    /// Text under a plot, by its file.
+    plot_notes: &'a [(&'a str, String)],
     intro: &'a str,
     definitions: &'a [String],
     meas: &'a Measurements,
@@ -565,6 +572,7 @@ impl PageInputs<'_> {
             table: &table_rows(self.evals),
             left_out: &left_out_rows(self.evals),
             plots: &plot_names,
+            plot_notes: self.plot_notes,
             scenes: &named,
             radio_map: self.radio_map,
             points: &points,

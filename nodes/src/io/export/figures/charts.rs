@@ -1,6 +1,7 @@
 //! The report's scoring charts: predicted vs measured, the CDF of the absolute error, and path
 //! loss vs distance with each model's power-distance and close-in trend lines (the lines are
-//! defined, with their sources, on `stages::eval::evaluate::carrier_trends`).
+//! defined, with their sources, on `stages::eval::evaluate::carrier_trends`); with received power
+//! and no EIRP (a drive test's RSRP), received power vs distance instead.
 
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
