@@ -1016,7 +1016,9 @@ fn power_distance_note(pd: &PowerDistance, models: &[String], evals: &[&Metrics]
          grey points are the {} readings as read (dBm, no offset applied); each model's points \
          are RSRP = EIRP_fit − PL_pred at the links it scored, EIRP_fit being that model's own \
          fitted EIRP per transmitter, EIRP_fit = −offset_db/<tx> (Evaluate's offset is the mean \
-         of measured − predicted path loss{}, with measured path loss = −RSRP). The dashed lines \
+         of measured − predicted path loss{}, with measured path loss = −RSRP; with RSRP, EIRP_fit \
+         is per resource element, like RSRP, and takes in antenna gains the model leaves out). \
+         The dashed lines \
          are free space, EIRP_fit − FSPL(f, d), one per transmitter ({} lines, one legend entry: \
          per-cell labels would crowd the legend), at the EIRP fitted for {}, each at its \
          transmitter's carrier. EIRP_fit applied (dBm) — {}. The power-distance and close-in \
