@@ -61,6 +61,8 @@ pub struct Page<'a> {
     pub left_out: &'a [TableRow],
     /// Plot files, relative to the page.
     pub plots: &'a [&'a str],
+    /// Text shown under a plot, by its file: what it draws when that is not said elsewhere.
+    pub plot_notes: &'a [(&'a str, String)],
     /// Scenes to draw, by name; the first is shown at load, and its terrain carries the map and
     /// the points.
     pub scenes: &'a [(&'a str, &'a Scene)],
@@ -349,9 +351,13 @@ pub fn report_html(p: &Page) -> Result<String, String> {
         .iter()
         .map(|f| {
             format!(
-                "<figure><a href=\"{1}\" title=\"vector version (SVG)\"><img src=\"{0}\" alt=\"{0}\"></a><figcaption>{0} · <a href=\"{1}\">SVG</a></figcaption></figure>",
+                "<figure><a href=\"{1}\" title=\"vector version (SVG)\"><img src=\"{0}\" alt=\"{0}\"></a><figcaption>{0} · <a href=\"{1}\">SVG</a>{2}</figcaption></figure>",
                 esc(f),
-                esc(&f.strip_suffix(".png").map_or_else(|| f.to_string(), |s| format!("{s}.svg")))
+                esc(&f.strip_suffix(".png").map_or_else(|| f.to_string(), |s| format!("{s}.svg"))),
+                p.plot_notes
+                    .iter()
+                    .find(|(n, _)| n == f)
+                    .map_or_else(String::new, |(_, t)| format!("<br>{}", esc(t)))
             )
         })
         .collect();

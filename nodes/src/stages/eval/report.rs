@@ -12,7 +12,9 @@ use crate::artifact::{
 };
 use crate::artifact::{Half, block_half, link_distance, measured_loss};
 use crate::io::csv_text;
-use crate::io::export::figures::charts::{ErrorCdf, ModelSeries, PathLossDistance, Scatter};
+use crate::io::export::figures::charts::{
+    ErrorCdf, ModelSeries, PathLossDistance, PowerDistance, ReceivedPowerDistance, Scatter,
+};
 use crate::io::export::figures::maps::{Layer, MapFigure, Palette, robust_range, view_grid};
 use crate::io::export::figures::{Figure, render};
 use crate::io::export::report_html::{LinkPoint, Page, TableRow, number, report_html};
@@ -148,8 +150,10 @@ impl Stage for Report {
     // measured lines; 11: the PD/CI <= P2P sentence says "on those links"; 12: the links with no
     // path get their row (they were left out unseen beside "no value: 0"), links.csv's
     // offset_db and half columns, the table of links left out (Evaluate 6's split, windows,
-    // footprints).
-    const VERSION: u32 = 12;
+    // footprints); 13: with received power and no EIRP (a drive test's RSRP), the
+    // path-loss-distance chart in received power (measured as read, each model at its fitted
+    // EIRP, free space at the first model's), the offsets applied said under it.
+    const VERSION: u32 = 13;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -249,8 +253,15 @@ impl Stage for Report {
             definitions_markdown(&defs),
             left_out_markdown(p, &evals)
         );
+        let power_note = power_distance(&p.models, meas, &preds, &evals)
+            .map(|pd| power_distance_note(&pd, &p.models, &evals));
         for (name, _) in plots.iter().filter(|(n, _)| n.ends_with(".png")) {
             md.push_str(&format!("![{name}]({name})\n\n"));
+            if let Some(note) = power_note.as_ref()
+                && name == "plots/path_loss_distance.png"
+            {
+                md.push_str(&format!("{note}\n\n"));
+            }
         }
         md.push_str(&evidence_markdown(&evidence));
         files.push(("report.md".to_string(), md.into_bytes()));
@@ -260,8 +271,13 @@ impl Stage for Report {
             links_csv(&p.models, meas, &preds, &evals, ctx.site.origin).into_bytes(),
         ));
         files.push(("metrics.json".to_string(), metrics_json(p, &evals)?));
+        let plot_notes: Vec<(&str, String)> = power_note
+            .map(|n| ("plots/path_loss_distance.png", n))
+            .into_iter()
+            .collect();
         let page = PageInputs {
             p,
+            plot_notes: &plot_notes,
             intro: &intro,
             definitions: &defs,
             meas,
@@ -332,7 +348,11 @@ fn model_figures(
         ),
         (
             "path_loss_distance".into(),
-            render(&PathLossDistance(&with_measured)).map_err(fail)?,
+            match power_distance(&p.models, meas, preds, evals) {
+                Some(pd) => render(&ReceivedPowerDistance(&pd)),
+                None => render(&PathLossDistance(&with_measured)),
+            }
+            .map_err(fail)?,
         ),
     ];
     if let Some(map) = radio_map {
@@ -508,6 +528,8 @@ fn definitions_markdown(defs: &[String]) -> String {
 /// What report.html is made of besides its plots.
 struct PageInputs<'a> {
     p: &'a ReportParams,
+    /// Text under a plot, by its file.
+    plot_notes: &'a [(&'a str, String)],
     intro: &'a str,
     definitions: &'a [String],
     meas: &'a Measurements,
@@ -550,6 +572,7 @@ impl PageInputs<'_> {
             table: &table_rows(self.evals),
             left_out: &left_out_rows(self.evals),
             plots: &plot_names,
+            plot_notes: self.plot_notes,
             scenes: &named,
             radio_map: self.radio_map,
             points: &points,
@@ -894,6 +917,121 @@ fn pairs(meas: &Measurements, pred: &Measurements, ev: &Metrics) -> Vec<((f64, f
         .collect()
 }
 
+/// The measurements are received power without the transmitters' EIRP (a drive test's RSRP:
+/// no link gives a path loss or an EIRP) and the first evaluation fitted offsets: the
+/// path-loss chart is then drawn in received power.
+fn received_power_only(meas: &Measurements, evals: &[&Metrics]) -> bool {
+    evals.first().is_some_and(|e| fits_offsets(e))
+        && meas.links.iter().any(|l| l.rx_power_dbm.is_some())
+        && meas
+            .links
+            .iter()
+            .all(|l| l.path_loss_db.is_none() && l.tx_eirp_dbm.is_none())
+}
+
+/// The received-power chart's values, `None` unless [`received_power_only`]: every reading's
+/// received power as read; per model each scored link at EIRP_fit − PL_pred, where EIRP_fit =
+/// −offset_db/<tx> (Evaluate's offset is the mean of measured − predicted path loss, and the
+/// measured path loss is −RSRP here), links of a transmitter the model fitted no offset for left
+/// out; and one free-space line per transmitter at the first model's EIRP_fit, at the median
+/// carrier of its links.
+fn power_distance(
+    models: &[String],
+    meas: &Measurements,
+    preds: &[&Measurements],
+    evals: &[&Metrics],
+) -> Option<PowerDistance> {
+    if !received_power_only(meas, evals) {
+        return None;
+    }
+    let rsrp = |l: &Link| l.rx_power_dbm.filter(|v| v.is_finite());
+    let measured = meas
+        .links
+        .iter()
+        .filter_map(|l| Some((link_distance(l, None), rsrp(l)?)))
+        .collect();
+    let series = models
+        .iter()
+        .zip(preds)
+        .zip(evals)
+        .map(|((name, pr), ev)| {
+            let pts = meas
+                .links
+                .iter()
+                .zip(&pr.links)
+                .filter_map(|(m, l)| {
+                    rsrp(m)?;
+                    let eirp = -fitted_offset(ev, &m.tx.id)?;
+                    Some((link_distance(m, None), eirp - scored_prediction(l, ev)?))
+                })
+                .collect();
+            (name.clone(), pts)
+        })
+        .collect();
+    let mut freqs: BTreeMap<&str, Vec<f64>> = BTreeMap::new();
+    for l in &meas.links {
+        freqs.entry(&l.tx.id).or_default().push(l.freq_hz);
+    }
+    let first = evals[0];
+    let free_space = freqs
+        .into_iter()
+        .filter_map(|(tx, f)| {
+            let off = first.get(&format!("offset_db/{tx}"))?;
+            Some((tx.to_string(), -off, median(&f)))
+        })
+        .collect();
+    Some(PowerDistance {
+        measured,
+        models: series,
+        free_space,
+        free_space_from: models.first().cloned().unwrap_or_default(),
+    })
+}
+
+/// The text under the received-power chart: what is drawn, and every offset applied.
+fn power_distance_note(pd: &PowerDistance, models: &[String], evals: &[&Metrics]) -> String {
+    let split = evals.iter().any(|e| e.get("split/block_m").is_some());
+    let per_model: Vec<String> = models
+        .iter()
+        .zip(evals)
+        .map(|(name, ev)| {
+            let cells: Vec<String> = ev
+                .values
+                .iter()
+                .filter_map(|(k, v)| {
+                    let tx = k.strip_prefix("offset_db/")?;
+                    Some(format!("{tx} {:.2}", -v))
+                })
+                .collect();
+            if cells.is_empty() {
+                format!("{name}: none fitted (EIRP 0 dBm)")
+            } else {
+                format!("{name}: {}", cells.join(", "))
+            }
+        })
+        .collect();
+    format!(
+        "Received power against distance. The measurements are received power (RSRP) without \
+         the transmitters' EIRP, so this chart is drawn in received power, not path loss: the \
+         grey points are the {} readings as read (dBm, no offset applied); each model's points \
+         are RSRP = EIRP_fit − PL_pred at the links it scored, EIRP_fit being that model's own \
+         fitted EIRP per transmitter, EIRP_fit = −offset_db/<tx> (Evaluate's offset is the mean \
+         of measured − predicted path loss{}, with measured path loss = −RSRP; with RSRP, EIRP_fit \
+         is per resource element, like RSRP, and takes in antenna gains the model leaves out). \
+         The dashed lines \
+         are free space, EIRP_fit − FSPL(f, d), one per transmitter ({} lines, one legend entry: \
+         per-cell labels would crowd the legend), at the EIRP fitted for {}, each at its \
+         transmitter's carrier. EIRP_fit applied (dBm) — {}. The power-distance and close-in \
+         lines are path-loss lines and are not drawn here: the cells' EIRPs differ; Table 1 \
+         gives their RMSE.",
+        pd.measured.len(),
+        if split { ", on the training half" } else { "" },
+        pd.free_space.len(),
+        pd.free_space_from,
+        per_model.join("; ")
+    )
+}
+
 /// Each model's links and trend lines, for the charts: the lines Evaluate fitted to its
 /// predictions (its metrics), with several carriers the lowest carrier's; a model that is its own
 /// line (3GPP) gets the lines fitted to its values here, for the eye. The close-in line is drawn
@@ -1015,6 +1153,100 @@ mod tests {
         let defs = definitions(&[&m]).join("\n");
         assert!(defs.contains("fitted per carrier"), "{defs}");
         assert!(!defs.contains("rf.md"), "{defs}");
+    }
+
+    /// Received power without EIRP: the readings as read, each model at −its offset − its
+    /// prediction, free space at the first model's EIRP per transmitter, by hand.
+    #[test]
+    fn received_power_chart_puts_each_model_at_its_fitted_eirp() {
+        use crate::artifact::Endpoint;
+        let end = |id: &str, x: f64, y: f64| Endpoint {
+            id: id.into(),
+            x,
+            y,
+            z: Height::Absolute(0.0),
+            azimuth_deg: None,
+        };
+        let reading = |tx: &str, rx: (f64, f64), f: f64, rsrp: Option<f64>| Link {
+            tx: end(tx, 0.0, 0.0),
+            rx: end("", rx.0, rx.1),
+            freq_hz: f,
+            path_loss_db: None,
+            rx_power_dbm: rsrp,
+            tx_eirp_dbm: None,
+            los: None,
+        };
+        let predicted = |l: &Link, pl: Option<f64>| Link {
+            path_loss_db: pl,
+            rx_power_dbm: None,
+            ..l.clone()
+        };
+        let meas = Measurements {
+            links: vec![
+                reading("a", (100.0, 0.0), 3.5e9, Some(-80.0)),
+                reading("b", (0.0, 200.0), 1.9e9, Some(-90.0)),
+                reading("a", (300.0, 0.0), 3.5e9, None),
+            ],
+        };
+        let pred = |pl: [Option<f64>; 3]| Measurements {
+            links: meas
+                .links
+                .iter()
+                .zip(pl)
+                .map(|(l, v)| predicted(l, v))
+                .collect(),
+        };
+        let (pm, pn) = (
+            pred([Some(110.0), Some(120.0), Some(130.0)]),
+            pred([Some(105.0), Some(100.0), Some(130.0)]),
+        );
+        // Evaluate's offsets are measured − predicted path loss, the measured loss −RSRP: an
+        // offset of −30 dB is an EIRP of 30 dBm. N fitted none for b (its training half had none).
+        let metrics = |kv: &[(&str, f64)]| {
+            let mut m = Metrics::default();
+            for (k, v) in kv {
+                m.set(*k, *v);
+            }
+            m
+        };
+        let em = metrics(&[("offset_db/a", -30.0), ("offset_db/b", -28.0)]);
+        let en = metrics(&[("offset_db/a", -25.0)]);
+        let models = ["M".to_string(), "N".to_string()];
+        let pd = power_distance(&models, &meas, &[&pm, &pn], &[&em, &en]).unwrap();
+        // The readings as read; the third has no reading, so no point for any model.
+        assert_eq!(pd.measured, [(100.0, -80.0), (200.0, -90.0)]);
+        assert_eq!(
+            pd.models[0],
+            ("M".into(), vec![(100.0, -80.0), (200.0, -92.0)])
+        );
+        assert_eq!(pd.models[1], ("N".into(), vec![(100.0, -80.0)]));
+        // Free space at the first model's EIRP per transmitter, at its carrier.
+        assert_eq!(
+            pd.free_space,
+            [("a".into(), 30.0, 3.5e9), ("b".into(), 28.0, 1.9e9)]
+        );
+        assert_eq!(pd.free_space_from, "M");
+        let note = power_distance_note(&pd, &models, &[&em, &en]);
+        for want in ["M: a 30.00, b 28.00", "N: a 25.00", "2 readings as read"] {
+            assert!(note.contains(want), "{want:?} not in {note}");
+        }
+        let fig = render(&ReceivedPowerDistance(&pd)).unwrap();
+        for want in [
+            "received power, RSRP (dBm)",
+            "free space at each cell&apos;s EIRP fitted for M",
+            "measured RSRP (as read)",
+        ] {
+            assert!(
+                fig.svg.contains(want) || fig.svg.contains(&want.replace("&apos;", "'")),
+                "no {want:?} in the SVG"
+            );
+        }
+        // With the EIRP known, or with no offsets fitted, the path-loss chart as before.
+        let mut known = meas.clone();
+        known.links[0].tx_eirp_dbm = Some(30.0);
+        assert!(power_distance(&models, &known, &[&pm, &pn], &[&em, &en]).is_none());
+        let none = Metrics::default();
+        assert!(power_distance(&models, &meas, &[&pm, &pn], &[&none, &en]).is_none());
     }
 
     /// links.csv: each model's offset next to its error, empty (and no error) for a transmitter

@@ -1,6 +1,7 @@
 //! The report's scoring charts: predicted vs measured, the CDF of the absolute error, and path
 //! loss vs distance with each model's power-distance and close-in trend lines (the lines are
-//! defined, with their sources, on `stages::eval::evaluate::carrier_trends`).
+//! defined, with their sources, on `stages::eval::evaluate::carrier_trends`); with received power
+//! and no EIRP (a drive test's RSRP), received power vs distance instead.
 
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
@@ -240,6 +241,120 @@ impl Draw for PathLossDistance<'_> {
             }
         }
         legend(&mut chart, SeriesLabelPosition::LowerRight)
+    }
+}
+
+/// The received-power chart's values, when the measurements are received power without the
+/// transmitters' EIRP (a drive test's RSRP): what [`ReceivedPowerDistance`] draws.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PowerDistance {
+    /// Each measured reading as (distance m, received power dBm), as read.
+    pub measured: Vec<(f64, f64)>,
+    /// Per model, its name and each scored link as (distance m, EIRP_fit − predicted path loss
+    /// dBm), EIRP_fit the model's own fitted EIRP for the link's transmitter.
+    pub models: Vec<(String, Vec<(f64, f64)>)>,
+    /// The free-space lines, one per transmitter: (transmitter, EIRP dBm, carrier Hz).
+    pub free_space: Vec<(String, f64, f64)>,
+    /// Whose fitted EIRP the free-space lines are drawn at (the legend says so).
+    pub free_space_from: String,
+}
+
+/// Received power against distance (log axis): the measured readings as read, each model's
+/// prediction at its fitted EIRP, and free space at each transmitter's fitted EIRP, one dashed
+/// line per transmitter under one legend entry.
+pub struct ReceivedPowerDistance<'a>(pub &'a PowerDistance);
+
+impl Draw for ReceivedPowerDistance<'_> {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+        let pd = self.0;
+        let all = || {
+            pd.measured
+                .iter()
+                .chain(pd.models.iter().flat_map(|m| m.1.iter()))
+                .filter(|p| p.0 > 0.0 && p.1.is_finite())
+        };
+        let (dmin, dmax) = all().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+            (a.min(p.0), b.max(p.0))
+        });
+        let (dmin, dmax) = if dmin < dmax {
+            (dmin * 0.9, dmax * 1.1)
+        } else {
+            (1.0, 1000.0)
+        };
+        let yr = padded_range(all().map(|p| p.1));
+        let mut chart = ChartBuilder::on(root)
+            .caption(
+                "Received power vs distance: measured RSRP, models at their fitted EIRP",
+                (FONT, TITLE),
+            )
+            .margin(30)
+            .x_label_area_size(80)
+            .y_label_area_size(100)
+            .build_cartesian_2d((dmin..dmax).log_scale(), yr.0..yr.1)
+            .map_err(plot_err)?;
+        chart
+            .configure_mesh()
+            .x_desc("link distance (m, log scale)")
+            .x_labels(12)
+            .x_label_formatter(&|d| format!("{d:.0}"))
+            .y_desc("received power, RSRP (dBm)")
+            .axis_desc_style((FONT, LABEL))
+            .label_style((FONT, TICK))
+            .light_line_style(BLACK.mix(0.05))
+            .draw()
+            .map_err(plot_err)?;
+        let grey = RGBColor(90, 90, 90);
+        chart
+            .draw_series(
+                pd.measured
+                    .iter()
+                    .filter(|p| p.0 > 0.0)
+                    .map(|p| Circle::new(*p, 3, grey.mix(0.5).filled())),
+            )
+            .map_err(plot_err)?
+            .label("measured RSRP (as read)")
+            .legend(move |(x, y)| Circle::new((x + 15, y), 6, grey.filled()));
+        for (k, (name, pts)) in pd.models.iter().enumerate() {
+            let c = colour(k);
+            chart
+                .draw_series(
+                    pts.iter()
+                        .filter(|p| p.0 > 0.0)
+                        .map(|p| Circle::new(*p, 2, c.mix(0.5).filled())),
+                )
+                .map_err(plot_err)?
+                .label(format!("{name}: its EIRP_fit − PL_pred"))
+                .legend(move |(x, y)| Circle::new((x + 15, y), 6, c.filled()));
+        }
+        // Only inside the axes: plotters would flatten the part outside onto the frame.
+        let line = |eirp: f64, f: f64| {
+            (0..=200)
+                .map(move |i| {
+                    let d = dmin * (dmax / dmin).powf(i as f64 / 200.0);
+                    (d, eirp - crate::rf::em::fspl_db(d, f))
+                })
+                .filter(move |p| (yr.0..=yr.1).contains(&p.1))
+        };
+        for (k, (_, eirp, f)) in pd.free_space.iter().enumerate() {
+            let s = chart
+                .draw_series(DashedLineSeries::new(
+                    line(*eirp, *f),
+                    12,
+                    8,
+                    BLACK.stroke_width(2),
+                ))
+                .map_err(plot_err)?;
+            if k == 0 {
+                s.label(format!(
+                    "free space at each cell's EIRP fitted for {} (one line per cell)",
+                    pd.free_space_from
+                ))
+                .legend(|(x, y)| {
+                    DashedPathElement::new([(x, y), (x + 30, y)], 8, 5, BLACK.stroke_width(2))
+                });
+            }
+        }
+        legend(&mut chart, SeriesLabelPosition::LowerLeft)
     }
 }
 
