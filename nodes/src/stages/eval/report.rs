@@ -153,7 +153,8 @@ impl Stage for Report {
     // footprints); 13: with received power and no EIRP (a drive test's RSRP), the
     // path-loss-distance chart in received power (measured as read, each model at its fitted
     // EIRP, free space at the first model's), the offsets applied said under it.
-    const VERSION: u32 = 13;
+    // 14: the intro says the models were scored at different links when they were.
+    const VERSION: u32 = 14;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -245,7 +246,7 @@ impl Stage for Report {
         let (md_table, csv) = tables(p, &evals);
         let figures = model_figures(p, meas, &preds, &evals, radio_map, ortho)?;
         let plots = plot_files(figures, &inputs.many::<ReportFiles>("figures")?)?;
-        let intro = intro(meas);
+        let intro = intro(meas, &evals);
         let defs = definitions(&evals);
         let mut md = format!(
             "# KODAMA report: {}\n\n{intro}\n\n{md_table}\n{}\n{}",
@@ -391,10 +392,19 @@ fn plot_files(
 }
 
 /// The report's introduction: how many links, and where the definitions are.
-fn intro(meas: &Measurements) -> String {
+/// The claim "every model is scored at the same links" is made only when it holds: a traced model
+/// that finds no path for some links is scored on fewer, and then the intro says so.
+fn intro(meas: &Measurements, evals: &[&Metrics]) -> String {
+    let scored: Vec<Option<f64>> = evals.iter().map(|m| m.get("links_scored")).collect();
+    let same = scored.windows(2).all(|w| w[0] == w[1]);
+    let how = if same {
+        "every model is scored at the same links (paper Sec. 5)"
+    } else {
+        "the models are scored at the links each gives a value for, so their counts differ \
+         (\"links scored\" in Table 1, and where the others went in the table of links left out)"
+    };
     format!(
-        "{} measured links; every model is scored at the same links (paper Sec. 5). How each \
-         figure of Table 1 is computed is stated under it.",
+        "{} measured links; {how}. How each figure of Table 1 is computed is stated under it.",
         meas.links.len()
     )
 }
