@@ -37,7 +37,15 @@ pub struct ReportParams {
     /// Names of the `evidence` reports, in order. Default the report's place, "evidence 1", ...
     #[serde(default)]
     pub evidence_names: Vec<String>,
+    /// What the run assumes that the data does not say (antenna heights, terrain, default
+    /// building heights), one sentence each, stated after the introduction. Default none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub assumptions: Vec<String>,
 }
+
+/// The most assumptions a report states, and the longest one, in characters.
+const MAX_ASSUMPTIONS: usize = 64;
+const MAX_ASSUMPTION_CHARS: usize = 1000;
 
 fn site() -> String {
     "site".into()
@@ -153,7 +161,8 @@ impl Stage for Report {
     // footprints); 13: with received power and no EIRP (a drive test's RSRP), the
     // path-loss-distance chart in received power (measured as read, each model at its fitted
     // EIRP, free space at the first model's), the offsets applied said under it.
-    // 14: the intro says the models were scored at different links when they were.
+    // 14: the intro says the models were scored at different links when they were; the
+    // `assumptions` stated after it.
     const VERSION: u32 = 14;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
@@ -214,6 +223,19 @@ impl Stage for Report {
                 "expected at most 64 reports",
             ));
         }
+        if p.assumptions.len() > MAX_ASSUMPTIONS
+            || p.assumptions
+                .iter()
+                .any(|a| a.chars().count() > MAX_ASSUMPTION_CHARS)
+        {
+            return Err(ParamError::new(
+                "assumptions",
+                format!(
+                    "expected at most {MAX_ASSUMPTIONS} sentences of at most \
+                     {MAX_ASSUMPTION_CHARS} characters each"
+                ),
+            ));
+        }
         Ok(())
     }
 
@@ -246,7 +268,7 @@ impl Stage for Report {
         let (md_table, csv) = tables(p, &evals);
         let figures = model_figures(p, meas, &preds, &evals, radio_map, ortho)?;
         let plots = plot_files(figures, &inputs.many::<ReportFiles>("figures")?)?;
-        let intro = intro(meas, &evals);
+        let intro = with_assumptions(intro(meas, &evals), &p.assumptions);
         let defs = definitions(&evals);
         let mut md = format!(
             "# KODAMA report: {}\n\n{intro}\n\n{md_table}\n{}\n{}",
@@ -389,6 +411,21 @@ fn plot_files(
         }
     }
     Ok(plots)
+}
+
+/// The introduction followed by the run's assumptions, when it states any.
+fn with_assumptions(intro: String, assumptions: &[String]) -> String {
+    if assumptions.is_empty() {
+        return intro;
+    }
+    let list: Vec<String> = assumptions
+        .iter()
+        .map(|a| a.trim().trim_end_matches('.').to_string())
+        .collect();
+    format!(
+        "{intro} Assumptions, none of them published: {}.",
+        list.join("; ")
+    )
 }
 
 /// The report's introduction: how many links, and where the definitions are.
@@ -1343,9 +1380,25 @@ mod tests {
                 site: "s".into(),
                 scene_names: vec![],
                 evidence_names: vec![],
+                assumptions: vec![],
             },
             &[&ev, &Metrics::default()],
         );
         assert!(md.contains("| scored | 1 | – |"), "{md}");
+    }
+
+    #[test]
+    fn assumptions_follow_the_introduction() {
+        let intro = "46655 measured links.".to_string();
+        assert_eq!(with_assumptions(intro.clone(), &[]), intro);
+        let a = [
+            "ground flat at z = 0.".to_string(),
+            " antennas 12 m".to_string(),
+        ];
+        assert_eq!(
+            with_assumptions(intro, &a),
+            "46655 measured links. Assumptions, none of them published: ground flat at z = 0; \
+             antennas 12 m."
+        );
     }
 }
