@@ -4,6 +4,8 @@
 //! and no EIRP (a drive test's RSRP), received power vs distance instead.
 
 use plotters::coord::Shift;
+use plotters::coord::combinators::LogCoord;
+use plotters::coord::types::RangedCoordf64;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 
@@ -30,6 +32,45 @@ fn colour(k: usize) -> RGBColor {
 const TITLE: u32 = 40;
 const LABEL: u32 = 28;
 const TICK: u32 = 22;
+
+/// Axes of log link distance (metres) against `y_desc`, over the positive distances `ds` (padded
+/// by 10 %; 1-1000 m when there are none) and the range `yr`, with the figures' mesh: what both
+/// distance plots stand on.
+fn log_distance_chart<'a, DB: DrawingBackend>(
+    root: &'a DrawingArea<DB, Shift>,
+    caption: &str,
+    y_desc: &str,
+    ds: impl Iterator<Item = f64>,
+    yr: (f64, f64),
+) -> Result<ChartContext<'a, DB, Cartesian2d<LogCoord<f64>, RangedCoordf64>>, String> {
+    let (dmin, dmax) = ds
+        .filter(|d| *d > 0.0)
+        .fold((f64::INFINITY, 0.0f64), |(a, b), d| (a.min(d), b.max(d)));
+    let (dmin, dmax) = if dmin < dmax {
+        (dmin * 0.9, dmax * 1.1)
+    } else {
+        (1.0, 1000.0)
+    };
+    let mut chart = ChartBuilder::on(root)
+        .caption(caption, (FONT, TITLE))
+        .margin(30)
+        .x_label_area_size(80)
+        .y_label_area_size(100)
+        .build_cartesian_2d((dmin..dmax).log_scale(), yr.0..yr.1)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("link distance (m, log scale)")
+        .x_labels(12)
+        .x_label_formatter(&|d| format!("{d:.0}"))
+        .y_desc(y_desc)
+        .axis_desc_style((FONT, LABEL))
+        .label_style((FONT, TICK))
+        .light_line_style(BLACK.mix(0.05))
+        .draw()
+        .map_err(plot_err)?;
+    Ok(chart)
+}
 
 fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
@@ -159,38 +200,22 @@ impl Draw for PathLossDistance<'_> {
                 .flat_map(|m| m.links.iter().map(|l| l.0))
                 .filter(|d| *d > 0.0)
         };
-        let (dmin, dmax) = ds().fold((f64::INFINITY, 0.0f64), |(a, b), d| (a.min(d), b.max(d)));
-        let (dmin, dmax) = if dmin < dmax {
-            (dmin * 0.9, dmax * 1.1)
-        } else {
-            (1.0, 1000.0)
-        };
         let yr = padded_range(
             self.0
                 .iter()
                 .flat_map(|m| m.links.iter().flat_map(|l| [l.1, l.2])),
         );
-        let mut chart = ChartBuilder::on(root)
-            .caption(
-                "Path loss vs distance: power-distance (solid) and close-in (dashed) lines",
-                (FONT, TITLE),
-            )
-            .margin(30)
-            .x_label_area_size(80)
-            .y_label_area_size(100)
-            .build_cartesian_2d((dmin..dmax).log_scale(), yr.0..yr.1)
-            .map_err(plot_err)?;
-        chart
-            .configure_mesh()
-            .x_desc("link distance (m, log scale)")
-            .x_labels(12)
-            .x_label_formatter(&|d| format!("{d:.0}"))
-            .y_desc("path loss (dB)")
-            .axis_desc_style((FONT, LABEL))
-            .label_style((FONT, TICK))
-            .light_line_style(BLACK.mix(0.05))
-            .draw()
-            .map_err(plot_err)?;
+        let mut chart = log_distance_chart(
+            root,
+            "Path loss vs distance: power-distance (solid) and close-in (dashed) lines",
+            "path loss (dB)",
+            ds(),
+            yr,
+        )?;
+        let (dmin, dmax) = {
+            let r = chart.x_range();
+            (r.start, r.end)
+        };
         if let Some(first) = self.0.first() {
             let grey = RGBColor(90, 90, 90);
             chart
@@ -273,36 +298,18 @@ impl Draw for ReceivedPowerDistance<'_> {
                 .chain(pd.models.iter().flat_map(|m| m.1.iter()))
                 .filter(|p| p.0 > 0.0 && p.1.is_finite())
         };
-        let (dmin, dmax) = all().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
-            (a.min(p.0), b.max(p.0))
-        });
-        let (dmin, dmax) = if dmin < dmax {
-            (dmin * 0.9, dmax * 1.1)
-        } else {
-            (1.0, 1000.0)
-        };
         let yr = padded_range(all().map(|p| p.1));
-        let mut chart = ChartBuilder::on(root)
-            .caption(
-                "Received power vs distance: measured RSRP, models at their fitted EIRP",
-                (FONT, TITLE),
-            )
-            .margin(30)
-            .x_label_area_size(80)
-            .y_label_area_size(100)
-            .build_cartesian_2d((dmin..dmax).log_scale(), yr.0..yr.1)
-            .map_err(plot_err)?;
-        chart
-            .configure_mesh()
-            .x_desc("link distance (m, log scale)")
-            .x_labels(12)
-            .x_label_formatter(&|d| format!("{d:.0}"))
-            .y_desc("received power, RSRP (dBm)")
-            .axis_desc_style((FONT, LABEL))
-            .label_style((FONT, TICK))
-            .light_line_style(BLACK.mix(0.05))
-            .draw()
-            .map_err(plot_err)?;
+        let mut chart = log_distance_chart(
+            root,
+            "Received power vs distance: measured RSRP, models at their fitted EIRP",
+            "received power, RSRP (dBm)",
+            all().map(|p| p.0),
+            yr,
+        )?;
+        let (dmin, dmax) = {
+            let r = chart.x_range();
+            (r.start, r.end)
+        };
         let grey = RGBColor(90, 90, 90);
         chart
             .draw_series(

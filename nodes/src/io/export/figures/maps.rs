@@ -24,18 +24,7 @@ pub enum Palette {
 }
 
 /// Ten distinct colours (matplotlib's tab10), for [`Palette::Categorical`].
-pub const CATEGORICAL: [[u8; 3]; 10] = [
-    [31, 119, 180],
-    [255, 127, 14],
-    [44, 160, 44],
-    [214, 39, 40],
-    [148, 103, 189],
-    [140, 86, 75],
-    [227, 119, 194],
-    [127, 127, 127],
-    [188, 189, 34],
-    [23, 190, 207],
-];
+pub const CATEGORICAL: [[u8; 3]; 10] = super::TAB10;
 
 /// The most categories a categorical legend lists.
 pub const MAX_CATEGORIES: usize = 64;

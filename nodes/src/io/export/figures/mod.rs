@@ -20,15 +20,22 @@ pub const PRINT: (u32, u32) = (1600, 1000);
 /// The largest figure side drawn, pixels: a map at native resolution is downsampled past it.
 pub const MAX_SIDE: u32 = 6000;
 
-/// Series colours (matplotlib's tab10 order).
-pub const PALETTE: [[u8; 3]; 6] = [
+/// matplotlib's tab10: ten distinct colours, for series and for categorical maps.
+pub const TAB10: [[u8; 3]; 10] = [
     [31, 119, 180],
     [255, 127, 14],
     [44, 160, 44],
     [214, 39, 40],
     [148, 103, 189],
     [140, 86, 75],
+    [227, 119, 194],
+    [127, 127, 127],
+    [188, 189, 34],
+    [23, 190, 207],
 ];
+
+/// Series colours: tab10's first six, in order.
+pub const PALETTE: [[u8; 3]; 6] = [TAB10[0], TAB10[1], TAB10[2], TAB10[3], TAB10[4], TAB10[5]];
 
 /// The font family every figure uses; registered with plotters under this name.
 pub const FONT: &str = "sans-serif";
