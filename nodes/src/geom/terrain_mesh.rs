@@ -1,9 +1,26 @@
 //! The terrain raster as a triangle mesh.
 
 use crate::artifact::Material;
-use crate::artifact::{Mesh, Raster};
+use crate::artifact::{Mesh, ObjectClass, Raster, SceneObject};
 use crate::geom::mesh_build::height_surface;
 use crate::raster::gap_fill::fill_gaps;
+
+/// The id every scene gives its ground.
+pub const TERRAIN_ID: &str = "terrain";
+
+/// The terrain as a scene's ground object ([`TERRAIN_ID`], class Terrain), meshed by
+/// [`terrain_mesh`].
+pub fn terrain_object(
+    terrain: &Raster,
+    step: f64,
+    material: Material,
+) -> Result<SceneObject, String> {
+    Ok(SceneObject {
+        id: TERRAIN_ID.into(),
+        class: ObjectClass::Terrain,
+        mesh: terrain_mesh(terrain, step, material)?,
+    })
+}
 
 /// The terrain raster as a regular triangulated surface over its whole extent, vertices every
 /// `step` metres (bilinear between cell centres, clamped at the rim); no-data cells are filled

@@ -12,7 +12,7 @@ use crate::artifact::{Material, default_material};
 use crate::geom::mesh_build::prism;
 use crate::geom::mesh_check::{OnInvalid, check_solid};
 use crate::geom::polygon::{convex_hull, simplify_polygon};
-use crate::geom::terrain_mesh::terrain_mesh;
+use crate::geom::terrain_mesh::terrain_object;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, ReportSpec, Reported, Stage, StageError};
 
 /// Params of [`OsmBaseline`].
@@ -198,13 +198,9 @@ fn baseline_scene(
     };
     let mut objects = Vec::new();
     if p.ground == Ground::Include {
-        let mesh =
-            terrain_mesh(terrain, g.cell_m, p.terrain_material).map_err(StageError::Failed)?;
-        objects.push(SceneObject {
-            id: "terrain".into(),
-            class: ObjectClass::Terrain,
-            mesh,
-        });
+        objects.push(
+            terrain_object(terrain, g.cell_m, p.terrain_material).map_err(StageError::Failed)?,
+        );
     }
     for f in &footprints.items {
         let (height, source) = height_and_source(f, p);

@@ -6,10 +6,10 @@ use std::collections::BTreeSet;
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Metrics, ObjectClass, Raster, Scene, SceneObject, Typed};
+use crate::artifact::{ArtifactType, Metrics, ObjectClass, Raster, Scene, Typed};
 use crate::artifact::{Material, default_material};
 use crate::geom::mesh_check::{OnInvalid, check_solid};
-use crate::geom::terrain_mesh::terrain_mesh;
+use crate::geom::terrain_mesh::terrain_object;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, ReportSpec, Reported, Stage, StageError};
 
 /// Params of [`AssembleScene`].
@@ -116,18 +116,14 @@ fn assemble(
 ) -> Result<(Scene, usize), StageError> {
     let terrain: &Raster = inputs.one("terrain")?;
     let scenes: Vec<&Scene> = inputs.many("objects")?;
-    let mesh = terrain_mesh(
+    let ground = terrain_object(
         terrain,
         p.terrain_step_m.unwrap_or(terrain.grid.cell_m),
         p.terrain_material,
     )
     .map_err(StageError::Failed)?;
-    let mut objects = vec![SceneObject {
-        id: "terrain".into(),
-        class: ObjectClass::Terrain,
-        mesh,
-    }];
-    let mut ids: BTreeSet<String> = BTreeSet::from(["terrain".to_string()]);
+    let mut ids: BTreeSet<String> = BTreeSet::from([ground.id.clone()]);
+    let mut objects = vec![ground];
     let total: usize = scenes.iter().map(|s| s.objects.len()).sum();
     ctx.progress.set_total(total as u64);
     let mut dropped: Vec<String> = Vec::new();
@@ -173,6 +169,7 @@ fn assemble(
 mod tests {
     use super::*;
     use crate::artifact::{Grid, PodVec};
+    use crate::geom::terrain_mesh::terrain_mesh;
 
     #[test]
     fn the_terrain_mesh_covers_the_raster_and_follows_it() {
