@@ -15,6 +15,7 @@ use std::collections::BTreeMap;
 use glam::DVec3;
 
 use crate::artifact::{Chart, ChartMaterials, ChartSet, Mesh, NO_MATERIAL, PodVec, Scene};
+use crate::geom::mesh_check::check_solid;
 
 /// How material regions are turned into geometry.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -36,7 +37,7 @@ impl Default for ApplySpec {
 }
 
 /// What [`apply_materials`] did.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ApplyStats {
     /// Building triangles before.
     pub triangles_before: u64,
@@ -48,6 +49,23 @@ pub struct ApplyStats {
     pub cut_lines: u64,
     /// Vertices added on mesh edges (shared with the neighbours) and inside faces.
     pub vertices_added: u64,
+    /// Objects split along their material regions.
+    pub objects_split: u64,
+    /// Objects whose split failed (or would open a closed solid), kept whole with each triangle
+    /// painted the material at its centre: "id: why", in object order.
+    pub kept_whole: Vec<String>,
+}
+
+impl ApplyStats {
+    /// Adds one object's counts.
+    fn absorb(&mut self, o: &ApplyStats) {
+        self.triangles_before += o.triangles_before;
+        self.triangles_after += o.triangles_after;
+        self.charts_split += o.charts_split;
+        self.cut_lines += o.cut_lines;
+        self.vertices_added += o.vertices_added;
+        self.objects_split += o.objects_split;
+    }
 }
 
 /// Points closer than this (metres) to a cut line lie on it; edge points closer than half of it
@@ -100,17 +118,70 @@ pub fn apply_materials(
     let mut out = scene.clone();
     for (&o, ks) in &by_object {
         let obj = &mut out.objects[o as usize];
-        stats.triangles_before += obj.mesh.len() as u64;
         let plans: Vec<(usize, ChartPlan)> = ks
             .iter()
             .map(|&k| (k, plan_chart(&charts.charts[k], &mats[k], spec)))
             .collect();
-        let mesh = split_object(&obj.mesh, charts, &plans, &mut stats)
-            .map_err(|e| format!("{}: {e}", obj.id))?;
-        stats.triangles_after += mesh.len() as u64;
-        obj.mesh = mesh;
+        // One building's split going wrong (a cut through a sliver, a self-intersection the
+        // new vertices make) must not cost the whole twin: that building keeps its checked
+        // mesh, painted triangle by triangle, and is counted.
+        let mut one = ApplyStats {
+            triangles_before: obj.mesh.len() as u64,
+            ..Default::default()
+        };
+        let split = split_object(&obj.mesh, charts, &plans, &mut one)
+            .and_then(|mesh| keeps_a_solid(&obj.mesh, mesh));
+        match split {
+            Ok(mesh) => {
+                one.triangles_after = mesh.len() as u64;
+                one.objects_split = 1;
+                stats.absorb(&one);
+                obj.mesh = mesh;
+            }
+            Err(why) => {
+                obj.mesh = painted_whole(&obj.mesh, charts, &plans);
+                stats.triangles_before += one.triangles_before;
+                stats.triangles_after += one.triangles_before;
+                stats.kept_whole.push(format!("{}: {why}", obj.id));
+            }
+        }
     }
     Ok((out, stats))
+}
+
+/// `split` if it is a closed, manifold solid wherever `before` was one; an object that was no
+/// checked solid to begin with (a truth scene's unions of shells) is not made worse by its split.
+fn keeps_a_solid(before: &Mesh, split: Mesh) -> Result<Mesh, String> {
+    match check_solid(&split) {
+        Err(e) if check_solid(before).is_ok() => Err(format!(
+            "the solid split along its material boundaries is not closed and manifold: {e}"
+        )),
+        _ => Ok(split),
+    }
+}
+
+/// `mesh` unsplit, each charted triangle given its plan's material at the triangle's centre
+/// (its own where the plan has none): coarser than the split, but the solid is the one checked.
+fn painted_whole(mesh: &Mesh, charts: &ChartSet, plans: &[(usize, ChartPlan)]) -> Mesh {
+    let plan_of = plan_of_triangles(mesh, charts, plans);
+    let mut out = mesh.clone();
+    out.materials.0.resize(mesh.len(), 0);
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        let Some((k, plan)) = plans.get(plan_of[t]) else {
+            continue;
+        };
+        let centre = tri
+            .iter()
+            .map(|&v| DVec3::from(mesh.positions[v as usize].map(f64::from)))
+            .sum::<DVec3>()
+            / 3.0;
+        let (u, v) = uv(&charts.charts[*k], centre);
+        let m = plan.material_at(u, v);
+        if m != NO_MATERIAL {
+            out.materials.0[t] = m;
+        }
+    }
+    out
 }
 
 /// One chart's cut lines (texel coordinates, ascending) and the material of each cell between
@@ -884,6 +955,55 @@ mod tests {
             .filter(|&&m| m == Material::Brick as u8)
             .count();
         assert_eq!(brick, mesh.len() - 2);
+    }
+
+    /// The fallback for a building whose split fails: its checked mesh, untouched, each charted
+    /// triangle painted the plan's material at its centre (walls glass here, the roof concrete,
+    /// the floor, uncharted, as it was), and a split that opens a closed solid is refused.
+    #[test]
+    fn a_building_kept_whole_is_painted_triangle_by_triangle() {
+        let scene = box_scene();
+        let charts = building_charts(&scene, &ChartSpec::default()).unwrap();
+        let mats: Vec<ChartMaterials> = charts
+            .charts
+            .iter()
+            .map(|c| {
+                let m = match c.kind {
+                    crate::artifact::ChartKind::Wall => Material::Glass as u8,
+                    _ => Material::Metal as u8,
+                };
+                let on = |&t: &u32| if t == u32::MAX { NO_MATERIAL } else { m };
+                ChartMaterials {
+                    material: PodVec(c.triangle_at.iter().map(on).collect()),
+                    source: PodVec(vec![1; c.len()]),
+                    dominant: Some(m),
+                }
+            })
+            .collect();
+        let plans: Vec<(usize, ChartPlan)> = (0..charts.charts.len())
+            .map(|k| {
+                (
+                    k,
+                    plan_chart(&charts.charts[k], &mats[k], &ApplySpec::default()),
+                )
+            })
+            .collect();
+        let before = &scene.objects[0].mesh;
+        let whole = painted_whole(before, &charts, &plans);
+        assert_eq!(whole.positions, before.positions);
+        assert_eq!(whole.triangles, before.triangles);
+        check_solid(&whole).unwrap();
+        let count = |m: Material| whole.materials.iter().filter(|&&x| x == m as u8).count();
+        assert_eq!(count(Material::Glass), 8);
+        assert_eq!(count(Material::Metal), 2);
+        assert_eq!(count(Material::Concrete), 2);
+        let mut open = before.clone();
+        open.triangles.0.pop();
+        open.materials.0.pop();
+        let why = keeps_a_solid(before, open.clone()).unwrap_err();
+        assert!(why.contains("not closed and manifold"), "{why}");
+        // An object that was open to begin with is not this step's to refuse.
+        assert!(keeps_a_solid(&open, open.clone()).is_ok());
     }
 
     #[test]
