@@ -338,3 +338,55 @@ fn delft_tile_footprints_and_solids() {
         "BGT ids leaked into the derived footprints"
     );
 }
+
+/// Real LiDAR with no building class (Autzen: classes 1 and 2 only) over a river bank, its trees
+/// and a footbridge: the geometric cues find high, smooth candidates (the bridge deck, banks the
+/// terrain missed, tree clumps) and drop every one, for being too narrow, letting the laser
+/// through or standing on no walls; the stage says so.
+#[test]
+fn autzen_without_a_building_class_makes_no_bridge_or_tree_a_building() {
+    let data = repo("../shared/data");
+    assert!(data.is_dir(), "real test data missing: {}", data.display());
+    let env = Env::new();
+    let r = env
+        .run(
+            &repo("graphs/autzen.ron"),
+            &["--data", data.to_str().unwrap()],
+        )
+        .ok();
+    let fp: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(env.out().join("building_footprints.geojson")).unwrap(),
+    )
+    .unwrap();
+    let n = fp["features"].as_array().unwrap().len();
+    assert_eq!(n, 0, "buildings where Autzen has none: {fp}");
+    assert!(
+        r.stderr.contains("building candidates from geometric cues")
+            && r.stderr.contains("give the stage footprints or a mask"),
+        "{}",
+        r.stderr
+    );
+    // Without the cues the same chain makes the footbridge and the banks buildings.
+    let bare = env
+        .run(
+            &repo("graphs/autzen.ron"),
+            &[
+                "--data",
+                data.to_str().unwrap(),
+                "--set",
+                "buildings.min_width_m=0.0",
+                "--set",
+                "buildings.max_pass_through=1.0",
+                "--set",
+                "buildings.min_walled=0.0",
+            ],
+        )
+        .ok();
+    drop(bare);
+    let fp: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(env.out().join("building_footprints.geojson")).unwrap(),
+    )
+    .unwrap();
+    let n = fp["features"].as_array().unwrap().len();
+    assert!(n >= 5, "{n} candidates without the cues");
+}
