@@ -137,3 +137,30 @@ pub fn vertices(scene: &Scene) -> Vec<[f32; 3]> {
         .flat_map(|o| o.mesh.positions.iter().copied())
         .collect()
 }
+
+/// A munich-like map set-up: `scene` at 3.5 GHz with its file's slab thicknesses (as the CLI
+/// loads it), the default plane of `cell_m` cells at 1.5 m.
+pub fn munich_rf(xml: &std::path::Path) -> kodama_nodes::rf::scene::RfScene {
+    let (s, thickness) = kodama_nodes::io::sionna_xml::read_scene_with_thickness(xml).unwrap();
+    let rf = kodama_nodes::rf::scene::RfScene::new(&s, 3.5e9, false).unwrap();
+    thickness
+        .into_iter()
+        .fold(rf, |rf, (m, d)| rf.with_thickness(m, d))
+}
+
+/// Compares two path-gain maps (linear): (cells both reach, cells only one reaches, median,
+/// 99th percentile and largest |difference| in dB over the cells both reach).
+pub fn compare_maps(a: &[f32], b: &[f32]) -> (usize, usize, f64, f64, f64) {
+    let mut diff = Vec::new();
+    let mut only = 0;
+    for (x, y) in a.iter().zip(b) {
+        match (*x > 0.0, *y > 0.0) {
+            (true, true) => diff.push((10.0 * (*x as f64 / *y as f64).log10()).abs()),
+            (false, false) => {}
+            _ => only += 1,
+        }
+    }
+    diff.sort_by(f64::total_cmp);
+    let at = |q: f64| diff[((diff.len() - 1) as f64 * q) as usize];
+    (diff.len(), only, at(0.5), at(0.99), at(1.0))
+}

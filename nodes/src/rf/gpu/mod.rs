@@ -14,10 +14,20 @@
 //!   same IEEE operations in the same order, so a GPU map can only differ from the CPU's where
 //!   the physics' transcendental functions do.
 //!
-//! The radio map on the GPU (the shoot-and-bounce megakernel) is not written yet: asking for it
-//! is an error that says so, and the CPU path is the default.
+//! - The radio map is one megakernel, a thread per launched ray (Sionna RT's symbolic loop is
+//!   one too), summing into cells as exact fixed-point integers: a GPU map is the same bits on
+//!   every run whatever the scheduling, and the same bits as the host twin's. It covers the
+//!   flat plane, iso antennas, reflection and transmission; anything else is refused by name
+//!   ([`map_unavailable`], `map_unsupported`), and the CPU path stays the default.
 
+use glam::DVec3;
 use serde::{Deserialize, Serialize};
+
+use crate::artifact::Raster;
+use crate::rf::antenna::Antenna;
+use crate::rf::map_plane::MapPlane;
+use crate::rf::path::TraceOptions;
+use crate::rf::scene::RfScene;
 
 /// Where a radio map is traced.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -79,12 +89,60 @@ pub fn map_unavailable(device: Device) -> Option<String> {
              NVIDIA driver or use --device cpu"
                 .into(),
         ),
-        Device::Cuda => Some(
-            "device cuda: the radio map's GPU kernel is not written yet (issue 56, stage 2); \
-             only the cast kernel exists; use --device cpu"
-                .into(),
-        ),
+        Device::Cuda => None,
     }
+}
+
+/// [`radio_map`](crate::rf::radiomap::radio_map) on `device`. On the GPU the map is the host
+/// twin's to the bit and the CPU's within the tolerance `tests/gpu_host.rs` states; a map the
+/// kernel does not cover (foliage, diffuse, diffraction, a terrain-following surface, antennas
+/// other than iso vertical) is an error naming what, since the user asked for the GPU.
+pub fn radio_map_on(
+    device: Device,
+    scene: &RfScene,
+    tx: DVec3,
+    antenna: &Antenna,
+    plane: &MapPlane,
+    opt: &TraceOptions,
+    freq_hz: f64,
+) -> Result<Raster, String> {
+    if let Some(why) = map_unavailable(device) {
+        return Err(why);
+    }
+    match device {
+        Device::Cpu => Ok(crate::rf::radiomap::radio_map(
+            scene, tx, antenna, plane, opt, freq_hz,
+        )),
+        Device::Cuda => cuda_map(scene, tx, antenna, plane, opt),
+    }
+}
+
+#[cfg(feature = "cuda")]
+fn cuda_map(
+    scene: &RfScene,
+    tx: DVec3,
+    antenna: &Antenna,
+    plane: &MapPlane,
+    opt: &TraceOptions,
+) -> Result<Raster, String> {
+    let inputs = MapInputs::new(scene, tx, antenna, plane, opt)
+        .map_err(|e| format!("device cuda: {e}; use --device cpu"))?;
+    let gpu = Gpu::new().map_err(|e| format!("device cuda: {e}"))?;
+    let (map, _) = gpu
+        .radio_map(&inputs)
+        .map_err(|e| format!("device cuda: {e}"))?;
+    Ok(map)
+}
+
+#[cfg(not(feature = "cuda"))]
+fn cuda_map(
+    _: &RfScene,
+    _: DVec3,
+    _: &Antenna,
+    _: &MapPlane,
+    _: &TraceOptions,
+) -> Result<Raster, String> {
+    unreachable!("map_unavailable refuses cuda without the feature")
 }
 
 #[cfg(feature = "cuda")]
