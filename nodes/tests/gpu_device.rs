@@ -1,18 +1,25 @@
-//! The cast kernel on a real GPU (the checked-in PTX through the CUDA driver) against the Rust
+//! The cast and map kernels on a real GPU (the checked-in PTX through the CUDA driver) against the Rust
 //! tracer, to the bit; and, run with `--ignored` (scripts/gpu_device_check.sh), its speed on
-//! munich against the CPU's. Skips, saying so, where no CUDA driver is present.
+//! munich against the CPU's, casts and maps. Skips, saying so, where no CUDA driver is present.
 
 mod gpu_common;
 
 use std::time::Instant;
 
-use glam::Vec3A;
+use glam::{DVec3, Vec3A};
 use gpu_common::{munich_xml, rays, street_grid, vertices};
 use kodama_nodes::artifact::Scene;
 use kodama_nodes::geom::raycast::SceneRays;
 use kodama_nodes::io::sionna_xml::read_scene;
+use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::fibonacci::fibonacci_run;
-use kodama_nodes::rf::gpu::{CastHit, Gpu, GpuRay, Tree, driver_present, host_cast};
+use kodama_nodes::rf::gpu::{
+    CastHit, Gpu, GpuRay, MapInputs, Tree, driver_present, host_cast, host_radio_map,
+};
+use kodama_nodes::rf::map_plane::{MapPlane, default_plane};
+use kodama_nodes::rf::path::TraceOptions;
+use kodama_nodes::rf::radiomap::radio_map;
+use kodama_nodes::rf::scene::RfScene;
 use rayon::prelude::*;
 
 fn gpu() -> Option<Gpu> {
@@ -183,6 +190,109 @@ fn device_cast_speed_on_munich() {
             );
             assert!(equal, "device hits differ from the CPU's");
             assert!(same, "two device runs differ");
+        }
+    }
+}
+
+fn map_inputs(scene: &RfScene, tx: DVec3, plane: &MapPlane, rays: u32, depth: u32) -> MapInputs {
+    let opt = TraceOptions {
+        rays,
+        max_depth: depth,
+        ..Default::default()
+    };
+    MapInputs::new(scene, tx, &Antenna::default(), plane, &opt).unwrap()
+}
+
+/// The device map is the host twin's to the bit (the same integer sums), twice.
+#[test]
+fn device_maps_are_the_host_maps() {
+    let Some(gpu) = gpu() else { return };
+    let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
+    let plane = default_plane(&scene, 4.0, 1.5);
+    let mut cases = vec![(
+        "street grid",
+        map_inputs(&scene, DVec3::new(-60.0, -56.0, 12.0), &plane, 100_000, 3),
+    )];
+    let munich = munich_xml().map(|xml| gpu_common::munich_rf(&xml));
+    if let Some(m) = &munich {
+        let plane = default_plane(m, 5.0, 1.5);
+        cases.push((
+            "munich",
+            map_inputs(m, DVec3::new(8.5, 21.0, 27.0), &plane, 100_000, 3),
+        ));
+    }
+    for (name, inputs) in cases {
+        let host = host_radio_map(&inputs);
+        let (a, _) = gpu.radio_map(&inputs).unwrap();
+        let (b, _) = gpu.radio_map(&inputs).unwrap();
+        let bits = |r: &[f32]| r.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(
+            bits(&a.data.0),
+            bits(&b.data.0),
+            "{name}: two device maps differ"
+        );
+        assert_eq!(
+            bits(&a.data.0),
+            bits(&host.data.0),
+            "{name}: device map != host map"
+        );
+        let reached = a.data.0.iter().filter(|v| **v > 0.0).count();
+        println!("{name}: device map = host map to the bit, twice ({reached} cells reached)");
+    }
+}
+
+/// Munich maps on the device against `radio_map` on every CPU core: 10^6 and 10^7 rays at
+/// depth 3 and 5, 5 m cells at 1.5 m, tx (8.5, 21, 27), 3.5 GHz. Warm times (the PTX JIT and the
+/// scene's upload done before; the BVH built on the CPU, as Sionna RT is timed warm): GPU map =
+/// kernel + cells back. Prints a markdown table.
+#[test]
+#[ignore = "timing on a GPU machine: scripts/gpu_device_check.sh"]
+fn device_map_speed_on_munich() {
+    let Some(gpu) = gpu() else { return };
+    let Some(xml) = munich_xml() else { return };
+    let scene = gpu_common::munich_rf(&xml);
+    let plane = default_plane(&scene, 5.0, 1.5);
+    let tx = DVec3::new(8.5, 21.0, 27.0);
+    // Warm-up: the driver's JIT of the PTX, caches.
+    gpu.radio_map(&map_inputs(&scene, tx, &plane, 10_000, 3))
+        .unwrap();
+    println!(
+        "\n| device | rays | depth | GPU map s (kernel+readback) | GPU upload s | GPU M rays/s | \
+         CPU map s ({} threads) | speed-up | cells both | cells one only | median abs dB diff | \
+         max abs dB diff | GPU run-to-run |",
+        rayon::current_num_threads()
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for n in [1_000_000u32, 10_000_000] {
+        for depth in [3u32, 5] {
+            let inputs = map_inputs(&scene, tx, &plane, n, depth);
+            let (a, t) = gpu.radio_map(&inputs).unwrap();
+            let (b, t2) = gpu.radio_map(&inputs).unwrap();
+            let map_s = t.map.min(t2.map);
+            let same = a
+                .data
+                .0
+                .iter()
+                .zip(&b.data.0)
+                .all(|(x, y)| x.to_bits() == y.to_bits());
+            let opt = TraceOptions {
+                rays: n,
+                max_depth: depth,
+                ..Default::default()
+            };
+            let clock = Instant::now();
+            let cpu = radio_map(&scene, tx, &Antenna::default(), &plane, &opt, 3.5e9);
+            let cpu_s = clock.elapsed().as_secs_f64();
+            let (both, only, median, _, max) = gpu_common::compare_maps(&a.data.0, &cpu.data.0);
+            println!(
+                "| {} | {n} | {depth} | {map_s:.4} | {:.4} | {:.0} | {cpu_s:.4} | {:.1}x | {both} | \
+                 {only} | {median:.2e} | {max:.2e} | {same} |",
+                gpu.name(),
+                t.upload,
+                n as f64 / map_s / 1e6,
+                cpu_s / map_s
+            );
+            assert!(same, "two device maps differ");
         }
     }
 }
