@@ -14,9 +14,12 @@ for line in sys.stdin:
     m = json.loads(line)
     if m.get("reason") == "compiler-artifact" and m["target"]["name"] == "gpu_device" and m.get("executable"):
         print(m["executable"])')
+# The shared data may be read-only: make the old copy writable before removing it.
+[ -d .devcarry ] && chmod -R u+w .devcarry
 rm -rf .devcarry
 mkdir -p .devcarry
 cp "$bin" .devcarry/gpu_device
 strip .devcarry/gpu_device
 cp -r "$munich" .devcarry/munich
+chmod -R u+w .devcarry/munich
 du -sh .devcarry
