@@ -11,11 +11,11 @@ use glam::DVec3;
 use kodama_nodes::io::export::{Encoded, encode};
 use kodama_nodes::io::sionna_xml::read_scene_with_thickness;
 use kodama_nodes::rf::antenna::{Antenna, Pattern};
+use kodama_nodes::rf::gpu::{Device, map_unavailable, radio_map_on};
 use kodama_nodes::rf::links_csv::{read_links, write_results};
 use kodama_nodes::rf::map_plane::default_plane;
 use kodama_nodes::rf::path::{LinkEnds, LinkPaths, TraceOptions};
 use kodama_nodes::rf::paths::trace_links;
-use kodama_nodes::rf::radiomap::radio_map;
 use kodama_nodes::rf::scene::RfScene;
 use kodama_nodes::{Artifact, Site, StageError};
 
@@ -144,6 +144,10 @@ pub struct RadiomapArgs {
     /// The map: .tif (GeoTIFF, scene frame), .exr or .png (with a colour bar); path gain in dB.
     #[arg(long)]
     out: PathBuf,
+    /// Where to trace: `cpu`, or `cuda` (an NVIDIA GPU; a build with `--features cuda` and the
+    /// NVIDIA driver; README, "GPU backend (optional)").
+    #[arg(long, value_parser = Device::parse, default_value = "cpu")]
+    device: Device,
 }
 
 fn parse_point(s: &str) -> Result<[f64; 3], String> {
@@ -383,6 +387,10 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
             format!("error: --cell-m {} is not a positive size", a.cell_m),
         ));
     }
+    // Before the scene is read: a GPU that cannot be had is the user's to fix (exit 2).
+    if let Some(why) = map_unavailable(a.device) {
+        return Err((2, format!("error: {why}")));
+    }
     let task = Task::new(Mode::detect(false), "reading the scene", None);
     let scene = load(&a.scene, &a.interactions)?;
     note_unmodelled(&a.interactions);
@@ -392,14 +400,16 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
         a.interactions.rays, plane.grid.width, plane.grid.height
     ));
     let t = Instant::now();
-    let map = radio_map(
+    let map = radio_map_on(
+        a.device,
         &scene,
         DVec3::from(a.tx),
         &a.tx_antenna,
         &plane,
         &a.interactions.options(),
         a.interactions.freq_hz,
-    );
+    )
+    .map_err(|e| (2, format!("error: {e}")))?;
     let secs = t.elapsed().as_secs_f64();
     drop(task);
     let db = kodama_nodes::rf::radiomap::to_db(&map);

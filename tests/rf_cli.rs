@@ -317,3 +317,23 @@ fn tx_antenna_points_a_sector_by_compass_bearing_and_refuses_bad_values() {
     assert!(r.stderr.contains("tilt"), "{}", r.stderr);
     assert!(!map.exists());
 }
+
+/// `--device cuda` where it cannot run (a build without feature `cuda`, or no NVIDIA driver)
+/// is the user's to fix: exit 2 and a line saying which, and no map written.
+#[test]
+fn radiomap_device_cuda_without_a_gpu_is_a_clear_error() {
+    if kodama_nodes::rf::gpu::BUILT && kodama_nodes::rf::gpu::driver_present() {
+        eprintln!("skipped: this machine has a CUDA driver");
+        return;
+    }
+    let env = Env::new();
+    let out = env.path("map.tif");
+    let r = canyon_map(&env, &["--rays", "1000", "--device", "cuda"], &out);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("--features cuda") || r.stderr.contains("no CUDA driver"),
+        "{}",
+        r.stderr
+    );
+    assert!(!out.exists());
+}

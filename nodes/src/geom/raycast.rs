@@ -156,6 +156,11 @@ impl SceneRays {
         self.bvh.uses_simd()
     }
 
+    /// The wide BVH (the GPU backend uploads it).
+    pub fn wide_bvh(&self) -> &WideBvh {
+        &self.bvh
+    }
+
     /// The number of triangles.
     pub fn len(&self) -> usize {
         self.tris.len()

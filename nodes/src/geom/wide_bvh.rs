@@ -26,6 +26,12 @@ const PAD: f32 = 4.0 / (1 << 20) as f32;
 /// Children per node.
 const WIDTH: usize = 8;
 
+/// u32 words per node in [`WideBvh::gpu_words`] (256 bytes, the CPU node's size).
+pub const GPU_NODE_WORDS: usize = 64;
+
+/// u32 words per triangle packet in [`WideBvh::gpu_words`] (160 bytes).
+pub const GPU_PACKET_WORDS: usize = 40;
+
 /// A node: its children's boxes as structure of arrays, so one load fetches an axis bound of all
 /// eight. A child is a node (`count` 0, `index` the node) or a leaf (`count` triangle packets
 /// from `index`). An unused slot's box is empty (lower bounds +inf, upper -inf), which no ray
@@ -267,6 +273,37 @@ impl WideBvh {
         }
         let mid = sides.len() / 2;
         *sides.select_nth_unstable_by(mid, f32::total_cmp).1
+    }
+
+    /// The tree as flat words for another traverser (the GPU backend, `rf::gpu`): per node
+    /// [`GPU_NODE_WORDS`] u32 (the six plane rows' f32 bits, the eight indices, the eight
+    /// counts packed four to a word, the used mask, zero padding), per packet
+    /// [`GPU_PACKET_WORDS`] (`v[vertex][axis][lane]` f32 bits, then the four triangle
+    /// indices), and the stack entries a traversal can need.
+    pub fn gpu_words(&self) -> (Vec<u32>, Vec<u32>, usize) {
+        let mut nodes = Vec::with_capacity(self.nodes.len() * GPU_NODE_WORDS);
+        for n in &self.nodes {
+            nodes.extend(n.planes.iter().flatten().map(|f| f.to_bits()));
+            nodes.extend(n.index);
+            nodes.extend(
+                n.count
+                    .chunks(4)
+                    .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]])),
+            );
+            nodes.push(n.used);
+            nodes.resize(nodes.len().next_multiple_of(GPU_NODE_WORDS), 0);
+        }
+        let mut packets = Vec::with_capacity(self.packets.len() * GPU_PACKET_WORDS);
+        for p in &self.packets {
+            let tris: Vec<Triangle> = (0..LANES).map(|lane| p.triangle(lane)).collect();
+            for k in 0..3 {
+                for a in 0..3 {
+                    packets.extend(tris.iter().map(|t| [t.v0, t.v1, t.v2][k][a].to_bits()));
+                }
+            }
+            packets.extend(p.prim);
+        }
+        (nodes, packets, self.stack_need)
     }
 
     /// Uses the scalar box test even where AVX2 is available (to compare the two).

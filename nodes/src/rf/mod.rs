@@ -15,6 +15,7 @@ pub mod em;
 pub mod fibonacci;
 pub mod field;
 pub mod foliage;
+pub mod gpu;
 pub mod image_method;
 pub mod links_csv;
 pub mod map_plane;

@@ -117,6 +117,11 @@ impl RfScene {
         self
     }
 
+    /// The scene's ray caster (the GPU backend uploads its BVH).
+    pub fn rays(&self) -> &SceneRays {
+        &self.rays
+    }
+
     /// The closest surface along `o + t d` for t in (`tmin`, `tmax`).
     // Always inlined: left to the inliner, the radio map's bounce loop came to call it out as
     // the crate grew, and the map took 15 % longer (docs/benchmarks-log.md, 2026-11-27, commit 34e95bb).

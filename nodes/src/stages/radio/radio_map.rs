@@ -5,9 +5,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Grid, Raster, Scene};
 use crate::rf::antenna::Antenna;
+use crate::rf::gpu::{Device, map_unavailable, radio_map_on};
 use crate::rf::map_plane::{MapPlane, default_plane};
 use crate::rf::path::TraceOptions;
-use crate::rf::radiomap::radio_map;
 use crate::rf::scattering::ScatteringPattern;
 use crate::rf::scene::RfScene;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
@@ -38,6 +38,11 @@ pub struct RadioMapParams {
     /// none: it is ITU-R P.527 soil there (`rf::materials`).
     #[serde(default)]
     pub extrapolate: bool,
+    /// Where to trace: `cpu` (default) or `cuda` (an NVIDIA GPU, a build with feature `cuda`).
+    /// Part of the cache key when not `cpu` (a GPU map may differ from the CPU's in the last
+    /// bits); a `cpu` map keeps the key it had before the parameter existed.
+    #[serde(default, skip_serializing_if = "Device::is_cpu")]
+    pub device: Device,
 }
 
 /// `options` of [`RadioMapParams`]: which interactions the rays follow, and how many there are.
@@ -185,6 +190,9 @@ impl Stage for RadioMap {
     }
 
     fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Raster, StageError> {
+        if let Some(why) = map_unavailable(p.device) {
+            return Err(StageError::Param(ParamError::new("device", why)));
+        }
         let scene: &Scene = inputs.one("scene")?;
         let terrain: Option<&Raster> = inputs.optional("terrain")?;
         let rf = RfScene::new(scene, p.freq_hz, p.extrapolate).map_err(StageError::Failed)?;
@@ -233,7 +241,8 @@ impl Stage for RadioMap {
             ),
         };
         let options = p.options.trace_options();
-        let map = radio_map(&rf, tx, &p.antenna, &plane, &options, p.freq_hz);
+        let map = radio_map_on(p.device, &rf, tx, &p.antenna, &plane, &options, p.freq_hz)
+            .map_err(|e| StageError::Param(ParamError::new("device", e)))?;
         Ok(crate::rf::radiomap::to_db(&map))
     }
 }
@@ -330,6 +339,33 @@ mod tests {
         }
     }
 
+    /// `device: cpu` leaves the params' serialisation (the cache key) as it was; `cuda` enters
+    /// it; asking for cuda where it cannot run (no feature, or no driver here) is a param error.
+    #[test]
+    fn device_param_keys_and_errors() {
+        let json = r#"{"tx": [0.0, 0.0, 10.0], "freq_hz": 3.5e9}"#;
+        let p: RadioMapParams = serde_json::from_str(json).unwrap();
+        assert_eq!(p.device, Device::Cpu);
+        assert!(!serde_json::to_string(&p).unwrap().contains("device"));
+        let q: RadioMapParams =
+            serde_json::from_str(r#"{"tx": [0.0, 0.0, 10.0], "freq_hz": 3.5e9, "device": "cuda"}"#)
+                .unwrap();
+        assert!(
+            serde_json::to_string(&q)
+                .unwrap()
+                .contains(r#""device":"cuda""#)
+        );
+        let inputs = Inputs::new().with(
+            "scene",
+            Slot::One(Arc::new(Artifact::Scene(Scene::default()))),
+        );
+        let s = site();
+        match RadioMap::run(&q, &inputs, &Ctx::new(&s, &[])) {
+            Err(StageError::Param(e)) => assert_eq!(e.field, "device"),
+            other => panic!("expected a device error, got {:?}", other.map(|_| ())),
+        }
+    }
+
     #[test]
     fn radio_map_follows_the_terrain_surface() {
         // Free space over "terrain" at 12 m: the map at 1.5 m above it is Friis from a transmitter
@@ -351,6 +387,7 @@ mod tests {
             options: MapOptions::default(),
             antenna: Antenna::default(),
             extrapolate: false,
+            device: Device::Cpu,
         };
         let s = site();
         let map = RadioMap::run(&p, &inputs, &Ctx::new(&s, &[])).unwrap();

@@ -1,0 +1,618 @@
+// The GPU tracer's kernels, written once for two compilers: NVRTC makes the PTX the driver runs
+// (scripts/gpu_ptx.sh, checked in as kernels.ptx), and g++ builds the same source for the host
+// (nodes/build.rs, feature `cuda`) so that CI without a GPU can check every hit against the Rust
+// tracer. `CUDA_CALLABLE` marks what both compile (NVIDIA Warp's style, warp/native/bvh.h).
+//
+// Bit-exactness with `geom::wide_bvh` (the CPU's closest hit) rests on:
+// - the same IEEE operations in the same order: no contraction into fused multiply-adds
+//   (NVRTC --fmad=false, g++ -ffp-contract=off), IEEE division and square root
+//   (-prec-div=true -prec-sqrt=true), no flush of subnormals;
+// - min and max as the CPU's compare-selects (`a < b ? a : b`, the second operand unless the
+//   first is smaller: `_mm256_min_ps`'s rule), never fminf/fmaxf, which treat NaN differently;
+// - the watertight sheared test (Woop, Benthin and Wald, JCGT 2013) with the f64 tie-break on
+//   edges, as `geom::sheared_ray`;
+// - the smallest (t, triangle index) wins, so the traversal order does not change a hit.
+
+#if defined(__CUDACC__) || defined(__CUDACC_RTC__)
+#define CUDA_CALLABLE __host__ __device__ __forceinline__
+#define KODAMA_DEVICE 1
+typedef unsigned int u32;
+typedef unsigned long long u64;
+typedef unsigned char u8;
+#define INF_F __int_as_float(0x7f800000)
+#define NEG_INF_F __int_as_float(0xff800000)
+#else
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#define CUDA_CALLABLE static inline
+typedef uint32_t u32;
+typedef uint64_t u64;
+typedef uint8_t u8;
+#define INF_F (__builtin_inff())
+#define NEG_INF_F (-__builtin_inff())
+#endif
+
+// Children per node and triangles per leaf packet (`wide_bvh::WIDTH`, `tri_packet::LANES`).
+#define WIDTH 8
+#define LANES 4
+// Traversal stack entries per thread; the host refuses a tree that needs more.
+#define STACK_MAX 160
+
+// `wide_bvh::Node` as `WideBvh::gpu_words` writes it: 256 bytes.
+struct Node {
+    float planes[6][WIDTH];
+    u32 index[WIDTH];
+    u8 count[WIDTH];
+    u32 used;
+    u32 pad[5];
+};
+
+// `tri_packet::TriPacket`: v[vertex][axis][lane], then the lanes' triangle indices.
+struct TriPacket {
+    float v[3][3][LANES];
+    u32 prim[LANES];
+};
+
+struct Entry {
+    u32 index;
+    u32 count;
+    float near_t;
+};
+
+// wide_bvh::PAD: 4 / 2^20, exact in f32, and 1 + PAD, exact too.
+#define PAD 3.814697265625e-06f
+#define ONE_PAD 1.000003814697265625f
+
+CUDA_CALLABLE float min_sel(float a, float b) { return a < b ? a : b; }
+CUDA_CALLABLE float max_sel(float a, float b) { return a > b ? a : b; }
+
+CUDA_CALLABLE float abs_f(float x) {
+#ifdef KODAMA_DEVICE
+    return fabsf(x);
+#else
+    return std::fabs(x);
+#endif
+}
+
+CUDA_CALLABLE float copysign_f(float m, float s) {
+#ifdef KODAMA_DEVICE
+    return copysignf(m, s);
+#else
+    return std::copysign(m, s);
+#endif
+}
+
+CUDA_CALLABLE float padded(float t) { return t + abs_f(t) * PAD; }
+
+// `sheared_ray::ShearedRay`.
+struct Sheared {
+    float o[3];
+    int k[3];
+    float s[3];
+    float tmin;
+};
+
+CUDA_CALLABLE Sheared sheared_new(const float o[3], const float d[3], float tmin) {
+    Sheared r;
+    float ax = abs_f(d[0]), ay = abs_f(d[1]), az = abs_f(d[2]);
+    int kz;
+    if (ax > ay) {
+        kz = ax > az ? 0 : 2;
+    } else {
+        kz = ay > az ? 1 : 2;
+    }
+    int kx = (kz + 1) % 3, ky = (kz + 2) % 3;
+    if (d[kz] < 0.0f) {
+        int t = kx;
+        kx = ky;
+        ky = t;
+    }
+    for (int a = 0; a < 3; a++) r.o[a] = o[a];
+    r.k[0] = kx;
+    r.k[1] = ky;
+    r.k[2] = kz;
+    r.s[0] = d[kx] / d[kz];
+    r.s[1] = d[ky] / d[kz];
+    r.s[2] = 1.0f / d[kz];
+    r.tmin = tmin;
+    return r;
+}
+
+CUDA_CALLABLE float edge_f64(float p, float q, float r, float s) {
+    double a = (double)p * (double)q;
+    double b = (double)r * (double)s;
+    return (float)(a - b);
+}
+
+// `ShearedRay::intersect` on lane `lane` of a packet (which `TriPacket::intersect` equals bit for
+// bit, lane by lane): the distance, or infinity on a miss.
+CUDA_CALLABLE float tri_intersect(const Sheared& r, const TriPacket& p, int lane, float tmax) {
+    int kx = r.k[0], ky = r.k[1], kz = r.k[2];
+    float sx = r.s[0], sy = r.s[1], sz = r.s[2];
+    float a[3], b[3], c[3];
+    for (int i = 0; i < 3; i++) {
+        a[i] = p.v[0][i][lane] - r.o[i];
+        b[i] = p.v[1][i][lane] - r.o[i];
+        c[i] = p.v[2][i][lane] - r.o[i];
+    }
+    float ax = a[kx] - sx * a[kz], ay = a[ky] - sy * a[kz];
+    float bx = b[kx] - sx * b[kz], by = b[ky] - sy * b[kz];
+    float cx = c[kx] - sx * c[kz], cy = c[ky] - sy * c[kz];
+    float u = cx * by - cy * bx;
+    float v = ax * cy - ay * cx;
+    float w = bx * ay - by * ax;
+    if (u == 0.0f || v == 0.0f || w == 0.0f) {
+        u = edge_f64(cx, by, cy, bx);
+        v = edge_f64(ax, cy, ay, cx);
+        w = edge_f64(bx, ay, by, ax);
+    }
+    if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return INF_F;
+    float det = u + v + w;
+    if (det == 0.0f) return INF_F;
+    float t = (u * sz * a[kz] + v * sz * b[kz] + w * sz * c[kz]) / det;
+    return (t > r.tmin && t < tmax) ? t : INF_F;
+}
+
+// `wide_bvh::Slabs`.
+struct Slabs {
+    float o[3];
+    float inv[3];
+    float inv_far[3];
+    int near_row[3];
+    int far_row[3];
+};
+
+CUDA_CALLABLE Slabs slabs_new(const float o[3], const float d[3]) {
+    Slabs s;
+    for (int a = 0; a < 3; a++) {
+        float c = d[a];
+        if (abs_f(c) < 1e-20f) c = copysign_f(1e-20f, c + 0.0f);
+        float inv = 1.0f / c;
+        bool positive = inv > 0.0f;
+        s.o[a] = o[a];
+        s.inv[a] = inv;
+        s.inv_far[a] = inv * ONE_PAD;
+        s.near_row[a] = positive ? a : 3 + a;
+        s.far_row[a] = positive ? 3 + a : a;
+    }
+    return s;
+}
+
+// `wide_bvh::Scalar::boxes`: a bit per child entered within [tmin, far], and entry distances.
+CUDA_CALLABLE u32 boxes(const Node& node, const Slabs& s, float tmin, float far_t,
+                        float near_out[WIDTH]) {
+    u32 mask = 0;
+    for (int i = 0; i < WIDTH; i++) {
+        float nx = (node.planes[s.near_row[0]][i] - s.o[0]) * s.inv[0];
+        float fx = (node.planes[s.far_row[0]][i] - s.o[0]) * s.inv_far[0];
+        float ny = (node.planes[s.near_row[1]][i] - s.o[1]) * s.inv[1];
+        float fy = (node.planes[s.far_row[1]][i] - s.o[1]) * s.inv_far[1];
+        float nz = (node.planes[s.near_row[2]][i] - s.o[2]) * s.inv[2];
+        float fz = (node.planes[s.far_row[2]][i] - s.o[2]) * s.inv_far[2];
+        float tn = max_sel(max_sel(nx, ny), max_sel(nz, tmin));
+        float tf = min_sel(min_sel(fx, fy), min_sel(fz, far_t));
+        near_out[i] = tn;
+        if (tn <= tf) mask |= 1u << i;
+    }
+    return mask;
+}
+
+CUDA_CALLABLE int ctz(u32 x) {
+#ifdef KODAMA_DEVICE
+    return __ffs(x) - 1;
+#else
+    return __builtin_ctz(x);
+#endif
+}
+
+// `SceneRays::cast_index`: the closest (t, triangle) of `o + t d`, t in (tmin, tmax); returns
+// false on a miss. `d` need not be canonical: -0.0 is made +0.0 first, as the CPU does.
+CUDA_CALLABLE bool closest_hit(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                               const float o_in[3], const float d_in[3], float tmin, float tmax,
+                               float* t_out, u32* prim_out) {
+    if (n_nodes == 0) return false;
+    float o[3], d[3];
+    for (int a = 0; a < 3; a++) {
+        o[a] = o_in[a];
+        d[a] = d_in[a] + 0.0f;
+    }
+    Sheared ray = sheared_new(o, d, tmin);
+    Slabs slabs = slabs_new(o, d);
+    float best_t = tmax;
+    u32 best_p = 0xffffffffu;
+    Entry stack[STACK_MAX];
+    int top = 0;
+    Entry cur;
+    cur.index = 0;
+    cur.count = 0;
+    cur.near_t = tmin;
+    float limit = padded(best_t);
+    for (;;) {
+        if (cur.near_t <= limit) {
+            if (cur.count != 0) {
+                for (u32 k = 0; k < cur.count; k++) {
+                    const TriPacket& p = packets[cur.index + k];
+                    for (int lane = 0; lane < LANES; lane++) {
+                        float t = tri_intersect(ray, p, lane, tmax);
+                        u32 q = p.prim[lane];
+                        if (t < tmax && t <= best_t && (t < best_t || q < best_p)) {
+                            best_t = t;
+                            best_p = q;
+                        }
+                    }
+                }
+                limit = padded(best_t);
+            } else {
+                const Node& node = nodes[cur.index];
+                float near_t[WIDTH];
+                u32 mask = boxes(node, slabs, tmin, limit, near_t);
+                if (mask != 0) {
+                    // Nearest child next, the others on the stack farthest first (the CPU's
+                    // order, though any order gives the same hit).
+                    Entry order[WIDTH];
+                    int n = 0;
+                    while (mask != 0) {
+                        int i = ctz(mask);
+                        mask &= mask - 1;
+                        Entry e;
+                        e.index = node.index[i];
+                        e.count = node.count[i];
+                        e.near_t = near_t[i];
+                        int j = n;
+                        while (j > 0 && order[j - 1].near_t < e.near_t) {
+                            order[j] = order[j - 1];
+                            j--;
+                        }
+                        order[j] = e;
+                        n++;
+                    }
+                    for (int j = 0; j < n - 1; j++) stack[top++] = order[j];
+                    cur = order[n - 1];
+                    continue;
+                }
+            }
+        }
+        if (top == 0) break;
+        cur = stack[--top];
+    }
+    if (best_p == 0xffffffffu) return false;
+    *t_out = best_t;
+    *prim_out = best_p;
+    return true;
+}
+
+// One cast per ray; `rays` holds 8 floats a ray (origin, direction, tmin, tmax). A miss writes
+// infinity and 0xffffffff.
+CUDA_CALLABLE void cast_one(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                            const float* rays, u64 i, float* t_out, u32* prim_out) {
+    const float* r = rays + 8 * i;
+    float t;
+    u32 p;
+    if (closest_hit(nodes, n_nodes, packets, r, r + 3, r[6], r[7], &t, &p)) {
+        t_out[i] = t;
+        prim_out[i] = p;
+    } else {
+        t_out[i] = INF_F;
+        prim_out[i] = 0xffffffffu;
+    }
+}
+
+
+// ---------------------------------------------------------------------------------------------
+// The radio map (`rf::radiomap::radio_map`, `Shooter::segment`): Sionna RT's shoot-and-bounce
+// estimator, one thread per launched ray. The field is a complex 3-vector in f64 (`rf::field`),
+// reflection and transmission use the ITU-R P.2040 slab coefficients (`rf::em::slab`) from a
+// table over √cos θ, the event (specular or through) is drawn from the same hash as the CPU's,
+// and every crossing of the plane adds |E|² Ω / (|cos θ| A_cell) to its cell. Sums are exact
+// fixed-point integers (value · 2^FIX_SHIFT in 128 bits, two u64 words with carry), so the map
+// is the same bits whatever order the threads add in.
+
+#define FIX_SHIFT 100
+#define EPS_M 1e-3
+
+// The scalars of a map, as f64 (`MapConsts` in backend.rs writes them in this order).
+enum {
+    C_TX = 0,        // 3
+    C_OMEGA = 3,
+    C_X0 = 4,
+    C_Y0 = 5,
+    C_CELL = 6,
+    C_Z = 7,
+    C_S2 = 8,
+    C_NRAYS = 9,
+    C_DEPTH = 10,
+    C_LOS = 11,
+    C_REFLECT = 12,
+    C_TRANSMIT = 13,
+    C_WIDTH = 14,
+    C_HEIGHT = 15,
+    C_TABLE = 16,
+    C_COUNT = 17
+};
+
+struct Cx {
+    double re, im;
+};
+
+CUDA_CALLABLE Cx cx(double re, double im) {
+    Cx c;
+    c.re = re;
+    c.im = im;
+    return c;
+}
+CUDA_CALLABLE Cx cadd(Cx a, Cx b) { return cx(a.re + b.re, a.im + b.im); }
+CUDA_CALLABLE Cx csub(Cx a, Cx b) { return cx(a.re - b.re, a.im - b.im); }
+CUDA_CALLABLE Cx cmul(Cx a, Cx b) { return cx(a.re * b.re - a.im * b.im, a.re * b.im + a.im * b.re); }
+CUDA_CALLABLE Cx cscale(Cx a, double f) { return cx(a.re * f, a.im * f); }
+CUDA_CALLABLE double cnorm2(Cx a) { return a.re * a.re + a.im * a.im; }
+
+struct V3 {
+    double x, y, z;
+};
+CUDA_CALLABLE V3 v3(double x, double y, double z) {
+    V3 v;
+    v.x = x;
+    v.y = y;
+    v.z = z;
+    return v;
+}
+CUDA_CALLABLE V3 vadd(V3 a, V3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
+CUDA_CALLABLE V3 vsub(V3 a, V3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
+CUDA_CALLABLE V3 vmul(V3 a, double f) { return v3(a.x * f, a.y * f, a.z * f); }
+CUDA_CALLABLE double vdot(V3 a, V3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+CUDA_CALLABLE V3 vcross(V3 a, V3 b) {
+    return v3(a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y);
+}
+CUDA_CALLABLE double dsqrt(double x) {
+#ifdef KODAMA_DEVICE
+    return sqrt(x);
+#else
+    return std::sqrt(x);
+#endif
+}
+CUDA_CALLABLE V3 vnormalize(V3 a) { return vmul(a, 1.0 / dsqrt(vdot(a, a))); }
+// glam's `any_orthonormal_vector` (Frisvad's, as revised by Duff et al. 2017).
+CUDA_CALLABLE V3 any_orthonormal(V3 v) {
+    double sign = v.z >= 0.0 ? 1.0 : -1.0;
+    double a = -1.0 / (sign + v.z);
+    double b = v.x * v.y * a;
+    return v3(b, sign + v.y * v.y * a, -v.y);
+}
+
+struct Field {
+    Cx c[3];
+};
+
+CUDA_CALLABLE double field_norm2(const Field& e) {
+    return cnorm2(e.c[0]) + cnorm2(e.c[1]) + cnorm2(e.c[2]);
+}
+CUDA_CALLABLE Cx field_dot(const Field& e, V3 v) {
+    return cadd(cadd(cscale(e.c[0], v.x), cscale(e.c[1], v.y)), cscale(e.c[2], v.z));
+}
+CUDA_CALLABLE Field combine(Cx a, V3 u, Cx b, V3 v) {
+    Field f;
+    f.c[0] = cadd(cscale(a, u.x), cscale(b, v.x));
+    f.c[1] = cadd(cscale(a, u.y), cscale(b, v.y));
+    f.c[2] = cadd(cscale(a, u.z), cscale(b, v.z));
+    return f;
+}
+// `field::basis`: (⊥, ∥) of the plane of incidence of k on a surface of normal n.
+CUDA_CALLABLE void basis(V3 k, V3 n, V3* perp, V3* par) {
+    V3 c = vcross(k, n);
+    *perp = vdot(c, c) > 1e-20 ? vnormalize(c) : any_orthonormal(k);
+    *par = vcross(*perp, k);
+}
+
+// `rng::mix` (SplitMix64's finaliser) and `rng::unit`.
+CUDA_CALLABLE u64 mix64(u64 z) {
+    z = z + 0x9E3779B97F4A7C15ull;
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+CUDA_CALLABLE double unit01(u64 h) { return (double)(h >> 11) / 9007199254740992.0; }
+
+CUDA_CALLABLE void sincos_d(double x, double* s, double* c) {
+#ifdef KODAMA_DEVICE
+    sincos(x, s, c);
+#else
+    *s = std::sin(x);
+    *c = std::cos(x);
+#endif
+}
+
+// The i-th of n points of the Fibonacci lattice (`fibonacci::fibonacci_sphere`, Sionna's).
+CUDA_CALLABLE V3 lattice(u32 n, u32 i) {
+    const double golden = 1.6180339887498949;
+    double q = (double)i / golden;
+    double x = q - (double)(u64)q;
+    double y = n > 1 ? (double)i / (double)(n - 1) : 0.5;
+    double phi = 2.0 * 3.141592653589793 * x;
+    double z = 1.0 - 2.0 * y;
+    double r2 = 1.0 - z * z;
+    double r = dsqrt(r2 > 0.0 ? r2 : 0.0);
+    double s, c;
+    sincos_d(phi, &s, &c);
+    return v3(r * c, r * s, z);
+}
+
+// Adds `v` (≥ 0) to cell `cell` of `acc` (two u64 words a cell, low first) as a fixed-point
+// integer: integer sums do not depend on their order.
+CUDA_CALLABLE void accumulate(u64* acc, u32 cell, double v) {
+    const double two64 = 18446744073709551616.0;
+    double x = v * 1267650600228229401496703205376.0;  // 2^FIX_SHIFT
+    if (!(x > 0.0)) return;
+    if (x >= two64 * two64) x = two64 * two64 * 0.9999999999999999;
+    u64 hi = (u64)(x / two64);
+    u64 lo = (u64)(x - (double)hi * two64);
+    u64* w = acc + 2 * (u64)cell;
+#ifdef KODAMA_DEVICE
+    u64 old = atomicAdd((unsigned long long*)w, (unsigned long long)lo);
+    u64 carry = old + lo < old ? 1 : 0;
+    if (hi + carry != 0) atomicAdd((unsigned long long*)(w + 1), (unsigned long long)(hi + carry));
+#else
+    u64 old = w[0];
+    w[0] = old + lo;
+    w[1] += hi + (old + lo < old ? 1 : 0);
+#endif
+}
+
+// Slab coefficients of material m at incidence cosine cos_t (either sign): the table holds, per
+// material, `len` samples evenly spaced in √cos θ, each (R_TE, R_TM, T_TE, T_TM) as 8 f64.
+CUDA_CALLABLE void slab_get(const double* slabs, u32 len, u32 m, double cos_t, Cx out[4]) {
+    double c = cos_t < 0.0 ? -cos_t : cos_t;
+    if (c > 1.0) c = 1.0;
+    double x = dsqrt(c) * (double)(len - 1);
+    u32 i = (u32)x;
+    if (i > len - 2) i = len - 2;
+    double f = x - (double)i;
+    const double* a = slabs + ((u64)m * len + i) * 8;
+    const double* b = a + 8;
+    for (int k = 0; k < 4; k++) {
+        Cx ca = cx(a[2 * k], a[2 * k + 1]);
+        Cx cb = cx(b[2 * k], b[2 * k + 1]);
+        out[k] = cadd(ca, cscale(csub(cb, ca), f));
+    }
+}
+
+// One launched ray, the `lattice_index`-th, from the transmitter to the end of its bounces.
+// `tri` holds per triangle its unit normal and first vertex (6 f64).
+CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                         const double* tri, const u32* material, const double* slabs,
+                         const double* k, u32 lattice_index, u64* acc) {
+    u32 n_rays = (u32)k[C_NRAYS];
+    u32 max_depth = (u32)k[C_DEPTH];
+    u32 width = (u32)k[C_WIDTH], height = (u32)k[C_HEIGHT];
+    double cell = k[C_CELL];
+    double s2 = k[C_S2];
+    V3 d = lattice(n_rays, lattice_index);
+    V3 o = v3(k[C_TX], k[C_TX + 1], k[C_TX + 2]);
+    // Isotropic, vertically polarised: the field along θ̂ (`antenna::spherical_basis`).
+    Field e;
+    {
+        double rho = dsqrt(d.x * d.x + d.y * d.y);
+        V3 th;
+        if (rho < 1e-12) {
+            th = v3(1.0 * d.z, -0.0 * d.z, 0.0);
+        } else {
+            double cp = d.x / rho, sp = d.y / rho;
+            th = v3(d.z * cp, d.z * sp, -rho);
+        }
+        e.c[0] = cx(th.x, 0.0);
+        e.c[1] = cx(th.y, 0.0);
+        e.c[2] = cx(th.z, 0.0);
+    }
+    double omega = k[C_OMEGA];
+    u32 depth = 0;
+    for (;;) {
+        float of[3] = {(float)o.x, (float)o.y, (float)o.z};
+        float df[3] = {(float)d.x, (float)d.y, (float)d.z};
+        float t32;
+        u32 hit_tri;
+        // `RfScene::cast`: tmin EPS, tmax f32::MAX, then the distance refined in f64.
+        bool hit = closest_hit(nodes, n_nodes, packets, of, df, (float)EPS_M, 3.40282347e38f,
+                               &t32, &hit_tri);
+        double t_end = 1.0 / 0.0;
+        if (hit) {
+            const double* tr = tri + 6 * (u64)hit_tri;
+            V3 nn = v3(tr[0], tr[1], tr[2]);
+            double denom = vdot(nn, d);
+            double t64 = vdot(nn, vsub(v3(tr[3], tr[4], tr[5]), o)) / denom;
+            double dt = t64 - (double)t32;
+            if (dt < 0.0) dt = -dt;
+            double ad = denom < 0.0 ? -denom : denom;
+            if (ad > 1e-12 && dt <= 1e-3 * (1.0 + (double)t32)) {
+                t_end = t64 > EPS_M ? t64 : EPS_M;
+            } else {
+                t_end = (double)t32;
+            }
+        }
+        if (depth > 0 || k[C_LOS] != 0.0) {
+            if (d.z != 0.0) {
+                double t = (k[C_Z] - o.z) / d.z;
+                if (t > EPS_M && t < t_end) {
+                    V3 p = vadd(o, vmul(d, t));
+                    double c = (p.x - k[C_X0]) / cell;
+                    double r = (k[C_Y0] - p.y) / cell;
+                    if (c >= 0.0 && r >= 0.0 && c < (double)width && r < (double)height) {
+                        double cosv = d.z < 0.0 ? -d.z : d.z;
+                        if (cosv < 1e-6) cosv = 1e-6;
+                        double weight = 1.0 / (cosv * (cell * cell / 1.0));
+                        double v = field_norm2(e) * 1.0 * 1.0 * omega * weight;
+                        accumulate(acc, (u32)r * width + (u32)c, v);
+                    }
+                }
+            }
+        }
+        if (!hit) return;
+        o = vadd(o, vmul(d, t_end));
+        const double* tr = tri + 6 * (u64)hit_tri;
+        V3 n = v3(tr[0], tr[1], tr[2]);
+        depth++;
+        if (depth > max_depth) return;
+        double dn = vdot(d, n);
+        Cx co[4];
+        slab_get(slabs, (u32)k[C_TABLE], material[hit_tri], dn, co);
+        double pr = cnorm2(co[0]) + cnorm2(co[1]);
+        double pt = cnorm2(co[2]) + cnorm2(co[3]);
+        double p_spec = k[C_REFLECT] != 0.0 ? pr * (1.0 - s2) : 0.0;
+        double p_tran = k[C_TRANSMIT] != 0.0 ? pt : 0.0;
+        double total = p_spec + p_tran;
+        if (total <= 0.0) return;
+        u64 seed = mix64(((u64)lattice_index * 0x9E3779B97F4A7C15ull) ^ (u64)depth);
+        double u = unit01(seed) * total;
+        V3 perp, par;
+        basis(d, n, &perp, &par);
+        if (u < p_spec) {
+            V3 kr = vsub(d, vmul(n, 2.0 * vdot(d, n)));
+            V3 par_r = vcross(perp, kr);
+            Field e2 = combine(cmul(co[0], field_dot(e, perp)), perp, cmul(co[1], field_dot(e, par)),
+                               par_r);
+            double w = dsqrt((1.0 - s2) * total / p_spec);
+            for (int q = 0; q < 3; q++) e.c[q] = cscale(e2.c[q], w);
+            d = kr;
+        } else {
+            Field e2 = combine(cmul(co[2], field_dot(e, perp)), perp, cmul(co[3], field_dot(e, par)),
+                               par);
+            double w = dsqrt(total / p_tran);
+            for (int q = 0; q < 3; q++) e.c[q] = cscale(e2.c[q], w);
+        }
+    }
+}
+
+#ifdef KODAMA_DEVICE
+extern "C" __global__ void kodama_cast(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                                       const float* rays, u64 n, float* t_out, u32* prim_out) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < n) cast_one(nodes, n_nodes, packets, rays, i, t_out, prim_out);
+}
+
+// Thread i shoots the lattice's `order[i]`-th ray: the lattice's patch order, so a warp's rays
+// leave side by side and walk the same nodes.
+extern "C" __global__ void kodama_map(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                                      const double* tri, const u32* material, const double* slabs,
+                                      const double* consts, const u32* order, u64 n, u64* acc) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < n) shoot(nodes, n_nodes, packets, tri, material, slabs, consts, order[i], acc);
+}
+#else
+// The host twin of `kodama_cast` (nodes/build.rs compiles it under feature `cuda`).
+extern "C" void kodama_host_cast(const void* nodes, u32 n_nodes, const void* packets,
+                                 const float* rays, u64 n, float* t_out, u32* prim_out) {
+    for (u64 i = 0; i < n; i++)
+        cast_one((const Node*)nodes, n_nodes, (const TriPacket*)packets, rays, i, t_out,
+                 prim_out);
+}
+
+// The host twin of `kodama_map`: rays `first..first + n` of the lattice (any order gives the
+// same integer sums).
+extern "C" void kodama_host_map(const void* nodes, u32 n_nodes, const void* packets,
+                                const double* tri, const u32* material, const double* slabs,
+                                const double* consts, u32 first, u64 n, u64* acc) {
+    for (u64 i = 0; i < n; i++)
+        shoot((const Node*)nodes, n_nodes, (const TriPacket*)packets, tri, material, slabs, consts,
+              first + (u32)i, acc);
+}
+#endif

@@ -1,0 +1,151 @@
+//! The GPU backend (issue 56; the research in `shared/notes/gpu.md`): the tracer's closest-hit
+//! cast as a CUDA kernel, driven from Rust through the driver API.
+//!
+//! Why this shape:
+//! - One CUDA C++ source (`kernels.cu`) written for two compilers. The driver runs its PTX
+//!   (`kernels.ptx`, made by NVRTC from a pinned PyPI wheel with `scripts/gpu_ptx.sh` and checked
+//!   in), so a GPU machine needs only the NVIDIA driver: no toolkit, no NVRTC, no Vulkan or
+//!   OptiX. g++ compiles the same file for the host (feature `cuda`, `build.rs`), and the tests
+//!   check that twin against the Rust tracer on machines without a GPU.
+//! - `cudarc` loads `libcuda.so.1` at run time, so the feature builds anywhere; without a driver
+//!   [`driver_present`] is false and asking for the GPU is a clear error, not a crash.
+//! - Hits are the CPU's to the bit ([`crate::geom::wide_bvh`]): the kernel traverses the same
+//!   8-wide tree (uploaded as [`crate::geom::wide_bvh::WideBvh::gpu_words`] writes it) with the
+//!   same IEEE operations in the same order, so a GPU map can only differ from the CPU's where
+//!   the physics' transcendental functions do.
+//!
+//! - The radio map is one megakernel, a thread per launched ray (Sionna RT's symbolic loop is
+//!   one too), summing into cells as exact fixed-point integers: a GPU map is the same bits on
+//!   every run whatever the scheduling, and the same bits as the host twin's. It covers the
+//!   flat plane, iso antennas, reflection and transmission; anything else is refused by name
+//!   ([`map_unavailable`], `map_unsupported`), and the CPU path stays the default.
+
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+
+use crate::artifact::Raster;
+use crate::rf::antenna::Antenna;
+use crate::rf::map_plane::MapPlane;
+use crate::rf::path::TraceOptions;
+use crate::rf::scene::RfScene;
+
+/// Where a radio map is traced.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Device {
+    /// The Rust tracer on every core (the default).
+    #[default]
+    Cpu,
+    /// An NVIDIA GPU through the CUDA driver (feature `cuda`).
+    Cuda,
+}
+
+impl Device {
+    /// True for [`Device::Cpu`] (serde's `skip_serializing_if`: a CPU map's cache key stays what
+    /// it was before the device existed).
+    pub fn is_cpu(&self) -> bool {
+        *self == Device::Cpu
+    }
+
+    /// `cpu` or `cuda`.
+    pub fn parse(s: &str) -> Result<Device, String> {
+        match s {
+            "cpu" => Ok(Device::Cpu),
+            "cuda" => Ok(Device::Cuda),
+            _ => Err(format!("expected cpu or cuda, found {s:?}")),
+        }
+    }
+}
+
+/// True when this build has the GPU backend (feature `cuda`).
+pub const BUILT: bool = cfg!(feature = "cuda");
+
+/// Whether the CUDA driver library (`libcuda.so.1`) can be loaded; always false without the
+/// feature.
+pub fn driver_present() -> bool {
+    #[cfg(feature = "cuda")]
+    {
+        // SAFETY: only tries to open the library by its usual names.
+        unsafe { cudarc::driver::sys::is_culib_present() }
+    }
+    #[cfg(not(feature = "cuda"))]
+    {
+        false
+    }
+}
+
+/// Why a radio map cannot be traced on `device` by this build on this machine, or `None` when
+/// it can. Callers turn the reason into a user error (exit code 2).
+pub fn map_unavailable(device: Device) -> Option<String> {
+    match device {
+        Device::Cpu => None,
+        Device::Cuda if !BUILT => Some(
+            "device cuda: this build has no GPU backend; rebuild with `--features cuda` \
+             (README, \"GPU backend (optional)\")"
+                .into(),
+        ),
+        Device::Cuda if !driver_present() => Some(
+            "device cuda: no CUDA driver found (libcuda.so.1 could not be loaded); install the \
+             NVIDIA driver or use --device cpu"
+                .into(),
+        ),
+        Device::Cuda => None,
+    }
+}
+
+/// [`radio_map`](crate::rf::radiomap::radio_map) on `device`. On the GPU the map is the host
+/// twin's to the bit and the CPU's within the tolerance `tests/gpu_host.rs` states; a map the
+/// kernel does not cover (foliage, diffuse, diffraction, a terrain-following surface, antennas
+/// other than iso vertical) is an error naming what, since the user asked for the GPU.
+pub fn radio_map_on(
+    device: Device,
+    scene: &RfScene,
+    tx: DVec3,
+    antenna: &Antenna,
+    plane: &MapPlane,
+    opt: &TraceOptions,
+    freq_hz: f64,
+) -> Result<Raster, String> {
+    if let Some(why) = map_unavailable(device) {
+        return Err(why);
+    }
+    match device {
+        Device::Cpu => Ok(crate::rf::radiomap::radio_map(
+            scene, tx, antenna, plane, opt, freq_hz,
+        )),
+        Device::Cuda => cuda_map(scene, tx, antenna, plane, opt),
+    }
+}
+
+#[cfg(feature = "cuda")]
+fn cuda_map(
+    scene: &RfScene,
+    tx: DVec3,
+    antenna: &Antenna,
+    plane: &MapPlane,
+    opt: &TraceOptions,
+) -> Result<Raster, String> {
+    let inputs = MapInputs::new(scene, tx, antenna, plane, opt)
+        .map_err(|e| format!("device cuda: {e}; use --device cpu"))?;
+    let gpu = Gpu::new().map_err(|e| format!("device cuda: {e}"))?;
+    let (map, _) = gpu
+        .radio_map(&inputs)
+        .map_err(|e| format!("device cuda: {e}"))?;
+    Ok(map)
+}
+
+#[cfg(not(feature = "cuda"))]
+fn cuda_map(
+    _: &RfScene,
+    _: DVec3,
+    _: &Antenna,
+    _: &MapPlane,
+    _: &TraceOptions,
+) -> Result<Raster, String> {
+    unreachable!("map_unavailable refuses cuda without the feature")
+}
+
+#[cfg(feature = "cuda")]
+mod backend;
+#[cfg(feature = "cuda")]
+pub use backend::*;

@@ -1,0 +1,298 @@
+//! The cast and map kernels on a real GPU (the checked-in PTX through the CUDA driver) against the Rust
+//! tracer, to the bit; and, run with `--ignored` (scripts/gpu_device_check.sh), its speed on
+//! munich against the CPU's, casts and maps. Skips, saying so, where no CUDA driver is present.
+
+mod gpu_common;
+
+use std::time::Instant;
+
+use glam::{DVec3, Vec3A};
+use gpu_common::{munich_xml, rays, street_grid, vertices};
+use kodama_nodes::artifact::Scene;
+use kodama_nodes::geom::raycast::SceneRays;
+use kodama_nodes::io::sionna_xml::read_scene;
+use kodama_nodes::rf::antenna::Antenna;
+use kodama_nodes::rf::fibonacci::fibonacci_run;
+use kodama_nodes::rf::gpu::{
+    CastHit, Gpu, GpuRay, MapInputs, Tree, driver_present, host_cast, host_radio_map,
+};
+use kodama_nodes::rf::map_plane::{MapPlane, default_plane};
+use kodama_nodes::rf::path::TraceOptions;
+use kodama_nodes::rf::radiomap::radio_map;
+use kodama_nodes::rf::scene::RfScene;
+use rayon::prelude::*;
+
+fn gpu() -> Option<Gpu> {
+    if !driver_present() {
+        println!("skipped: no CUDA driver (libcuda.so.1) on this machine");
+        return None;
+    }
+    let g = Gpu::new().expect("a CUDA driver is present, so a GPU should open");
+    println!(
+        "device: {} (driver CUDA {}.{})",
+        g.name(),
+        g.driver_version() / 1000,
+        g.driver_version() % 1000 / 10
+    );
+    Some(g)
+}
+
+fn bits(h: &CastHit) -> Option<(u32, u32)> {
+    h.map(|(t, p)| (t.to_bits(), p))
+}
+
+fn cpu_cast(cpu: &SceneRays, rays: &[GpuRay]) -> Vec<CastHit> {
+    rays.par_iter()
+        .map(|r| cpu.cast_index([r[0], r[1], r[2]], [r[3], r[4], r[5]], r[6], r[7]))
+        .collect()
+}
+
+/// Device hits == host twin's == the Rust tracer's, for every ray; returns the hit count.
+fn check(gpu: &Gpu, scene: &Scene, rays: &[GpuRay]) -> usize {
+    let cpu = SceneRays::new(scene);
+    let tree = Tree::new(cpu.wide_bvh()).unwrap();
+    let dev = gpu.upload(&tree).unwrap();
+    let got = gpu.cast(&dev, rays).unwrap();
+    let host = host_cast(&tree, rays);
+    let want = cpu_cast(&cpu, rays);
+    for (k, r) in rays.iter().enumerate() {
+        assert_eq!(
+            bits(&got[k]),
+            bits(&want[k]),
+            "device vs CPU, ray {k}: {r:?}"
+        );
+        assert_eq!(
+            bits(&host[k]),
+            bits(&want[k]),
+            "host twin vs CPU, ray {k}: {r:?}"
+        );
+    }
+    want.iter().filter(|h| h.is_some()).count()
+}
+
+#[test]
+fn device_casts_are_the_cpu_casts() {
+    let Some(gpu) = gpu() else { return };
+    let scene = street_grid();
+    let r = rays(
+        [-60.0, -56.0, 12.0],
+        [0.0, 0.0, 10.0],
+        200.0,
+        100_000,
+        &vertices(&scene),
+    );
+    let hits = check(&gpu, &scene, &r);
+    println!(
+        "street grid: {} rays, {hits} hits, device = CPU to the bit",
+        r.len()
+    );
+    let Some(xml) = munich_xml() else { return };
+    let scene = read_scene(&xml).unwrap();
+    let r = rays(
+        [8.5, 21.0, 27.0],
+        [0.0, 0.0, 30.0],
+        400.0,
+        200_000,
+        &vertices(&scene),
+    );
+    let hits = check(&gpu, &scene, &r);
+    println!(
+        "munich: {} rays, {hits} hits, device = CPU to the bit",
+        r.len()
+    );
+}
+
+/// The next segment of every ray that hit: specular reflection off the hit triangle, from the
+/// hit point (what a map's bounce casts look like, without its physics).
+fn bounce(tris: &[[Vec3A; 3]], rays: &[GpuRay], hits: &[CastHit]) -> Vec<GpuRay> {
+    rays.par_iter()
+        .zip(hits)
+        .filter_map(|(r, h)| {
+            let (t, p) = (*h)?;
+            let [a, b, c] = tris[p as usize];
+            let n = (b - a).cross(c - a).normalize_or_zero();
+            let o = Vec3A::new(r[0], r[1], r[2]);
+            let d = Vec3A::new(r[3], r[4], r[5]);
+            let q = o + d * t;
+            let d2 = (d - 2.0 * d.dot(n) * n).normalize_or_zero();
+            (d2 != Vec3A::ZERO).then(|| [q.x, q.y, q.z, d2.x, d2.y, d2.z, 1e-3, f32::INFINITY])
+        })
+        .collect()
+}
+
+/// Munich casts per second on the device and on every CPU core, for a map-like load: the
+/// lattice from the transmitter, then up to `depth - 1` specular bounces of the rays that hit.
+/// Prints a markdown table; asserts device = CPU to the bit and two device runs identical.
+#[test]
+#[ignore = "timing on a GPU machine: scripts/gpu_device_check.sh"]
+fn device_cast_speed_on_munich() {
+    let Some(gpu) = gpu() else { return };
+    let Some(xml) = munich_xml() else { return };
+    let scene = read_scene(&xml).unwrap();
+    let cpu = SceneRays::new(&scene);
+    let tree = Tree::new(cpu.wide_bvh()).unwrap();
+    let dev = gpu.upload(&tree).unwrap();
+    let tris: Vec<[Vec3A; 3]> = scene
+        .objects
+        .iter()
+        .flat_map(|o| {
+            let p = &o.mesh.positions;
+            o.mesh
+                .triangles
+                .iter()
+                .map(move |t| t.map(|i| Vec3A::from(p[i as usize])))
+        })
+        .collect();
+    println!(
+        "\n| device | rays | depth | casts | GPU kernel s | GPU casts/s | GPU +upload+readback s | \
+         CPU s ({} threads) | CPU casts/s | speed-up (kernel) | bit-equal | run-to-run |",
+        rayon::current_num_threads()
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    // Warm the driver's JIT and the caches.
+    let warm: Vec<GpuRay> = (0..1024)
+        .map(|_| [8.5, 21.0, 27.0, 0.0, 0.0, -1.0, 1e-3, f32::INFINITY])
+        .collect();
+    gpu.cast(&dev, &warm).unwrap();
+    for n in [1_000_000u32, 10_000_000] {
+        for depth in [3u32, 5] {
+            let mut seg: Vec<GpuRay> = fibonacci_run(n, 0, n)
+                .map(|d| {
+                    let d = d.as_vec3();
+                    [8.5, 21.0, 27.0, d.x, d.y, d.z, 1e-3, f32::INFINITY]
+                })
+                .collect();
+            let (mut casts, mut kernel, mut total, mut cpu_s) = (0usize, 0.0, 0.0, 0.0);
+            let (mut equal, mut same) = (true, true);
+            for _ in 0..depth {
+                if seg.is_empty() {
+                    break;
+                }
+                let (got, times) = gpu.cast_timed(&dev, &seg).unwrap();
+                let again = gpu.cast(&dev, &seg).unwrap();
+                let clock = Instant::now();
+                let want = cpu_cast(&cpu, &seg);
+                cpu_s += clock.elapsed().as_secs_f64();
+                casts += seg.len();
+                kernel += times.kernel;
+                total += times.upload + times.kernel + times.readback;
+                equal &= got.iter().zip(&want).all(|(a, b)| bits(a) == bits(b));
+                same &= got.iter().zip(&again).all(|(a, b)| bits(a) == bits(b));
+                seg = bounce(&tris, &seg, &want);
+            }
+            println!(
+                "| {} | {n} | {depth} | {casts} | {kernel:.4} | {:.0} M | {total:.4} | {cpu_s:.4} | \
+                 {:.0} M | {:.1}x | {equal} | {same} |",
+                gpu.name(),
+                casts as f64 / kernel / 1e6,
+                casts as f64 / cpu_s / 1e6,
+                cpu_s / kernel
+            );
+            assert!(equal, "device hits differ from the CPU's");
+            assert!(same, "two device runs differ");
+        }
+    }
+}
+
+fn map_inputs(scene: &RfScene, tx: DVec3, plane: &MapPlane, rays: u32, depth: u32) -> MapInputs {
+    let opt = TraceOptions {
+        rays,
+        max_depth: depth,
+        ..Default::default()
+    };
+    MapInputs::new(scene, tx, &Antenna::default(), plane, &opt).unwrap()
+}
+
+/// The device map is the host twin's to the bit (the same integer sums), twice.
+#[test]
+fn device_maps_are_the_host_maps() {
+    let Some(gpu) = gpu() else { return };
+    let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
+    let plane = default_plane(&scene, 4.0, 1.5);
+    let mut cases = vec![(
+        "street grid",
+        map_inputs(&scene, DVec3::new(-60.0, -56.0, 12.0), &plane, 100_000, 3),
+    )];
+    let munich = munich_xml().map(|xml| gpu_common::munich_rf(&xml));
+    if let Some(m) = &munich {
+        let plane = default_plane(m, 5.0, 1.5);
+        cases.push((
+            "munich",
+            map_inputs(m, DVec3::new(8.5, 21.0, 27.0), &plane, 100_000, 3),
+        ));
+    }
+    for (name, inputs) in cases {
+        let host = host_radio_map(&inputs);
+        let (a, _) = gpu.radio_map(&inputs).unwrap();
+        let (b, _) = gpu.radio_map(&inputs).unwrap();
+        let bits = |r: &[f32]| r.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(
+            bits(&a.data.0),
+            bits(&b.data.0),
+            "{name}: two device maps differ"
+        );
+        assert_eq!(
+            bits(&a.data.0),
+            bits(&host.data.0),
+            "{name}: device map != host map"
+        );
+        let reached = a.data.0.iter().filter(|v| **v > 0.0).count();
+        println!("{name}: device map = host map to the bit, twice ({reached} cells reached)");
+    }
+}
+
+/// Munich maps on the device against `radio_map` on every CPU core: 10^6 and 10^7 rays at
+/// depth 3 and 5, 5 m cells at 1.5 m, tx (8.5, 21, 27), 3.5 GHz. Warm times (the PTX JIT and the
+/// scene's upload done before; the BVH built on the CPU, as Sionna RT is timed warm): GPU map =
+/// kernel + cells back. Prints a markdown table.
+#[test]
+#[ignore = "timing on a GPU machine: scripts/gpu_device_check.sh"]
+fn device_map_speed_on_munich() {
+    let Some(gpu) = gpu() else { return };
+    let Some(xml) = munich_xml() else { return };
+    let scene = gpu_common::munich_rf(&xml);
+    let plane = default_plane(&scene, 5.0, 1.5);
+    let tx = DVec3::new(8.5, 21.0, 27.0);
+    // Warm-up: the driver's JIT of the PTX, caches.
+    gpu.radio_map(&map_inputs(&scene, tx, &plane, 10_000, 3))
+        .unwrap();
+    println!(
+        "\n| device | rays | depth | GPU map s (kernel+readback) | GPU upload s | GPU M rays/s | \
+         CPU map s ({} threads) | speed-up | cells both | cells one only | median abs dB diff | \
+         max abs dB diff | GPU run-to-run |",
+        rayon::current_num_threads()
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for n in [1_000_000u32, 10_000_000] {
+        for depth in [3u32, 5] {
+            let inputs = map_inputs(&scene, tx, &plane, n, depth);
+            let (a, t) = gpu.radio_map(&inputs).unwrap();
+            let (b, t2) = gpu.radio_map(&inputs).unwrap();
+            let map_s = t.map.min(t2.map);
+            let same = a
+                .data
+                .0
+                .iter()
+                .zip(&b.data.0)
+                .all(|(x, y)| x.to_bits() == y.to_bits());
+            let opt = TraceOptions {
+                rays: n,
+                max_depth: depth,
+                ..Default::default()
+            };
+            let clock = Instant::now();
+            let cpu = radio_map(&scene, tx, &Antenna::default(), &plane, &opt, 3.5e9);
+            let cpu_s = clock.elapsed().as_secs_f64();
+            let (both, only, median, _, max) = gpu_common::compare_maps(&a.data.0, &cpu.data.0);
+            println!(
+                "| {} | {n} | {depth} | {map_s:.4} | {:.4} | {:.0} | {cpu_s:.4} | {:.1}x | {both} | \
+                 {only} | {median:.2e} | {max:.2e} | {same} |",
+                gpu.name(),
+                t.upload,
+                n as f64 / map_s / 1e6,
+                cpu_s / map_s
+            );
+            assert!(same, "two device maps differ");
+        }
+    }
+}

@@ -1,0 +1,122 @@
+//! The GPU kernels' source compiled for the host (feature `cuda`, nodes/build.rs) against the
+//! Rust tracer: every ray's closest hit must be the same triangle at the same distance, to the
+//! bit. This is what lets CI without a GPU vouch for the kernel the GPU runs (`rf::gpu`).
+
+mod gpu_common;
+
+use gpu_common::{munich_xml, rays, street_grid, vertices};
+use kodama_nodes::artifact::Scene;
+use kodama_nodes::geom::raycast::SceneRays;
+use kodama_nodes::io::sionna_xml::read_scene;
+use kodama_nodes::rf::gpu::{GpuRay, Tree, host_cast};
+
+/// Casts `rays` with the Rust tracer and with the kernel's host build; asserts every hit equal
+/// to the bit; returns (rays, hits).
+fn compare(scene: &Scene, rays: &[GpuRay]) -> (usize, usize) {
+    let cpu = SceneRays::new(scene);
+    let tree = Tree::new(cpu.wide_bvh()).unwrap();
+    let got = host_cast(&tree, rays);
+    let mut hits = 0;
+    for (k, (r, g)) in rays.iter().zip(&got).enumerate() {
+        let want = cpu.cast_index([r[0], r[1], r[2]], [r[3], r[4], r[5]], r[6], r[7]);
+        let bits = |h: Option<(f32, u32)>| h.map(|(t, p)| (t.to_bits(), p));
+        assert_eq!(bits(*g), bits(want), "ray {k}: {r:?}");
+        hits += want.is_some() as usize;
+    }
+    (rays.len(), hits)
+}
+
+#[test]
+fn host_kernel_casts_street_grid_as_the_cpu() {
+    let scene = street_grid();
+    let v = vertices(&scene);
+    let rays = rays([-60.0, -56.0, 12.0], [0.0, 0.0, 10.0], 200.0, 100_000, &v);
+    let (n, hits) = compare(&scene, &rays);
+    println!("street grid: {n} rays, {hits} hits, all bit-equal");
+    assert!(hits > n / 4, "{hits} hits of {n}: too few to test much");
+}
+
+#[test]
+fn host_kernel_casts_munich_as_the_cpu() {
+    let Some(xml) = munich_xml() else { return };
+    let scene = read_scene(&xml).unwrap();
+    let v = vertices(&scene);
+    let rays = rays([8.5, 21.0, 27.0], [0.0, 0.0, 30.0], 400.0, 200_000, &v);
+    let (n, hits) = compare(&scene, &rays);
+    println!("munich: {n} rays, {hits} hits, all bit-equal");
+    assert!(hits > n / 4, "{hits} hits of {n}: too few to test much");
+}
+
+use glam::DVec3;
+use kodama_nodes::artifact::Grid;
+use kodama_nodes::rf::antenna::Antenna;
+use kodama_nodes::rf::gpu::{MapInputs, host_radio_map};
+use kodama_nodes::rf::map_plane::{MapPlane, default_plane};
+use kodama_nodes::rf::path::TraceOptions;
+use kodama_nodes::rf::radiomap::radio_map;
+use kodama_nodes::rf::scene::RfScene;
+
+/// The host twin's map against `radio_map`; returns the comparison and prints it. Tolerance:
+/// the launch directions (closed form here, a rotation on the CPU: 1e-8 apart), the slab table's
+/// sampling and libm's last bits differ, so a ray grazing an edge may land elsewhere; the cells
+/// must be the same but for a handful, and the median cell within 0.01 dB.
+fn check_map(name: &str, scene: &RfScene, tx: DVec3, plane: &MapPlane, rays: u32) {
+    let opt = TraceOptions {
+        rays,
+        max_depth: 3,
+        ..Default::default()
+    };
+    let antenna = Antenna::default();
+    let cpu = radio_map(scene, tx, &antenna, plane, &opt, 3.5e9);
+    let inputs = MapInputs::new(scene, tx, &antenna, plane, &opt).unwrap();
+    let host = host_radio_map(&inputs);
+    let again = host_radio_map(&inputs);
+    assert_eq!(host.data.0, again.data.0, "{name}: two host maps differ");
+    let (both, only, median, p99, max) = gpu_common::compare_maps(&host.data.0, &cpu.data.0);
+    println!(
+        "{name}: {rays} rays, depth 3: {both} cells both reach, {only} one only; |dB| median \
+         {median:.2e}, p99 {p99:.2e}, max {max:.2e}"
+    );
+    assert!(both > 100, "{name}: only {both} cells reached");
+    assert!(
+        only * 1000 <= both,
+        "{name}: {only} cells reached by one map only"
+    );
+    assert!(median <= 0.01, "{name}: median |difference| {median} dB");
+}
+
+#[test]
+fn host_kernel_maps_street_grid_as_the_cpu() {
+    let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
+    let plane = MapPlane::plane(
+        Grid {
+            x0: -100.0,
+            y0: 100.0,
+            cell_m: 4.0,
+            width: 50,
+            height: 50,
+        },
+        1.5,
+    );
+    check_map(
+        "street grid",
+        &scene,
+        DVec3::new(-60.0, -56.0, 12.0),
+        &plane,
+        100_000,
+    );
+}
+
+#[test]
+fn host_kernel_maps_munich_as_the_cpu() {
+    let Some(xml) = munich_xml() else { return };
+    let scene = gpu_common::munich_rf(&xml);
+    let plane = default_plane(&scene, 5.0, 1.5);
+    check_map(
+        "munich",
+        &scene,
+        DVec3::new(8.5, 21.0, 27.0),
+        &plane,
+        100_000,
+    );
+}
