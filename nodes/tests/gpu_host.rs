@@ -120,3 +120,41 @@ fn host_kernel_maps_munich_as_the_cpu() {
         100_000,
     );
 }
+
+use kodama_nodes::rf::fibonacci::patch_order;
+use kodama_nodes::rf::gpu::{ORDER_CHUNK, host_patch_order};
+
+/// The order kernel's host twin is `patch_order`, ray for ray: whole chunks at the start, middle
+/// and end of lattices of several sizes, the last partial chunk, chunks shorter than a patch,
+/// the chunk lengths `radio_map` uses, and every chunk of one lattice.
+#[test]
+fn host_order_is_patch_order() {
+    let mut cases = Vec::new();
+    for n in [
+        0u32, 1, 2, 64, 65, 1000, 65_536, 65_537, 100_000, 1_000_000, 10_000_000, 12_345_678,
+    ] {
+        let last = n.saturating_sub(1) / ORDER_CHUNK * ORDER_CHUNK;
+        for start in [0, n / 2 / ORDER_CHUNK * ORDER_CHUNK, last] {
+            cases.push((n, start, ORDER_CHUNK));
+        }
+    }
+    for (n, len) in [
+        (1_000_000u32, 14_208u32),
+        (10_000_000, 44_864),
+        (100_000, 8192),
+    ] {
+        for start in [0, n / 3, n / 2 - len / 2, n - len, n - 100] {
+            cases.push((n, start, len));
+        }
+    }
+    let n = 1_000_000u32;
+    for start in (0..n).step_by(ORDER_CHUNK as usize) {
+        cases.push((n, start, ORDER_CHUNK));
+    }
+    for &(n, start, len) in &cases {
+        let want = patch_order(n, start, len);
+        let got = host_patch_order(n, start, len);
+        assert_eq!(got, want, "n {n} start {start} len {len}");
+    }
+    println!("{} chunks: host order = patch_order", cases.len());
+}

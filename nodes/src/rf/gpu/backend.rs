@@ -17,7 +17,6 @@ use crate::artifact::{Grid, PodVec, Raster};
 use crate::geom::wide_bvh::{GPU_NODE_WORDS, GPU_PACKET_WORDS, WideBvh};
 use crate::rf::antenna::{Antenna, Pattern, Polarization};
 use crate::rf::em::slab;
-use crate::rf::fibonacci::patch_order;
 use crate::rf::map_plane::MapPlane;
 use crate::rf::path::TraceOptions;
 use crate::rf::scene::RfScene;
@@ -120,6 +119,7 @@ pub struct Gpu {
     stream: Arc<CudaStream>,
     cast: CudaFunction,
     map: CudaFunction,
+    order: CudaFunction,
     name: String,
     driver_version: i32,
 }
@@ -163,10 +163,14 @@ impl Gpu {
         let map = module
             .load_function("kodama_map")
             .map_err(driver_err("kodama_map"))?;
+        let order = module
+            .load_function("kodama_order")
+            .map_err(driver_err("kodama_order"))?;
         Ok(Gpu {
             stream: ctx.default_stream(),
             cast,
             map,
+            order,
             name,
             driver_version,
         })
@@ -291,31 +295,24 @@ pub fn map_unsupported(
     (!why.is_empty()).then(|| format!("the GPU map kernel does not cover {}", why.join(", ")))
 }
 
-/// What the map kernel reads besides the tree: per triangle its unit normal and first vertex,
-/// its material, the slab table, and the map's scalars.
-pub struct MapInputs {
+/// What the map kernel reads of a scene: the tree, per triangle its unit normal and first
+/// vertex, its material, and the slab table. Made once per scene (and frequency): a caller
+/// mapping several transmitters or grids uploads it once ([`Gpu::upload_scene`]).
+pub struct MapScene {
     tree: Tree,
     tri: Vec<f64>,
     material: Vec<u32>,
     slabs: Vec<f64>,
-    consts: Vec<f64>,
-    grid: Grid,
+    /// (λ / 4π)²: the fixed-point sums to path gain.
     scale: f64,
-    rays: u32,
 }
 
-impl MapInputs {
-    /// Everything [`radio_map`](crate::rf::radiomap::radio_map) would use, flattened; an error
-    /// when the kernel does not cover the map ([`map_unsupported`]).
-    pub fn new(
-        scene: &RfScene,
-        tx: DVec3,
-        antenna: &Antenna,
-        plane: &MapPlane,
-        opt: &TraceOptions,
-    ) -> Result<MapInputs, String> {
-        if let Some(why) = map_unsupported(scene, antenna, plane, opt) {
-            return Err(why);
+impl MapScene {
+    /// `scene` flattened for the map kernel; an error when its BVH is too deep for the kernel
+    /// or it holds foliage (which the kernel does not cover).
+    pub fn new(scene: &RfScene) -> Result<MapScene, String> {
+        if scene.has_foliage() {
+            return Err("the GPU map kernel does not cover foliage".into());
         }
         let tree = Tree::new(scene.rays().wide_bvh())?;
         let mut tri = Vec::with_capacity(6 * scene.tris.len());
@@ -338,6 +335,41 @@ impl MapInputs {
                 ]);
             }
         }
+        Ok(MapScene {
+            tree,
+            tri,
+            material,
+            slabs,
+            scale: (scene.wavelength / (4.0 * std::f64::consts::PI)).powi(2),
+        })
+    }
+
+    /// Bytes the scene takes on the device.
+    pub fn bytes(&self) -> usize {
+        self.tree.bytes() + 8 * (self.tri.len() + self.slabs.len()) + 4 * self.material.len()
+    }
+}
+
+/// What one map adds to its scene: the transmitter, grid and options as the kernel's scalars.
+pub struct MapParams {
+    consts: Vec<f64>,
+    grid: Grid,
+    rays: u32,
+}
+
+impl MapParams {
+    /// The scalars of [`radio_map`](crate::rf::radiomap::radio_map)`(scene, tx, antenna,
+    /// plane, opt)`; an error when the kernel does not cover the map ([`map_unsupported`]).
+    pub fn new(
+        scene: &RfScene,
+        tx: DVec3,
+        antenna: &Antenna,
+        plane: &MapPlane,
+        opt: &TraceOptions,
+    ) -> Result<MapParams, String> {
+        if let Some(why) = map_unsupported(scene, antenna, plane, opt) {
+            return Err(why);
+        }
         let g = plane.grid;
         let flag = |b: bool| if b { 1.0 } else { 0.0 };
         let consts = vec![
@@ -359,37 +391,66 @@ impl MapInputs {
             g.height as f64,
             SLAB_SAMPLES as f64,
         ];
-        Ok(MapInputs {
-            tree,
-            tri,
-            material,
-            slabs,
+        Ok(MapParams {
             consts,
             grid: g,
-            scale: (scene.wavelength / (4.0 * std::f64::consts::PI)).powi(2),
             rays: opt.rays,
         })
     }
+}
 
-    /// The map from the cells' fixed-point sums (two u64 words a cell): the mean path gain,
-    /// as `radio_map` returns it.
-    fn raster(&self, acc: &[u64]) -> Raster {
-        Raster {
-            grid: self.grid,
-            data: PodVec(
-                acc.chunks(2)
-                    .map(|w| {
-                        let v = ((w[1] as u128) << 64 | w[0] as u128) as f64 / FIX;
-                        (v * self.scale) as f32
-                    })
-                    .collect(),
-            ),
-        }
+/// A scene and one map of it: everything [`radio_map`](crate::rf::radiomap::radio_map) would
+/// use, flattened.
+pub struct MapInputs {
+    /// The scene's part, the same for every map of it.
+    pub scene: MapScene,
+    /// The map's part.
+    pub map: MapParams,
+}
+
+impl MapInputs {
+    /// [`MapScene::new`] and [`MapParams::new`]; an error when the kernel does not cover the map
+    /// ([`map_unsupported`]).
+    pub fn new(
+        scene: &RfScene,
+        tx: DVec3,
+        antenna: &Antenna,
+        plane: &MapPlane,
+        opt: &TraceOptions,
+    ) -> Result<MapInputs, String> {
+        let map = MapParams::new(scene, tx, antenna, plane, opt)?;
+        Ok(MapInputs {
+            scene: MapScene::new(scene)?,
+            map,
+        })
+    }
+}
+
+/// The map from the cells' fixed-point sums (two u64 words a cell): the mean path gain, as
+/// `radio_map` returns it.
+fn raster(grid: Grid, scale: f64, acc: &[u64]) -> Raster {
+    Raster {
+        grid,
+        data: PodVec(
+            acc.chunks(2)
+                .map(|w| {
+                    let v = ((w[1] as u128) << 64 | w[0] as u128) as f64 / FIX;
+                    (v * scale) as f32
+                })
+                .collect(),
+        ),
     }
 }
 
 /// 2^`FIX_SHIFT` of kernels.cu: the fixed point's unit.
 const FIX: f64 = (1u128 << 100) as f64;
+
+/// Rays the device orders at a time ([`crate::rf::fibonacci::patch_order`]'s chunk; `ORDER_CHUNK` in kernels.cu is
+/// the most a block takes).
+pub const ORDER_CHUNK: u32 = 65_536;
+
+/// Threads of a `kodama_order` block (`ORDER_THREADS` in kernels.cu).
+const ORDER_THREADS: u32 = 256;
 
 unsafe extern "C" {
     fn kodama_host_map(
@@ -404,32 +465,45 @@ unsafe extern "C" {
         n: u64,
         acc: *mut u64,
     );
+    fn kodama_host_order(n: u32, start: u32, len: u32, out: *mut u32);
+}
+
+/// The order kernel's host twin: [`crate::rf::fibonacci::patch_order`]`(n, start, len)` as kernels.cu computes it (the
+/// device's phases one thread after another), as offsets from `start`.
+pub fn host_patch_order(n: u32, start: u32, len: u32) -> Vec<u32> {
+    let len = len.min(n.saturating_sub(start));
+    assert!(len <= ORDER_CHUNK, "a chunk of at most {ORDER_CHUNK} rays");
+    let mut out = vec![0u32; len as usize];
+    // SAFETY: `out` holds len words; len is at most ORDER_CHUNK and start + len at most n.
+    unsafe { kodama_host_order(n, start, len, out.as_mut_ptr()) };
+    out
 }
 
 /// The map kernel's host twin, on every core: chunks of the lattice into their own sums, added
 /// as integers (the same bits at any thread count).
 pub fn host_radio_map(inputs: &MapInputs) -> Raster {
-    let cells = inputs.grid.len();
+    let (sc, mp) = (&inputs.scene, &inputs.map);
+    let cells = mp.grid.len();
     const CHUNK: u32 = 16_384;
-    let t = &inputs.tree;
-    let acc = (0..inputs.rays.div_ceil(CHUNK))
+    let t = &sc.tree;
+    let acc = (0..mp.rays.div_ceil(CHUNK))
         .into_par_iter()
         .map(|k| {
             let first = k * CHUNK;
-            let n = CHUNK.min(inputs.rays - first);
+            let n = CHUNK.min(mp.rays - first);
             let mut acc = vec![0u64; 2 * cells];
-            // SAFETY: the buffers are what `MapInputs::new` built for this scene and grid
-            // (consts names the grid's width and height, acc has two words a cell); rays
-            // first..first + n are within the lattice.
+            // SAFETY: the buffers are what `MapScene::new` and `MapParams::new` built for this
+            // scene and grid (consts names the grid's width and height, acc has two words a
+            // cell); rays first..first + n are within the lattice.
             unsafe {
                 kodama_host_map(
                     t.nodes.as_ptr(),
                     t.node_count(),
                     t.packets.as_ptr(),
-                    inputs.tri.as_ptr(),
-                    inputs.material.as_ptr(),
-                    inputs.slabs.as_ptr(),
-                    inputs.consts.as_ptr(),
+                    sc.tri.as_ptr(),
+                    sc.material.as_ptr(),
+                    sc.slabs.as_ptr(),
+                    mp.consts.as_ptr(),
                     first,
                     n as u64,
                     acc.as_mut_ptr(),
@@ -438,7 +512,7 @@ pub fn host_radio_map(inputs: &MapInputs) -> Raster {
             acc
         })
         .reduce(|| vec![0u64; 2 * cells], add_fixed);
-    inputs.raster(&acc)
+    raster(mp.grid, sc.scale, &acc)
 }
 
 /// Cell-wise sum of two fixed-point maps.
@@ -451,67 +525,153 @@ fn add_fixed(mut a: Vec<u64>, b: Vec<u64>) -> Vec<u64> {
     a
 }
 
+/// A [`MapScene`] on the device: what every map of the scene reads, uploaded once.
+pub struct DeviceScene {
+    nodes: CudaSlice<u32>,
+    packets: CudaSlice<u32>,
+    n_nodes: u32,
+    tri: CudaSlice<f64>,
+    material: CudaSlice<u32>,
+    slabs: CudaSlice<f64>,
+    scale: f64,
+}
+
 /// Times of one device map, seconds.
 #[derive(Clone, Copy, Debug)]
 pub struct MapTimes {
-    /// Scene buffers and ray order up to the device (once per scene in a warm process).
+    /// The scene up to the device ([`Gpu::upload_scene`]): once per scene in a warm process;
+    /// zero from [`Gpu::map`], which takes a resident scene.
     pub upload: f64,
-    /// The kernel, launch to completion, and the cells back to the host: the warm map time.
-    pub map: f64,
+    /// The whole warm call on a resident scene: the map's scalars up, its buffers allocated
+    /// and zeroed, the patch order computed on the device, the kernel, the cells back and made
+    /// into the raster.
+    pub call: f64,
+    /// Of `call`: the map kernel, launch to completion, and the cells back to the host.
+    pub kernel: f64,
 }
 
 impl Gpu {
-    /// The radio map on the device ([`host_radio_map`]'s bits: the same integer sums).
-    pub fn radio_map(&self, inputs: &MapInputs) -> Result<(Raster, MapTimes), String> {
+    /// Copies a scene's map inputs to the device, for any number of [`Gpu::map`] calls.
+    pub fn upload_scene(&self, scene: &MapScene) -> Result<DeviceScene, String> {
         let s = &self.stream;
-        let clock = Instant::now();
         let up = |v: &[u32]| s.clone_htod(v).map_err(driver_err("upload"));
         let upf = |v: &[f64]| s.clone_htod(v).map_err(driver_err("upload"));
-        let (nodes, packets) = (up(&inputs.tree.nodes)?, up(&inputs.tree.packets)?);
-        let (tri, material) = (upf(&inputs.tri)?, up(&inputs.material)?);
-        let (slabs, consts) = (upf(&inputs.slabs)?, upf(&inputs.consts)?);
-        // The lattice's patch order, chunk by chunk as `radio_map` takes it.
-        let mut order = Vec::with_capacity(inputs.rays as usize);
-        let chunk = 65_536u32;
-        for start in (0..inputs.rays).step_by(chunk as usize) {
-            order.extend(
-                patch_order(inputs.rays, start, chunk)
-                    .iter()
-                    .map(|&k| start + k),
-            );
-        }
-        let order = up(&order)?;
-        let mut acc = s
-            .alloc_zeros::<u64>(2 * inputs.grid.len())
-            .map_err(driver_err("alloc"))?;
+        let dev = DeviceScene {
+            nodes: up(&scene.tree.nodes)?,
+            packets: up(&scene.tree.packets)?,
+            n_nodes: scene.tree.node_count(),
+            tri: upf(&scene.tri)?,
+            material: up(&scene.material)?,
+            slabs: upf(&scene.slabs)?,
+            scale: scene.scale,
+        };
         s.synchronize().map_err(driver_err("sync"))?;
-        let upload = clock.elapsed().as_secs_f64();
-        let clock = Instant::now();
-        let n = inputs.rays as u64;
-        let n_nodes = inputs.tree.node_count();
-        let block = 128u32;
+        Ok(dev)
+    }
+
+    /// The patch order of an n-ray lattice computed on the device, chunk after chunk of
+    /// [`ORDER_CHUNK`] rays, as lattice indices: what [`Gpu::map`] launches its rays in.
+    pub fn patch_order(&self, n: u32) -> Result<Vec<u32>, String> {
+        let s = &self.stream;
+        let order = self.order(n)?;
+        let Some(order) = order else {
+            return Ok(Vec::new());
+        };
+        s.clone_dtoh(&order).map_err(driver_err("readback"))
+    }
+
+    /// Launches the order kernel for an n-ray lattice; `None` for no rays.
+    fn order(&self, n: u32) -> Result<Option<CudaSlice<u32>>, String> {
+        if n == 0 {
+            return Ok(None);
+        }
+        let s = &self.stream;
+        let chunks = n.div_ceil(ORDER_CHUNK);
+        let mut order = s
+            .alloc_zeros::<u32>(n as usize)
+            .map_err(driver_err("alloc"))?;
+        let mut scratch = s
+            .alloc_zeros::<u32>(chunks as usize * (ORDER_CHUNK as usize / 4 + 2))
+            .map_err(driver_err("alloc"))?;
         let cfg = LaunchConfig {
-            grid_dim: (n.div_ceil(block as u64) as u32, 1, 1),
-            block_dim: (block, 1, 1),
+            grid_dim: (chunks, 1, 1),
+            block_dim: (ORDER_THREADS, 1, 1),
             shared_mem_bytes: 0,
         };
-        let mut launch = s.launch_builder(&self.map);
+        let mut launch = s.launch_builder(&self.order);
         launch
-            .arg(&nodes)
-            .arg(&n_nodes)
-            .arg(&packets)
-            .arg(&tri)
-            .arg(&material)
-            .arg(&slabs)
-            .arg(&consts)
-            .arg(&order)
             .arg(&n)
-            .arg(&mut acc);
-        // SAFETY: the arguments match `kodama_map`'s parameters in kernels.cu, in order and
-        // type; `order` holds n lattice indices below the lattice's size.
+            .arg(&ORDER_CHUNK)
+            .arg(&mut order)
+            .arg(&mut scratch);
+        // SAFETY: the arguments match `kodama_order`'s parameters in kernels.cu, in order and
+        // type; `order` holds n words, `scratch` ORDER_CHUNK / 4 + 2 a block, and the blocks
+        // are ORDER_THREADS threads, as the kernel's shared arrays are sized.
         unsafe { launch.launch(cfg) }.map_err(driver_err("launch"))?;
-        let acc = s.clone_dtoh(&acc).map_err(driver_err("readback"))?;
-        let map = clock.elapsed().as_secs_f64();
-        Ok((inputs.raster(&acc), MapTimes { upload, map }))
+        Ok(Some(order))
+    }
+
+    /// The radio map of a resident scene ([`host_radio_map`]'s bits: the same integer sums).
+    /// Nothing of the scene travels; the patch order is computed on the device.
+    pub fn map(&self, scene: &DeviceScene, map: &MapParams) -> Result<(Raster, MapTimes), String> {
+        let s = &self.stream;
+        let call = Instant::now();
+        let consts = s.clone_htod(&map.consts).map_err(driver_err("upload"))?;
+        let mut acc = s
+            .alloc_zeros::<u64>(2 * map.grid.len())
+            .map_err(driver_err("alloc"))?;
+        let mut kernel = 0.0;
+        let acc = match self.order(map.rays)? {
+            None => s.clone_dtoh(&acc).map_err(driver_err("readback"))?,
+            Some(order) => {
+                s.synchronize().map_err(driver_err("order kernel"))?;
+                let clock = Instant::now();
+                let n = map.rays as u64;
+                let block = 128u32;
+                let cfg = LaunchConfig {
+                    grid_dim: (n.div_ceil(block as u64) as u32, 1, 1),
+                    block_dim: (block, 1, 1),
+                    shared_mem_bytes: 0,
+                };
+                let mut launch = s.launch_builder(&self.map);
+                launch
+                    .arg(&scene.nodes)
+                    .arg(&scene.n_nodes)
+                    .arg(&scene.packets)
+                    .arg(&scene.tri)
+                    .arg(&scene.material)
+                    .arg(&scene.slabs)
+                    .arg(&consts)
+                    .arg(&order)
+                    .arg(&n)
+                    .arg(&mut acc);
+                // SAFETY: the arguments match `kodama_map`'s parameters in kernels.cu, in order
+                // and type; `order` holds n lattice indices below the lattice's size, `acc` two
+                // words a cell of the grid `consts` names, the scene what `MapScene::new` made.
+                unsafe { launch.launch(cfg) }.map_err(driver_err("launch"))?;
+                let acc = s.clone_dtoh(&acc).map_err(driver_err("readback"))?;
+                kernel = clock.elapsed().as_secs_f64();
+                acc
+            }
+        };
+        let r = raster(map.grid, scene.scale, &acc);
+        Ok((
+            r,
+            MapTimes {
+                upload: 0.0,
+                call: call.elapsed().as_secs_f64(),
+                kernel,
+            },
+        ))
+    }
+
+    /// The radio map on the device, the scene uploaded for this call alone: [`Gpu::upload_scene`]
+    /// then [`Gpu::map`].
+    pub fn radio_map(&self, inputs: &MapInputs) -> Result<(Raster, MapTimes), String> {
+        let clock = Instant::now();
+        let scene = self.upload_scene(&inputs.scene)?;
+        let upload = clock.elapsed().as_secs_f64();
+        let (r, t) = self.map(&scene, &inputs.map)?;
+        Ok((r, MapTimes { upload, ..t }))
     }
 }

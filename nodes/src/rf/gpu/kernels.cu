@@ -582,6 +582,169 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
     }
 }
 
+// ---------------------------------------------------------------------------------------------
+// The lattice's patch order (`fibonacci::patch_order`) on the device: the rays of a chunk cut into
+// rows of latitude, each row counting-sorted by azimuth bin. A row's bins follow the previous
+// row's, so the chunk is one counting sort by (row's first bin + bin), stable in k: sorting each
+// bin's few entries by k after an unordered scatter gives exactly the stable sort's order. The
+// rows come from one thread (a handful of square roots a row); the rest is split over a block's
+// threads in phases, which the host twin runs one after another (its scatter visits k out of
+// order, so the bins' sort is exercised there too).
+
+#define PATCH 64
+// Rays a block orders, at most (backend.rs orders chunks of this size).
+#define ORDER_CHUNK 65536
+// Threads of a `kodama_order` block (`ORDER_THREADS` in backend.rs).
+#define ORDER_THREADS 256
+// Rows a chunk can have: every row but the last has at least PATCH rays.
+#define ORDER_ROWS (ORDER_CHUNK / PATCH + 2)
+
+CUDA_CALLABLE double round_d(double x) {
+#ifdef KODAMA_DEVICE
+    return round(x);
+#else
+    return std::round(x);
+#endif
+}
+
+CUDA_CALLABLE double golden_ratio() { return (1.0 + dsqrt(5.0)) / 2.0; }
+
+// `patch_order`'s `square_row`: rays in a row whose patches are square, k rays into the chunk.
+CUDA_CALLABLE double square_row(u32 n, u32 start, double k) {
+    double z = 1.0 - 2.0 * ((double)start + k) / (double)(n - 1);
+    double r2 = 1.0 - z * z;
+    return 8.0 * dsqrt(r2 > 0.0 ? r2 : 0.0) * dsqrt(3.141592653589793 * (double)n);
+}
+
+// The rows of rays `start..start + len` of an n-ray lattice (len already within n): row r holds
+// rays row_start[r]..row_start[r + 1] (offsets from start) and bins bin_off[r]..bin_off[r + 1] of
+// the chunk. Returns the row count. A chunk `patch_order` leaves in lattice order is one row of
+// one bin (the bin's sort by k keeps it so).
+CUDA_CALLABLE u32 patch_rows(u32 n, u32 start, u32 len, u32* row_start, u32* bin_off) {
+    row_start[0] = 0;
+    bin_off[0] = 0;
+    if (n <= 1 || len <= PATCH) {
+        row_start[1] = len;
+        bin_off[1] = 1;
+        return 1;
+    }
+    u32 rows = 0, row = 0;
+    while (row < len) {
+        double guess = square_row(n, start, (double)row);
+        if (!(guess > (double)PATCH)) guess = (double)PATCH;
+        double m = square_row(n, start, (double)row + guess / 2.0);
+        u32 mm = (u32)round_d(m / (double)PATCH);
+        if (mm < 1) mm = 1;
+        mm *= PATCH;
+        if (mm > len - row) mm = len - row;
+        if (len - row - mm < mm / 2) mm = len - row;
+        u32 bins = mm / 4 > 1 ? mm / 4 : 1;
+        row_start[rows + 1] = row + mm;
+        bin_off[rows + 1] = bin_off[rows] + bins;
+        rows++;
+        row += mm;
+    }
+    return rows;
+}
+
+// The chunk's bin of ray `start + k`: its row's first bin plus its azimuth's bin in the row.
+CUDA_CALLABLE u32 patch_key(u32 start, u32 k, const u32* row_start, const u32* bin_off,
+                            u32 rows) {
+    u32 lo = 0, hi = rows;
+    while (hi - lo > 1) {
+        u32 mid = (lo + hi) / 2;
+        if (row_start[mid] <= k)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    u32 bins = bin_off[lo + 1] - bin_off[lo];
+    double q = (double)(start + k) / golden_ratio();
+    double x = q - (double)(u64)q;
+    u32 b = (u32)(x * (double)bins);
+    if (b > bins - 1) b = bins - 1;
+    return bin_off[lo] + b;
+}
+
+CUDA_CALLABLE u32 bump(u32* p) {
+#ifdef KODAMA_DEVICE
+    return atomicAdd(p, 1u);
+#else
+    return (*p)++;
+#endif
+}
+
+// The phases of one chunk's sort, thread `tid` of `threads`. `count` has a word per bin and one
+// more (bin_off[rows] + 1), `partial` a word per thread.
+struct OrderChunk {
+    u32 n, start, len, rows, base;
+    const u32* row_start;
+    const u32* bin_off;
+    u32* count;
+    u32* partial;
+    u32* out;
+};
+
+CUDA_CALLABLE void order_zero(const OrderChunk& c, u32 tid, u32 threads) {
+    for (u32 i = tid; i <= c.bin_off[c.rows]; i += threads) c.count[i] = 0;
+}
+// count[b + 1] = rays in bin b.
+CUDA_CALLABLE void order_histogram(const OrderChunk& c, u32 tid, u32 threads) {
+    for (u32 k = tid; k < c.len; k += threads)
+        bump(&c.count[patch_key(c.start, k, c.row_start, c.bin_off, c.rows) + 1]);
+}
+// The prefix sum of count, in three phases: each thread's segment, the segments' totals (one
+// thread), the totals added back: count[b] = rays in bins before b.
+CUDA_CALLABLE void order_segment(const OrderChunk& c, u32 tid, u32 threads, u32* lo, u32* hi) {
+    u32 words = c.bin_off[c.rows] + 1;
+    u32 seg = (words + threads - 1) / threads;
+    *lo = tid * seg < words ? tid * seg : words;
+    *hi = *lo + seg < words ? *lo + seg : words;
+}
+CUDA_CALLABLE void order_scan_segment(const OrderChunk& c, u32 tid, u32 threads) {
+    u32 lo, hi, s = 0;
+    order_segment(c, tid, threads, &lo, &hi);
+    for (u32 i = lo; i < hi; i++) {
+        s += c.count[i];
+        c.count[i] = s;
+    }
+    c.partial[tid] = s;
+}
+CUDA_CALLABLE void order_scan_totals(const OrderChunk& c, u32 threads) {
+    u32 s = 0;
+    for (u32 t = 0; t < threads; t++) {
+        u32 v = c.partial[t];
+        c.partial[t] = s;
+        s += v;
+    }
+}
+CUDA_CALLABLE void order_scan_add(const OrderChunk& c, u32 tid, u32 threads) {
+    u32 lo, hi;
+    order_segment(c, tid, threads, &lo, &hi);
+    for (u32 i = lo; i < hi; i++) c.count[i] += c.partial[tid];
+}
+// Every ray to a free place of its bin, in any order; count[b] ends as the end of bin b.
+CUDA_CALLABLE void order_scatter(const OrderChunk& c, u32 tid, u32 threads) {
+    for (u32 k = tid; k < c.len; k += threads) {
+        u32 at = bump(&c.count[patch_key(c.start, k, c.row_start, c.bin_off, c.rows)]);
+        c.out[at] = c.base + k;
+    }
+}
+// Each bin's rays by k (a few a bin): the stable counting sort's order.
+CUDA_CALLABLE void order_sort_bins(const OrderChunk& c, u32 tid, u32 threads) {
+    for (u32 b = tid; b < c.bin_off[c.rows]; b += threads) {
+        u32 lo = b == 0 ? 0 : c.count[b - 1], hi = c.count[b];
+        for (u32 i = lo + 1; i < hi; i++) {
+            u32 v = c.out[i], j = i;
+            while (j > lo && c.out[j - 1] > v) {
+                c.out[j] = c.out[j - 1];
+                j--;
+            }
+            c.out[j] = v;
+        }
+    }
+}
+
 #ifdef KODAMA_DEVICE
 extern "C" __global__ void kodama_cast(const Node* nodes, u32 n_nodes, const TriPacket* packets,
                                        const float* rays, u64 n, float* t_out, u32* prim_out) {
@@ -596,6 +759,46 @@ extern "C" __global__ void kodama_map(const Node* nodes, u32 n_nodes, const TriP
                                       const double* consts, const u32* order, u64 n, u64* acc) {
     u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
     if (i < n) shoot(nodes, n_nodes, packets, tri, material, slabs, consts, order[i], acc);
+}
+
+// Block c orders rays c * chunk.. of an n-ray lattice (chunk at most ORDER_CHUNK, ORDER_THREADS
+// threads a block) into order[c * chunk..] as lattice indices; `scratch` holds chunk / 4 + 2
+// words a block.
+extern "C" __global__ void kodama_order(u32 n, u32 chunk, u32* order, u32* scratch) {
+    __shared__ u32 row_start[ORDER_ROWS];
+    __shared__ u32 bin_off[ORDER_ROWS];
+    __shared__ u32 partial[ORDER_THREADS];
+    __shared__ u32 rows;
+    u32 start = blockIdx.x * chunk;
+    u32 tid = threadIdx.x, threads = blockDim.x;
+    if (start >= n) return;
+    u32 len = n - start < chunk ? n - start : chunk;
+    if (tid == 0) rows = patch_rows(n, start, len, row_start, bin_off);
+    __syncthreads();
+    OrderChunk c;
+    c.n = n;
+    c.start = start;
+    c.len = len;
+    c.rows = rows;
+    c.base = start;
+    c.row_start = row_start;
+    c.bin_off = bin_off;
+    c.count = scratch + (u64)blockIdx.x * (chunk / 4 + 2);
+    c.partial = partial;
+    c.out = order + start;
+    order_zero(c, tid, threads);
+    __syncthreads();
+    order_histogram(c, tid, threads);
+    __syncthreads();
+    order_scan_segment(c, tid, threads);
+    __syncthreads();
+    if (tid == 0) order_scan_totals(c, threads);
+    __syncthreads();
+    order_scan_add(c, tid, threads);
+    __syncthreads();
+    order_scatter(c, tid, threads);
+    __syncthreads();
+    order_sort_bins(c, tid, threads);
 }
 #else
 // The host twin of `kodama_cast` (nodes/build.rs compiles it under feature `cuda`).
@@ -614,5 +817,37 @@ extern "C" void kodama_host_map(const void* nodes, u32 n_nodes, const void* pack
     for (u64 i = 0; i < n; i++)
         shoot((const Node*)nodes, n_nodes, (const TriPacket*)packets, tri, material, slabs, consts,
               first + (u32)i, acc);
+}
+// The host twin of `kodama_order` for one chunk, rays `start..start + len` of an n-ray lattice
+// (len at most ORDER_CHUNK and within n), as offsets from start: the device's phases, run one
+// thread after another.
+extern "C" void kodama_host_order(u32 n, u32 start, u32 len, u32* out) {
+    u32* row_start = new u32[ORDER_ROWS];
+    u32* bin_off = new u32[ORDER_ROWS];
+    u32* count = new u32[len / 4 + 2];
+    u32* partial = new u32[ORDER_THREADS];
+    OrderChunk c;
+    c.n = n;
+    c.start = start;
+    c.len = len;
+    c.rows = patch_rows(n, start, len, row_start, bin_off);
+    c.base = 0;
+    c.row_start = row_start;
+    c.bin_off = bin_off;
+    c.count = count;
+    c.partial = partial;
+    c.out = out;
+    const u32 T = ORDER_THREADS;
+    for (u32 t = 0; t < T; t++) order_zero(c, t, T);
+    for (u32 t = 0; t < T; t++) order_histogram(c, t, T);
+    for (u32 t = 0; t < T; t++) order_scan_segment(c, t, T);
+    order_scan_totals(c, T);
+    for (u32 t = 0; t < T; t++) order_scan_add(c, t, T);
+    for (u32 t = 0; t < T; t++) order_scatter(c, t, T);
+    for (u32 t = 0; t < T; t++) order_sort_bins(c, t, T);
+    delete[] row_start;
+    delete[] bin_off;
+    delete[] count;
+    delete[] partial;
 }
 #endif

@@ -19,6 +19,10 @@
 //!   every run whatever the scheduling, and the same bits as the host twin's. It covers the
 //!   flat plane, iso antennas, reflection and transmission; anything else is refused by name
 //!   ([`map_unavailable`], `map_unsupported`), and the CPU path stays the default.
+//! - A scene goes up once (`Gpu::upload_scene`) and stays for any number of maps (`Gpu::map`):
+//!   per map only its scalars travel, the rays' patch order is computed on the device
+//!   (`kodama_order`, `fibonacci::patch_order`'s to the ray) and the cells come back.
+//!   [`radio_map_on`] uploads the scene for its one map.
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
