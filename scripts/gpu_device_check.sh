@@ -4,9 +4,11 @@
 # GPU; this one needs no Rust, toolkit or internet, only the NVIDIA driver):
 #   1. the driver, CUDA and graphics (Vulkan ICD, OptiX) libraries present;
 #   2. the cast kernel against the Rust tracer, to the bit (street grid and munich);
-#   2b. the map kernel against its host twin, to the bit, twice;
+#   2b. the map kernel against its host twin, to the bit, thrice (twice on a resident scene), and
+#       the device's patch order against patch_order, to the ray;
 #   3. munich radio maps on the GPU against radio_map on every CPU core, 10^6 and 10^7 rays at
-#      depth 3 and 5 (warm map time, M rays/s, median |dB| difference, run-to-run identity), and
+#      depth 3 and 5 (the scene's upload once, then the warm whole call and the kernel+readback
+#      alone, M rays/s, median |dB| difference, run-to-run identity), and
 #      munich casts/s (lattice + specular bounces, hits compared to the bit): markdown tables.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -34,8 +36,8 @@ fi
 export KODAMA_MUNICH_XML="$PWD/$carry/munich/munich.xml"
 export RAYON_NUM_THREADS="${RAYON_NUM_THREADS:-$(nproc)}"
 
-say "kernels = Rust tracer: casts to the bit, maps = host twin to the bit (tests/gpu_device.rs)"
-"$carry/gpu_device" --test-threads=1 --nocapture device_casts_are_the_cpu_casts device_maps_are_the_host_maps
+say "kernels = Rust tracer: casts to the bit, maps = host twin to the bit, order = patch_order (tests/gpu_device.rs)"
+"$carry/gpu_device" --test-threads=1 --nocapture device_casts_are_the_cpu_casts device_maps_are_the_host_maps device_order_is_patch_order
 rc1=$?
 
 say "munich maps: GPU vs CPU ($RAYON_NUM_THREADS threads), 5 m cells at 1.5 m, tx 8.5,21,27, 3.5 GHz"
