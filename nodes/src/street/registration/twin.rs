@@ -166,21 +166,47 @@ pub(super) struct Turn {
     pitch: (f64, f64),
     /// The reported camera's right axis, site frame.
     right: [f64; 3],
+    /// The reported camera's rotation (columns right, down, forward).
+    rotation: [[f64; 3]; 3],
+    /// 1 / (1 + the relative focal change): a ray's camera-frame x and y scale by it.
+    zoom: f64,
 }
 
 impl Turn {
-    /// The turn of candidate `c` (yaw `c[2]`, pitch `c[4]`, radians) from `pose`.
-    pub(super) fn of(pose: &crate::artifact::Pose, c: [f64; 5]) -> Turn {
+    /// The turn of candidate `c` (yaw `c[2]`, pitch `c[4]`, radians; focal change `c[5]`) from
+    /// `pose`.
+    pub(super) fn of(pose: &crate::artifact::Pose, c: [f64; 6]) -> Turn {
         let r = pose.rotation;
         Turn {
             yaw: c[2].sin_cos(),
             pitch: c[4].sin_cos(),
             right: [r[0][0], r[1][0], r[2][0]],
+            rotation: r,
+            zoom: 1.0 / (1.0 + c[5]),
         }
     }
 
-    /// Direction `d` (site frame) turned.
+    /// Direction `d` (site frame, a pixel's ray from the reported pose) as the candidate sees
+    /// that pixel: its focal length applied about the image centre, then pitched and turned.
     pub(super) fn apply(&self, d: [f64; 3]) -> [f64; 3] {
+        self.turn(self.zoomed(d))
+    }
+
+    /// Direction `d` with its camera-frame x and y scaled by `zoom`.
+    fn zoomed(&self, d: [f64; 3]) -> [f64; 3] {
+        if self.zoom == 1.0 {
+            return d;
+        }
+        let r = self.rotation;
+        let cam: [f64; 3] =
+            std::array::from_fn(|c| r[0][c] * d[0] + r[1][c] * d[1] + r[2][c] * d[2]);
+        let cam = [cam[0] * self.zoom, cam[1] * self.zoom, cam[2]];
+        let n = (cam[0] * cam[0] + cam[1] * cam[1] + cam[2] * cam[2]).sqrt();
+        std::array::from_fn(|a| (r[a][0] * cam[0] + r[a][1] * cam[1] + r[a][2] * cam[2]) / n)
+    }
+
+    /// Direction `d` (site frame) pitched and turned (the camera's axes turn so).
+    pub(super) fn turn(&self, d: [f64; 3]) -> [f64; 3] {
         let d = if self.pitch.0 == 0.0 {
             d
         } else {
