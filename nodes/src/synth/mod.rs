@@ -12,4 +12,3 @@ pub mod synth_scan;
 pub mod synth_terrain;
 pub mod synth_views;
 pub mod truth_scene;
-pub mod view_errors;

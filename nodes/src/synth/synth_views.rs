@@ -19,9 +19,9 @@ use crate::io::export::material_color;
 use crate::rng::{gaussian, mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
-use super::view_errors::{
-    DepthErrors, MaskErrors, degrade_depth, degrade_instances, degrade_normals,
-};
+pub mod errors;
+
+use errors::{DepthErrors, MaskErrors, degrade_depth, degrade_instances, degrade_normals};
 
 /// Params of [`SynthViews`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -451,7 +451,7 @@ fn render(
 /// The model outputs of a painted frame as real models give them: the depth model's per-image
 /// scale and offset, warp, far-range growth and edge bleeding; the normal estimator's noise and
 /// edge blur; the instance segmenter's merged, confused and spurious instances and displaced
-/// contours (see `view_errors`).
+/// contours (see [`errors`]).
 fn degrade(frame: &mut Frame, p: &SynthViewsParams, (w, h): (u32, u32), seed: u64) {
     let g = |j: u64| gaussian(mix(seed ^ mix(j ^ 0xDE_9700)));
     let depth = DepthErrors {

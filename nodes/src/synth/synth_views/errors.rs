@@ -1,4 +1,4 @@
-//! The errors of the model outputs [`super::synth_views::SynthViews`] hands on: what a monocular
+//! The errors of the model outputs [`super::SynthViews`] hands on: what a monocular
 //! depth model, a normal estimator and an instance segmenter get wrong on real street views,
 //! applied to the buffers rendered from the truth. Every draw is a hash of the view's seed and
 //! what it draws for (a pixel, a lattice node, an instance), so a view's errors are the same at
