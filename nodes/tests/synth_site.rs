@@ -121,8 +121,11 @@ fn the_demo_city_has_every_roof_type_and_closed_buildings() {
 fn lidar_density_classes_occlusion_and_returns() {
     let city = generate(&small_city());
     let scene = scene_of(&city);
+    // The classes as the simulator knows them: the labelling errors are checked below.
     let p = SynthLidarParams {
         density_per_m2: 8.0,
+        class_error: 0.0,
+        class_error_open: 0.0,
         ..Default::default()
     };
     let pts = scan(&scene, &p);
@@ -223,6 +226,51 @@ fn lidar_density_classes_occlusion_and_returns() {
             .all(|i| pts.class[i] == 5),
         "only foliage lets a pulse through"
     );
+}
+
+/// The default labelling errors: a few percent of the returns misclassified (national LiDAR
+/// products' class quality), most of them on hard returns (vegetation, walls, clutter); the
+/// points themselves are where the error-free survey put them.
+#[test]
+fn lidar_classification_errors_are_a_few_percent_and_concentrated_on_hard_returns() {
+    let scene = scene_of(&generate(&small_city()));
+    let noisy = scan(
+        &scene,
+        &SynthLidarParams {
+            density_per_m2: 8.0,
+            ..Default::default()
+        },
+    );
+    let exact = scan(
+        &scene,
+        &SynthLidarParams {
+            density_per_m2: 8.0,
+            class_error: 0.0,
+            class_error_open: 0.0,
+            ..Default::default()
+        },
+    );
+    assert_eq!(noisy.xyz, exact.xyz);
+    let wrong = |keep: &dyn Fn(u8) -> bool| {
+        let (mut n, mut w) = (0usize, 0usize);
+        for (a, b) in noisy.class.iter().zip(exact.class.iter()) {
+            if keep(*b) {
+                n += 1;
+                w += (a != b) as usize;
+            }
+        }
+        w as f64 / n.max(1) as f64
+    };
+    let (all, ground, veg) = (wrong(&|_| true), wrong(&|c| c == 2), wrong(&|c| c == 5));
+    println!(
+        "misclassified: {:.2} % of all returns, {:.2} % of ground, {:.2} % of vegetation, {:.2} % of building",
+        100.0 * all,
+        100.0 * ground,
+        100.0 * veg,
+        100.0 * wrong(&|c| c == 6)
+    );
+    assert!(all > 0.005 && all < 0.05, "{all}");
+    assert!(veg > 3.0 * ground, "{veg} vs {ground}");
 }
 
 #[test]

@@ -41,12 +41,7 @@ fn small(p: SynthViewsParams) -> SynthViewsParams {
 
 #[test]
 fn ground_pixels_back_project_onto_the_terrain() {
-    let (city, set) = render(&small(SynthViewsParams {
-        depth_noise: 0.0,
-        material_error: 0.0,
-        instance_miss: 0.0,
-        ..Default::default()
-    }));
+    let (city, set) = render(&small(SynthViewsParams::exact()));
     assert_eq!(set.views.len(), 6);
     // The synthetic terrain is medium dry ground, which a material model calls gravel.
     let ground = RMSNET_CLASSES.iter().position(|c| *c == "gravel").unwrap() as u8;
@@ -130,15 +125,10 @@ fn views_round_trip_through_the_on_disk_layout() {
 
 #[test]
 fn error_knobs_act() {
-    let exact = render(&small(SynthViewsParams {
-        depth_noise: 0.0,
-        material_error: 0.0,
-        instance_miss: 0.0,
-        ..Default::default()
-    }))
-    .1;
+    let exact = render(&small(SynthViewsParams::exact())).1;
     let missed = render(&small(SynthViewsParams {
         instance_miss: 1.0,
+        instance_spurious: 0.0,
         ..Default::default()
     }))
     .1;
@@ -155,11 +145,8 @@ fn error_knobs_act() {
             .all(|v| v.arch.as_ref().unwrap().ids.iter().all(|&i| i == 0))
     );
     let relative = render(&small(SynthViewsParams {
-        depth_noise: 0.0,
         depth_scale: 0.5,
-        material_error: 0.0,
-        instance_miss: 0.0,
-        ..Default::default()
+        ..SynthViewsParams::exact()
     }))
     .1;
     let (d0, d1) = (
@@ -174,7 +161,7 @@ fn error_knobs_act() {
     );
     let noisy = render(&small(SynthViewsParams {
         material_error: 0.5,
-        ..Default::default()
+        ..SynthViewsParams::exact()
     }))
     .1;
     let differ = noisy
@@ -218,11 +205,8 @@ fn a_view_pointing_at_a_missing_image_names_it() {
 #[test]
 fn facade_features_are_instances_and_metadata_noise_moves_only_the_reported_pose() {
     let exact = render(&small(SynthViewsParams {
-        depth_noise: 0.0,
-        material_error: 0.0,
-        instance_miss: 0.0,
         max_views: 12,
-        ..Default::default()
+        ..SynthViewsParams::exact()
     }))
     .1;
     let classes: std::collections::BTreeSet<&str> = exact
@@ -242,21 +226,23 @@ fn facade_features_are_instances_and_metadata_noise_moves_only_the_reported_pose
     }
     assert_eq!(exact.material_classes.len(), 20);
     let noisy = render(&small(SynthViewsParams {
-        depth_noise: 0.0,
-        material_error: 0.0,
-        instance_miss: 0.0,
         max_views: 12,
         pose_noise_m: 1.0,
         heading_noise_deg: 2.0,
+        height_noise_m: 0.5,
+        pitch_noise_deg: 0.5,
+        roll_noise_deg: 0.5,
+        focal_noise: 0.02,
         depth_scale: 0.8,
         depth_offset_m: 1.5,
-        ..Default::default()
+        ..SynthViewsParams::exact()
     }))
     .1;
     let mut moved = 0.0;
     for (a, b) in exact.views.iter().zip(&noisy.views) {
-        // Rendered from the same true pose: the same pixels.
+        // Rendered from the same true pose: the same pixels; only the metadata differs.
         assert!(a.image == b.image && a.arch == b.arch, "{}", a.id);
+        assert!(a.intrinsics.cx == b.intrinsics.cx && a.intrinsics.fx != b.intrinsics.fx);
         moved += (a.pose.position[0] - b.pose.position[0])
             .hypot(a.pose.position[1] - b.pose.position[1]);
         // Depth d' = 0.8 d + 1.5, the affine bias a calibration must undo.
@@ -350,4 +336,92 @@ fn model_outputs_attach_to_provider_views_by_id() {
     let empty = tempfile::tempdir().unwrap();
     let e = run(&params(false), empty.path()).unwrap_err().to_string();
     assert!(e.contains("no model output for any of the"), "{e}");
+}
+
+/// The default sensor errors, measured against the same views rendered exactly: the depth's
+/// error left after the per-image affine fit a calibration makes (AbsRel), the normals' median
+/// angular error, the share of labelled pixels whose instance class differs; and the same bytes
+/// at one and two threads.
+#[test]
+fn default_sensor_errors_are_at_the_levels_of_real_models() {
+    let p = small(SynthViewsParams {
+        max_views: 12,
+        ..Default::default()
+    });
+    let noisy = render(&p).1;
+    let exact = render(&small(SynthViewsParams {
+        max_views: 12,
+        ..SynthViewsParams::exact()
+    }))
+    .1;
+    let (mut abs_rel, mut angles, mut mask_diff) = (Vec::new(), Vec::new(), Vec::new());
+    for (a, b) in noisy.views.iter().zip(&exact.views) {
+        let (da, db) = (a.depth.as_ref().unwrap(), b.depth.as_ref().unwrap());
+        let pairs: Vec<(f64, f64)> = db
+            .iter()
+            .zip(da.iter())
+            .filter(|(t, r)| t.is_finite() && r.is_finite())
+            .map(|(&t, &r)| (t as f64, r as f64))
+            .collect();
+        if pairs.len() < 100 {
+            continue;
+        }
+        // Least squares r = s t + o, then AbsRel of (r - o) / s against t.
+        let n = pairs.len() as f64;
+        let (mt, mr) = (
+            pairs.iter().map(|p| p.0).sum::<f64>() / n,
+            pairs.iter().map(|p| p.1).sum::<f64>() / n,
+        );
+        let cov: f64 = pairs.iter().map(|p| (p.0 - mt) * (p.1 - mr)).sum();
+        let var: f64 = pairs.iter().map(|p| (p.0 - mt).powi(2)).sum();
+        let s = cov / var;
+        let o = mr - s * mt;
+        abs_rel.push(
+            pairs
+                .iter()
+                .map(|p| ((p.1 - o) / s - p.0).abs() / p.0)
+                .sum::<f64>()
+                / n,
+        );
+        for (x, y) in a
+            .normal
+            .as_ref()
+            .unwrap()
+            .iter()
+            .zip(b.normal.as_ref().unwrap().iter())
+        {
+            if *y != [0.0; 3] {
+                let d = (x[0] * y[0] + x[1] * y[1] + x[2] * y[2]).clamp(-1.0, 1.0);
+                angles.push((d as f64).acos().to_degrees());
+            }
+        }
+        let (ia, ib) = (a.arch.as_ref().unwrap(), b.arch.as_ref().unwrap());
+        let class = |inst: &kodama_nodes::artifact::Instances, i: usize| {
+            inst.classes.get(&inst.ids[i]).cloned()
+        };
+        let labelled: Vec<usize> = (0..ib.ids.len()).filter(|&i| ib.ids[i] != 0).collect();
+        let differ = labelled
+            .iter()
+            .filter(|&&i| class(ia, i) != class(ib, i))
+            .count();
+        mask_diff.push(differ as f64 / labelled.len().max(1) as f64);
+    }
+    let med = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (ar, ang, md) = (med(&mut abs_rel), med(&mut angles), med(&mut mask_diff));
+    println!(
+        "default sensor errors: depth AbsRel after the affine fit, median over views {ar:.3}; normals median angular error {ang:.1} deg; labelled pixels of another class, median {:.1} %",
+        100.0 * md
+    );
+    assert!(ar > 0.02 && ar < 0.15, "{ar}");
+    assert!(ang > 8.0 && ang < 18.0, "{ang}");
+    assert!(md > 0.005 && md < 0.3, "{md}");
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(|| render(&p).1);
+    assert!(one == noisy, "views differ between thread counts");
 }

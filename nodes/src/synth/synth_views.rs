@@ -19,6 +19,10 @@ use crate::io::export::material_color;
 use crate::rng::{gaussian, mix, unit};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
+pub mod errors;
+
+use errors::{DepthErrors, MaskErrors, degrade_depth, degrade_instances, degrade_normals};
+
 /// Params of [`SynthViews`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -35,21 +39,65 @@ pub struct SynthViewsParams {
     pub camera_height_m: f64,
     /// Upward tilt, degrees. Default 8.
     pub pitch_deg: f64,
-    /// Relative standard deviation of depth noise. Default 0.02.
+    /// Relative standard deviation of the depth model's per-pixel noise at near range (it grows
+    /// with depth, see `depth_far_m`). Default 0.02.
     pub depth_noise: f64,
-    /// Depth is reported as `depth_scale` x true depth + `depth_offset_m` (with the noise): the
-    /// affine bias of monocular depth before calibration. Default 1 (metric).
+    /// Depth is reported as `depth_scale` x depth + `depth_offset_m` (with the errors below): the
+    /// affine bias of monocular depth before calibration; each image draws its own scale and
+    /// offset about these (`depth_scale_jitter`, `depth_offset_jitter_m`). Default 1 (metric).
     pub depth_scale: f64,
     /// See `depth_scale`. Default 0.
     pub depth_offset_m: f64,
+    /// Relative standard deviation of each image's own depth scale about `depth_scale` (a
+    /// metric model's per-image scale error; an affine-invariant one's is arbitrary). Default 0.1.
+    pub depth_scale_jitter: f64,
+    /// Standard deviation of each image's own depth offset about `depth_offset_m`, metres.
+    /// Default 0.5.
+    pub depth_offset_jitter_m: f64,
+    /// RMS of a smooth relative warp of each image's depth (five low-order 2D cosine terms with
+    /// seeded weights) at near range. Default 0.04.
+    pub depth_warp: f64,
+    /// The depth model's relative errors (noise and warp) grow as 1 + depth / `depth_far_m`:
+    /// at 40 m twice what they are near the camera. 0 turns the growth off. Default 40.
+    pub depth_far_m: f64,
+    /// Radius, pixels, within which depths mix across a depth discontinuity (edge bleeding, the
+    /// "flying pixels" between a façade and the sky or a façade behind). Default 2.
+    pub depth_edge_px: u32,
+    /// Median angular error of the reported normals, degrees (half of the variance smooth over
+    /// the image, half per pixel). Default 12.
+    pub normal_noise_deg: f64,
+    /// Radius, pixels, over which normals are averaged across a normal or depth edge. Default 2.
+    pub normal_edge_px: u32,
+    /// Standard deviation of the smooth displacement of every instance contour, pixels (dilation
+    /// here, erosion there, along the contour). Default 1.5.
+    pub instance_boundary_px: f64,
+    /// Spurious façade instances (a "window" on a bare wall) per true façade-feature instance in
+    /// the view. Default 0.05.
+    pub instance_spurious: f64,
+    /// Probability that two adjacent instances of one class on one building (two windows one
+    /// pier apart) come out as one instance spanning both and the wall between. Default 0.1.
+    pub instance_merge: f64,
+    /// Probability that an instance is reported as a confusable class (window <-> door, balcony
+    /// or drainpipe -> window, pole <-> sign, car <-> shelter). Default 0.05.
+    pub class_confusion: f64,
     /// Standard deviation of the reported camera position, horizontally, metres (the views are
-    /// rendered from the true pose; the metadata is off, as real metadata is). Default 0.
+    /// rendered from the true pose; the metadata is off, as real metadata is). Default 0.5.
     pub pose_noise_m: f64,
-    /// Standard deviation of the reported heading, degrees. Default 0.
+    /// Standard deviation of the reported camera height, metres. Default 0.5.
+    pub height_noise_m: f64,
+    /// Standard deviation of the reported heading, degrees. Default 1.
     pub heading_noise_deg: f64,
+    /// Standard deviation of the reported pitch, degrees. Default 0.5.
+    pub pitch_noise_deg: f64,
+    /// Standard deviation of the reported roll, degrees. Default 0.5.
+    pub roll_noise_deg: f64,
+    /// Relative standard deviation of the reported focal length (the views are rendered with the
+    /// true one). Default 0.02.
+    pub focal_noise: f64,
     /// Probability that an object's material is reported as another RMSNet class. Default 0.05.
     pub material_error: f64,
-    /// Probability that an instance is missed (its pixels get id 0). Default 0.1.
+    /// Probability that an instance is missed (a façade feature's pixels go to its wall, any
+    /// other instance's get id 0). Default 0.1.
     pub instance_miss: f64,
     /// Seed. Default 7.
     pub seed: u64,
@@ -67,11 +115,56 @@ impl Default for SynthViewsParams {
             depth_noise: 0.02,
             depth_scale: 1.0,
             depth_offset_m: 0.0,
-            pose_noise_m: 0.0,
-            heading_noise_deg: 0.0,
+            depth_scale_jitter: 0.1,
+            depth_offset_jitter_m: 0.5,
+            depth_warp: 0.04,
+            depth_far_m: 40.0,
+            depth_edge_px: 2,
+            normal_noise_deg: 12.0,
+            normal_edge_px: 2,
+            instance_boundary_px: 1.5,
+            instance_spurious: 0.05,
+            instance_merge: 0.1,
+            class_confusion: 0.05,
+            pose_noise_m: 0.5,
+            height_noise_m: 0.5,
+            heading_noise_deg: 1.0,
+            pitch_noise_deg: 0.5,
+            roll_noise_deg: 0.5,
+            focal_noise: 0.02,
             material_error: 0.05,
             instance_miss: 0.1,
             seed: 7,
+        }
+    }
+}
+
+impl SynthViewsParams {
+    /// Views with every error off: exact depth, normals, masks, materials, poses and focal
+    /// length (an oracle, for tests that isolate one stage's own error).
+    pub fn exact() -> Self {
+        SynthViewsParams {
+            depth_noise: 0.0,
+            depth_scale_jitter: 0.0,
+            depth_offset_jitter_m: 0.0,
+            depth_warp: 0.0,
+            depth_far_m: 0.0,
+            depth_edge_px: 0,
+            normal_noise_deg: 0.0,
+            normal_edge_px: 0,
+            instance_boundary_px: 0.0,
+            instance_spurious: 0.0,
+            instance_merge: 0.0,
+            class_confusion: 0.0,
+            pose_noise_m: 0.0,
+            height_noise_m: 0.0,
+            heading_noise_deg: 0.0,
+            pitch_noise_deg: 0.0,
+            roll_noise_deg: 0.0,
+            focal_noise: 0.0,
+            material_error: 0.0,
+            instance_miss: 0.0,
+            ..Default::default()
         }
     }
 }
@@ -81,7 +174,10 @@ pub struct SynthViews;
 
 impl Stage for SynthViews {
     const KIND: &'static str = "SynthViews";
-    const VERSION: u32 = 2;
+    // 3: sensor errors after real models' and metadata's (issue 51): per-image depth scale and
+    // offset, warp, far-range growth and edge bleeding; normal noise and edge blur; mask
+    // boundaries, spurious, merged and confused instances; height, pitch, roll and focal noise.
+    const VERSION: u32 = 3;
     const DOC: &'static str = "synthetic street views with instance, material, depth and normal maps (with error knobs), Sec. 4.2";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),
@@ -115,10 +211,23 @@ impl Stage for SynthViews {
             ("depth_offset_m", p.depth_offset_m.abs()),
             ("pose_noise_m", p.pose_noise_m),
             ("heading_noise_deg", p.heading_noise_deg),
+            ("height_noise_m", p.height_noise_m),
+            ("pitch_noise_deg", p.pitch_noise_deg),
+            ("roll_noise_deg", p.roll_noise_deg),
+            ("depth_offset_jitter_m", p.depth_offset_jitter_m),
+            ("depth_far_m", p.depth_far_m),
+            ("normal_noise_deg", p.normal_noise_deg),
+            ("instance_boundary_px", p.instance_boundary_px),
         ] {
             if !(v >= 0.0 && v <= 1000.0) {
                 return Err(ParamError::new(name, "expected a finite value within 1000"));
             }
+        }
+        if p.depth_edge_px > 16 || p.normal_edge_px > 16 {
+            return Err(ParamError::new(
+                "depth_edge_px",
+                "expected edge radii of at most 16 pixels",
+            ));
         }
         if p.max_views > 100_000 {
             return Err(ParamError::new(
@@ -130,6 +239,12 @@ impl Stage for SynthViews {
             ("depth_noise", p.depth_noise),
             ("material_error", p.material_error),
             ("instance_miss", p.instance_miss),
+            ("depth_scale_jitter", p.depth_scale_jitter),
+            ("depth_warp", p.depth_warp),
+            ("instance_spurious", p.instance_spurious),
+            ("instance_merge", p.instance_merge),
+            ("class_confusion", p.class_confusion),
+            ("focal_noise", p.focal_noise),
         ] {
             if !prob(v) {
                 return Err(ParamError::new(name, "expected a value in [0, 1]"));
@@ -153,6 +268,7 @@ impl Stage for SynthViews {
             .map(|(k, pose)| {
                 let mut v = render(scene, &rays, &buildings, p, k, *pose);
                 v.pose = reported_pose(&v.pose, p, k);
+                v.intrinsics = reported_intrinsics(&v.intrinsics, p, k);
                 ctx.progress.advance(1);
                 v
             })
@@ -187,20 +303,36 @@ fn stations(city: &City, p: &SynthViewsParams) -> Vec<Pose> {
     out
 }
 
-/// The pose the metadata reports: the true one with position and heading noise.
+/// The pose the metadata reports: the true one with noise in all six degrees of freedom
+/// (east, north, height; heading about the site's vertical, pitch and roll about the camera's
+/// right and forward axes).
 fn reported_pose(truth: &Pose, p: &SynthViewsParams, k: usize) -> Pose {
-    if p.pose_noise_m == 0.0 && p.heading_noise_deg == 0.0 {
-        return *truth;
-    }
     let s = mix(p.seed ^ mix(k as u64 ^ 0x9051_7E00));
-    let (dx, dy) = (
-        p.pose_noise_m * gaussian(mix(s ^ 1)),
-        p.pose_noise_m * gaussian(mix(s ^ 2)),
-    );
-    let yaw = -(p.heading_noise_deg * gaussian(mix(s ^ 3))).to_radians();
+    let g = |j: u64| gaussian(mix(s ^ j));
+    let (dx, dy) = (p.pose_noise_m * g(1), p.pose_noise_m * g(2));
+    let yaw = -(p.heading_noise_deg * g(3)).to_radians();
+    // Drawn apart from the three above, so that turning these on leaves x, y and yaw as they were.
+    let dz = p.height_noise_m * g(4);
+    let pitch = (p.pitch_noise_deg * g(5)).to_radians();
+    let roll = (p.roll_noise_deg * g(6)).to_radians();
+    // Pitch and roll turn the camera about its own right and forward axes: R' = R Rx(pitch)
+    // Rz(roll) on the columns (right, down, forward).
+    let r = truth.rotation;
+    let col = |c: usize| [r[0][c], r[1][c], r[2][c]];
+    let (right, down, fwd) = (col(0), col(1), col(2));
+    let (sp, cp) = pitch.sin_cos();
+    let down1: [f64; 3] = std::array::from_fn(|a| cp * down[a] - sp * fwd[a]);
+    let fwd1: [f64; 3] = std::array::from_fn(|a| sp * down[a] + cp * fwd[a]);
+    let (sr, cr) = roll.sin_cos();
+    let right2: [f64; 3] = std::array::from_fn(|a| cr * right[a] + sr * down1[a]);
+    let down2: [f64; 3] = std::array::from_fn(|a| -sr * right[a] + cr * down1[a]);
+    let r = [
+        [right2[0], down2[0], fwd1[0]],
+        [right2[1], down2[1], fwd1[1]],
+        [right2[2], down2[2], fwd1[2]],
+    ];
     // Heading noise turns the camera about the vertical: rotate its axes about site z.
     let (sn, cs) = yaw.sin_cos();
-    let r = truth.rotation;
     let rotation = [
         [
             cs * r[0][0] - sn * r[1][0],
@@ -218,9 +350,21 @@ fn reported_pose(truth: &Pose, p: &SynthViewsParams, k: usize) -> Pose {
         position: [
             truth.position[0] + dx,
             truth.position[1] + dy,
-            truth.position[2],
+            truth.position[2] + dz,
         ],
         rotation,
+    }
+}
+
+/// The intrinsics the metadata reports: the focal length off by `focal_noise` (relative), the
+/// same factor on both axes (EXIF gives one focal length).
+fn reported_intrinsics(truth: &Intrinsics, p: &SynthViewsParams, k: usize) -> Intrinsics {
+    let s = mix(p.seed ^ mix(k as u64 ^ 0xF0CA_1000));
+    let f = (1.0 + p.focal_noise * gaussian(s)).max(0.5);
+    Intrinsics {
+        fx: truth.fx * f,
+        fy: truth.fy * f,
+        ..*truth
     }
 }
 
@@ -300,7 +444,84 @@ fn render(
             }
         }
     }
+    degrade(&mut frame, p, (w, h), painter.seed);
     frame.into_view(k, (w, h), intrinsics, pose)
+}
+
+/// The model outputs of a painted frame as real models give them: the depth model's per-image
+/// scale and offset, warp, far-range growth and edge bleeding; the normal estimator's noise and
+/// edge blur; the instance segmenter's merged, confused and spurious instances and displaced
+/// contours (see [`errors`]).
+fn degrade(frame: &mut Frame, p: &SynthViewsParams, (w, h): (u32, u32), seed: u64) {
+    let g = |j: u64| gaussian(mix(seed ^ mix(j ^ 0xDE_9700)));
+    let depth = DepthErrors {
+        noise: p.depth_noise,
+        scale: (p.depth_scale * (1.0 + p.depth_scale_jitter * g(1))).max(0.1 * p.depth_scale),
+        offset_m: p.depth_offset_m + p.depth_offset_jitter_m * g(2),
+        warp: p.depth_warp,
+        far_m: p.depth_far_m,
+        edge_px: p.depth_edge_px,
+    };
+    let true_depth = std::mem::take(&mut frame.depth);
+    frame.normal = degrade_normals(
+        &frame.normal,
+        &true_depth,
+        w,
+        h,
+        p.normal_noise_deg,
+        p.normal_edge_px,
+        mix(seed ^ 0x4E),
+    );
+    frame.depth = degrade_depth(&true_depth, w, h, &depth, mix(seed ^ 0xD7));
+    let masks = MaskErrors {
+        boundary_px: p.instance_boundary_px,
+        spurious: p.instance_spurious,
+        merge: p.instance_merge,
+        confusion: p.class_confusion,
+    };
+    let mut object_of = HashMap::new();
+    let mut host_of = HashMap::new();
+    for (&(object, feature, roof), &id) in &frame.arch_of {
+        object_of.insert(id, object);
+        if feature.is_none() && !roof {
+            host_of.insert(object, id);
+        }
+    }
+    let walls: std::collections::HashSet<u16> = frame
+        .arch
+        .classes
+        .iter()
+        .filter(|(_, c)| c.as_str() == "wall")
+        .map(|(&id, _)| id)
+        .collect();
+    degrade_instances(
+        &mut frame.arch_ids,
+        &mut frame.arch.classes,
+        w,
+        h,
+        &object_of,
+        &host_of,
+        &|id| walls.contains(&id),
+        "window",
+        &masks,
+        mix(seed ^ 0xA7C),
+    );
+    let object_of: HashMap<u16, usize> = frame.clutter_of.iter().map(|(&o, &id)| (id, o)).collect();
+    degrade_instances(
+        &mut frame.clutter_ids,
+        &mut frame.clutter.classes,
+        w,
+        h,
+        &object_of,
+        &HashMap::new(),
+        &|_| false,
+        "",
+        &MaskErrors {
+            spurious: 0.0,
+            ..masks
+        },
+        mix(seed ^ 0xC1),
+    );
 }
 
 /// The pinhole camera of `p`'s image size and horizontal field of view, principal point at the
@@ -425,15 +646,14 @@ impl Painter<'_> {
     /// Pixel `i`, whose ray (`dir`, `norm` as [`pixel_rays`] gives them) hits `hit`: what the
     /// camera and each model output would say of it.
     fn paint(&self, frame: &mut Frame, i: usize, hit: &Hit, (dir, norm): ([f64; 3], f64)) {
-        let (p, seed) = (self.p, self.seed);
         let obj = &self.scene.objects[hit.object];
         let mut nrm = hit.normal.map(|c| c as f64);
         if nrm[0] * dir[0] + nrm[1] * dir[1] + nrm[2] * dir[2] > 0.0 {
             nrm = nrm.map(|c| -c);
         }
         let z_depth = hit.t as f64 / norm;
-        let noise = 1.0 + p.depth_noise * gaussian(mix(seed ^ (i as u64).wrapping_mul(0x9E37)));
-        frame.depth[i] = (z_depth * noise * p.depth_scale + p.depth_offset_m) as f32;
+        // The true depth: the depth model's errors are applied to the whole frame once painted.
+        frame.depth[i] = z_depth as f32;
         frame.normal[i] = self.pose.to_camera(nrm).map(|c| c as f32);
         let m = obj
             .mesh
@@ -481,11 +701,24 @@ impl Painter<'_> {
             .arch_of
             .entry((hit.object, feature, roof))
             .or_insert(next);
-        let key =
-            (hit.object as u64) << 20 ^ feature.map_or(0xFFFFF, |f| f as u64) << 1 ^ roof as u64;
-        if !self.missed(key) {
+        let key = |feature: Option<usize>| {
+            (hit.object as u64) << 20 ^ feature.map_or(0xFFFFF, |f| f as u64) << 1 ^ roof as u64
+        };
+        if !self.missed(key(feature)) {
             frame.arch_ids[i] = id;
             frame.arch.classes.insert(id, class.into());
+        } else if feature.is_some() && !self.missed(key(None)) {
+            // A missed façade feature is seen as the wall (or roof) it is on.
+            let next = frame.arch_of.len() as u16 + 1;
+            let host = *frame
+                .arch_of
+                .entry((hit.object, None, roof))
+                .or_insert(next);
+            frame.arch_ids[i] = host;
+            frame
+                .arch
+                .classes
+                .insert(host, if roof { "roof" } else { "wall" }.into());
         }
     }
 

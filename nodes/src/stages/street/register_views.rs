@@ -14,8 +14,10 @@ impl Stage for RegisterViews {
     const KIND: &'static str = "RegisterViews";
     // 2: drainpipes and balconies say nothing about the pose; the pattern search goes on to
     // steps under 2.5 cm.
-    const VERSION: u32 = 2;
-    const DOC: &'static str = "street views with position and heading refined against the twin's building silhouettes (bounded search; a view is left alone when nothing beats its metadata)";
+    // 3: camera height, pitch and focal length searched too (issue 51: the views' metadata errs in all six
+    // degrees of freedom).
+    const VERSION: u32 = 3;
+    const DOC: &'static str = "street views with position, height, heading, pitch and focal length refined against the twin's building silhouettes (bounded search; a view is left alone when nothing beats its metadata)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
             "views",
@@ -47,14 +49,23 @@ impl Stage for RegisterViews {
             let was = v.pose_source.clone().unwrap_or_else(|| "metadata".into());
             v.pose_source = Some(if r.accepted {
                 v.pose = pose;
+                v.intrinsics.fx *= r.focal_scale;
+                v.intrinsics.fy *= r.focal_scale;
                 let by = if r.by_facades {
                     "the twin's silhouettes and the façades the other views agree on"
                 } else {
                     "the twin's silhouettes"
                 };
                 format!(
-                    "{was}; refined against {by}: moved ({:+.2}, {:+.2}) m, turned {:+.2} deg, agreement {:.3} -> {:.3}",
-                    r.shift_m[0], r.shift_m[1], r.yaw_deg, r.before, r.after
+                    "{was}; refined against {by}: moved ({:+.2}, {:+.2}, {:+.2}) m, turned {:+.2} deg, pitched {:+.2} deg, focal length x {:.3}, agreement {:.3} -> {:.3}",
+                    r.shift_m[0],
+                    r.shift_m[1],
+                    r.dz_m,
+                    r.yaw_deg,
+                    r.pitch_deg,
+                    r.focal_scale,
+                    r.before,
+                    r.after
                 )
             } else if r.before.is_finite() {
                 format!(

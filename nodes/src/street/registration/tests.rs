@@ -118,7 +118,7 @@ fn view(scene: &Scene, pose: Pose, reported: Pose) -> View {
 }
 
 fn moved(p: Pose, dx: f64, dy: f64, yaw_deg: f64) -> Pose {
-    turned(&p, [dx, dy, yaw_deg.to_radians()])
+    turned(&p, [dx, dy, yaw_deg.to_radians(), 0.0, 0.0, 0.0])
 }
 
 fn heading(p: &Pose) -> f64 {

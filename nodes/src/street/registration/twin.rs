@@ -23,8 +23,7 @@ pub(super) struct Twin<'a> {
     pub(super) max_range: f32,
 }
 
-/// The agreement share (-1 to 1) with the camera at `position` turned by `yaw` radians about
-/// the vertical: the silhouettes (building, sky, ground) per sample, plus, for neighbouring
+/// The agreement share (-1 to 1) with the camera at `position` turned by `turn`: the silhouettes (building, sky, ground) per sample, plus, for neighbouring
 /// samples that show a wall in the view and a building in the twin, whether both say the same
 /// about the two being one building or two (a party wall between row houses is where a flat
 /// street front tells where along it the camera stood).
@@ -33,14 +32,13 @@ pub(super) fn score(
     twin: &Twin,
     consensus: Option<&OthersSay>,
     position: [f64; 3],
-    yaw: f64,
+    turn: Turn,
 ) -> f64 {
-    let (s, c) = yaw.sin_cos();
     let origin = position.map(|v| v as f32);
     let (mut total, mut counted) = (0i64, 0i64);
     let rays: Vec<([f32; 3], [f32; 3])> = samples
         .iter()
-        .map(|smp| (origin, turned_dir(smp.dir, (s, c)).map(|v| v as f32)))
+        .map(|smp| (origin, turn.apply(smp.dir).map(|v| v as f32)))
         .collect();
     // A tile's samples are a packet: near an edge a tile holds a fraction of a packet, and a
     // packet of several tiles spreads too wide to be cast as one.
@@ -125,25 +123,24 @@ pub(super) fn shown_by_triangle(scene: &Scene) -> Vec<Shown> {
 }
 
 impl Twin<'_> {
-    /// For the consensus: `view`'s façade samples as seen from `position`, turned by `yaw` radians about the
-    /// vertical from its reported heading, pooled in cells.
+    /// For the consensus: `view`'s façade samples as seen from `position`, turned by `turn`
+    /// from its reported orientation, pooled in cells.
     pub(super) fn pool(
         &self,
         cell_m: f64,
         view: &View,
         position: [f64; 3],
-        yaw: f64,
+        turn: Turn,
         p: &RegistrationParams,
     ) -> Pool {
         let origin = position.map(|v| v as f32);
-        let turn = yaw.sin_cos();
         let mut cells = Pool::default();
         let (_, fine_stride) = strides(view, p);
         for smp in samples(view, fine_stride, None, p) {
             if smp.facade == Facade::None {
                 continue;
             }
-            let d = turned_dir(smp.dir, turn);
+            let d = turn.apply(smp.dir);
             let dir = d.map(|c| c as f32);
             let Some((t, prim)) = self.rays.cast_index(origin, dir, 1e-3, self.max_range) else {
                 continue;
@@ -159,7 +156,72 @@ impl Twin<'_> {
     }
 }
 
-/// Direction `d` turned about the vertical by the angle whose (sine, cosine) is `turn`.
-pub(super) fn turned_dir(d: [f64; 3], (s, c): (f64, f64)) -> [f64; 3] {
-    [c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]]
+/// A candidate's turn of the reported camera: pitched about its right axis (in the site frame),
+/// then turned about the vertical.
+#[derive(Clone, Copy)]
+pub(super) struct Turn {
+    /// (sine, cosine) of the yaw.
+    yaw: (f64, f64),
+    /// (sine, cosine) of the pitch.
+    pitch: (f64, f64),
+    /// The reported camera's right axis, site frame.
+    right: [f64; 3],
+    /// The reported camera's rotation (columns right, down, forward).
+    rotation: [[f64; 3]; 3],
+    /// 1 / (1 + the relative focal change): a ray's camera-frame x and y scale by it.
+    zoom: f64,
+}
+
+impl Turn {
+    /// The turn of candidate `c` (yaw `c[2]`, pitch `c[4]`, radians; focal change `c[5]`) from
+    /// `pose`.
+    pub(super) fn of(pose: &crate::artifact::Pose, c: [f64; 6]) -> Turn {
+        let r = pose.rotation;
+        Turn {
+            yaw: c[2].sin_cos(),
+            pitch: c[4].sin_cos(),
+            right: [r[0][0], r[1][0], r[2][0]],
+            rotation: r,
+            zoom: 1.0 / (1.0 + c[5]),
+        }
+    }
+
+    /// Direction `d` (site frame, a pixel's ray from the reported pose) as the candidate sees
+    /// that pixel: its focal length applied about the image centre, then pitched and turned.
+    pub(super) fn apply(&self, d: [f64; 3]) -> [f64; 3] {
+        self.turn(self.zoomed(d))
+    }
+
+    /// Direction `d` with its camera-frame x and y scaled by `zoom`.
+    fn zoomed(&self, d: [f64; 3]) -> [f64; 3] {
+        if self.zoom == 1.0 {
+            return d;
+        }
+        let r = self.rotation;
+        let cam: [f64; 3] =
+            std::array::from_fn(|c| r[0][c] * d[0] + r[1][c] * d[1] + r[2][c] * d[2]);
+        let cam = [cam[0] * self.zoom, cam[1] * self.zoom, cam[2]];
+        let n = (cam[0] * cam[0] + cam[1] * cam[1] + cam[2] * cam[2]).sqrt();
+        std::array::from_fn(|a| (r[a][0] * cam[0] + r[a][1] * cam[1] + r[a][2] * cam[2]) / n)
+    }
+
+    /// Direction `d` (site frame) pitched and turned (the camera's axes turn so).
+    pub(super) fn turn(&self, d: [f64; 3]) -> [f64; 3] {
+        let d = if self.pitch.0 == 0.0 {
+            d
+        } else {
+            // Rodrigues about the right axis k: d cos + (k x d) sin + k (k . d)(1 - cos).
+            let (s, c) = self.pitch;
+            let k = self.right;
+            let kxd = [
+                k[1] * d[2] - k[2] * d[1],
+                k[2] * d[0] - k[0] * d[2],
+                k[0] * d[1] - k[1] * d[0],
+            ];
+            let kd = k[0] * d[0] + k[1] * d[1] + k[2] * d[2];
+            std::array::from_fn(|a| d[a] * c + kxd[a] * s + k[a] * kd * (1.0 - c))
+        };
+        let (s, c) = self.yaw;
+        [c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]]
+    }
 }
