@@ -59,16 +59,13 @@ fn fuse(views: SynthViewsParams) -> Fused {
     }
 }
 
-/// Perfect views: every error knob off.
+/// Perfect views: every error knob off (SynthViews' defaults are the honest sensors).
 fn perfect() -> SynthViewsParams {
     SynthViewsParams {
         size: (320, 240),
         spacing_m: 15.0,
         max_views: 80,
-        depth_noise: 0.0,
-        material_error: 0.0,
-        instance_miss: 0.0,
-        ..Default::default()
+        ..SynthViewsParams::exact()
     }
 }
 

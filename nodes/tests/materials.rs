@@ -54,7 +54,11 @@ fn demo_views() -> SynthViewsParams {
 fn label_noise() -> SynthViewsParams {
     SynthViewsParams {
         pose_noise_m: 0.0,
+        height_noise_m: 0.0,
         heading_noise_deg: 0.0,
+        pitch_noise_deg: 0.0,
+        roll_noise_deg: 0.0,
+        focal_noise: 0.0,
         ..demo_views()
     }
 }
