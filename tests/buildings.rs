@@ -63,8 +63,18 @@ fn demo_scenes_hold_only_valid_building_solids() {
     check_report(&env.out().join("report"));
 }
 
-/// The demo's report (paper Table 1 on the synthetic site): the twin ahead of the OSM baseline
-/// and of 3GPP in P2P RMSE, every model scored on every link, and plots that decode.
+/// The full twin's P2P RMSE on the demo's default city, dB: 7.92 measured (BENCHMARKS.md, "The
+/// demo's Table 1 since issue 51"), inside +-1 dB, about the range four seeds of the views'
+/// noise alone gave the full twin before (5.77-6.86 dB). Outside it, a change moved the
+/// headline: measure the test family again (graphs/sweeps/family_test.ron) and restate both.
+const DEMO_TWIN_P2P_DB: (f64, f64) = (6.9, 8.9);
+
+/// The models of the demo's Table 1, in its column order.
+const DEMO_MODELS: [&str; 4] = ["KODAMA twin", "Sec. 4.1 solids", "OSM baseline", "3GPP UMi"];
+
+/// The demo's report (paper Table 1 on the synthetic site): the full twin's P2P RMSE inside its
+/// stated band and ahead of the OSM baseline and of 3GPP, every model scored on every link, and
+/// plots that decode.
 fn check_report(dir: &Path) {
     let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
     println!("{md}");
@@ -76,11 +86,17 @@ fn check_report(dir: &Path) {
         twin < osm && twin < gpp,
         "twin {twin}, OSM {osm}, 3GPP {gpp}"
     );
+    // The headline, guarded: the full twin's P2P RMSE on the default city (README.md,
+    // BENCHMARKS.md) inside a band of the spread the views' noise alone gives it.
+    assert!(
+        (DEMO_TWIN_P2P_DB.0..=DEMO_TWIN_P2P_DB.1).contains(&twin),
+        "full twin P2P {twin} dB outside {DEMO_TWIN_P2P_DB:?}"
+    );
     // Table 1's trend lines (issue 49): a fitted model's PD and CI RMSE, the gap between its line
     // and the measured line on the same links, never exceed its P2P RMSE; the twin's trend is
     // closer to the measured one than 3GPP's; the report states its definitions itself.
     let get = |m: &str, k: &str| metrics[m][k].as_f64().unwrap();
-    for m in ["KODAMA twin", "OSM baseline"] {
+    for m in ["KODAMA twin", "Sec. 4.1 solids", "OSM baseline"] {
         for k in ["pd_rmse_db", "ci_rmse_db"] {
             assert!(get(m, k) <= get(m, "p2p_rmse_db"), "{m} {k}");
         }
@@ -88,7 +104,7 @@ fn check_report(dir: &Path) {
     assert!(get("KODAMA twin", "pd_rmse_db") < get("3GPP UMi", "pd_rmse_db"));
     assert!(md.contains("How each figure is computed") && !md.contains("rf.md"));
     let links = metrics["KODAMA twin"]["links"].as_f64().unwrap();
-    for m in ["KODAMA twin", "OSM baseline", "3GPP UMi"] {
+    for m in DEMO_MODELS {
         assert_eq!(metrics[m]["links_scored"].as_f64().unwrap(), links, "{m}");
     }
     assert!(links > 100.0, "{links}");
@@ -127,7 +143,9 @@ fn check_report(dir: &Path) {
     }
     let csv = std::fs::read_to_string(dir.join("table.csv")).unwrap();
     assert!(
-        csv.starts_with("site,metric,KODAMA twin,OSM baseline,3GPP UMi\nsynthetic,P2P RMSE (dB),"),
+        csv.starts_with(
+            "site,metric,KODAMA twin,Sec. 4.1 solids,OSM baseline,3GPP UMi\nsynthetic,P2P RMSE (dB),"
+        ),
         "{csv}"
     );
     check_links_csv(dir, &metrics, links as usize);
@@ -144,7 +162,7 @@ fn check_links_csv(dir: &Path, metrics: &serde_json::Value, links: usize) {
     assert_eq!(rows.len(), links);
     let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
     let los = col("los");
-    for m in ["KODAMA twin", "OSM baseline", "3GPP UMi"] {
+    for m in DEMO_MODELS {
         let err = col(&format!("{m} error_db"));
         let rmse = |keep: &dyn Fn(&[&str]) -> bool| {
             let e: Vec<f64> = rows

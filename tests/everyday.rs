@@ -46,7 +46,9 @@ fn demo_sweep_shares_upstream_nodes_and_matches_single_runs() {
         ),
     );
     // The sweep sits in a temp folder, its base graph in the repository: allowed explicitly.
-    let r = env.sweep(&sweep, &["--allow-outside"]);
+    // The engine's sharing is what is tested, not the street level: the demo's first 64 views
+    // (of 416) keep its three runs quick.
+    let r = env.sweep(&sweep, &["--allow-outside", "--set", "views.max_views=64"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let rows = table(&env.out().join("table.csv"));
     assert_eq!(rows.len(), 6);
@@ -78,6 +80,8 @@ fn demo_sweep_shares_upstream_nodes_and_matches_single_runs() {
                 "coverage.cell_m=4.0",
                 "--set",
                 "solids.tolerance_m=0.3",
+                "--set",
+                "views.max_views=64",
             ],
         )
         .ok();
