@@ -304,14 +304,14 @@ fn pass_through_shares(labels: &[u32], n: usize, a: &Raster, pts: &PointSet) -> 
             ground[l] += 1;
         }
     }
-    (0..=n)
-        .map(|l| {
-            if all[l] > 0 {
-                ground[l] as f64 / all[l] as f64
-            } else {
-                0.0
-            }
-        })
+    shares(&ground, &all, 0.0)
+}
+
+/// `part[l] / whole[l]` per label, `empty` where a label has no whole.
+fn shares(part: &[u64], whole: &[u64], empty: f64) -> Vec<f64> {
+    part.iter()
+        .zip(whole)
+        .map(|(&p, &w)| if w > 0 { p as f64 / w as f64 } else { empty })
         .collect()
 }
 
@@ -353,15 +353,7 @@ fn walled_shares(labels: &[u32], n: usize, a: &Raster, drop_m: f64) -> Vec<f64> 
             }
         }
     }
-    (0..=n)
-        .map(|l| {
-            if edges[l] > 0 {
-                walls[l] as f64 / edges[l] as f64
-            } else {
-                1.0
-            }
-        })
-        .collect()
+    shares(&walls, &edges, 1.0)
 }
 
 /// Per label (index 0 unused): whether some of it is `width_m` wide, i.e. survives an erosion by
