@@ -31,8 +31,8 @@ pub mod scattering;
 pub mod scene;
 pub mod sequences;
 pub mod slab_table;
-#[cfg(test)]
-mod test_scenes;
+#[doc(hidden)]
+pub mod test_scenes;
 pub mod utd;
 
 /// Speed of light in vacuum, m/s (Sionna's constant).

@@ -1,4 +1,5 @@
-//! Scenes the tracer's unit tests share.
+//! Scenes the tracer's tests share (the unit tests and, through the public module, the GPU
+//! backend's integration tests).
 
 use glam::DVec3;
 
@@ -10,9 +11,14 @@ use crate::rf::scene::RfScene;
 /// A transmitter 12 m up at the crossing of [`street_grid`]'s first streets.
 pub const STREET_TX: DVec3 = DVec3::new(-60.0, -56.0, 12.0);
 
+/// [`street_grid_scene`] at 3.5 GHz, ready to trace.
+pub fn street_grid() -> RfScene {
+    RfScene::new(&street_grid_scene(), 3.5e9, false).unwrap()
+}
+
 /// 36 concrete blocks of 8 to 24 m, some turned, on a 6 x 6 street grid over x, y in about
 /// [-85, 85], standing on a 400 m ground of two triangles.
-pub fn street_grid() -> RfScene {
+pub fn street_grid_scene() -> Scene {
     let mut objects: Vec<SceneObject> = (0..36)
         .map(|k| SceneObject {
             id: format!("b{k}"),
@@ -40,5 +46,5 @@ pub fn street_grid() -> RfScene {
             materials: PodVec(vec![Material::MediumDryGround as u8; 2]),
         },
     });
-    RfScene::new(&Scene { objects }, 3.5e9, false).unwrap()
+    Scene { objects }
 }

@@ -2,8 +2,7 @@
 //! and where munich is.
 #![allow(dead_code)]
 
-use kodama_nodes::artifact::{Material, Mesh, ObjectClass, PodVec, Scene, SceneObject};
-use kodama_nodes::geom::mesh_build::cuboid;
+use kodama_nodes::artifact::Scene;
 use kodama_nodes::rf::fibonacci::fibonacci_run;
 use kodama_nodes::rf::gpu::GpuRay;
 use kodama_nodes::rng::{mix, unit};
@@ -29,38 +28,7 @@ pub fn munich_xml() -> Option<std::path::PathBuf> {
     None
 }
 
-/// `rf::test_scenes::street_grid`'s geometry: 36 concrete blocks of 8 to 24 m, some turned, on a
-/// 6 x 6 street grid, on a 400 m ground of two triangles.
-pub fn street_grid() -> Scene {
-    let mut objects: Vec<SceneObject> = (0..36)
-        .map(|k| SceneObject {
-            id: format!("b{k}"),
-            class: ObjectClass::Building,
-            mesh: cuboid(
-                [(k % 6) as f64 * 30.0 - 75.0, (k / 6) as f64 * 28.0 - 70.0],
-                [18.0 + (k % 4) as f64, 16.0, 8.0 + (k % 5) as f64 * 4.0],
-                (k % 3) as f64 * 0.1,
-                0.0,
-                Material::Concrete,
-            ),
-        })
-        .collect();
-    objects.push(SceneObject {
-        id: "ground".into(),
-        class: ObjectClass::Terrain,
-        mesh: Mesh {
-            positions: PodVec(vec![
-                [-200.0, -200.0, 0.0],
-                [200.0, -200.0, 0.0],
-                [200.0, 200.0, 0.0],
-                [-200.0, 200.0, 0.0],
-            ]),
-            triangles: PodVec(vec![[0, 1, 2], [0, 2, 3]]),
-            materials: PodVec(vec![Material::MediumDryGround as u8; 2]),
-        },
-    });
-    Scene { objects }
-}
+pub use kodama_nodes::rf::test_scenes::street_grid_scene as street_grid;
 
 /// Rays that exercise every branch of the cast: the launch lattice from `tx` (as a map's first
 /// segment), random origins and directions over a cube `span` wide around `centre`, rays along
