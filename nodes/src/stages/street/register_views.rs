@@ -16,8 +16,9 @@ impl Stage for RegisterViews {
     // steps under 2.5 cm.
     // 3: camera height, pitch and focal length searched too (issue 51: the views' metadata errs in all six
     // degrees of freedom).
-    const VERSION: u32 = 3;
-    const DOC: &'static str = "street views with position, height, heading, pitch and focal length refined against the twin's building silhouettes (bounded search; a view is left alone when nothing beats its metadata)";
+    // 4: roll can be searched too (`search_roll_deg`, off by default).
+    const VERSION: u32 = 4;
+    const DOC: &'static str = "street views with position, height, heading, pitch and focal length (roll optionally) refined against the twin's building silhouettes (bounded search; a view is left alone when nothing beats its metadata)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
             "views",
@@ -57,12 +58,13 @@ impl Stage for RegisterViews {
                     "the twin's silhouettes"
                 };
                 format!(
-                    "{was}; refined against {by}: moved ({:+.2}, {:+.2}, {:+.2}) m, turned {:+.2} deg, pitched {:+.2} deg, focal length x {:.3}, agreement {:.3} -> {:.3}",
+                    "{was}; refined against {by}: moved ({:+.2}, {:+.2}, {:+.2}) m, turned {:+.2} deg, pitched {:+.2} deg, rolled {:+.2} deg, focal length x {:.3}, agreement {:.3} -> {:.3}",
                     r.shift_m[0],
                     r.shift_m[1],
                     r.dz_m,
                     r.yaw_deg,
                     r.pitch_deg,
+                    r.roll_deg,
                     r.focal_scale,
                     r.before,
                     r.after

@@ -118,7 +118,54 @@ fn view(scene: &Scene, pose: Pose, reported: Pose) -> View {
 }
 
 fn moved(p: Pose, dx: f64, dy: f64, yaw_deg: f64) -> Pose {
-    turned(&p, [dx, dy, yaw_deg.to_radians(), 0.0, 0.0, 0.0])
+    turned(&p, [dx, dy, yaw_deg.to_radians(), 0.0, 0.0, 0.0, 0.0])
+}
+
+/// The angle between the two poses' down axes (roll and pitch together), degrees.
+fn tilt_between(a: &Pose, b: &Pose) -> f64 {
+    let down = |p: &Pose| [p.rotation[0][1], p.rotation[1][1], p.rotation[2][1]];
+    let (u, v) = (down(a), down(b));
+    let dot = (u[0] * v[0] + u[1] * v[1] + u[2] * v[2]).clamp(-1.0, 1.0);
+    dot.acos().to_degrees()
+}
+
+/// A reported roll (the camera's horizon tilted) comes back when roll is searched: the two
+/// houses' eaves, tilted in the view, are level again once the view is rolled; the default
+/// search (roll off) leaves it.
+#[test]
+fn a_rolled_view_is_rolled_back() {
+    let s = scene(&[
+        ([-6.0, 12.0], [8.0, 6.0, 7.0]),
+        ([6.0, 12.0], [9.0, 6.0, 9.0]),
+    ]);
+    let truth = look([0.0, 0.0, 2.0], 90f64.to_radians());
+    for roll_deg in [0.8f64, -0.6] {
+        let reported = turned(
+            &truth,
+            [0.2, -0.1, 0.0, 0.0, 0.0, 0.0, roll_deg.to_radians()],
+        );
+        assert!((tilt_between(&reported, &truth) - roll_deg.abs()).abs() < 1e-6);
+        let v = view(&s, truth, reported);
+        let with_roll = RegistrationParams {
+            search_roll_deg: 1.0,
+            ..Default::default()
+        };
+        let (pose, r) = register_views(&s, std::slice::from_ref(&v), &with_roll, &NoProgress)[0];
+        assert!(r.accepted, "{r:?}");
+        let left = tilt_between(&pose, &truth);
+        println!("rolled {roll_deg} deg: {left:.3} deg left, {r:?}");
+        assert!(left <= 0.15, "rolled {roll_deg}: {left:.3} deg left, {r:?}");
+        let (kept, _) = register_views(
+            &s,
+            std::slice::from_ref(&v),
+            &RegistrationParams::default(),
+            &NoProgress,
+        )[0];
+        assert!(
+            tilt_between(&kept, &truth) >= 0.5 * roll_deg.abs(),
+            "without the roll search the tilt stays"
+        );
+    }
 }
 
 fn heading(p: &Pose) -> f64 {
@@ -315,6 +362,10 @@ fn a_view_without_labels_is_left_alone_and_bad_knobs_are_refused() {
         },
         RegistrationParams {
             consensus_cell_m: 0.0,
+            ..Default::default()
+        },
+        RegistrationParams {
+            search_roll_deg: f64::NAN,
             ..Default::default()
         },
         RegistrationParams {

@@ -156,14 +156,18 @@ impl Twin<'_> {
     }
 }
 
-/// A candidate's turn of the reported camera: pitched about its right axis (in the site frame),
-/// then turned about the vertical.
+/// A candidate's turn of the reported camera: rolled about its forward axis, pitched about its
+/// right axis (both the reported camera's, in the site frame), then turned about the vertical.
 #[derive(Clone, Copy)]
 pub(super) struct Turn {
     /// (sine, cosine) of the yaw.
     yaw: (f64, f64),
     /// (sine, cosine) of the pitch.
     pitch: (f64, f64),
+    /// (sine, cosine) of the roll.
+    roll: (f64, f64),
+    /// The reported camera's forward axis, site frame.
+    forward: [f64; 3],
     /// The reported camera's right axis, site frame.
     right: [f64; 3],
     /// The reported camera's rotation (columns right, down, forward).
@@ -172,14 +176,31 @@ pub(super) struct Turn {
     zoom: f64,
 }
 
+/// `d` rotated about unit axis `k` by the angle of (sine, cosine) `(s, c)`, by Rodrigues'
+/// formula: d cos + (k x d) sin + k (k . d)(1 - cos). `d` itself where the angle is 0.
+fn rodrigues(d: [f64; 3], k: [f64; 3], (s, c): (f64, f64)) -> [f64; 3] {
+    if s == 0.0 && c == 1.0 {
+        return d;
+    }
+    let kxd = [
+        k[1] * d[2] - k[2] * d[1],
+        k[2] * d[0] - k[0] * d[2],
+        k[0] * d[1] - k[1] * d[0],
+    ];
+    let kd = k[0] * d[0] + k[1] * d[1] + k[2] * d[2];
+    std::array::from_fn(|a| d[a] * c + kxd[a] * s + k[a] * kd * (1.0 - c))
+}
+
 impl Turn {
-    /// The turn of candidate `c` (yaw `c[2]`, pitch `c[4]`, radians; focal change `c[5]`) from
-    /// `pose`.
-    pub(super) fn of(pose: &crate::artifact::Pose, c: [f64; 6]) -> Turn {
+    /// The turn of candidate `c` (yaw `c[2]`, pitch `c[4]`, roll `c[6]`, radians; focal change
+    /// `c[5]`) from `pose`.
+    pub(super) fn of(pose: &crate::artifact::Pose, c: [f64; 7]) -> Turn {
         let r = pose.rotation;
         Turn {
             yaw: c[2].sin_cos(),
             pitch: c[4].sin_cos(),
+            roll: c[6].sin_cos(),
+            forward: [r[0][2], r[1][2], r[2][2]],
             right: [r[0][0], r[1][0], r[2][0]],
             rotation: r,
             zoom: 1.0 / (1.0 + c[5]),
@@ -205,22 +226,10 @@ impl Turn {
         std::array::from_fn(|a| (r[a][0] * cam[0] + r[a][1] * cam[1] + r[a][2] * cam[2]) / n)
     }
 
-    /// Direction `d` (site frame) pitched and turned (the camera's axes turn so).
+    /// Direction `d` (site frame) rolled, pitched and turned (the camera's axes turn so).
     pub(super) fn turn(&self, d: [f64; 3]) -> [f64; 3] {
-        let d = if self.pitch.0 == 0.0 {
-            d
-        } else {
-            // Rodrigues about the right axis k: d cos + (k x d) sin + k (k . d)(1 - cos).
-            let (s, c) = self.pitch;
-            let k = self.right;
-            let kxd = [
-                k[1] * d[2] - k[2] * d[1],
-                k[2] * d[0] - k[0] * d[2],
-                k[0] * d[1] - k[1] * d[0],
-            ];
-            let kd = k[0] * d[0] + k[1] * d[1] + k[2] * d[2];
-            std::array::from_fn(|a| d[a] * c + kxd[a] * s + k[a] * kd * (1.0 - c))
-        };
+        let d = rodrigues(d, self.forward, self.roll);
+        let d = rodrigues(d, self.right, self.pitch);
         let (s, c) = self.yaw;
         [c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]]
     }
