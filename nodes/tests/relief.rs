@@ -498,7 +498,6 @@ fn print_scores(label: &str, sc: &Scores) {
 }
 
 #[test]
-#[ignore = "fails under the honest sensors of issue 51 (on by default since 2026-11-28); to be re-measured and re-baselined, see the session note"]
 fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
     let s = demo_site();
     let (r, secs) = demo_relief();
@@ -522,23 +521,31 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
     // Affine depth (0.8 z + 1 m) calibrates on every view (walls and ground spread the depths).
     assert_eq!(r.stats.calibrated, r.stats.views);
     assert!(sc.by_class["window"].observed > 50);
-    // The issue's targets. Drainpipes are the hard class: 0.12 m wide, 1.2 texels, seen by one to
-    // three views each, and where registration leaves a view's evidence half a texel off, IoU 0.5
-    // is out of reach. Six of the seven observed are found here (three of eight before pipes ran
-    // up to the eave, the blur came off thin features and protrusions no view measured were
-    // dropped; four once they took a width within their class's range, five once they ran up
-    // through wall seen too coarsely to show them, six since they run down to the ground
-    // through less than a storey of flat wall and their centre is their whole evidence's; 5 of
-    // 7 in the city with its crossings clear, six again since a pipe the segmentation missed
-    // is no longer joined to the ground). Seven pipes are few: the test on every street below
-    // scores fifty.
-    for c in ["window", "door", "balcony", "drainpipe"] {
+    // The targets were 0.8 recall and precision per class, met with the near-oracle sensors
+    // before issue 51 (drainpipes, the hard class at 0.12 m wide, six of seven). With the
+    // sensors of issue 51 the views' poses err in height, pitch, roll and focal length as well,
+    // and that alone takes windows from 0.97 / 0.91 to 0.79 / 0.73 (`relief_by_error`); with
+    // every error on, windows come to 0.61 / 0.60 (435 observed), doors 0.50 / 0.70 (8),
+    // balconies 0.50 / 0.50 (14), drainpipes 0.25 / 0.21 (8) (2026-11-28). The floors below
+    // hold those levels: windows firmly, the classes of a handful of instances loosely (one
+    // door is an eighth of the class).
+    let floors = [
+        ("window", 0.55, 0.55),
+        ("door", 0.35, 0.5),
+        ("balcony", 0.35, 0.35),
+        ("drainpipe", 0.12, 0.1),
+    ];
+    for (c, recall, precision) in floors {
         assert!(sc.by_class[c].observed >= 5, "{c}: {:?}", sc.by_class[c]);
-        assert!(sc.recall(c) >= 0.8, "{c} recall {}", sc.recall(c));
-        assert!(sc.precision(c) >= 0.8, "{c} precision {}", sc.precision(c));
+        assert!(sc.recall(c) >= recall, "{c} recall {}", sc.recall(c));
+        assert!(
+            sc.precision(c) >= precision,
+            "{c} precision {}",
+            sc.precision(c)
+        );
     }
     assert!(
-        sc.median_depth_error() <= 0.05,
+        sc.median_depth_error() <= 0.06,
         "{}",
         sc.median_depth_error()
     );
@@ -600,23 +607,17 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
 
 /// The demo city (400 m x 300 m, 72 buildings) with every street photographed (416 views, the
 /// street-level sweep's twin), registered: a sample large enough to score the thin classes (49
-/// observed drainpipes against the 8 above). Windows, doors and balconies meet the issue's 0.8
-/// (balconies 0.75 / 0.71 until their depth step was measured on their fronts: read short, they
-/// were deposited up to half a metre off); drainpipes (0.755 / 0.792) do not quite, and their
-/// asserts below are the levels measured on 2026-11-27, guards against regressions rather than
-/// the target. Drainpipes were
-/// 0.29 / 0.23 before a half-peak side toward a chart's end was extrapolated (a pipe 0.1 m from
-/// a corner) and their rectangles took a width within the class's range (a 0.12 m pipe reads
-/// 0.2-0.3 m wide through the kernel and the views' registration scatter): 0.37 / 0.33; then
-/// 0.43 / 0.42 once a pipe ran up through wall no view saw sharply enough to show it; then
-/// 0.57 / 0.52 once the registration left balconies and drainpipes out of its evidence (the
-/// twin it matches has none) and placed the views to 2 cm (1.6 cm steps, every pixel near an
-/// edge); then 0.755 / 0.792 once a pipe ran down to the terrain as well as up, through less
-/// than a storey of wall seen flat (the one close view whose segmentation missed the pipe no
-/// longer cuts it), and took its centre from its whole evidence rather than from the columns
-/// its rectangle cut (0.4 texel toward the cut side, enough to fall under IoU 0.5).
+/// observed drainpipes against the 8 above). With the near-oracle sensors before issue 51,
+/// windows, doors and balconies met the issue's 0.8 and drainpipes came to 0.80 / 0.83 (the
+/// history of each step is in docs/benchmarks-log.md). With the sensors of issue 51 (poses off
+/// in six degrees of freedom and the focal length, depth warped, masks merged, missed and
+/// confused): windows 0.558 / 0.579 (3109 observed), doors 0.692 / 0.609 (26), balconies 0.253 /
+/// 0.324 (79; their median depth error 0.20 m), drainpipes 0.286 / 0.291 (49) (2026-11-28).
+/// The floors hold those levels. Slow (416 views rendered, registered and fused: about 6
+/// minutes on 2 cores), so run on request: `cargo test -p kodama-nodes --test relief
+/// relief_on_every_street -- --ignored --nocapture`.
 #[test]
-#[ignore = "fails under the honest sensors of issue 51 (on by default since 2026-11-28); to be re-measured and re-baselined, see the session note"]
+#[ignore = "slow (416 views, about 6 minutes on 2 cores); passes: run with --ignored"]
 fn relief_on_every_street_of_the_demo_city() {
     let s = make_site_in(
         &SynthCityParams::default(),
@@ -631,18 +632,13 @@ fn relief_on_every_street_of_the_demo_city() {
     let r = run_relief(&s, &views, None, &p);
     let sc = score(&s, &r, &p);
     print_scores("the demo city, every street, views registered:", &sc);
-    let guards = [
-        ("window", 0.85, 0.9),
-        ("door", 0.8, 0.85),
-        // Balcony precision sits at 0.79-0.80 from one registration to the next: most of the
-        // wrong instances (16 of 81) are real balconies found in part (half their width, IoU
-        // 0.15-0.45).
-        ("balcony", 0.8, 0.78),
-        // Drainpipes 40 of 50 (0.80 / 0.83), guarded a pipe below the target: one view's
-        // registration more or less moves one pipe.
-        ("drainpipe", 0.78, 0.8),
+    let floors = [
+        ("window", 0.5, 0.52),
+        ("door", 0.6, 0.55),
+        ("balcony", 0.2, 0.27),
+        ("drainpipe", 0.22, 0.23),
     ];
-    for (c, recall, precision) in guards {
+    for (c, recall, precision) in floors {
         assert!(sc.by_class[c].observed >= 20, "{c}: {:?}", sc.by_class[c]);
         assert!(sc.recall(c) >= recall, "{c} recall {}", sc.recall(c));
         assert!(
@@ -651,17 +647,15 @@ fn relief_on_every_street_of_the_demo_city() {
             sc.precision(c)
         );
     }
-    // A balcony's step read over all its pixels (slab underside, side panels) came 0.16 m short
-    // of its 1.2 m; on its front, 0.04.
     let mut d = sc.depth_errors["balcony"].clone();
     d.sort_by(f64::total_cmp);
     assert!(
-        d[d.len() / 2] <= 0.08,
+        d[d.len() / 2] <= 0.25,
         "balcony median depth error {}",
         d[d.len() / 2]
     );
     assert!(
-        sc.median_depth_error() <= 0.05,
+        sc.median_depth_error() <= 0.06,
         "{}",
         sc.median_depth_error()
     );
@@ -692,9 +686,12 @@ fn missing_class(views: &ViewSet, class: &str) -> ViewSet {
 
 /// The segmentation model missing every wall (each view's wall pixels unlabelled, as the demo's
 /// missed instances do to one wall in ten): the calibrated depth puts the unlabelled pixels
-/// around a window on its wall's plane, so the windows are still enclosed and found.
+/// around a window on its wall's plane, so windows are still enclosed and found. With the
+/// near-oracle sensors 0.7 of the windows the labelled walls gave were found so; with those of
+/// issue 51 (depth warped and bled across edges, normals 12 degrees off) 0.19 (2026-11-28),
+/// and without the depth to tell the walls, none: the depth still carries what the labels lost,
+/// but far less of it.
 #[test]
-#[ignore = "fails under the honest sensors of issue 51 (on by default since 2026-11-28); to be re-measured and re-baselined, see the session note"]
 fn windows_are_found_where_the_segmentation_missed_the_walls() {
     let s = demo_site();
     let views = missing_class(demo_registered(), "wall");
@@ -702,8 +699,6 @@ fn windows_are_found_where_the_segmentation_missed_the_walls() {
     let r = run_relief(s, &views, None, &p);
     let sc = score_against(s, &r, &demo_relief().0, &p);
     print_scores("every wall missed by the segmentation:", &sc);
-    assert!(sc.recall("window") >= 0.7, "{}", sc.recall("window"));
-    assert!(sc.precision("window") >= 0.7, "{}", sc.precision("window"));
     // Without the depth to tell the walls, nothing is enclosed.
     let blind = ReliefParams {
         plane_tol_m: 0.0,
@@ -715,7 +710,18 @@ fn windows_are_found_where_the_segmentation_missed_the_walls() {
         &demo_relief().0,
         &blind,
     );
-    assert!(none.recall("window") < 0.1, "{}", none.recall("window"));
+    println!(
+        "window recall with the walls missed: {:.3} by the depth, {:.3} without it",
+        sc.recall("window"),
+        none.recall("window")
+    );
+    assert!(sc.recall("window") >= 0.15, "{}", sc.recall("window"));
+    assert!(sc.precision("window") >= 0.5, "{}", sc.precision("window"));
+    assert!(
+        none.recall("window") < 0.5 * sc.recall("window"),
+        "{}",
+        none.recall("window")
+    );
 }
 
 /// Mean protruding evidence (E+ / W_exp) over the observed texels of the true drainpipes, and
@@ -745,11 +751,11 @@ fn drainpipe_evidence(s: &Site, r: &ReliefSet, p: &ReliefParams) -> (f64, usize)
 /// unlabelled pixels are kept apart from the ground's by their normals, so the wall encloses
 /// them and their depth step reads the pipe standing out. Joined to the street's surface they
 /// were one region nothing enclosed, whose pixels voted for a flat wall where the pipe stands:
-/// mean protruding evidence over the pipes' texels 0.29, against 0.46 now (0.54 with the pipes
-/// labelled). Found as instances, 2 of 7 (1 joined to the ground): without its class a
-/// protrusion is not run up the wall's height.
+/// mean protruding evidence over the pipes' texels 0.29, against 0.46 (0.54 with the pipes
+/// labelled) with the near-oracle sensors. With those of issue 51 (normals 12 degrees off,
+/// depth warped and bled across edges, poses off in six degrees of freedom) 0.218 missed
+/// against 0.294 labelled (2026-11-28): the pipe keeps three quarters of its evidence.
 #[test]
-#[ignore = "fails under the honest sensors of issue 51 (on by default since 2026-11-28); to be re-measured and re-baselined, see the session note"]
 fn a_drainpipe_the_segmentation_missed_still_reads_as_standing_out() {
     let s = demo_site();
     let views = missing_class(demo_registered(), "drainpipe");
@@ -764,7 +770,10 @@ fn a_drainpipe_the_segmentation_missed_still_reads_as_standing_out() {
     println!(
         "protruding evidence over {n} observed pipe texels: {missed:.3} missed, {labelled:.3} labelled"
     );
-    assert!(missed >= 0.4, "{missed}");
+    assert!(
+        missed >= 0.6 * labelled && missed >= 0.15,
+        "{missed} against {labelled}"
+    );
 }
 
 /// Registration against the walls, scored against the poses the views were rendered from
@@ -1084,7 +1093,6 @@ fn carved_solids_pass_the_solid_check_and_read_back_closed_from_the_glb() {
 // Delta from a source mesh.
 
 #[test]
-#[ignore = "fails under the honest sensors of issue 51 (on by default since 2026-11-28); to be re-measured and re-baselined, see the session note"]
 fn delta_finds_recesses_the_views_miss_and_yields_where_many_views_disagree() {
     let s = demo_site();
     let p = ReliefParams::default();
@@ -1133,8 +1141,8 @@ fn delta_finds_recesses_the_views_miss_and_yields_where_many_views_disagree() {
             q[0] += 0.3;
         }
     }
-    let r = run_relief(s, &s.views, Some(&shifted), &p);
-    let (mut checked, mut flat) = (0usize, 0usize);
+    let r = run_relief(s, demo_registered(), Some(&shifted), &p);
+    let (mut checked, mut flat, mut no_mesh) = (0usize, 0usize, 0usize);
     for (ci, c) in s.charts.charts.iter().enumerate() {
         if c.kind != ChartKind::Wall || c.normal[0] > -0.99 {
             continue;
@@ -1145,6 +1153,12 @@ fn delta_finds_recesses_the_views_miss_and_yields_where_many_views_disagree() {
             if !(rr.is_finite() && rr < 0.05 && pp < 0.05 && l.exposure.get(k) >= 5.0) {
                 continue;
             }
+            // Where the shifted mesh lies past Delta's search along the normal (at a wall's
+            // ends, where the shift leaves its neighbour's corner), there is no Delta.
+            if !l.delta.get(k).is_finite() {
+                no_mesh += 1;
+                continue;
+            }
             assert!((l.delta.get(k) + 0.3).abs() < 0.02, "{}", l.delta.get(k));
             checked += 1;
             flat += (l.pr_recessed.get(k) < 0.5) as usize;
@@ -1153,8 +1167,10 @@ fn delta_finds_recesses_the_views_miss_and_yields_where_many_views_disagree() {
             assert!((l.pr_recessed.get(k) as f64 - want[0]).abs() < 1e-6);
         }
     }
-    println!("wrong mesh: {flat} of {checked} well-observed flat texels stay flat");
-    assert!(checked > 1000 && flat == checked);
+    println!(
+        "wrong mesh: {flat} of {checked} well-observed flat texels stay flat ({no_mesh} without a Delta)"
+    );
+    assert!(checked > 1000 && flat == checked && no_mesh * 10 < checked);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1251,6 +1267,135 @@ fn registration_by_error() {
             pos[pos.len() / 2],
             pos[pos.len() * 9 / 10],
             yaw[yaw.len() / 2]
+        );
+    }
+}
+
+/// Which sensor error costs the relief what: the demo site's views with the poses as the demo
+/// knobs report them (0.5 m, 1 degree), registered, and every other error off but one group at
+/// a time; window, door and balcony recall and precision printed per row. Slow (a site and a
+/// registration per row): `cargo test -p kodama-nodes --test relief relief_by_error --
+/// --ignored --nocapture`.
+#[test]
+#[ignore]
+fn relief_by_error() {
+    let exact = SynthViewsParams {
+        size: (320, 240),
+        spacing_m: 15.0,
+        max_views: 64,
+        depth_scale: 0.8,
+        depth_offset_m: 1.0,
+        ..SynthViewsParams::exact()
+    };
+    let d = SynthViewsParams::default();
+    let xy = SynthViewsParams {
+        pose_noise_m: 0.5,
+        heading_noise_deg: 1.0,
+        ..exact.clone()
+    };
+    let rows = [
+        ("exact, true poses", exact.clone()),
+        ("x, y, yaw noise, registered", xy.clone()),
+        (
+            "+ height, pitch, roll, focal",
+            SynthViewsParams {
+                height_noise_m: d.height_noise_m,
+                pitch_noise_deg: d.pitch_noise_deg,
+                roll_noise_deg: d.roll_noise_deg,
+                focal_noise: d.focal_noise,
+                ..xy.clone()
+            },
+        ),
+        (
+            "+ height",
+            SynthViewsParams {
+                height_noise_m: d.height_noise_m,
+                ..xy.clone()
+            },
+        ),
+        (
+            "+ pitch",
+            SynthViewsParams {
+                pitch_noise_deg: d.pitch_noise_deg,
+                ..xy.clone()
+            },
+        ),
+        (
+            "+ roll",
+            SynthViewsParams {
+                roll_noise_deg: d.roll_noise_deg,
+                ..xy.clone()
+            },
+        ),
+        (
+            "+ focal",
+            SynthViewsParams {
+                focal_noise: d.focal_noise,
+                ..xy.clone()
+            },
+        ),
+        (
+            "+ depth errors",
+            SynthViewsParams {
+                depth_noise: d.depth_noise,
+                depth_scale_jitter: d.depth_scale_jitter,
+                depth_offset_jitter_m: d.depth_offset_jitter_m,
+                depth_warp: d.depth_warp,
+                depth_far_m: d.depth_far_m,
+                depth_edge_px: d.depth_edge_px,
+                ..xy.clone()
+            },
+        ),
+        (
+            "+ normal errors",
+            SynthViewsParams {
+                normal_noise_deg: d.normal_noise_deg,
+                normal_edge_px: d.normal_edge_px,
+                ..xy.clone()
+            },
+        ),
+        (
+            "+ mask boundaries",
+            SynthViewsParams {
+                instance_boundary_px: d.instance_boundary_px,
+                ..xy.clone()
+            },
+        ),
+        (
+            "+ missed instances",
+            SynthViewsParams {
+                instance_miss: d.instance_miss,
+                ..xy.clone()
+            },
+        ),
+        (
+            "+ merged, spurious, confused",
+            SynthViewsParams {
+                instance_merge: d.instance_merge,
+                instance_spurious: d.instance_spurious,
+                class_confusion: d.class_confusion,
+                ..xy.clone()
+            },
+        ),
+        ("all (the demo knobs)", demo_views()),
+    ];
+    let p = ReliefParams::default();
+    for (k, (name, v)) in rows.into_iter().enumerate() {
+        let s = make_site(v);
+        let views = if k == 0 {
+            s.views.clone()
+        } else {
+            register_views(&s.views, &s.walls)
+        };
+        let sc = score(&s, &run_relief(&s, &views, None, &p), &p);
+        let f = |c: &str| format!("{c} {:.2}/{:.2}", sc.recall(c), sc.precision(c));
+        println!(
+            "{name:32} {} {} {} {} depth {:.3} m",
+            f("window"),
+            f("door"),
+            f("balcony"),
+            f("drainpipe"),
+            sc.median_depth_error()
         );
     }
 }

@@ -112,6 +112,19 @@ impl View {
         let norm = (cam[0] * cam[0] + cam[1] * cam[1] + 1.0).sqrt();
         (self.pose.to_site(cam.map(|c| c / norm)), norm)
     }
+
+    /// Where site-frame point `p` falls in the image: its image point (x, y) (pixel (i, j)'s
+    /// centre is (i + 0.5, j + 0.5)) and its depth along the optical axis; `None` behind the
+    /// camera. The inverse of [`View::pixel_ray`], distortion likewise not applied.
+    pub fn project(&self, p: [f64; 3]) -> Option<([f64; 2], f64)> {
+        let rel = std::array::from_fn(|a| p[a] - self.pose.position[a]);
+        let c = self.pose.to_camera(rel);
+        if c[2] <= 1e-9 {
+            return None;
+        }
+        let k = self.intrinsics;
+        Some(([k.fx * c[0] / c[2] + k.cx, k.fy * c[1] / c[2] + k.cy], c[2]))
+    }
 }
 
 impl View {
@@ -283,5 +296,47 @@ impl Pose {
         std::array::from_fn(|c| {
             self.rotation[0][c] * v[0] + self.rotation[1][c] * v[1] + self.rotation[2][c] * v[2]
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn project_inverts_pixel_ray() {
+        let view = View {
+            id: "v".into(),
+            width: 64,
+            height: 48,
+            intrinsics: Intrinsics {
+                fx: 50.0,
+                fy: 52.0,
+                cx: 31.0,
+                cy: 25.0,
+            },
+            pose: Pose::from_angles([3.0, -2.0, 1.6], 30.0, 4.0, -2.0),
+            captured_at: None,
+            pose_source: None,
+            distortion: None,
+            image: PodVec(Vec::new()),
+            arch: None,
+            clutter: None,
+            material: None,
+            depth: None,
+            normal: None,
+        };
+        let (dir, per_depth) = view.pixel_ray(10.5, 40.5);
+        let depth = 7.0;
+        let p = std::array::from_fn(|a| view.pose.position[a] + dir[a] * depth * per_depth);
+        let (xy, d) = view.project(p).unwrap();
+        assert!(
+            (xy[0] - 10.5).abs() < 1e-9 && (xy[1] - 40.5).abs() < 1e-9,
+            "{xy:?}"
+        );
+        assert!((d - depth).abs() < 1e-9, "{d}");
+        // A point behind the camera projects nowhere.
+        let behind = std::array::from_fn(|a| view.pose.position[a] - dir[a]);
+        assert!(view.project(behind).is_none());
     }
 }

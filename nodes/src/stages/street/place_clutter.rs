@@ -1,6 +1,6 @@
 //! PlaceClutter (paper Sec. 4.2.4): clutter instances of street views, their depth calibrated
 //! per view against the twin (Theil-Sen), lifted to world positions, clustered across views,
-//! suppressed by class and distance, filtered by a scene grammar and instantiated from the asset
+//! kept where enough of the views framing them detected them, suppressed by class and distance, filtered by a scene grammar and instantiated from the asset
 //! library. It emits the objects as a scene for `AssembleScene`, and its report `counts` says
 //! what the chain did (detections, clusters, suppressed, each grammar rule's effect, placed per
 //! class, the calibration figures).
@@ -34,6 +34,13 @@ pub struct PlaceClutterParams {
     pub nms_factor: f64,
     /// Objects seen from fewer views are dropped. Default 1.
     pub min_views: u32,
+    /// Objects detected by fewer than this share of the views that should have seen them
+    /// (framed, within `max_range_m`, large enough, not hidden behind nearer depth) are
+    /// dropped: a segmenter's one-off errors, such as a car read as a shelter in one frame of
+    /// six. 0 turns the test off. Default 0.4.
+    pub min_view_share: f64,
+    /// Slack of that occlusion test, metres (plus 5 % of the range). Default 1.
+    pub occlusion_tol_m: f64,
     /// Vehicles farther than this from the nearest street axis the camera track draws are
     /// off the road, metres.
     /// Default 7.
@@ -64,6 +71,8 @@ impl Default for PlaceClutterParams {
             cluster_factor: c.cluster_factor,
             nms_factor: c.nms_factor,
             min_views: c.min_views as u32,
+            min_view_share: c.min_view_share,
+            occlusion_tol_m: c.occlusion_tol_m,
             road_half_width_m: c.road_half_width_m,
             vehicle_building_gap_m: c.vehicle_building_gap_m,
             roadside_min_m: c.roadside_min_m,
@@ -86,6 +95,8 @@ impl PlaceClutterParams {
             cluster_factor: self.cluster_factor,
             nms_factor: self.nms_factor,
             min_views: self.min_views as usize,
+            min_view_share: self.min_view_share,
+            occlusion_tol_m: self.occlusion_tol_m,
             road_half_width_m: self.road_half_width_m,
             vehicle_building_gap_m: self.vehicle_building_gap_m,
             roadside_min_m: self.roadside_min_m,
@@ -113,6 +124,8 @@ fn validate(p: &PlaceClutterParams) -> Result<(), ParamError> {
         ("max_range_m", p.max_range_m, 1.0, 1000.0),
         ("cluster_factor", p.cluster_factor, 0.0, 10.0),
         ("nms_factor", p.nms_factor, 0.0, 10.0),
+        ("min_view_share", p.min_view_share, 0.0, 1.0),
+        ("occlusion_tol_m", p.occlusion_tol_m, 0.0, 100.0),
         ("road_half_width_m", p.road_half_width_m, 0.0, 100.0),
         (
             "vehicle_building_gap_m",
@@ -187,8 +200,10 @@ impl Stage for PlaceClutter {
     // that shows.
     // 4: the road at a point is the nearest of the streets the track draws there, not one axis
     // fitted across a crossing.
-    const VERSION: u32 = 4;
-    const DOC: &'static str = "street clutter from views: Theil-Sen depth calibration, lifting, clustering, NMS, scene grammar, asset library, Sec. 4.2.4";
+    // 5: a cluster detected by under `min_view_share` of the views that should have seen it is
+    // dropped (the segmenter's one-off class confusions of issue 51's sensors).
+    const VERSION: u32 = 5;
+    const DOC: &'static str = "street clutter from views: Theil-Sen depth calibration, lifting, clustering, multi-view support, NMS, scene grammar, asset library, Sec. 4.2.4";
     const INPUTS: &'static [InputSpec] = INPUTS;
     type Params = PlaceClutterParams;
     type Output = Scene;

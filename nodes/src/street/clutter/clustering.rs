@@ -22,6 +22,8 @@ pub struct Cluster {
     pub heading: Option<f64>,
     /// Distinct views.
     pub views: usize,
+    /// Those views' indices, ascending.
+    pub seen_by: Vec<usize>,
     /// Sum of the members' weights.
     pub score: f64,
 }
@@ -80,6 +82,7 @@ pub fn cluster(dets: &[Detection], cfg: &ClutterConfig) -> Vec<Cluster> {
             z: (col(&|d| d.z.0), col(&|d| d.z.1)),
             heading: members.iter().find_map(|&j| dets[j].heading),
             views: views.len(),
+            seen_by: views,
             score: members.iter().map(|&j| dets[j].weight).sum(),
         });
     }
@@ -88,7 +91,10 @@ pub fn cluster(dets: &[Detection], cfg: &ClutterConfig) -> Vec<Cluster> {
 
 /// Non-maximum suppression by class and distance: clusters in order of score (views first), each
 /// suppressed when a kept one of its class lies within `nms_factor` x the class length (at least
-/// 1.5 m). Returns the kept clusters and the number suppressed.
+/// 1.5 m). Returns the kept clusters and the number suppressed. Only within a class: suppressing
+/// a cluster where another class's footprint overlaps it (a car read as a shelter in one view)
+/// cost more true objects than confusions on the demo city (every street: car recall 0.67 to
+/// 0.47, pole 0.57 to 0.29, with trees' crowns and parked cars beside posts; 2026-11-28).
 pub fn nms(mut clusters: Vec<Cluster>, cfg: &ClutterConfig) -> (Vec<Cluster>, usize) {
     clusters.sort_by(|a, b| {
         b.views
@@ -143,5 +149,19 @@ mod tests {
         assert_eq!(cl[0].xy[0], 10.0);
         let (kept, suppressed) = nms(cl, &cfg);
         assert_eq!((kept.len(), suppressed), (1, 1));
+        // Another class at the same spot is not suppressed: a shelter read where a car stands
+        // is the support test's to drop.
+        let shelter = Cluster {
+            class: "shelter".into(),
+            kind: AssetKind::Shelter,
+            xy: [10.3, 0.0],
+            z: (0.0, 2.6),
+            heading: None,
+            views: 1,
+            seen_by: vec![4],
+            score: 30.0,
+        };
+        let (kept, suppressed) = nms(vec![kept[0].clone(), shelter], &cfg);
+        assert_eq!((kept.len(), suppressed), (2, 0));
     }
 }

@@ -25,6 +25,12 @@ pub struct ClutterConfig {
     pub nms_factor: f64,
     /// Clusters seen from fewer distinct views are dropped.
     pub min_views: usize,
+    /// Clusters detected by fewer than this share of the views that should have seen them
+    /// (framed, in range, unoccluded) are dropped: a segmenter's one-off errors.
+    pub min_view_share: f64,
+    /// Slack of the occlusion test of that count: a view's calibrated depth at the object may
+    /// fall this many metres (plus 5 % of the range) in front of it and still count as seeing it.
+    pub occlusion_tol_m: f64,
     /// Vehicles farther than this from the nearest street axis the camera track draws are
     /// off the road, metres.
     pub road_half_width_m: f64,
@@ -52,6 +58,8 @@ impl Default for ClutterConfig {
             cluster_factor: 0.6,
             nms_factor: 1.0,
             min_views: 1,
+            min_view_share: 0.4,
+            occlusion_tol_m: 1.0,
             road_half_width_m: 7.0,
             vehicle_building_gap_m: 2.0,
             roadside_min_m: 4.0,

@@ -1,6 +1,6 @@
 //! Clutter from street views (paper Sec. 4.2.4): each view's depth calibrated against the twin
 //! with a Theil-Sen affine fit, clutter instances lifted to world positions, repeated detections
-//! clustered across views, non-maximum suppression by class and distance, a scene grammar whose
+//! clustered across views, those too few of the views framing them detected dropped, non-maximum suppression by class and distance, a scene grammar whose
 //! every rule's effect is counted, and the survivors instantiated from the asset library.
 
 pub mod assets;
@@ -10,6 +10,7 @@ mod config;
 mod grammar;
 mod lifting;
 mod spread;
+mod support;
 mod track;
 
 use std::collections::BTreeMap;
@@ -23,6 +24,7 @@ pub use clustering::{Cluster, cluster, nms};
 pub use config::{ClutterConfig, default_classes};
 pub use grammar::{Ground, Placed, grammar};
 pub use lifting::{Calibration, Detection, calibrate, calibration_samples, lift_view};
+pub use support::{should_see, supported};
 pub use track::Track;
 
 /// The whole chain over a view set: calibration, lifting, clustering, NMS, grammar. Returns the
@@ -72,6 +74,8 @@ pub fn place_clutter(
     m.set("detections", dets.len() as f64);
     let clusters = cluster(&dets, cfg);
     m.set("clusters", clusters.len() as f64);
+    let (clusters, unsupported) = supported(clusters, views, &cals, cfg);
+    m.set("unsupported", unsupported as f64);
     let (kept, suppressed) = nms(clusters, cfg);
     m.set("nms_suppressed", suppressed as f64);
     let ground = Ground::new(terrain, twin, views, canopies);
