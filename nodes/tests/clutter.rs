@@ -369,7 +369,8 @@ fn clutter_recall_and_precision_on_the_demo_site() {
 /// 0.132, signs 0.438. Since a cluster detected by under 0.4 of the views that frame it is
 /// dropped (`min_view_share`): cars 0.578 / 0.669, poles 0.537 / 0.571, shelters 0.192 /
 /// 0.714, signs 0.467 / 0.824, trees 0.776 / 0.883, median 0.60 m (2026-11-28; the run prints
-/// the chain with the test off beside it). The floors hold those levels. Slow (416 views
+/// the chain with the test off beside it: cars 0.520 / 0.717, poles 0.405 / 0.810, the
+/// precision bought with recall). The floors hold those levels. Slow (416 views
 /// rendered and registered: about 6 minutes on 2 cores), so run on request:
 /// `cargo test -p kodama-nodes --test clutter clutter_on_every_street -- --ignored --nocapture`.
 #[test]

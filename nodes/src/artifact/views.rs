@@ -103,6 +103,27 @@ pub struct View {
 }
 
 impl View {
+    /// A view of `width` x `height` pixels with a black image and no model outputs (no
+    /// instances, materials, depth or normals), taken from `pose` through `intrinsics`.
+    pub fn new(id: &str, width: u32, height: u32, intrinsics: Intrinsics, pose: Pose) -> View {
+        View {
+            id: id.to_owned(),
+            width,
+            height,
+            intrinsics,
+            pose,
+            captured_at: None,
+            pose_source: None,
+            distortion: None,
+            image: PodVec(vec![[0; 3]; width as usize * height as usize]),
+            arch: None,
+            clutter: None,
+            material: None,
+            depth: None,
+            normal: None,
+        }
+    }
+
     /// The unit site-frame direction through image point (`x`, `y`) (pixel (i, j)'s centre is
     /// (i + 0.5, j + 0.5)), and the ray length per unit of depth along the optical axis (so a
     /// pixel's depth d is t = d times it along the ray).
@@ -305,27 +326,15 @@ mod tests {
 
     #[test]
     fn project_inverts_pixel_ray() {
-        let view = View {
-            id: "v".into(),
-            width: 64,
-            height: 48,
-            intrinsics: Intrinsics {
-                fx: 50.0,
-                fy: 52.0,
-                cx: 31.0,
-                cy: 25.0,
-            },
-            pose: Pose::from_angles([3.0, -2.0, 1.6], 30.0, 4.0, -2.0),
-            captured_at: None,
-            pose_source: None,
-            distortion: None,
-            image: PodVec(Vec::new()),
-            arch: None,
-            clutter: None,
-            material: None,
-            depth: None,
-            normal: None,
+        let k = Intrinsics {
+            fx: 50.0,
+            fy: 52.0,
+            cx: 31.0,
+            cy: 25.0,
         };
+        let pose = Pose::from_angles([3.0, -2.0, 1.6], 30.0, 4.0, -2.0);
+        let view = View::new("v", 64, 48, k, pose);
+        assert!(view.check(0).is_ok());
         let (dir, per_depth) = view.pixel_ray(10.5, 40.5);
         let depth = 7.0;
         let p = std::array::from_fn(|a| view.pose.position[a] + dir[a] * depth * per_depth);

@@ -1,7 +1,7 @@
 //! PlaceClutter (paper Sec. 4.2.4): clutter instances of street views, their depth calibrated
 //! per view against the twin (Theil-Sen), lifted to world positions, clustered across views,
-//! kept where enough of the views framing them detected them, suppressed by class and distance, filtered by a scene grammar and instantiated from the asset
-//! library. It emits the objects as a scene for `AssembleScene`, and its report `counts` says
+//! kept where enough of the views framing them detected them, suppressed by class and distance,
+//! filtered by a scene grammar and instantiated from the asset library. It emits the objects as a scene for `AssembleScene`, and its report `counts` says
 //! what the chain did (detections, clusters, suppressed, each grammar rule's effect, placed per
 //! class, the calibration figures).
 

@@ -1,7 +1,8 @@
 //! Clutter from street views (paper Sec. 4.2.4): each view's depth calibrated against the twin
 //! with a Theil-Sen affine fit, clutter instances lifted to world positions, repeated detections
-//! clustered across views, those too few of the views framing them detected dropped, non-maximum suppression by class and distance, a scene grammar whose
-//! every rule's effect is counted, and the survivors instantiated from the asset library.
+//! clustered across views, clusters too few of the views framing them detected dropped,
+//! non-maximum suppression by class and distance, a scene grammar whose every rule's effect is
+//! counted, and the survivors instantiated from the asset library.
 
 pub mod assets;
 
@@ -27,9 +28,9 @@ pub use lifting::{Calibration, Detection, calibrate, calibration_samples, lift_v
 pub use support::{should_see, supported};
 pub use track::Track;
 
-/// The whole chain over a view set: calibration, lifting, clustering, NMS, grammar. Returns the
-/// placed objects and the counts (detections, clusters, suppressed, each grammar rule, placed per
-/// class, calibration figures).
+/// The whole chain over a view set: calibration, lifting, clustering, support, NMS, grammar.
+/// Returns the placed objects and the counts (detections, clusters, unsupported, suppressed, each
+/// grammar rule, placed per class, calibration figures).
 pub fn place_clutter(
     views: &[View],
     twin: &Scene,
