@@ -474,6 +474,24 @@ fn score_against(s: &Site, r: &ReliefSet, seen: &ReliefSet, p: &ReliefParams) ->
     }
 }
 
+/// Each class of `floors` (class, recall, precision) observed at least `min_observed` times and
+/// found at least at its floors.
+fn assert_floors(sc: &Scores, min_observed: usize, floors: &[(&str, f64, f64)]) {
+    for &(c, recall, precision) in floors {
+        assert!(
+            sc.by_class[c].observed >= min_observed,
+            "{c}: {:?}",
+            sc.by_class[c]
+        );
+        assert!(sc.recall(c) >= recall, "{c} recall {}", sc.recall(c));
+        assert!(
+            sc.precision(c) >= precision,
+            "{c} precision {}",
+            sc.precision(c)
+        );
+    }
+}
+
 fn print_scores(label: &str, sc: &Scores) {
     println!("{label}");
     for (c, s) in &sc.by_class {
@@ -529,21 +547,16 @@ fn relief_on_the_synthetic_site_with_the_demo_view_knobs() {
     // balconies 0.50 / 0.50 (14), drainpipes 0.25 / 0.21 (8) (2026-11-28). The floors below
     // hold those levels: windows firmly, the classes of a handful of instances loosely (one
     // door is an eighth of the class).
-    let floors = [
-        ("window", 0.55, 0.55),
-        ("door", 0.35, 0.5),
-        ("balcony", 0.35, 0.35),
-        ("drainpipe", 0.12, 0.1),
-    ];
-    for (c, recall, precision) in floors {
-        assert!(sc.by_class[c].observed >= 5, "{c}: {:?}", sc.by_class[c]);
-        assert!(sc.recall(c) >= recall, "{c} recall {}", sc.recall(c));
-        assert!(
-            sc.precision(c) >= precision,
-            "{c} precision {}",
-            sc.precision(c)
-        );
-    }
+    assert_floors(
+        &sc,
+        5,
+        &[
+            ("window", 0.55, 0.55),
+            ("door", 0.35, 0.5),
+            ("balcony", 0.35, 0.35),
+            ("drainpipe", 0.12, 0.1),
+        ],
+    );
     assert!(
         sc.median_depth_error() <= 0.06,
         "{}",
@@ -632,21 +645,16 @@ fn relief_on_every_street_of_the_demo_city() {
     let r = run_relief(&s, &views, None, &p);
     let sc = score(&s, &r, &p);
     print_scores("the demo city, every street, views registered:", &sc);
-    let floors = [
-        ("window", 0.5, 0.52),
-        ("door", 0.6, 0.55),
-        ("balcony", 0.2, 0.27),
-        ("drainpipe", 0.22, 0.23),
-    ];
-    for (c, recall, precision) in floors {
-        assert!(sc.by_class[c].observed >= 20, "{c}: {:?}", sc.by_class[c]);
-        assert!(sc.recall(c) >= recall, "{c} recall {}", sc.recall(c));
-        assert!(
-            sc.precision(c) >= precision,
-            "{c} precision {}",
-            sc.precision(c)
-        );
-    }
+    assert_floors(
+        &sc,
+        20,
+        &[
+            ("window", 0.5, 0.52),
+            ("door", 0.6, 0.55),
+            ("balcony", 0.2, 0.27),
+            ("drainpipe", 0.22, 0.23),
+        ],
+    );
     let mut d = sc.depth_errors["balcony"].clone();
     d.sort_by(f64::total_cmp);
     assert!(

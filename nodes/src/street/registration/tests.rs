@@ -117,6 +117,15 @@ fn view(scene: &Scene, pose: Pose, reported: Pose) -> View {
     v
 }
 
+/// Two detached houses across the street from a camera at (0, 0, 2) looking north: 8 m and 9 m
+/// wide, 7 m and 9 m tall, a 3.5 m gap between them.
+fn two_houses() -> Scene {
+    scene(&[
+        ([-6.0, 12.0], [8.0, 6.0, 7.0]),
+        ([6.0, 12.0], [9.0, 6.0, 9.0]),
+    ])
+}
+
 fn moved(p: Pose, dx: f64, dy: f64, yaw_deg: f64) -> Pose {
     turned(&p, [dx, dy, yaw_deg.to_radians(), 0.0, 0.0, 0.0, 0.0])
 }
@@ -134,10 +143,7 @@ fn tilt_between(a: &Pose, b: &Pose) -> f64 {
 /// search (roll off) leaves it.
 #[test]
 fn a_rolled_view_is_rolled_back() {
-    let s = scene(&[
-        ([-6.0, 12.0], [8.0, 6.0, 7.0]),
-        ([6.0, 12.0], [9.0, 6.0, 9.0]),
-    ]);
+    let s = two_houses();
     let truth = look([0.0, 0.0, 2.0], 90f64.to_radians());
     for roll_deg in [0.8f64, -0.6] {
         let reported = turned(
@@ -190,10 +196,7 @@ fn the_agreement_table_is_symmetric_where_it_should_be() {
 /// camera along the street, their eaves and bases across it.
 #[test]
 fn a_view_of_two_houses_is_moved_back_to_where_it_was() {
-    let s = scene(&[
-        ([-6.0, 12.0], [8.0, 6.0, 7.0]),
-        ([6.0, 12.0], [9.0, 6.0, 9.0]),
-    ]);
+    let s = two_houses();
     let truth = look([0.0, 0.0, 2.0], 90f64.to_radians());
     let p = RegistrationParams::default();
     for (dx, dy, dyaw) in [(0.6, -0.4, 1.0), (-0.9, 0.3, -1.5), (0.2, 0.8, 0.5)] {
@@ -224,10 +227,7 @@ fn a_view_of_two_houses_is_moved_back_to_where_it_was() {
 /// a balcony lands on a different patch of the wall behind it). A window's pixels do.
 #[test]
 fn features_off_the_wall_say_nothing_about_the_pose() {
-    let s = scene(&[
-        ([-6.0, 12.0], [8.0, 6.0, 7.0]),
-        ([6.0, 12.0], [9.0, 6.0, 9.0]),
-    ]);
+    let s = two_houses();
     let mut with = s.clone();
     with.objects.push(object(
         "balcony-0",
@@ -294,10 +294,7 @@ fn a_view_of_one_endless_wall_keeps_its_metadata() {
 
 #[test]
 fn a_window_of_zero_keeps_the_metadata() {
-    let s = scene(&[
-        ([-6.0, 12.0], [8.0, 6.0, 7.0]),
-        ([6.0, 12.0], [9.0, 6.0, 9.0]),
-    ]);
+    let s = two_houses();
     let truth = look([0.0, 0.0, 2.0], 90f64.to_radians());
     let reported = moved(truth, 0.6, -0.4, 1.0);
     let v = view(&s, truth, reported);
