@@ -9,6 +9,10 @@ spread. A gain smaller than its spread is reported as "not shown", as the projec
 rule asks.
 
     python3 scripts/family_table.py out/family_test/table.csv
+
+A leave-one-out ablation's table (graphs/sweeps/family_ablation.ron: a "stage" column beside the
+site) gives instead each stage's gain: the P2P RMSE of the twin without that stage minus the full
+twin's, per pair, with its mean, spread and verdict, overall and over NLOS links.
 """
 
 import csv
@@ -31,11 +35,42 @@ def mean_sd(xs):
     return m, sd
 
 
+def ablation(path, rows):
+    """Each stage's gain per pair: the twin without it minus the full twin, P2P and NLOS."""
+    keys = ["twin_eval.p2p_rmse_db", "twin_eval.nlos/p2p_rmse_db"]
+    missing = [k for k in ["site", *keys] if k not in rows[0]]
+    if missing:
+        sys.exit(f"{path}: no column {', '.join(missing)} (is this family_ablation's table?)")
+    by = {(r["site"], r["stage"]): r for r in rows}
+    sites = sorted({r["site"] for r in rows})
+    stages = [s for s in dict.fromkeys(r["stage"] for r in rows) if s != "full"]
+    if not all((s, "full") in by for s in sites):
+        sys.exit(f"{path}: every site needs a \"full\" row to measure gains against")
+    print("| stage left out | gain, P2P (dB) | spread | verdict | gain, NLOS (dB) | spread | verdict | pairs where it helps |")
+    print("|---|---|---|---|---|---|---|---|")
+    for stage in stages:
+        cells = []
+        gains = {}
+        for key in keys:
+            g = [float(by[(s, stage)][key]) - float(by[(s, "full")][key])
+                 for s in sites if (s, stage) in by]
+            m, sd = mean_sd(g)
+            gains[key] = g
+            cells += [f"{m:+.2f}", f"{sd:.2f}", "shown" if abs(m) > sd else "not shown"]
+        helps = sum(x > 0 for x in gains[keys[0]])
+        print(f"| {stage} | " + " | ".join(cells) + f" | {helps} of {len(gains[keys[0]])} |")
+    print()
+    print("A positive gain: the twin is that much better (lower RMSE) with the stage than without it.")
+
+
 def main(path):
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
     if not rows:
         sys.exit(f"{path}: no variants in the table")
+    if "stage" in rows[0]:
+        ablation(path, rows)
+        return
     missing = [key for _, key in COLUMNS if key not in rows[0]]
     if missing:
         sys.exit(f"{path}: no column {', '.join(missing)} (is this a family sweep's table?)")

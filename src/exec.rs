@@ -36,8 +36,8 @@ pub struct RunOptions {
     pub jobs: Option<usize>,
     /// Run only these nodes and their ancestors; all when empty.
     pub targets: Vec<String>,
-    /// Where declared outputs are written.
-    pub out_dir: PathBuf,
+    /// Where declared outputs are written; None writes none (a metrics-only sweep's variants).
+    pub out_dir: Option<PathBuf>,
 }
 
 /// Why a run could not start or finish.
@@ -217,7 +217,10 @@ pub fn run(
                     }
                 }
             });
-            let (outputs, output_errors) = exec.export(&opts.out_dir);
+            let (outputs, output_errors) = match &opts.out_dir {
+                Some(dir) => exec.export(dir),
+                None => Default::default(),
+            };
             let (records, snapshots) = exec.into_results();
             Ok((records, snapshots, outputs, output_errors))
         })?;

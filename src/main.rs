@@ -301,7 +301,7 @@ fn run_once(
         &RunOptions {
             jobs,
             targets,
-            out_dir,
+            out_dir: Some(out_dir),
         },
         &reporter,
     )?;

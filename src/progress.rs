@@ -41,7 +41,6 @@ pub struct Reporter {
     multi: MultiProgress,
     overall: Option<ProgressBar>,
     done: AtomicUsize,
-    total: usize,
 }
 
 impl Reporter {
@@ -66,7 +65,6 @@ impl Reporter {
             multi,
             overall,
             done: AtomicUsize::new(0),
-            total,
         }
     }
 
@@ -135,7 +133,8 @@ impl Reporter {
         let count = |s: Status| records.iter().filter(|r| r.status == s).count();
         eprintln!(
             "{} nodes: {} ran, {} cached, {} cut off, {} failed, {} skipped in {seconds:.2} s",
-            self.total,
+            // The records, not `total`: a sweep's one reporter serves variants of any size.
+            records.len(),
             count(Status::Ran),
             count(Status::Cached),
             count(Status::Cutoff),

@@ -17,6 +17,10 @@
 //! another so a node they share is computed once, by the first, and every later variant finds it in
 //! the cache; within a variant nodes run in parallel. An interrupted sweep resumes where it
 //! stopped: finished variants are all cache hits.
+//!
+//! `metrics_only: true` runs in each variant only the nodes its metrics need: an ablation over a
+//! family of cities then traces the links and skips the radio maps, plots and report it would
+//! otherwise redraw per variant, and writes no variant's outputs (the table is what it is for).
 
 use std::path::{Path, PathBuf};
 
@@ -44,6 +48,9 @@ pub struct Sweep {
     pub axes: Vec<(String, Vec<Choice>)>,
     /// `NODE.KEY` of each metric reported.
     pub metrics: Vec<String>,
+    /// Run only the nodes the metrics need and write no variant's outputs (default false: every
+    /// node, every output written).
+    pub metrics_only: bool,
 }
 
 /// One choice on an axis: its label and the overrides it applies.
@@ -114,8 +121,19 @@ pub fn load_sweep(path: &Path, allow_outside: bool) -> Result<Sweep, String> {
         return Err(err(path, &ast, "expected `Sweep(...)`"));
     }
     let (mut graph, mut axes, mut metrics) = (None, Vec::new(), Vec::new());
+    let mut metrics_only = false;
     for (n, v) in fields {
         match n.name.as_str() {
+            "metrics_only" => match v.v {
+                Value::Bool(b) => metrics_only = b,
+                ref other => {
+                    return Err(err(
+                        path,
+                        v,
+                        format!("expected true or false, found {}", other.describe()),
+                    ));
+                }
+            },
             "graph" => graph = Some((v, string(path, v, "the base graph's path")?)),
             "metrics" => {
                 let Value::List(items) = &v.v else {
@@ -144,7 +162,7 @@ pub fn load_sweep(path: &Path, allow_outside: bool) -> Result<Sweep, String> {
             }
             other => {
                 return Err(format!(
-                    "{}:{}:{}: unknown field `{other}`; expected graph, axes or metrics",
+                    "{}:{}:{}: unknown field `{other}`; expected graph, axes, metrics or metrics_only",
                     path.display(),
                     n.span.line,
                     n.span.col
@@ -179,6 +197,7 @@ pub fn load_sweep(path: &Path, allow_outside: bool) -> Result<Sweep, String> {
         graph,
         axes,
         metrics,
+        metrics_only,
     })
 }
 
@@ -370,6 +389,11 @@ pub fn run_sweep(
     let stop_after: Option<usize> = std::env::var("KODAMA_DAG_FAULT_SWEEP_STOP_AFTER")
         .ok()
         .and_then(|v| v.parse().ok());
+    let targets = if sweep.metrics_only {
+        metric_nodes(&sweep.metrics)
+    } else {
+        vec![]
+    };
     let mut results = Vec::new();
     for (i, (v, g)) in variants.iter().zip(&graphs).enumerate() {
         if stop_after == Some(i) {
@@ -379,8 +403,9 @@ pub fn run_sweep(
         on_variant(i, variants.len(), v);
         let run_opts = RunOptions {
             jobs: opts.jobs,
-            targets: vec![],
-            out_dir: opts.out_dir.join("variants").join(folder_name(&v.name())),
+            targets: targets.clone(),
+            out_dir: (!sweep.metrics_only)
+                .then(|| opts.out_dir.join("variants").join(folder_name(&v.name()))),
         };
         let record = run(g, cache, &run_opts, reporter).map_err(SweepError::Run)?;
         if let Some(f) = record
@@ -437,6 +462,18 @@ pub fn run_sweep(
     write_tables(sweep, &opts.out_dir, cache, &results)
         .map_err(|e| SweepError::Run(RunError::Io(e)))?;
     Ok(results)
+}
+
+/// The nodes the metrics name, each once, in the metrics' order.
+fn metric_nodes(metrics: &[String]) -> Vec<String> {
+    let mut nodes: Vec<String> = Vec::new();
+    for m in metrics {
+        let (node, _) = m.split_once('.').expect("checked on load");
+        if !nodes.iter().any(|n| n == node) {
+            nodes.push(node.to_string());
+        }
+    }
+    nodes
 }
 
 /// Every variant's graph, loaded and checked, with the metric names checked against it.

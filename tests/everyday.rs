@@ -186,6 +186,63 @@ fn an_interrupted_sweep_resumes_without_redoing_variants() {
     assert_eq!(table(&env.out().join("table.csv")).len(), 4);
 }
 
+/// `metrics_only`: each variant runs just what its metrics need; a node no metric reaches (the
+/// point statistics here) never runs, no variant's outputs are written, and the metrics are the
+/// ones a full sweep gives.
+#[test]
+fn a_metrics_only_sweep_runs_only_what_its_metrics_need() {
+    let env = Env::new();
+    env.write("g.ron", CHAIN);
+    let sweep_text = |only: bool| {
+        format!(
+            r#"Sweep(
+    graph: "g.ron",
+    axes: {{ "sigma": Grid(set: "smooth.sigma_m", values: [1.0, 3.0]) }},
+    metrics: ["stats.mean"],
+    metrics_only: {only},
+)"#
+        )
+    };
+    let ran_ids = |cache: &Path| {
+        let mut ids = std::collections::BTreeSet::new();
+        for entry in std::fs::read_dir(cache.join("runs")).unwrap() {
+            for rec in std::fs::read_dir(entry.unwrap().path().join("records")).unwrap() {
+                let v: serde_json::Value =
+                    serde_json::from_slice(&std::fs::read(rec.unwrap().path()).unwrap()).unwrap();
+                for n in v["nodes"].as_array().unwrap() {
+                    if n["status"] == "ran" {
+                        ids.insert(n["id"].as_str().unwrap().to_string());
+                    }
+                }
+            }
+        }
+        ids
+    };
+    let only = env.write("only.ron", &sweep_text(true));
+    let r = env.sweep(&only, &[]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let ran = ran_ids(&env.cache());
+    assert!(ran.contains("stats") && ran.contains("smooth"), "{ran:?}");
+    assert!(!ran.contains("pstats"), "no metric needs pstats: {ran:?}");
+    assert!(
+        !env.out().join("variants").exists(),
+        "a metrics-only sweep writes no variant's outputs"
+    );
+    let narrow = table(&env.out().join("table.csv"));
+
+    let full_env = Env::new();
+    full_env.write("g.ron", CHAIN);
+    let all = full_env.write("all.ron", &sweep_text(false));
+    let r = full_env.sweep(&all, &[]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(ran_ids(&full_env.cache()).contains("pstats"));
+    let wide = table(&full_env.out().join("table.csv"));
+    assert_eq!(narrow.len(), 2);
+    for (a, b) in narrow.iter().zip(&wide) {
+        assert_eq!(a["stats.mean"], b["stats.mean"]);
+    }
+}
+
 /// Watch: an edit reruns only what it affects, a broken edit is reported and the watch goes on,
 /// and the next good edit runs.
 #[test]
@@ -332,6 +389,32 @@ fn gc_keeps_what_a_kept_graph_needs() {
     );
     let other = env.run(&b, &[]).ok();
     assert!(!other.with_status("ran").is_empty());
+}
+
+/// The family ablation runs the test family's own sites: its "site" axis is family_test's, choice
+/// for choice, so the ablation's "full" rows are the headline's pairs. Every variant checks.
+#[test]
+fn the_family_ablation_runs_the_test_familys_sites() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/sweeps");
+    let test = kodama_dag::sweep::load_sweep(&dir.join("family_test.ron"), false).unwrap();
+    let ablation = kodama_dag::sweep::load_sweep(&dir.join("family_ablation.ron"), false).unwrap();
+    let site = |s: &kodama_dag::sweep::Sweep| {
+        s.axes
+            .iter()
+            .find(|(name, _)| name == "site")
+            .map(|(_, c)| c.clone())
+            .expect("a site axis")
+    };
+    assert_eq!(site(&test), site(&ablation));
+    assert!(ablation.metrics_only);
+    let env = Env::new();
+    let r = env.cli(&[
+        "sweep",
+        dir.join("family_ablation.ron").to_str().unwrap(),
+        "--dry-run",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(r.stdout.lines().count(), 8 * 5, "{}", r.stdout);
 }
 
 /// The committed ablation sweep loads, and every one of its variants is a valid graph.
