@@ -445,9 +445,9 @@ fn glb_loads_in_the_gltf_crate_with_a_node_per_object() {
     assert_eq!(fp.items.len(), city.buildings.len());
 }
 
-/// Façade relief, probed with horizontal rays fired at the walls: windows are glazed recesses
-/// 0.25 m deep, the wall between them stands on the outline, doors are wooden recesses,
-/// balconies protrude.
+/// Façade relief, probed with horizontal rays fired at the walls: windows are glazed recesses as
+/// deep as their building's draw (or glazed bays standing out), the wall between them stands on
+/// the outline, doors are wooden recesses, balconies protrude.
 #[test]
 fn facade_relief_is_where_the_city_says() {
     use kodama_nodes::artifact::FeatureKind;
@@ -508,11 +508,12 @@ fn facade_relief_is_where_the_city_says() {
             }
             probes += 1;
             let m = Material::from_u8(scene.objects[obj].mesh.materials[h.triangle]).unwrap();
-            // Windows: glass 0.25 m in. Doors: a wooden leaf 0.20 m in.
+            // Windows: glass at the feature's depth, in or out. Doors: a wooden leaf hung 0.05 m
+            // in front of the recess's back.
             let depth = if f.kind == FeatureKind::Door {
-                3.20
+                3.0 - f.depth_m - 0.05
             } else {
-                3.25
+                3.0 - f.depth_m
             };
             if (h.t as f64 - depth).abs() < 0.01 {
                 recessed += 1;
@@ -539,6 +540,92 @@ fn facade_relief_is_where_the_city_says() {
             && flush as f64 > 0.8 * probes as f64
             && wooden > 30,
         "{wooden} doors"
+    );
+}
+
+/// The default city's façades and clutter vary (issue 51: no stage may look the answer up):
+/// recess and balcony depths differ between buildings, some fronts have bays standing out and
+/// some ground floors glass shopfronts, and parked cars come in many sizes. Without variation
+/// every recess is 0.25 m, every balcony 1.2 m and every car 4.5 m long, as in SynthCity v2.
+#[test]
+fn facades_and_clutter_vary_and_can_be_made_uniform() {
+    use kodama_nodes::artifact::FeatureKind;
+    use kodama_nodes::synth::synth_city::CityVariation;
+    let distinct = |xs: Vec<f64>| {
+        let mut v: Vec<i64> = xs.iter().map(|x| (x * 1000.0).round() as i64).collect();
+        v.sort();
+        v.dedup();
+        v.len()
+    };
+    let depths = |city: &kodama_nodes::artifact::City, kind: FeatureKind| {
+        city.buildings
+            .iter()
+            .flat_map(|b| &b.features)
+            .filter(|f| f.kind == kind)
+            .map(|f| f.depth_m)
+            .collect::<Vec<_>>()
+    };
+    let car_lengths = |city: &kodama_nodes::artifact::City| {
+        city.clutter
+            .iter()
+            .filter(|c| c.kind == "car")
+            .map(|c| c.size[0])
+            .collect::<Vec<_>>()
+    };
+    let varied = generate(&SynthCityParams::default());
+    let windows = depths(&varied, FeatureKind::Window);
+    let bays = windows.iter().filter(|d| **d > 0.0).count();
+    let shopfronts = varied
+        .buildings
+        .iter()
+        .flat_map(|b| &b.features)
+        .filter(|f| f.kind == FeatureKind::Window && f.along.1 - f.along.0 > 2.0)
+        .count();
+    let recess_depths = distinct(windows.iter().copied().filter(|d| *d < 0.0).collect());
+    let balcony_depths = distinct(depths(&varied, FeatureKind::Balcony));
+    let cars = distinct(car_lengths(&varied));
+    println!(
+        "{recess_depths} recess depths, {balcony_depths} balcony depths, {bays} bays, \
+         {shopfronts} shopfront windows, {cars} car lengths"
+    );
+    assert!(recess_depths > 20 && balcony_depths >= 3 && bays > 10 && shopfronts > 20 && cars > 20);
+    // Every window and door lies within the drawn range, every bay stands out within its own.
+    let v = CityVariation::default();
+    for d in windows.iter().filter(|d| **d < 0.0) {
+        let r = -d;
+        assert!(
+            (v.recess_m.0..=v.recess_m.1).contains(&r) || (0.08..=0.2).contains(&r),
+            "{r}"
+        );
+    }
+    for d in windows.iter().filter(|d| **d > 0.0) {
+        assert!((v.bay_m.0..=v.bay_m.1).contains(d), "{d}");
+    }
+
+    let uniform = generate(&SynthCityParams {
+        variation: CityVariation::none(),
+        ..Default::default()
+    });
+    assert!(
+        depths(&uniform, FeatureKind::Window)
+            .iter()
+            .chain(&depths(&uniform, FeatureKind::Door))
+            .all(|d| *d == -0.25)
+    );
+    assert!(
+        depths(&uniform, FeatureKind::Balcony)
+            .iter()
+            .all(|d| *d == 1.2)
+    );
+    assert!(car_lengths(&uniform).iter().all(|l| *l == 4.5));
+    // The layout does not move with the variation: the same buildings on the same lots.
+    assert_eq!(uniform.buildings.len(), varied.buildings.len());
+    assert!(
+        uniform
+            .buildings
+            .iter()
+            .zip(&varied.buildings)
+            .all(|(a, b)| a.footprint == b.footprint)
     );
 }
 

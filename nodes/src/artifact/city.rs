@@ -6,10 +6,6 @@ use super::Polygon;
 use crate::artifact::Material;
 use crate::artifact::TerrainModel;
 
-/// Depth of the synthetic city's window and door recesses: the thickness of the outer wall
-/// layer, metres.
-pub const RECESS_M: f64 = 0.25;
-
 /// An oriented rectangle: south-west corner (before rotation), length along `heading`, width.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Rect {
@@ -151,10 +147,12 @@ pub struct BuildingSpec {
 impl BuildingSpec {
     /// The façade feature at site-frame point `p`, if any: `p` lies within the feature's extent
     /// along its edge and in height, and between the wall plane and the feature's depth (a recess
-    /// reaches `RECESS_M` in, a protrusion `depth_m` out), every extent widened by `slack_m` (the
-    /// reveals of an opening lie exactly on its edges: a slack above float rounding keeps them in).
+    /// reaches the walls' outer layer in, [`Self::recess_depth_m`], a protrusion `depth_m` out),
+    /// every extent widened by `slack_m` (the reveals of an opening lie exactly on its edges: a
+    /// slack above float rounding keeps them in).
     /// The truth for scoring what views and fusion find on a façade.
     pub fn feature_at(&self, p: [f64; 3], slack_m: f64) -> Option<usize> {
+        let layer_m = self.recess_depth_m();
         self.features.iter().position(|f| {
             // Most features are on other storeys: the height test first, before the edge's
             // frame (views ask this of every building pixel).
@@ -183,7 +181,7 @@ impl BuildingSpec {
             let along = d[0] * t[0] + d[1] * t[1];
             let inward = -d[0] * t[1] + d[1] * t[0];
             let (lo, hi) = if f.depth_m < 0.0 {
-                (0.0, RECESS_M.max(-f.depth_m))
+                (0.0, layer_m.max(-f.depth_m))
             } else {
                 (-f.depth_m, 0.0)
             };
@@ -192,6 +190,16 @@ impl BuildingSpec {
                 && inward >= lo - slack_m
                 && inward <= hi + slack_m
         })
+    }
+
+    /// How deep the building's openings reach into its walls, metres: the deepest window or
+    /// door recess (0 without any). The thickness of the walls' outer layer.
+    pub fn recess_depth_m(&self) -> f64 {
+        self.features
+            .iter()
+            .filter(|f| matches!(f.kind, FeatureKind::Window | FeatureKind::Door))
+            .map(|f| -f.depth_m)
+            .fold(0.0, f64::max)
     }
 
     /// Highest point of the roof above `ground_z`, furniture excluded.
@@ -206,7 +214,17 @@ impl BuildingSpec {
     }
 }
 
-/// A tree: trunk and ellipsoidal crown.
+/// The shape of a tree's crown.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum CrownShape {
+    /// An ellipsoid: broadleaved trees, round, spreading or columnar by its proportions.
+    #[default]
+    Ellipsoid,
+    /// A cone on a flat base: conifers.
+    Cone,
+}
+
+/// A tree: trunk and crown.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TreeSpec {
     /// `tree-<n>`.
@@ -221,6 +239,39 @@ pub struct TreeSpec {
     pub crown_radius_m: f64,
     /// Crown height.
     pub crown_m: f64,
+    /// Crown shape.
+    #[serde(default)]
+    pub crown: CrownShape,
+}
+
+impl TreeSpec {
+    /// The crown's bottom and top over site-frame (x, y), where the crown covers it: the truth a
+    /// canopy is scored against.
+    pub fn crown_span(&self, x: f64, y: f64) -> Option<(f64, f64)> {
+        let r2 =
+            ((x - self.pos[0]).powi(2) + (y - self.pos[1]).powi(2)) / self.crown_radius_m.powi(2);
+        if !(r2 < 1.0) {
+            return None;
+        }
+        let base = self.ground_z + self.trunk_m;
+        Some(match self.crown {
+            CrownShape::Ellipsoid => {
+                let cz = base + self.crown_m / 2.0;
+                let hh = self.crown_m / 2.0 * (1.0 - r2).sqrt();
+                (cz - hh, cz + hh)
+            }
+            CrownShape::Cone => (base, base + self.crown_m * (1.0 - r2.sqrt())),
+        })
+    }
+
+    /// The crown's volume, cubic metres.
+    pub fn crown_volume_m3(&self) -> f64 {
+        let disk = std::f64::consts::PI * self.crown_radius_m.powi(2);
+        match self.crown {
+            CrownShape::Ellipsoid => disk * self.crown_m * 2.0 / 3.0,
+            CrownShape::Cone => disk * self.crown_m / 3.0,
+        }
+    }
 }
 
 /// Street clutter.

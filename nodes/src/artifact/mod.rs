@@ -22,7 +22,7 @@ use serde::{Deserialize, Serialize};
 pub use array::{PodVec, SparseLayer};
 pub use charts::{Chart, ChartFrame, ChartKind, ChartLayers, ChartSet, FusionStats, TexelLayers};
 pub use city::{
-    BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, RECESS_M, Rect, Roof, RoofBox,
+    BuildingSpec, City, ClutterSpec, CrownShape, FacadeFeature, FeatureKind, Rect, Roof, RoofBox,
     Street, TreeSpec,
 };
 pub use footprints::{Footprint, Footprints, Polygon, point_in_ring, ring_area};

@@ -276,6 +276,38 @@ pub fn ellipsoid(c: [f64; 3], r: [f64; 3], segments: u32, m: Material) -> Mesh {
     spheroid_cap(c, r, segments, std::f64::consts::PI, m)
 }
 
+/// A closed cone: a disk of `radius` at `z0` under its apex `height` above, `segments` around. A
+/// conifer's crown.
+pub fn cone(
+    center: [f64; 2],
+    radius: f64,
+    z0: f64,
+    height: f64,
+    segments: u32,
+    m: Material,
+) -> Mesh {
+    let n = segments.max(3) as usize;
+    let mut b = Builder::default();
+    let apex = b.v([center[0], center[1], z0 + height]);
+    let ring: Vec<u32> = (0..n)
+        .map(|k| {
+            let phi = std::f64::consts::TAU * k as f64 / n as f64;
+            b.v([
+                center[0] + radius * phi.cos(),
+                center[1] + radius * phi.sin(),
+                z0,
+            ])
+        })
+        .collect();
+    let bottom = b.v([center[0], center[1], z0]);
+    for k in 0..n {
+        let k1 = (k + 1) % n;
+        b.tri(apex, ring[k], ring[k1], m);
+        b.tri(bottom, ring[k1], ring[k], m);
+    }
+    b.finish()
+}
+
 /// A closed dome: the upper half of an ellipsoid of radius `radius` and height `height` on a
 /// disk at `z0`.
 pub fn dome(

@@ -5,14 +5,18 @@
 //! (one or two rows); each lot draws a building type (flat, L-shaped, courtyard, gabled, hipped,
 //! stepped, domed) or a small park. Streets get trees, parked cars, poles, signs and shelters. All
 //! draws are hashes of (seed, purpose, index), so the city does not depend on evaluation order.
+//!
+//! Façades and clutter vary ([`CityVariation`]): recess and balcony depths drawn per building,
+//! bay windows standing out of some façades, glass shopfronts under masonry, cars, poles, signs
+//! and shelters of many sizes. The street-level stages have to measure these: no class, material
+//! or asset table of theirs holds the answer.
 
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::Material;
-use crate::artifact::RECESS_M;
 use crate::artifact::{
-    BuildingSpec, City, ClutterSpec, FacadeFeature, FeatureKind, Polygon, Rect, Roof, RoofBox,
-    Street, TreeSpec,
+    BuildingSpec, City, ClutterSpec, CrownShape, FacadeFeature, FeatureKind, Polygon, Rect, Roof,
+    RoofBox, Street, TreeSpec,
 };
 use crate::artifact::{TerrainModel, height_at};
 use crate::rng::{mix, unit};
@@ -41,9 +45,102 @@ pub struct SynthCityParams {
     pub tree_spacing_m: f64,
     /// Parked cars per 100 m of kerb. Default 6.
     pub cars_per_100m: f64,
+    /// How façades and street clutter vary from one building or item to the next.
+    pub variation: CityVariation,
     /// The terrain under the city.
     pub terrain: TerrainModel,
 }
+
+/// How the city's façades and clutter vary. [`CityVariation::none`] gives the uniform city of
+/// SynthCity v2 (every recess 0.25 m, every balcony 1.2 m, one size per clutter kind), for tests
+/// that isolate one stage from this variation.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CityVariation {
+    /// Depth range of window and door recesses, drawn once per building, metres. Default
+    /// (0.12, 0.40): the reveal of a window set in a thin rendered wall to one in a solid brick
+    /// wall of one and a half bricks.
+    pub recess_m: (f64, f64),
+    /// Depth range of balconies, drawn once per building, metres. Default (0.8, 1.8): French
+    /// balconies' shallow slabs to the 1.5 m-plus that housing codes ask of a usable one.
+    pub balcony_m: (f64, f64),
+    /// Share of masonry buildings of two storeys or more whose front wall has bay windows
+    /// standing out of it on the upper storeys. Default 0.15.
+    pub bay_share: f64,
+    /// How far bays stand out, drawn per building, metres. Default (0.3, 0.8).
+    pub bay_m: (f64, f64),
+    /// Share of masonry buildings with glass shopfronts along the ground floor of the front
+    /// wall: one building, two façade materials. Default 0.35.
+    pub shopfront_share: f64,
+    /// Whether clutter sizes are drawn per item (cars from small hatchbacks to vans, poles 6 to
+    /// 10 m, shelters and signs of several sizes) rather than one size per kind. Default true.
+    pub clutter_sizes: bool,
+    /// Whether tree crowns take several shapes (a fifth conical, a fifth narrow and columnar,
+    /// the rest round or spreading) rather than all round. Default true.
+    pub crown_shapes: bool,
+}
+
+impl Default for CityVariation {
+    fn default() -> Self {
+        CityVariation {
+            recess_m: (0.12, 0.40),
+            balcony_m: (0.8, 1.8),
+            bay_share: 0.15,
+            bay_m: (0.3, 0.8),
+            shopfront_share: 0.35,
+            clutter_sizes: true,
+            crown_shapes: true,
+        }
+    }
+}
+
+impl CityVariation {
+    /// No variation: every building and clutter item as SynthCity v2 drew them.
+    pub fn none() -> Self {
+        CityVariation {
+            recess_m: (UNIFORM_RECESS_M, UNIFORM_RECESS_M),
+            balcony_m: (UNIFORM_BALCONY_M, UNIFORM_BALCONY_M),
+            bay_share: 0.0,
+            bay_m: (0.3, 0.8),
+            shopfront_share: 0.0,
+            clutter_sizes: false,
+            crown_shapes: false,
+        }
+    }
+
+    fn validate(&self) -> Result<(), ParamError> {
+        let range = |name: &'static str, (lo, hi): (f64, f64), min: f64, max: f64| {
+            if lo >= min && lo <= hi && hi <= max {
+                Ok(())
+            } else {
+                Err(ParamError::new(
+                    name,
+                    format!("expected {min} <= low <= high <= {max} metres, found ({lo}, {hi})"),
+                ))
+            }
+        };
+        range("variation.recess_m", self.recess_m, 0.05, 1.0)?;
+        range("variation.balcony_m", self.balcony_m, 0.3, 3.0)?;
+        range("variation.bay_m", self.bay_m, 0.1, 1.5)?;
+        for (name, share) in [
+            ("variation.bay_share", self.bay_share),
+            ("variation.shopfront_share", self.shopfront_share),
+        ] {
+            if !(0.0..=1.0).contains(&share) {
+                return Err(ParamError::new(
+                    name,
+                    format!("expected a share from 0 to 1, found {share}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// SynthCity v2's one recess depth for every window and door, metres.
+const UNIFORM_RECESS_M: f64 = 0.25;
+/// SynthCity v2's one balcony depth, metres.
+const UNIFORM_BALCONY_M: f64 = 1.2;
 
 impl Default for SynthCityParams {
     fn default() -> Self {
@@ -56,6 +153,7 @@ impl Default for SynthCityParams {
             height_m: (8.0, 32.0),
             tree_spacing_m: 15.0,
             cars_per_100m: 6.0,
+            variation: CityVariation::default(),
             terrain: TerrainModel {
                 seed: 7,
                 size_m: (400.0, 300.0),
@@ -71,8 +169,8 @@ pub struct SynthCity;
 impl Stage for SynthCity {
     const KIND: &'static str = "SynthCity";
     // 2: no street furniture in the crossings (poles and parked cars stood in the carriageway of
-    // north-south streets).
-    const VERSION: u32 = 2;
+    // north-south streets). 3: façades and clutter vary (`variation`).
+    const VERSION: u32 = 3;
     const DOC: &'static str =
         "seeded synthetic city ground truth: terrain, buildings with roof shapes, trees, clutter";
     const INPUTS: &'static [InputSpec] = &[];
@@ -138,7 +236,7 @@ impl Stage for SynthCity {
                 "expected 3 <= min <= max, finite",
             ));
         }
-        Ok(())
+        p.variation.validate()
     }
 
     fn run(p: &Self::Params, _: &Inputs, _: &Ctx) -> Result<City, StageError> {
@@ -286,6 +384,7 @@ fn add_lot(city: &mut City, d: &Draw, p: &SynthCityParams, lot: u64, b: [f64; 4]
         lo - 1.0,
         hi + massing.eave_m,
         facade,
+        &p.variation,
     );
     city.buildings.push(BuildingSpec {
         id,
@@ -556,7 +655,10 @@ pub const FLOOR_M: f64 = 3.2;
 
 /// Windows on every storey of every wall long enough (every 3 m, 1.4 x 1.6 m, sill at 0.9 m), a
 /// door in the middle of the first wall, balconies on some taller masonry buildings, and
-/// drainpipes at two corners.
+/// drainpipes at two corners. With `v`'s variation: recess and balcony depths drawn per
+/// building, bay windows (2.1 m tall, 1.6 m wide, standing out) on the upper storeys of some
+/// masonry fronts, and glass shopfronts (2.6 m wide, 2.5 m tall, shallow) in place of the
+/// ground-floor windows of others' first wall.
 #[allow(clippy::too_many_arguments)]
 fn facade_features(
     d: &Draw,
@@ -567,9 +669,17 @@ fn facade_features(
     base_z: f64,
     eave_z: f64,
     facade: Material,
+    v: &CityVariation,
 ) -> Vec<FacadeFeature> {
     let floors = ((eave_z - ground_z) / FLOOR_M).floor().max(1.0) as usize;
-    let balconies = floors >= 3 && facade != Material::Glass && d.u(60, lot) < 0.4;
+    let masonry = facade != Material::Glass;
+    let balconies = floors >= 3 && masonry && d.u(60, lot) < 0.4;
+    let recess_m = d.range(61, lot, v.recess_m.0, v.recess_m.1);
+    let balcony_m = d.range(62, lot, v.balcony_m.0, v.balcony_m.1);
+    let bays = floors >= 2 && masonry && d.u(63, lot) < v.bay_share;
+    let bay_m = d.range(64, lot, v.bay_m.0, v.bay_m.1);
+    let shopfront = masonry && d.u(65, lot) < v.shopfront_share;
+    let shopfront_recess_m = d.range(66, lot, 0.08, 0.2);
     let mut out = Vec::new();
     let rings: Vec<&Vec<[f64; 2]>> = std::iter::once(&fp.exterior).chain(&fp.holes).collect();
     for (ri, ring) in rings.iter().enumerate() {
@@ -581,7 +691,8 @@ fn facade_features(
                 continue;
             }
             let first = (len - (n_win - 1) as f64 * 3.0) / 2.0;
-            let door = (ri == 0 && e == 0).then_some(n_win / 2);
+            let front = ri == 0 && e == 0;
+            let door = front.then_some(n_win / 2);
             for f in 0..floors {
                 let z0 = ground_z + f as f64 * FLOOR_M;
                 for k in 0..n_win {
@@ -601,22 +712,39 @@ fn facade_features(
                             FeatureKind::Door,
                             (c - 0.6, c + 0.6),
                             (g, g + 2.2),
-                            -RECESS_M,
+                            -recess_m,
                         ));
                         continue;
                     }
-                    out.push(feature(
-                        FeatureKind::Window,
-                        (c - 0.7, c + 0.7),
-                        (z0 + 0.9, z0 + 2.5),
-                        -RECESS_M,
-                    ));
-                    if balconies && ri == 0 && e == 0 && f >= 1 && k % 2 == 0 {
+                    let balcony = balconies && front && f >= 1 && k % 2 == 0;
+                    if f == 0 && front && shopfront {
+                        out.push(feature(
+                            FeatureKind::Window,
+                            (c - 1.3, c + 1.3),
+                            (z0 + 0.4, z0 + 2.9),
+                            -shopfront_recess_m,
+                        ));
+                    } else if bays && front && f >= 1 && !balcony {
+                        out.push(feature(
+                            FeatureKind::Window,
+                            (c - 0.8, c + 0.8),
+                            (z0 + 0.6, z0 + 2.7),
+                            bay_m,
+                        ));
+                    } else {
+                        out.push(feature(
+                            FeatureKind::Window,
+                            (c - 0.7, c + 0.7),
+                            (z0 + 0.9, z0 + 2.5),
+                            -recess_m,
+                        ));
+                    }
+                    if balcony {
                         out.push(feature(
                             FeatureKind::Balcony,
                             (c - 1.1, c + 1.1),
                             (z0, z0 + 1.1),
-                            1.2,
+                            balcony_m,
                         ));
                     }
                 }
@@ -636,15 +764,43 @@ fn facade_features(
     out
 }
 
+/// A street tree: a round or spreading crown, or with `variation.crown_shapes` one in five a
+/// conifer's cone (1.5-2.8 m across, 5-9 m tall) and one in five a columnar crown (1.2-2.0 m,
+/// 6-9 m tall), as street-tree stock lists hold them.
 fn add_tree(city: &mut City, d: &Draw, p: &SynthCityParams, pos: [f64; 2]) {
     let i = city.trees.len() as u64;
+    let shape = if p.variation.crown_shapes {
+        d.u(43, i)
+    } else {
+        1.0
+    };
+    let (crown, crown_radius_m, crown_m) = if shape < 0.2 {
+        (
+            CrownShape::Cone,
+            d.range(44, i, 1.5, 2.8),
+            d.range(45, i, 5.0, 9.0),
+        )
+    } else if shape < 0.4 {
+        (
+            CrownShape::Ellipsoid,
+            d.range(44, i, 1.2, 2.0),
+            d.range(45, i, 6.0, 9.0),
+        )
+    } else {
+        (
+            CrownShape::Ellipsoid,
+            d.range(41, i, 2.0, 3.8),
+            d.range(42, i, 4.0, 7.5),
+        )
+    };
     city.trees.push(TreeSpec {
         id: format!("tree-{i}"),
         pos,
         ground_z: height_at(&p.terrain, pos[0], pos[1]),
         trunk_m: d.range(40, i, 2.2, 3.5),
-        crown_radius_m: d.range(41, i, 2.0, 3.8),
-        crown_m: d.range(42, i, 4.0, 7.5),
+        crown_radius_m,
+        crown_m,
+        crown,
     });
 }
 
@@ -677,8 +833,24 @@ fn item(
     }
 }
 
-/// A parked car's length, width and height, metres.
+/// A parked car's length, width and height without size variation, metres.
 const CAR_M: [f64; 3] = [4.5, 1.8, 1.5];
+
+/// A parked car's length, width and height, metres: with `vary`, from a 3.6 m city car to a 5.2 m
+/// estate (European segments A to E), one in ten a 5.4 m van 2.4 m tall; otherwise [`CAR_M`].
+fn car_size(d: &Draw, i: u64, vary: bool) -> [f64; 3] {
+    if !vary {
+        return CAR_M;
+    }
+    if d.u(69, i) < 0.1 {
+        return [5.4, 2.0, 2.4];
+    }
+    [
+        d.range(58, i, 3.6, 5.2),
+        d.range(67, i, 1.65, 1.95),
+        d.range(68, i, 1.4, 1.75),
+    ]
+}
 
 /// Pavements are this wide, so a street's carriageway ends this far inside each of its edges.
 const PAVEMENT_M: f64 = 2.5;
@@ -728,7 +900,8 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, bw: f64,
             let mut x = 5.0 + d.range(52, k, 0.0, gap);
             let mut i = 0u64;
             while p.cars_per_100m > 0.0 && x < sx - 5.0 {
-                let clear = !near_crossing(x, CAR_M[0] / 2.0, &crossings, parking_clear_m);
+                let size = car_size(d, (k << 20) + i, p.variation.clutter_sizes);
+                let clear = !near_crossing(x, size[0] / 2.0, &crossings, parking_clear_m);
                 if clear && kerb > 2.0 && kerb < sy - 2.0 {
                     let heading = if d.u(53, (k << 20) + i) < 0.5 {
                         0.0
@@ -736,7 +909,7 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, bw: f64,
                         std::f64::consts::PI
                     };
                     let mat = Material::Metal;
-                    add_clutter(city, p, item("car", [x, kerb], heading, CAR_M, 0.0, mat));
+                    add_clutter(city, p, item("car", [x, kerb], heading, size, 0.0, mat));
                 }
                 x += gap * d.range(54, (k << 20) + i, 0.6, 1.4);
                 i += 1;
@@ -748,6 +921,12 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, bw: f64,
                 // The widest thing on a pole is its 0.9 m sign.
                 let clear = !near_crossing(x, 0.45, &crossings, carriageway_half_m);
                 if clear && py > 1.0 && py < sy - 1.0 {
+                    let sizes = p.variation.clutter_sizes;
+                    let pole_m = if sizes {
+                        d.range(70, (k << 20) + j, 6.0, 10.0)
+                    } else {
+                        8.0
+                    };
                     add_clutter(
                         city,
                         p,
@@ -755,12 +934,19 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, bw: f64,
                             "pole",
                             [x, py],
                             0.0,
-                            [0.25, 0.25, 8.0],
+                            [0.25, 0.25, pole_m],
                             0.0,
                             Material::Metal,
                         ),
                     );
                     if d.u(56, (k << 20) + j) < 0.3 {
+                        // Traffic signs: 0.6 m to 0.9 m plates (Vienna Convention sizes).
+                        let (w, h) = if sizes {
+                            let w = d.range(72, (k << 20) + j, 0.6, 0.9);
+                            (w, w * d.range(73, (k << 20) + j, 0.65, 1.0))
+                        } else {
+                            (0.9, 0.6)
+                        };
                         add_clutter(
                             city,
                             p,
@@ -768,14 +954,25 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, bw: f64,
                                 "sign",
                                 [x, py + side * 0.2],
                                 0.0,
-                                [0.9, 0.08, 0.6],
+                                [w, 0.08, h],
                                 2.2,
                                 Material::Metal,
                             ),
                         );
                     }
+                    // Shelters from a two-seat 3 m canopy to a 5 m one; the widest the
+                    // crossing test allows for is the 5 m one.
+                    let shelter = if sizes {
+                        [
+                            d.range(71, (k << 20) + j, 3.0, 5.0),
+                            d.range(74, (k << 20) + j, 1.3, 2.0),
+                            d.range(75, (k << 20) + j, 2.4, 2.8),
+                        ]
+                    } else {
+                        [3.5, 1.6, 2.6]
+                    };
                     let shelter_clear =
-                        !near_crossing(x + 4.0, 1.75, &crossings, carriageway_half_m);
+                        !near_crossing(x + 4.0, shelter[0] / 2.0, &crossings, carriageway_half_m);
                     if shelter_clear && d.u(57, (k << 20) + j) < 0.12 {
                         add_clutter(
                             city,
@@ -784,7 +981,7 @@ fn add_street_furniture(city: &mut City, d: &Draw, p: &SynthCityParams, bw: f64,
                                 "shelter",
                                 [x + 4.0, py - side * 0.6],
                                 0.0,
-                                [3.5, 1.6, 2.6],
+                                shelter,
                                 0.0,
                                 Material::Glass,
                             ),

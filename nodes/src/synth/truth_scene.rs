@@ -6,15 +6,14 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::Material;
-use crate::artifact::RECESS_M;
 use crate::artifact::height_at;
 use crate::artifact::{
-    ArtifactType, BuildingSpec, City, FeatureKind, Mesh, ObjectClass, Rect, Roof, Scene,
-    SceneObject,
+    ArtifactType, BuildingSpec, City, CrownShape, FeatureKind, Mesh, ObjectClass, Rect, Roof,
+    Scene, SceneObject,
 };
 use crate::geom::boolean::{subtract_then_add, to_manifold};
 use crate::geom::mesh_build::{
-    cuboid, dome, ellipsoid, gabled, height_surface, hipped, prism, quad_prism,
+    cone, cuboid, dome, ellipsoid, gabled, height_surface, hipped, prism, quad_prism,
 };
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -42,8 +41,10 @@ pub struct TruthScene;
 
 impl Stage for TruthScene {
     const KIND: &'static str = "TruthScene";
-    // 2: one solid per building, merged by Booleans (no stacked shells).
-    const VERSION: u32 = 2;
+    // 2: one solid per building, merged by Booleans (no stacked shells). 3: bay windows (a
+    // window standing out of its wall) and the roof's inset from each building's own recesses;
+    // conical crowns.
+    const VERSION: u32 = 3;
     const DOC: &'static str =
         "ground-truth scene of a synthetic city: terrain, closed buildings, foliage, clutter";
     const INPUTS: &'static [InputSpec] = &[InputSpec::one(
@@ -110,13 +111,23 @@ impl Stage for TruthScene {
                 t.ground_z - 0.5,
                 Material::Wood,
             );
-            let cz = t.ground_z + t.trunk_m + t.crown_m / 2.0;
-            mesh.append(&ellipsoid(
-                [t.pos[0], t.pos[1], cz],
-                [t.crown_radius_m, t.crown_radius_m, t.crown_m / 2.0],
-                16,
-                Material::Foliage,
-            ));
+            let base = t.ground_z + t.trunk_m;
+            mesh.append(&match t.crown {
+                CrownShape::Ellipsoid => ellipsoid(
+                    [t.pos[0], t.pos[1], base + t.crown_m / 2.0],
+                    [t.crown_radius_m, t.crown_radius_m, t.crown_m / 2.0],
+                    16,
+                    Material::Foliage,
+                ),
+                CrownShape::Cone => cone(
+                    t.pos,
+                    t.crown_radius_m,
+                    base,
+                    t.crown_m,
+                    16,
+                    Material::Foliage,
+                ),
+            });
             scene.objects.push(SceneObject {
                 id: t.id.clone(),
                 class: ObjectClass::Vegetation,
@@ -182,7 +193,7 @@ pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
         Roof::Gabled { rect, ridge_m } | Roof::Hipped { rect, ridge_m } => {
             // With façade relief the roof sits back by the recess depth: the walls' outer layer
             // (the depth of the openings) stops at the eave around it.
-            let d = if b.features.is_empty() { 0.0 } else { RECESS_M };
+            let d = b.recess_depth_m();
             let r = inset_rect(rect, d);
             let roof = if matches!(b.roof, Roof::Gabled { .. }) {
                 gabled
@@ -291,6 +302,12 @@ fn facade_relief(b: &BuildingSpec) -> (Vec<Mesh>, Vec<Mesh>) {
             quad_prism(on_wall(z), out, reach, m)
         };
         match f.kind {
+            // A bay window stands out of the wall, glazed at its front.
+            FeatureKind::Window if f.depth_m > 0.0 => protrusions.push(box_on(
+                f.z,
+                (-EMBED, f.depth_m),
+                [b.facade, b.facade, Material::Glass],
+            )),
             FeatureKind::Window => recesses.push(box_on(
                 f.z,
                 (f.depth_m.min(-EMBED), EMBED),

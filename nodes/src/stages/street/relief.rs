@@ -38,7 +38,9 @@ impl Stage for Relief {
     // the street round the corner) votes, by its label, on the wall it stands by.
     // 15: a view's depth calibrated by Theil-Sen, as the clutter's lifting does, instead of
     // least squares trimmed at three MADs (one depth calibration in the tree).
-    const VERSION: u32 = 15;
+    // 16: a class's depth range holds for its usual sign only (a window standing out, a bay,
+    // takes the protrusions' range); windows and doors 0.05-0.5 m deep.
+    const VERSION: u32 = 16;
     const DOC: &'static str = "façade relief from street views: region votes fused onto wall charts, the posterior of eq. (4), recessed and protruding instances with their evidence";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("views", ArtifactType::Views, "the street views"),

@@ -154,8 +154,10 @@ impl Default for ReliefParams {
             wall_class: "wall".into(),
             ignore_classes: vec!["roof".into()],
             classes: vec![
-                rule("window", -1, (0.1, 0.3), false, None),
-                rule("door", -1, (0.1, 0.3), false, None),
+                // Reveals from a window flush in a thin rendered wall to one set in a 0.5 m
+                // masonry wall.
+                rule("window", -1, (0.05, 0.5), false, None),
+                rule("door", -1, (0.05, 0.5), false, None),
                 rule("balcony", 1, (0.3, 1.5), false, None),
                 // Views see a drainpipe between balconies and parked cars, in pieces, and rarely
                 // up to the eave from the street: it runs there all the same. Downpipes are
@@ -271,9 +273,11 @@ impl ReliefParams {
     /// The depth range of an instance of `class` and `sign`.
     pub fn depth_range(&self, class: &str, sign: i8) -> (f64, f64) {
         match self.classes.iter().find(|c| c.name == class) {
-            Some(c) => c.depth_m,
-            None if sign < 0 => self.unknown_recess_m,
-            None => self.unknown_protrusion_m,
+            // A class's range is for its usual sign: a bay window stands out as far as any
+            // protrusion may, not as deep as windows are set in.
+            Some(c) if c.prior == 0 || c.prior.signum() == sign.signum() => c.depth_m,
+            _ if sign < 0 => self.unknown_recess_m,
+            _ => self.unknown_protrusion_m,
         }
     }
 }
