@@ -373,7 +373,9 @@ fn clutter_recall_and_precision_on_the_demo_site() {
 /// dropped (`min_view_share`): cars 0.578 / 0.669, poles 0.537 / 0.571, shelters 0.192 /
 /// 0.714, signs 0.467 / 0.824, trees 0.776 / 0.883, median 0.60 m (2026-11-28; the run prints
 /// the chain with the test off beside it: cars 0.520 / 0.717, poles 0.405 / 0.810, the
-/// precision bought with recall). The floors hold those levels. Slow (416 views
+/// precision bought with recall). On SynthCity v3's clutter of many sizes: cars 0.573 / 0.746,
+/// poles 0.529 / 0.587, shelters 0.208 / 0.714, signs 0.480 / 0.706, trees 0.765 / 0.854, median
+/// 0.65 m (2026-11-28). The floors hold those levels. Slow (416 views
 /// rendered and registered: about 6 minutes on 2 cores), so run on request:
 /// `cargo test -p kodama-nodes --test clutter clutter_on_every_street -- --ignored --nocapture`.
 #[test]
