@@ -465,6 +465,40 @@ fn a_sweep_metric_naming_nothing_is_refused() {
     has(&r.stderr, "did you mean `mean`?");
 }
 
+/// The fields this issue added: a sweep's `metrics_only` that is not a boolean, and a SynthCity
+/// variation range out of order or share above 1, are refused with exit 2, naming the file, the
+/// place and what was expected, before anything runs.
+#[test]
+fn a_bad_metrics_only_or_city_variation_is_refused() {
+    let env = Env::new();
+    env.write("g.ron", CHAIN);
+    let s = env.write(
+        "s.ron",
+        r#"Sweep(graph: "g.ron", axes: { "s": Grid(set: "smooth.sigma_m", values: [1.0]) }, metrics: ["stats.mean"], metrics_only: 1)"#,
+    );
+    let r = env.sweep(&s, &[]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    has(&r.stderr, "s.ron:1:");
+    has(&r.stderr, "expected true or false");
+    let city = env.write(
+        "city.ron",
+        r#"Graph(
+    site: Site(crs: "EPSG:32618", origin: (583200.0, 4506600.0), cell_m: 1.0),
+    nodes: {
+        "city": SynthCity(size_m: (120.0, 100.0), blocks: (2, 2), street_m: 14.0, terrain: (size_m: (120.0, 100.0)), variation: (recess_m: (0.4, 0.1))),
+    },
+)"#,
+    );
+    let r = env.run(&city, &[]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    has(&r.stderr, "city.ron:");
+    has(&r.stderr, "variation.recess_m");
+    let r = env.run(&city, &["--set", "city.variation=(bay_share: 1.5)"]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    has(&r.stderr, "variation.bay_share");
+    assert!(!env.cache().join("cas").exists() || env.blobs().is_empty());
+}
+
 // ------------------------------------------------------------------------------ output folder
 
 fn inode(p: &Path) -> u64 {

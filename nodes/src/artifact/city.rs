@@ -152,7 +152,9 @@ impl BuildingSpec {
     /// slack above float rounding keeps them in).
     /// The truth for scoring what views and fusion find on a façade.
     pub fn feature_at(&self, p: [f64; 3], slack_m: f64) -> Option<usize> {
-        let layer_m = self.recess_depth_m();
+        // The views ask this of every building pixel: the outer layer's depth is a pass over the
+        // features, so it is found only for a point behind a shallow opening's back.
+        let layer_m = std::cell::OnceCell::new();
         self.features.iter().position(|f| {
             // Most features are on other storeys: the height test first, before the edge's
             // frame (views ask this of every building pixel).
@@ -181,7 +183,12 @@ impl BuildingSpec {
             let along = d[0] * t[0] + d[1] * t[1];
             let inward = -d[0] * t[1] + d[1] * t[0];
             let (lo, hi) = if f.depth_m < 0.0 {
-                (0.0, layer_m.max(-f.depth_m))
+                let own = -f.depth_m;
+                if inward <= own + slack_m {
+                    (0.0, own)
+                } else {
+                    (0.0, own.max(*layer_m.get_or_init(|| self.recess_depth_m())))
+                }
             } else {
                 (-f.depth_m, 0.0)
             };
