@@ -230,6 +230,8 @@ pub fn run(
         nodes: records,
         outputs,
         output_errors,
+        wall_s: started.elapsed().as_secs_f64(),
+        peak_rss_mb: crate::record::peak_rss_mb(),
     };
     let mut next = last;
     next.nodes.extend(snapshots);

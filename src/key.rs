@@ -9,7 +9,8 @@ use crate::record::Snapshot;
 /// Bumped if the key layout below changes, so old cache entries are not mistaken for new ones.
 const KEY_LAYOUT: &[u8] = b"kodama-dag action key 1\0";
 
-fn put(h: &mut blake3::Hasher, bytes: &[u8]) {
+/// Hashes `bytes` behind their length, so that adjacent fields cannot run into each other.
+pub(crate) fn put(h: &mut blake3::Hasher, bytes: &[u8]) {
     h.update(&(bytes.len() as u64).to_le_bytes());
     h.update(bytes);
 }

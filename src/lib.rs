@@ -16,6 +16,7 @@ pub mod progress;
 pub mod record;
 pub mod registry;
 pub mod serve;
+pub mod slurm;
 pub mod sweep;
 pub mod syntax;
 pub mod watch;

@@ -83,6 +83,9 @@ enum Command {
     },
     /// Run a sweep file: a base graph over grids of parameters and ablation switches.
     Sweep(SweepArgs),
+    /// Submit a graph or a sweep to a cluster's scheduler as a chain of batch jobs over a shared
+    /// cache (README, "Running on a cluster").
+    Submit(SubmitArgs),
     /// Say what `run` would do and why, without running anything.
     Explain {
         #[command(flatten)]
@@ -149,6 +152,78 @@ struct SweepArgs {
     /// paths leave its folder (or --data).
     #[arg(long)]
     allow_outside: bool,
+    /// Run only variant I (numbered from 0 in --dry-run's order) and write no table: one task
+    /// of a job array.
+    #[arg(long, value_name = "I", conflicts_with_all = ["dry_run", "prefix"])]
+    variant: Option<usize>,
+    /// Run only the nodes every variant shares, and write no table: the prefix job of a
+    /// submitted sweep.
+    #[arg(long, conflicts_with = "dry_run")]
+    prefix: bool,
+}
+
+/// `submit` arguments.
+#[derive(Args)]
+struct SubmitArgs {
+    /// The graph or sweep file (RON).
+    file: PathBuf,
+    /// The scheduler.
+    #[arg(long, value_enum, default_value = "slurm")]
+    engine: Engine,
+    /// Options added to every sbatch command, e.g. "--partition=gpu --account=rf" (split as a
+    /// shell splits words; they override the scripts' #SBATCH lines).
+    #[arg(long, value_name = "ARGS", allow_hyphen_values = true)]
+    sbatch: Option<String>,
+    /// Resolve data paths against this folder.
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Override one parameter in every job: NODE.PARAM=VALUE (repeatable).
+    #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+    sets: Vec<String>,
+    /// Cache directory, on a filesystem every node of the cluster mounts at the same path
+    /// (default: $KODAMA_DAG_CACHE, else ./cache).
+    #[arg(long)]
+    cache: Option<PathBuf>,
+    /// Where outputs, tables, job scripts and logs go (default: out/<name>/); the scripts and
+    /// logs in its slurm/<n>/.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// A graph's nodes to run, with what they need (repeatable; graphs only).
+    #[arg(long = "target", value_name = "NODE")]
+    targets: Vec<String>,
+    /// CPUs per job (--cpus-per-task, and kodama-dag's -j); default 1.
+    #[arg(long, short, value_parser = parse_jobs)]
+    jobs: Option<usize>,
+    /// Let data paths (and a sweep's base graph) leave their folders.
+    #[arg(long)]
+    allow_outside: bool,
+    /// Run at most this many of a sweep's variant tasks at once (--array=...%K).
+    #[arg(long, value_name = "K", value_parser = parse_jobs)]
+    array_limit: Option<usize>,
+    /// Write the job scripts and print the sbatch commands, submitting nothing.
+    #[arg(long)]
+    dry_run: bool,
+    /// Wait for the jobs to end, then exit as a local run would (0, 1, or 2 for bad input).
+    #[arg(long)]
+    wait: bool,
+    /// Seconds between two looks at squeue while waiting (1-3600).
+    #[arg(long, default_value_t = 15, value_parser = parse_poll)]
+    poll_s: u64,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Engine {
+    /// Slurm, through sbatch and squeue.
+    Slurm,
+}
+
+fn parse_poll(s: &str) -> Result<u64, String> {
+    match s.trim().parse::<u64>() {
+        Ok(n) if (1..=3600).contains(&n) => Ok(n),
+        _ => Err(format!(
+            "expected whole seconds from 1 to 3600, found {s:?}"
+        )),
+    }
 }
 
 /// `gc` arguments.
@@ -455,6 +530,7 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             debounce_ms,
         } => watch_loop(graph, cache, out, jobs, json, quiet, debounce_ms),
         Command::Sweep(a) => sweep_command(a),
+        Command::Submit(a) => submit_command(a),
         Command::Explain {
             graph,
             cache,
@@ -497,6 +573,8 @@ fn sweep_command(a: SweepArgs) -> Result<u8, Fail> {
         quiet,
         dry_run,
         allow_outside,
+        variant,
+        prefix,
     } = a;
     let sw = kodama_dag::sweep::load_sweep(&sweep, allow_outside)
         .map_err(|e| Fail(2, format!("error: {e}")))?;
@@ -524,16 +602,34 @@ fn sweep_command(a: SweepArgs) -> Result<u8, Fail> {
         allow_outside,
     };
     let reporter = Reporter::new(Mode::detect(quiet), 0);
+    if let Some(i) = variant {
+        let r = kodama_dag::sweep::run_one_variant(&sw, &cache, &opts, &reporter, i)
+            .map_err(sweep_fail)?;
+        let ran = r
+            .record
+            .nodes
+            .iter()
+            .filter(|n| n.status == Status::Ran)
+            .count();
+        eprintln!("variant {i}: {}: {ran} node runs", r.variant.name());
+        return Ok(0);
+    }
+    if prefix {
+        let ids =
+            kodama_dag::sweep::run_prefix(&sw, &cache, &opts, &reporter).map_err(sweep_fail)?;
+        if ids.is_empty() {
+            eprintln!("no node is shared by every variant: nothing to run");
+        } else {
+            eprintln!("the shared prefix ran, up to {}", ids.join(", "));
+        }
+        return Ok(0);
+    }
     let results = kodama_dag::sweep::run_sweep(&sw, &cache, &opts, &reporter, |i, n, v| {
         if !quiet {
             eprintln!("variant {}/{n}: {}", i + 1, v.name());
         }
     })
-    .map_err(|e| match e {
-        kodama_dag::sweep::SweepError::Graph(m) => Fail(2, format!("error: {m}")),
-        kodama_dag::sweep::SweepError::Failed(m) => Fail(1, format!("error: {m}")),
-        kodama_dag::sweep::SweepError::Run(e) => Fail::from(e),
-    })?;
+    .map_err(sweep_fail)?;
     let ran: usize = results
         .iter()
         .map(|r| {
@@ -555,6 +651,211 @@ fn sweep_command(a: SweepArgs) -> Result<u8, Fail> {
     );
     Ok(0)
 }
+
+/// A sweep's failure as the CLI reports it.
+fn sweep_fail(e: kodama_dag::sweep::SweepError) -> Fail {
+    match e {
+        kodama_dag::sweep::SweepError::Graph(m) => Fail(2, format!("error: {m}")),
+        kodama_dag::sweep::SweepError::Failed(m) => Fail(1, format!("error: {m}")),
+        kodama_dag::sweep::SweepError::Run(e) => Fail::from(e),
+    }
+}
+
+/// `submit`: the graph or sweep checked here (bad input exits 2 before anything is queued), its
+/// job scripts written to `<out>/slurm/<n>/`, then submitted with sbatch unless `--dry-run`;
+/// with `--wait`, squeue polled until the jobs end, exiting as a local run would.
+fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
+    use kodama_dag::slurm;
+    let Engine::Slurm = a.engine;
+    let usage = |m: String| Fail(2, format!("error: {m}"));
+    let user_sbatch = match &a.sbatch {
+        None => Vec::new(),
+        Some(text) => shlex::split(text).ok_or_else(|| {
+            usage(format!(
+                "--sbatch {text:?}: unbalanced quotes; expected options as a shell writes them"
+            ))
+        })?,
+    };
+    if let Some(d) = &a.data
+        && !d.is_dir()
+    {
+        return Err(usage(format!("--data {}: not a directory", d.display())));
+    }
+    let cache = open_cache(a.cache.clone())?;
+    let cpus = a.jobs.unwrap_or(1);
+    // Every job's shared arguments, each a quoted shell word.
+    let mut common = vec![
+        "--cache".to_string(),
+        slurm::quote_path(cache.root()).map_err(usage)?,
+    ];
+    if let Some(d) = &a.data {
+        common.push("--data".into());
+        common.push(slurm::quote_path(d).map_err(usage)?);
+    }
+    for s in &a.sets {
+        common.push("--set".into());
+        common.push(slurm::quote(s).map_err(usage)?);
+    }
+    if a.allow_outside {
+        common.push("--allow-outside".into());
+    }
+    let is_sweep = kodama_dag::sweep::is_sweep_file(&a.file).map_err(usage)?;
+    let (plan, out_dir, records) = if is_sweep {
+        if !a.targets.is_empty() {
+            return Err(usage(
+                "--target is for graphs; a sweep runs what its metrics and outputs need".into(),
+            ));
+        }
+        let sw = kodama_dag::sweep::load_sweep(&a.file, a.allow_outside).map_err(usage)?;
+        let out_dir = a
+            .out
+            .clone()
+            .unwrap_or_else(|| Path::new("out").join(&sw.name));
+        let opts = kodama_dag::sweep::SweepOptions {
+            data_dir: a.data.clone(),
+            sets: a.sets.clone(),
+            out_dir: out_dir.clone(),
+            jobs: Some(cpus),
+            allow_outside: a.allow_outside,
+        };
+        common.push("--out".into());
+        common.push(slurm::quote_path(&out_dir).map_err(usage)?);
+        common.push("--quiet".into());
+        let plan = slurm::plan_sweep(&sw, &opts, &cache, &common).map_err(usage)?;
+        let base = load(
+            &sw.graph,
+            &LoadOptions {
+                data_dir: a.data.clone(),
+                sets: a.sets.clone(),
+                allow_outside: a.allow_outside,
+            },
+        )
+        .map_err(|e| usage(e.to_string()))?;
+        let records = kodama_dag::record::load_records(
+            &cache.runs_dir(&kodama_dag::exec::graph_key(&base)),
+            RECORDS_SIZING,
+        );
+        (plan, out_dir, records)
+    } else {
+        let g = load_graph(&GraphArgs {
+            graph: a.file.clone(),
+            data: a.data.clone(),
+            sets: a.sets.clone(),
+            allow_outside: a.allow_outside,
+        })?;
+        kodama_dag::exec::target_indices(&g, &a.targets)?;
+        let out_dir = a
+            .out
+            .clone()
+            .unwrap_or_else(|| Path::new("out").join(&g.name));
+        common.push("--out".into());
+        common.push(slurm::quote_path(&out_dir).map_err(usage)?);
+        for t in &a.targets {
+            common.push("--target".into());
+            common.push(slurm::quote(t).map_err(usage)?);
+        }
+        common.extend(["--json".to_string(), "--quiet".to_string()]);
+        let plan = slurm::plan_graph(&g, &common).map_err(usage)?;
+        let records = kodama_dag::record::load_records(
+            &cache.runs_dir(&kodama_dag::exec::graph_key(&g)),
+            RECORDS_SIZING,
+        );
+        (plan, out_dir, records)
+    };
+    for n in &plan.notes {
+        eprintln!("{n}");
+    }
+    let res = slurm::resources(&records, cpus);
+    let exe = std::env::current_exe()
+        .map_err(|e| Fail(1, format!("error: cannot find kodama-dag's own path: {e}")))?;
+    let cwd = std::env::current_dir()
+        .map_err(|e| Fail(1, format!("error: cannot read the working folder: {e}")))?;
+    let dir = slurm::submission_dir(&out_dir.join("slurm"))
+        .map_err(|m| Fail(1, format!("error: {m}")))?;
+    let dir = std::path::absolute(&dir).unwrap_or(dir);
+    slurm::write_scripts(&plan, &dir, &exe, &cwd, &res, a.array_limit, &user_sbatch)
+        .map_err(|m| Fail(1, format!("error: {m}")))?;
+    if a.dry_run {
+        eprintln!(
+            "job scripts in {}; nothing submitted (--dry-run)",
+            dir.display()
+        );
+        print!(
+            "{}",
+            std::fs::read_to_string(dir.join("submit.sh")).unwrap_or_default()
+        );
+        return Ok(0);
+    }
+    let ids = slurm::submit(&plan, &dir, a.array_limit, &user_sbatch).map_err(usage)?;
+    let listed: Vec<String> = plan
+        .jobs
+        .iter()
+        .zip(&ids)
+        .map(|(j, id)| format!("{}={id}", j.name))
+        .collect();
+    std::fs::write(dir.join("jobs.txt"), listed.join("\n") + "\n").ok();
+    eprintln!(
+        "submitted {}; scripts and logs in {}",
+        listed.join(" "),
+        dir.display()
+    );
+    println!("{}", listed.join(" "));
+    if !a.wait {
+        return Ok(0);
+    }
+    let ended = slurm::wait(
+        &plan,
+        &ids,
+        std::time::Duration::from_secs(a.poll_s),
+        |line| eprintln!("{line}"),
+    )
+    .map_err(|m| Fail(1, format!("error: {m}")))?;
+    for (job, task, e) in &ended.failed {
+        let id = plan
+            .jobs
+            .iter()
+            .position(|j| &j.name == job)
+            .map(|k| ids[k].clone())
+            .unwrap_or_default();
+        let log = slurm::log_path(&dir, job, &id, *task);
+        let task = task.map(|t| format!(" task {t}")).unwrap_or_default();
+        if e.reason == "DependencyNeverSatisfied" {
+            eprintln!("error: {job}{task} (job {id}): cancelled: a job it waits for failed");
+            continue;
+        }
+        let why = match e.exit_code {
+            Some(c) => format!("{}, exit {c} ({})", e.state, e.reason),
+            None => format!("{} ({})", e.state, e.reason),
+        };
+        eprintln!(
+            "error: {job}{task} (job {id}): {why}; log: {}",
+            log.display()
+        );
+        if let Ok(text) = std::fs::read_to_string(&log) {
+            for line in text
+                .lines()
+                .rev()
+                .take(5)
+                .collect::<Vec<_>>()
+                .into_iter()
+                .rev()
+            {
+                eprintln!("    {line}");
+            }
+        }
+    }
+    let code = ended.code();
+    if code == 0 && is_sweep {
+        print!(
+            "{}",
+            std::fs::read_to_string(out_dir.join("table.md")).unwrap_or_default()
+        );
+    }
+    Ok(code)
+}
+
+/// How many of a graph's latest run records size a job's memory and time.
+const RECORDS_SIZING: usize = 20;
 
 /// `explain`: what `run` would do for each node of the graph (or of `targets` and what they
 /// need) and why, as lines or as JSON.

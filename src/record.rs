@@ -60,6 +60,38 @@ pub struct RunRecord {
     /// Output name -> why it was not written; absent when every output was.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub output_errors: BTreeMap<String, crate::exec::OutputError>,
+    /// Wall time of the whole run, seconds (0 in records written before it was kept).
+    #[serde(default)]
+    pub wall_s: f64,
+    /// The process's peak resident memory when the run ended, MB (Linux's VmHWM): what `submit`
+    /// sizes a Slurm job's `--mem` from. None where the OS does not say.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_rss_mb: Option<f64>,
+}
+
+/// The process's peak resident set so far, MB, from `/proc/self/status` (Linux); None elsewhere.
+pub fn peak_rss_mb() -> Option<f64> {
+    let status = fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
+
+/// The run records of one graph kept in `dir` (a graph's folder under the cache's `runs/`),
+/// newest first, at most `limit`; unreadable ones are passed over.
+pub fn load_records(dir: &Path, limit: usize) -> Vec<RunRecord> {
+    let mut names: Vec<_> = fs::read_dir(dir.join("records"))
+        .into_iter()
+        .flatten()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .collect();
+    names.sort();
+    names
+        .iter()
+        .rev()
+        .filter_map(|p| serde_json::from_slice(&fs::read(p).ok()?).ok())
+        .take(limit)
+        .collect()
 }
 
 /// What a node's action key was made of.

@@ -32,7 +32,7 @@ use crate::cache::{Cache, Digest, write_atomic};
 use crate::exec::{RunError, RunOptions, run};
 use crate::graph::{Graph, LoadOptions, load};
 use crate::progress::Reporter;
-use crate::record::RunRecord;
+use crate::record::{RunRecord, Status};
 use crate::syntax::{self, Ast, Value};
 
 /// A loaded sweep file.
@@ -199,6 +199,22 @@ pub fn load_sweep(path: &Path, allow_outside: bool) -> Result<Sweep, String> {
         metrics,
         metrics_only,
     })
+}
+
+/// Whether `path` holds a sweep (`Sweep(...)`) rather than a graph: what `submit` is given.
+pub fn is_sweep_file(path: &Path) -> Result<bool, String> {
+    let text = crate::graph::read_graph_text(path)
+        .map_err(|e| format!("{}: cannot read the file: {e}", path.display()))?;
+    let ast = syntax::parse(&text, 0, 1, 1).map_err(|e| {
+        format!(
+            "{}:{}:{}: {}",
+            path.display(),
+            e.span.line,
+            e.span.col,
+            e.message
+        )
+    })?;
+    Ok(matches!(&ast.v, Value::Struct { name: Some(n), .. } if n.name == "Sweep"))
 }
 
 /// The base graph: a regular file inside the sweep's folder or its parent, unless allowed out.
@@ -389,11 +405,6 @@ pub fn run_sweep(
     let stop_after: Option<usize> = std::env::var("KODAMA_DAG_FAULT_SWEEP_STOP_AFTER")
         .ok()
         .and_then(|v| v.parse().ok());
-    let targets = if sweep.metrics_only {
-        metric_nodes(&sweep.metrics)
-    } else {
-        vec![]
-    };
     let mut results = Vec::new();
     for (i, (v, g)) in variants.iter().zip(&graphs).enumerate() {
         if stop_after == Some(i) {
@@ -401,67 +412,205 @@ pub fn run_sweep(
             std::process::exit(1);
         }
         on_variant(i, variants.len(), v);
-        let run_opts = RunOptions {
-            jobs: opts.jobs,
-            targets: targets.clone(),
-            out_dir: (!sweep.metrics_only)
-                .then(|| opts.out_dir.join("variants").join(folder_name(&v.name()))),
-        };
-        let record = run(g, cache, &run_opts, reporter).map_err(SweepError::Run)?;
-        if let Some(f) = record
-            .nodes
-            .iter()
-            .find(|n| n.status == crate::record::Status::Failed)
-        {
-            return Err(SweepError::Failed(format!(
-                "variant {}: node {:?} failed: {}",
-                v.name(),
-                f.id,
-                f.error.as_deref().unwrap_or(&f.reason)
-            )));
-        }
-        if let Some((name, e)) = record.output_errors.iter().next() {
-            return Err(SweepError::Failed(format!(
-                "variant {}: output {name:?} was not written: {}",
-                v.name(),
-                e.error
-            )));
-        }
-        let mut metrics = Vec::with_capacity(sweep.metrics.len());
-        for m in &sweep.metrics {
-            match metric(cache, &record, m) {
-                Ok(x) => metrics.push(x),
-                // Known only once the metrics node has run: a key it never reports is a typo in
-                // the sweep file, not a missing value, so the first variant settles it.
-                Err(keys) if i == 0 => {
-                    let hint = syntax::did_you_mean(
-                        m.split_once('.').map_or("", |(_, k)| k),
-                        keys.iter().map(String::as_str),
-                    )
-                    .map(|k| format!("; did you mean `{k}`?"))
-                    .unwrap_or_default();
-                    return Err(SweepError::Graph(format!(
-                        "{}: metric {m:?} names nothing: its node reports {}{hint}",
-                        sweep.path.display(),
-                        if keys.is_empty() {
-                            "no values".to_string()
-                        } else {
-                            keys.join(", ")
-                        }
-                    )));
-                }
-                Err(_) => metrics.push(f64::NAN),
-            }
-        }
-        results.push(VariantResult {
-            variant: v.clone(),
-            record,
-            metrics,
-        });
+        results.push(run_variant(sweep, cache, opts, reporter, i, v, g)?);
     }
     write_tables(sweep, &opts.out_dir, cache, &results)
         .map_err(|e| SweepError::Run(RunError::Io(e)))?;
     Ok(results)
+}
+
+/// Runs variant `index` alone, as the whole sweep would run it, and writes no table: one task
+/// of a job array (`kodama-dag sweep --variant I`); the table is a later, all-hits sweep.
+pub fn run_one_variant(
+    sweep: &Sweep,
+    cache: &Cache,
+    opts: &SweepOptions,
+    reporter: &Reporter,
+    index: usize,
+) -> Result<VariantResult, SweepError> {
+    let variants = sweep.variants();
+    let Some(v) = variants.get(index) else {
+        return Err(SweepError::Graph(format!(
+            "{}: --variant {index}: the sweep has {} variants, numbered from 0",
+            sweep.path.display(),
+            variants.len()
+        )));
+    };
+    let graphs = checked_graphs(sweep, opts, &variants)?;
+    run_variant(sweep, cache, opts, reporter, index, v, &graphs[index])
+}
+
+/// Runs the nodes every variant shares (the prefix `kodama-dag submit` gives its own job, so
+/// that the variants' tasks find them cached instead of racing to compute them); the ids run,
+/// empty when the variants share nothing.
+pub fn run_prefix(
+    sweep: &Sweep,
+    cache: &Cache,
+    opts: &SweepOptions,
+    reporter: &Reporter,
+) -> Result<Vec<String>, SweepError> {
+    let variants = sweep.variants();
+    let graphs = checked_graphs(sweep, opts, &variants)?;
+    let targets = shared_prefix(sweep, &graphs);
+    if targets.is_empty() {
+        return Ok(targets);
+    }
+    let run_opts = RunOptions {
+        jobs: opts.jobs,
+        targets: targets.clone(),
+        out_dir: None,
+    };
+    let record = run(&graphs[0], cache, &run_opts, reporter).map_err(SweepError::Run)?;
+    if let Some(f) = record.nodes.iter().find(|n| n.status == Status::Failed) {
+        return Err(SweepError::Failed(format!(
+            "the shared prefix: node {:?} failed: {}",
+            f.id,
+            f.error.as_deref().unwrap_or(&f.reason)
+        )));
+    }
+    Ok(targets)
+}
+
+/// Runs one variant's graph (the nodes its metrics need when `metrics_only`) and reads its
+/// metrics. The first variant settles whether each metric names a value its node reports.
+fn run_variant(
+    sweep: &Sweep,
+    cache: &Cache,
+    opts: &SweepOptions,
+    reporter: &Reporter,
+    i: usize,
+    v: &Variant,
+    g: &Graph,
+) -> Result<VariantResult, SweepError> {
+    let run_opts = RunOptions {
+        jobs: opts.jobs,
+        targets: variant_targets(sweep),
+        out_dir: (!sweep.metrics_only)
+            .then(|| opts.out_dir.join("variants").join(folder_name(&v.name()))),
+    };
+    let record = run(g, cache, &run_opts, reporter).map_err(SweepError::Run)?;
+    if let Some(f) = record.nodes.iter().find(|n| n.status == Status::Failed) {
+        let msg = format!(
+            "variant {}: node {:?} failed: {}",
+            v.name(),
+            f.id,
+            f.error.as_deref().unwrap_or(&f.reason)
+        );
+        // A failure of the user's input keeps its meaning (exit 2) wherever the variant ran.
+        return Err(if f.user_error {
+            SweepError::Graph(msg)
+        } else {
+            SweepError::Failed(msg)
+        });
+    }
+    if let Some((name, e)) = record.output_errors.iter().next() {
+        return Err(SweepError::Failed(format!(
+            "variant {}: output {name:?} was not written: {}",
+            v.name(),
+            e.error
+        )));
+    }
+    let mut metrics = Vec::with_capacity(sweep.metrics.len());
+    for m in &sweep.metrics {
+        match metric(cache, &record, m) {
+            Ok(x) => metrics.push(x),
+            // Known only once the metrics node has run: a key it never reports is a typo in
+            // the sweep file, not a missing value, so the first variant settles it.
+            Err(keys) if i == 0 => {
+                let hint = syntax::did_you_mean(
+                    m.split_once('.').map_or("", |(_, k)| k),
+                    keys.iter().map(String::as_str),
+                )
+                .map(|k| format!("; did you mean `{k}`?"))
+                .unwrap_or_default();
+                return Err(SweepError::Graph(format!(
+                    "{}: metric {m:?} names nothing: its node reports {}{hint}",
+                    sweep.path.display(),
+                    if keys.is_empty() {
+                        "no values".to_string()
+                    } else {
+                        keys.join(", ")
+                    }
+                )));
+            }
+            Err(_) => metrics.push(f64::NAN),
+        }
+    }
+    Ok(VariantResult {
+        variant: v.clone(),
+        record,
+        metrics,
+    })
+}
+
+/// What each variant runs: the metric nodes and their ancestors when `metrics_only`, else all.
+pub fn variant_targets(sweep: &Sweep) -> Vec<String> {
+    if sweep.metrics_only {
+        metric_nodes(&sweep.metrics)
+    } else {
+        vec![]
+    }
+}
+
+/// The nodes every variant computes alike, as the fewest targets that run them all: a node is
+/// shared when it has the same id, kind, VERSION, params, files and (shared) inputs in every
+/// variant's graph, so its action key is the same in all of them. Only nodes some variant needs
+/// count; a shared node whose consumers are all shared is run through them.
+pub fn shared_prefix(sweep: &Sweep, graphs: &[Graph]) -> Vec<String> {
+    let Some(first) = graphs.first() else {
+        return vec![];
+    };
+    let keys: Vec<Vec<[u8; 32]>> = graphs.iter().map(structure_keys).collect();
+    let targets = variant_targets(sweep);
+    let mut needed = vec![false; first.nodes.len()];
+    for g in graphs {
+        let idx: Vec<usize> = targets.iter().filter_map(|t| g.index(t)).collect();
+        for (i, need) in g.needed(&idx).iter().enumerate() {
+            if *need && let Some(j) = first.index(&g.nodes[i].id) {
+                needed[j] = true;
+            }
+        }
+    }
+    let shared: Vec<bool> = (0..first.nodes.len())
+        .map(|i| {
+            needed[i]
+                && graphs.iter().zip(&keys).all(|(g, k)| {
+                    g.index(&first.nodes[i].id)
+                        .is_some_and(|j| k[j] == keys[0][i])
+                })
+        })
+        .collect();
+    let consumers = first.consumers();
+    (0..first.nodes.len())
+        .filter(|&i| shared[i] && !consumers[i].iter().any(|&c| shared[c]))
+        .map(|i| first.nodes[i].id.clone())
+        .collect()
+}
+
+/// Per node, a digest of what determines its action key apart from file contents (which every
+/// variant reads alike): kind, VERSION, site, canonical params, file paths, and its inputs'
+/// digests of the same kind.
+fn structure_keys(g: &Graph) -> Vec<[u8; 32]> {
+    let site = crate::key::site_digest(&g.site);
+    let mut keys: Vec<[u8; 32]> = Vec::with_capacity(g.nodes.len());
+    for n in &g.nodes {
+        let mut h = blake3::Hasher::new();
+        crate::key::put(&mut h, n.kind.name.as_bytes());
+        h.update(&n.kind.version.to_le_bytes());
+        h.update(site.as_bytes());
+        crate::key::put(&mut h, &n.params.canonical());
+        for f in &n.files {
+            crate::key::put(&mut h, f.path.as_os_str().as_encoded_bytes());
+        }
+        for input in &n.inputs {
+            h.update(&(input.len() as u64).to_le_bytes());
+            for &j in input {
+                h.update(&keys[j]);
+            }
+        }
+        keys.push(*h.finalize().as_bytes());
+    }
+    keys
 }
 
 /// The nodes the metrics name, each once, in the metrics' order.
@@ -477,7 +626,7 @@ fn metric_nodes(metrics: &[String]) -> Vec<String> {
 }
 
 /// Every variant's graph, loaded and checked, with the metric names checked against it.
-fn checked_graphs(
+pub fn checked_graphs(
     sweep: &Sweep,
     opts: &SweepOptions,
     variants: &[Variant],
@@ -575,6 +724,18 @@ fn folder_name(name: &str) -> String {
         .collect()
 }
 
+/// The base graph as the sweep file names it (relative to the sweep's folder), so that the table
+/// reads the same however the sweep file was named on the command line (a submitted job names
+/// it by its absolute path).
+fn written_graph(sweep: &Sweep) -> &Path {
+    let folder = sweep
+        .path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    sweep.graph.strip_prefix(folder).unwrap_or(&sweep.graph)
+}
+
 fn write_tables(
     sweep: &Sweep,
     out: &Path,
@@ -598,7 +759,7 @@ fn write_tables(
     let mut md = format!(
         "# Sweep {}\n\nBase graph: `{}`\n\n| {} |\n|{}\n",
         sweep.name,
-        sweep.graph.display(),
+        written_graph(sweep).display(),
         header.join(" | "),
         "---|".repeat(header.len())
     );
