@@ -101,10 +101,10 @@ pub fn explain(
         let (key, snapshot) = action_key(node, &site, &inputs, &files[i]);
         let hit = cache.get_action(&key).filter(|a| {
             let (d, size) = a.output;
-            cache.has_blob(&d, size)
+            cache.can_get_blob(&d, size)
                 && node.kind.reports.iter().all(|r| {
                     a.report(r.name)
-                        .is_some_and(|(d, size)| cache.has_blob(&d, size))
+                        .is_some_and(|(d, size)| cache.can_get_blob(&d, size))
                 })
         });
         match hit {

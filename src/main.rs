@@ -27,6 +27,18 @@ use kodama_nodes::stage::Arity;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Share the cache through an S3 bucket: s3://BUCKET/PREFIX (default:
+    /// $KODAMA_DAG_REMOTE_CACHE). Endpoint and credentials from the AWS_* variables (README,
+    /// "A cache shared through S3").
+    #[arg(long, global = true, value_name = "s3://BUCKET/PREFIX")]
+    remote_cache: Option<String>,
+}
+
+/// The remote cache's URL for this process, from `--remote-cache` or the environment.
+static REMOTE_CACHE: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
+
+fn remote_cache_url() -> Option<&'static str> {
+    REMOTE_CACHE.get().and_then(|u| u.as_deref())
 }
 
 #[derive(Subcommand)]
@@ -348,10 +360,19 @@ fn cache_fail(dir: &std::path::Path, e: std::io::Error) -> Fail {
     }
 }
 
-/// Opens the cache, creating it if needed (run, sweep, watch, explain).
+/// Opens the cache, creating it if needed (run, sweep, watch, explain, submit), with its remote
+/// tier when one is given; a remote that cannot be reached or is not a cache is exit 2.
 fn open_cache(dir: Option<PathBuf>) -> Result<Cache, Fail> {
     let dir = cache_dir(dir);
-    Cache::open(&dir).map_err(|e| cache_fail(&dir, e))
+    let cache = Cache::open(&dir).map_err(|e| cache_fail(&dir, e))?;
+    match remote_cache_url() {
+        None => Ok(cache),
+        Some(url) => {
+            let remote =
+                kodama_dag::cache::Remote::open(url).map_err(|m| Fail(2, format!("error: {m}")))?;
+            Ok(cache.with_remote(remote))
+        }
+    }
 }
 
 /// Runs `g` once and reports it as `run` does; the exit code.
@@ -492,6 +513,12 @@ fn main() -> ExitCode {
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
+    let remote = cli.remote_cache.or_else(|| {
+        std::env::var("KODAMA_DAG_REMOTE_CACHE")
+            .ok()
+            .filter(|u| !u.is_empty())
+    });
+    REMOTE_CACHE.set(remote).expect("set once");
     match dispatch(cli.command) {
         Ok(code) => ExitCode::from(code),
         Err(Fail(code, msg)) => {
@@ -698,6 +725,10 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
     }
     if a.allow_outside {
         common.push("--allow-outside".into());
+    }
+    if let Some(url) = remote_cache_url() {
+        common.push("--remote-cache".into());
+        common.push(slurm::quote(url).map_err(usage)?);
     }
     let is_sweep = kodama_dag::sweep::is_sweep_file(&a.file).map_err(usage)?;
     let (plan, out_dir, records) = if is_sweep {

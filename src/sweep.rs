@@ -99,17 +99,7 @@ pub const MAX_VARIANTS: usize = 10_000;
 /// Reads and checks a sweep file. Its base graph must lie in the sweep file's folder or the one
 /// above it (sweeps sit in `graphs/sweeps/` beside the graphs they vary), unless `allow_outside`.
 pub fn load_sweep(path: &Path, allow_outside: bool) -> Result<Sweep, String> {
-    let text = crate::graph::read_graph_text(path)
-        .map_err(|e| format!("{}: cannot read the sweep file: {e}", path.display()))?;
-    let ast = syntax::parse(&text, 0, 1, 1).map_err(|e| {
-        format!(
-            "{}:{}:{}: {}",
-            path.display(),
-            e.span.line,
-            e.span.col,
-            e.message
-        )
-    })?;
+    let ast = parse_file(path, "the sweep file")?;
     let Value::Struct { name, fields } = &ast.v else {
         return Err(err(
             path,
@@ -201,11 +191,11 @@ pub fn load_sweep(path: &Path, allow_outside: bool) -> Result<Sweep, String> {
     })
 }
 
-/// Whether `path` holds a sweep (`Sweep(...)`) rather than a graph: what `submit` is given.
-pub fn is_sweep_file(path: &Path) -> Result<bool, String> {
+/// The RON syntax tree of a file; errors name the file (as `what`) and the place.
+fn parse_file(path: &Path, what: &str) -> Result<Ast, String> {
     let text = crate::graph::read_graph_text(path)
-        .map_err(|e| format!("{}: cannot read the file: {e}", path.display()))?;
-    let ast = syntax::parse(&text, 0, 1, 1).map_err(|e| {
+        .map_err(|e| format!("{}: cannot read {what}: {e}", path.display()))?;
+    syntax::parse(&text, 0, 1, 1).map_err(|e| {
         format!(
             "{}:{}:{}: {}",
             path.display(),
@@ -213,7 +203,12 @@ pub fn is_sweep_file(path: &Path) -> Result<bool, String> {
             e.span.col,
             e.message
         )
-    })?;
+    })
+}
+
+/// Whether `path` holds a sweep (`Sweep(...)`) rather than a graph: what `submit` is given.
+pub fn is_sweep_file(path: &Path) -> Result<bool, String> {
+    let ast = parse_file(path, "the file")?;
     Ok(matches!(&ast.v, Value::Struct { name: Some(n), .. } if n.name == "Sweep"))
 }
 

@@ -2,7 +2,6 @@
 //! two runs at once, failing nodes, gc.
 
 mod common;
-use std::time::{Duration, Instant};
 
 use common::*;
 
@@ -95,31 +94,11 @@ fn run_killed_while_writing_leaves_a_cache_the_next_run_completes() {
         .spawn()
         .unwrap();
     // Wait until a blob-sized temp file is half written (the writer pauses there), then kill.
-    let deadline = Instant::now() + Duration::from_secs(60);
-    let tmp = env.cache().join("tmp");
-    loop {
-        assert!(Instant::now() < deadline, "no write in progress seen");
-        let half_written = std::fs::read_dir(&tmp)
-            .map(|d| {
-                d.filter_map(Result::ok)
-                    .any(|e| e.metadata().is_ok_and(|m| m.len() > 10_000))
-            })
-            .unwrap_or(false);
-        if half_written {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    env.wait_for_half_written_blob(60);
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
     // Nothing half-written is visible: every stored blob hashes to its name, no output exists.
-    for b in env.blobs() {
-        let bytes = std::fs::read(&b).unwrap();
-        assert_eq!(
-            blake3::hash(&bytes).to_hex().as_str(),
-            b.file_name().unwrap().to_str().unwrap()
-        );
-    }
+    env.assert_blobs_intact();
     assert!(!env.out().join("dsm.tif").exists());
     let r = env.run(&g, &[]).ok();
     assert_eq!(r.digests(), clean.digests());

@@ -403,24 +403,8 @@ fn a_job_killed_mid_write_leaves_nothing_trusted() {
         .strip_prefix("run=")
         .expect("run=ID")
         .to_string();
+    env.wait_for_half_written_blob(120);
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
-    let tmp = env.cache().join("tmp");
-    loop {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "no write in progress seen"
-        );
-        let half_written = std::fs::read_dir(&tmp)
-            .map(|d| {
-                d.filter_map(Result::ok)
-                    .any(|e| e.metadata().is_ok_and(|m| m.len() > 10_000))
-            })
-            .unwrap_or(false);
-        if half_written {
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
     let k = Command::new("scancel")
         .args(["--signal=KILL", "--full", &id])
         .output()

@@ -15,6 +15,10 @@
 //! tmp/                   temp files; renamed into place when complete
 //! ```
 //!
+//! With a remote tier (`--remote-cache s3://...`, `remote.rs`) the same `cas/` and `ac/` entries
+//! are shared through an object store: a local miss asks it, and what is stored locally goes up
+//! to it, each blob before the action entry naming it.
+//!
 //! **Invariant:** a file under `cas/`, `ac/` or `stat/` is only ever created by renaming a complete,
 //! fsynced temp file, so a reader sees either nothing or the whole file, whatever was killed when.
 //! A blob is verified against its name on every read; a bad one is a miss that rebuilds.
@@ -22,6 +26,7 @@
 mod atomic;
 mod files;
 mod gc;
+pub mod remote;
 
 use std::fs::{self, File};
 use std::io;
@@ -31,6 +36,7 @@ use std::time::SystemTime;
 pub use atomic::write_atomic;
 pub use files::{InputStamp, check_folder, describe_file_type, folder_files, hash_file};
 pub use gc::{GcReport, gc};
+pub use remote::Remote;
 
 /// A blake3 digest (of artifact bytes, file contents, or an action).
 pub type Digest = blake3::Hash;
@@ -79,6 +85,8 @@ impl std::ops::Deref for Blob {
 /// A cache directory.
 pub struct Cache {
     root: PathBuf,
+    /// The remote tier, when the cache is shared through an object store.
+    remote: Option<std::sync::Arc<Remote>>,
 }
 
 /// Digest of `bytes`, using all threads for large inputs.
@@ -253,6 +261,7 @@ impl Cache {
         }
         Ok(Cache {
             root: root.to_path_buf(),
+            remote: None,
         })
     }
 
@@ -292,6 +301,7 @@ impl Cache {
         Self::create_dirs(root)?;
         Ok(Cache {
             root: root.to_path_buf(),
+            remote: None,
         })
     }
 
@@ -364,10 +374,34 @@ impl Cache {
         shard(&self.root.join("cas"), &d.to_hex())
     }
 
+    /// Shares this cache through `remote`: local misses ask it, and what is stored goes up to it.
+    pub fn with_remote(mut self, remote: Remote) -> Cache {
+        self.remote = Some(std::sync::Arc::new(remote));
+        self
+    }
+
+    /// The remote tier, if any.
+    pub fn remote(&self) -> Option<&Remote> {
+        self.remote.as_deref()
+    }
+
     /// Stores what `write` writes as a blob, hashed as it is written (the encoding is never held
-    /// in memory whole), and returns its digest and size. The temp file is fsynced and renamed
-    /// into place, or removed if a blob of that digest is already stored or anything failed.
+    /// in memory whole), and returns its digest and size; with a remote tier, the blob goes up to
+    /// it too. The temp file is fsynced and renamed into place, or removed if a blob of that
+    /// digest is already stored or anything failed.
     pub fn put_blob_with(
+        &self,
+        write: impl FnOnce(&mut dyn io::Write) -> io::Result<()>,
+    ) -> io::Result<(Digest, u64)> {
+        let (digest, size) = self.store_local(write)?;
+        if let Some(remote) = &self.remote {
+            self.upload(remote, &digest, size);
+        }
+        Ok((digest, size))
+    }
+
+    /// Stores a blob in the local folder only.
+    fn store_local(
         &self,
         write: impl FnOnce(&mut dyn io::Write) -> io::Result<()>,
     ) -> io::Result<(Digest, u64)> {
@@ -377,7 +411,7 @@ impl Cache {
             write(&mut w)?;
             let (file, digest, size) = w.finish()?;
             drop(file);
-            if self.has_blob(&digest, size) {
+            if self.has_local_blob(&digest, size) {
                 fs::remove_file(&tmp)?;
                 return Ok((digest, size));
             }
@@ -392,9 +426,82 @@ impl Cache {
         result
     }
 
-    /// True if a blob of `size` bytes is stored under `digest` (by stat, not by hashing); marks it
-    /// recently used for gc.
+    /// Puts the local blob `digest` on the remote unless it is there already; true when the
+    /// remote holds it afterwards. Failures are reported, never fatal.
+    fn upload(&self, remote: &Remote, digest: &Digest, size: u64) -> bool {
+        let hex = digest.to_hex();
+        match remote.blob_size(&hex) {
+            Ok(Some(s)) if s == size => return true,
+            Ok(_) => {}
+            Err(e) => {
+                remote.warn("looking up a blob", e);
+                return false;
+            }
+        }
+        let bytes = match self.get_local_blob(digest) {
+            Ok(b) => b,
+            Err(_) => return false,
+        };
+        match remote.put_blob(&hex, &bytes) {
+            Ok(()) => true,
+            Err(e) => {
+                remote.warn("uploading a blob", e);
+                false
+            }
+        }
+    }
+
+    /// Fetches blob `digest` from the remote into the local folder, verified as it streams in;
+    /// true when it is stored locally afterwards.
+    fn fetch(&self, digest: &Digest) -> bool {
+        let Some(remote) = &self.remote else {
+            return false;
+        };
+        let hex = digest.to_hex();
+        let got = self.store_local(|w| {
+            if remote.read_blob(&hex, w)? {
+                Ok(())
+            } else {
+                Err(io::Error::new(io::ErrorKind::NotFound, "not on the remote"))
+            }
+        });
+        match got {
+            Ok((d, _)) if d == *digest => true,
+            Ok(_) => {
+                // Stored under the digest of what it holds, harmless to keep; never used for
+                // this one.
+                remote.warn(
+                    &format!("blob {hex}"),
+                    "its bytes do not hash to its name; not used",
+                );
+                false
+            }
+            Err(e) if e.kind() == io::ErrorKind::NotFound => false,
+            Err(e) => {
+                remote.warn("fetching a blob", e);
+                false
+            }
+        }
+    }
+
+    /// True if a blob of `size` bytes is stored under `digest` (by stat, not by hashing), fetched
+    /// from the remote tier if only it has the blob; marks it recently used for gc.
     pub fn has_blob(&self, digest: &Digest, size: u64) -> bool {
+        self.has_local_blob(digest, size)
+            || (self.fetch(digest) && self.has_local_blob(digest, size))
+    }
+
+    /// Like [`Cache::has_blob`], but asks the remote without fetching: what `explain` and
+    /// `submit` use to plan, moving no bytes.
+    pub fn can_get_blob(&self, digest: &Digest, size: u64) -> bool {
+        self.has_local_blob(digest, size)
+            || self
+                .remote
+                .as_ref()
+                .is_some_and(|r| matches!(r.blob_size(&digest.to_hex()), Ok(Some(s)) if s == size))
+    }
+
+    fn has_local_blob(&self, digest: &Digest, size: u64) -> bool {
         let path = self.blob_path(digest);
         match fs::metadata(&path) {
             Ok(m) if m.len() == size => {
@@ -408,6 +515,13 @@ impl Cache {
     /// Maps and verifies the blob `digest`: its bytes are the page cache's, never copied into
     /// this process, so a large artifact is held once (decoded), not twice.
     pub fn get_blob(&self, digest: &Digest) -> Result<Blob, BlobError> {
+        match self.get_local_blob(digest) {
+            Err(BlobError::Missing) if self.fetch(digest) => self.get_local_blob(digest),
+            other => other,
+        }
+    }
+
+    fn get_local_blob(&self, digest: &Digest) -> Result<Blob, BlobError> {
         let path = self.blob_path(digest);
         let file = match File::open(&path) {
             Ok(f) => f,
@@ -435,12 +549,34 @@ impl Cache {
         Ok(blob)
     }
 
-    /// What action `key` produced, if recorded: its output blob and its reports'.
+    /// What action `key` produced, if recorded here or on the remote tier (whose entry is then
+    /// kept locally): its output blob and its reports'.
     pub fn get_action(&self, key: &Digest) -> Option<Action> {
-        parse_action(&fs::read_to_string(shard(&self.root.join("ac"), &key.to_hex())).ok()?)
+        let path = shard(&self.root.join("ac"), &key.to_hex());
+        if let Some(a) = fs::read_to_string(&path)
+            .ok()
+            .and_then(|t| parse_action(&t))
+        {
+            return Some(a);
+        }
+        let remote = self.remote.as_ref()?;
+        match remote.get_action(&key.to_hex()) {
+            Ok(Some(text)) => {
+                let action = parse_action(&text)?;
+                let _ = fs::create_dir_all(path.parent().expect("sharded path has a parent"));
+                let _ = write_atomic(&self.tmp(), &path, text.as_bytes());
+                Some(action)
+            }
+            Ok(None) => None,
+            Err(e) => {
+                remote.warn("reading an action entry", e);
+                None
+            }
+        }
     }
 
-    /// Records that action `key` produced `action`'s blobs.
+    /// Records that action `key` produced `action`'s blobs; on the remote tier too, once every
+    /// blob it names is there.
     pub fn put_action(&self, key: &Digest, action: &Action) -> io::Result<()> {
         let path = shard(&self.root.join("ac"), &key.to_hex());
         fs::create_dir_all(path.parent().expect("sharded path has a parent"))?;
@@ -449,7 +585,21 @@ impl Cache {
         for (name, d, size) in &action.reports {
             text.push_str(&format!("report {name} blake3:{} {size}\n", d.to_hex()));
         }
-        write_atomic(&self.tmp(), &path, text.as_bytes())
+        write_atomic(&self.tmp(), &path, text.as_bytes())?;
+        if let Some(remote) = &self.remote {
+            let blobs = std::iter::once(action.output)
+                .chain(action.reports.iter().map(|(_, d, s)| (*d, *s)));
+            // Every blob first: a remote entry never names a blob that did not arrive.
+            if blobs
+                .collect::<Vec<_>>()
+                .iter()
+                .all(|(d, s)| self.upload(remote, d, *s))
+                && let Err(e) = remote.put_action(&key.to_hex(), &text)
+            {
+                remote.warn("uploading an action entry", e);
+            }
+        }
+        Ok(())
     }
 
     /// The folder for run records and last-run snapshots of one graph.

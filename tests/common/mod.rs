@@ -111,6 +111,38 @@ impl Env {
         out.sort();
         out
     }
+    /// Waits (up to `secs`) until a blob-sized temp file is half written in the cache's tmp/ (the
+    /// writer paused there by `KODAMA_DAG_FAULT_SLOW_WRITE_MS`): the moment to kill the writer.
+    pub fn wait_for_half_written_blob(&self, secs: u64) {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(secs);
+        let tmp = self.cache().join("tmp");
+        loop {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "no write in progress seen"
+            );
+            let half_written = std::fs::read_dir(&tmp)
+                .map(|d| {
+                    d.filter_map(Result::ok)
+                        .any(|e| e.metadata().is_ok_and(|m| m.len() > 10_000))
+                })
+                .unwrap_or(false);
+            if half_written {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+    }
+    /// Nothing half-written is visible: every stored blob hashes to its name.
+    pub fn assert_blobs_intact(&self) {
+        for b in self.blobs() {
+            let bytes = std::fs::read(&b).unwrap();
+            assert_eq!(
+                blake3::hash(&bytes).to_hex().as_str(),
+                b.file_name().unwrap().to_str().unwrap()
+            );
+        }
+    }
     pub fn blob(&self, digest: &str) -> PathBuf {
         self.cache().join("cas").join(&digest[..2]).join(digest)
     }
