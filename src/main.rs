@@ -731,7 +731,7 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
         common.push(slurm::quote(url).map_err(usage)?);
     }
     let is_sweep = kodama_dag::sweep::is_sweep_file(&a.file).map_err(usage)?;
-    let (plan, out_dir, records) = if is_sweep {
+    let (plan, out_dir) = if is_sweep {
         if !a.targets.is_empty() {
             return Err(usage(
                 "--target is for graphs; a sweep runs what its metrics and outputs need".into(),
@@ -752,21 +752,10 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
         common.push("--out".into());
         common.push(slurm::quote_path(&out_dir).map_err(usage)?);
         common.push("--quiet".into());
-        let plan = slurm::plan_sweep(&sw, &opts, &cache, &common).map_err(usage)?;
-        let base = load(
-            &sw.graph,
-            &LoadOptions {
-                data_dir: a.data.clone(),
-                sets: a.sets.clone(),
-                allow_outside: a.allow_outside,
-            },
+        (
+            slurm::plan_sweep(&sw, &opts, &cache, &common).map_err(usage)?,
+            out_dir,
         )
-        .map_err(|e| usage(e.to_string()))?;
-        let records = kodama_dag::record::load_records(
-            &cache.runs_dir(&kodama_dag::exec::graph_key(&base)),
-            RECORDS_SIZING,
-        );
-        (plan, out_dir, records)
     } else {
         let g = load_graph(&GraphArgs {
             graph: a.file.clone(),
@@ -786,16 +775,12 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
             common.push(slurm::quote(t).map_err(usage)?);
         }
         common.extend(["--json".to_string(), "--quiet".to_string()]);
-        let plan = slurm::plan_graph(&g, &common).map_err(usage)?;
-        let records = kodama_dag::record::load_records(
-            &cache.runs_dir(&kodama_dag::exec::graph_key(&g)),
-            RECORDS_SIZING,
-        );
-        (plan, out_dir, records)
+        (slurm::plan_graph(&g, &common).map_err(usage)?, out_dir)
     };
     for n in &plan.notes {
         eprintln!("{n}");
     }
+    let records = kodama_dag::record::load_records(&cache.runs_dir(&plan.runs_key), RECORDS_SIZING);
     let res = slurm::resources(&records, cpus);
     let exe = std::env::current_exe()
         .map_err(|e| Fail(1, format!("error: cannot find kodama-dag's own path: {e}")))?;

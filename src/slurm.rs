@@ -53,6 +53,8 @@ pub struct Plan {
     pub jobs: Vec<Job>,
     /// What the plan left out and why (variants already cached, no shared prefix).
     pub notes: Vec<String>,
+    /// The graph's folder under the cache's `runs/`, whose records size the jobs.
+    pub runs_key: String,
 }
 
 /// What each job asks Slurm for.
@@ -596,10 +598,7 @@ pub fn plan_sweep(
     use crate::explain::{Plan as Step, explain};
     use crate::sweep::{checked_graphs, shared_prefix, variant_targets};
     let variants = sweep.variants();
-    let graphs = checked_graphs(sweep, opts, &variants).map_err(|e| match e {
-        crate::sweep::SweepError::Graph(m) | crate::sweep::SweepError::Failed(m) => m,
-        crate::sweep::SweepError::Run(e) => e.to_string(),
-    })?;
+    let graphs = checked_graphs(sweep, opts, &variants).map_err(|e| e.to_string())?;
     let all_cached = |g: &crate::graph::Graph, targets: &[String]| -> Result<bool, String> {
         Ok(explain(g, cache, targets)
             .map_err(|e| e.to_string())?
@@ -625,6 +624,8 @@ pub fn plan_sweep(
         name: sweep.name.clone(),
         jobs: Vec::new(),
         notes: Vec::new(),
+        // Every variant is the one base graph file, so its runs are kept under one key.
+        runs_key: crate::exec::graph_key(&graphs[0]),
     };
     let prefix = shared_prefix(sweep, &graphs);
     if prefix.is_empty() {
@@ -720,6 +721,7 @@ pub fn plan_graph(graph: &crate::graph::Graph, args: &[String]) -> Result<Plan, 
             after: vec![],
         }],
         notes: vec![],
+        runs_key: crate::exec::graph_key(graph),
     })
 }
 

@@ -386,6 +386,15 @@ pub enum SweepError {
     Failed(String),
 }
 
+impl std::fmt::Display for SweepError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SweepError::Graph(m) | SweepError::Failed(m) => f.write_str(m),
+            SweepError::Run(e) => write!(f, "{e}"),
+        }
+    }
+}
+
 /// Runs every variant in order through `cache`, then writes `table.md` and `table.csv` to the
 /// output folder. `on_variant` hears of each variant as it starts.
 pub fn run_sweep(
@@ -431,8 +440,10 @@ pub fn run_one_variant(
             variants.len()
         )));
     };
-    let graphs = checked_graphs(sweep, opts, &variants)?;
-    run_variant(sweep, cache, opts, reporter, index, v, &graphs[index])
+    // One task of an array loads its own graph only: the submission checked every variant.
+    check_folders(sweep, &variants)?;
+    let g = checked_graph(sweep, opts, v)?;
+    run_variant(sweep, cache, opts, reporter, index, v, &g)
 }
 
 /// Runs the nodes every variant shares (the prefix `kodama-dag submit` gives its own job, so
@@ -626,6 +637,15 @@ pub fn checked_graphs(
     opts: &SweepOptions,
     variants: &[Variant],
 ) -> Result<Vec<Graph>, SweepError> {
+    check_folders(sweep, variants)?;
+    variants
+        .iter()
+        .map(|v| checked_graph(sweep, opts, v))
+        .collect()
+}
+
+/// No two variants write the same output folder.
+fn check_folders(sweep: &Sweep, variants: &[Variant]) -> Result<(), SweepError> {
     let mut folders = std::collections::HashMap::new();
     for v in variants {
         let folder = folder_name(&v.name());
@@ -638,37 +658,35 @@ pub fn checked_graphs(
             )));
         }
     }
-    let mut graphs = Vec::with_capacity(variants.len());
-    for v in variants {
-        let g = load_variant(sweep, opts, v)?;
-        for m in &sweep.metrics {
-            let (node, _) = m.split_once('.').expect("checked on load");
-            let Some(n) = g.nodes.iter().find(|n| n.id == node) else {
-                return Err(SweepError::Graph(format!(
-                    "{}: metric {m:?}: the graph has no node {node:?}",
-                    sweep.path.display()
-                )));
-            };
-            if n.kind.output != kodama_nodes::ArtifactType::Metrics {
-                return Err(SweepError::Graph(format!(
-                    "{}: metric {m:?}: node {node:?} makes {}, not Metrics",
-                    sweep.path.display(),
-                    n.kind.output
-                )));
-            }
+    Ok(())
+}
+
+/// One variant's graph, loaded and checked, with the metric names checked against it.
+fn checked_graph(sweep: &Sweep, opts: &SweepOptions, v: &Variant) -> Result<Graph, SweepError> {
+    let g = load_variant(sweep, opts, v)?;
+    for m in &sweep.metrics {
+        let (node, _) = m.split_once('.').expect("checked on load");
+        let Some(n) = g.nodes.iter().find(|n| n.id == node) else {
+            return Err(SweepError::Graph(format!(
+                "{}: metric {m:?}: the graph has no node {node:?}",
+                sweep.path.display()
+            )));
+        };
+        if n.kind.output != kodama_nodes::ArtifactType::Metrics {
+            return Err(SweepError::Graph(format!(
+                "{}: metric {m:?}: node {node:?} makes {}, not Metrics",
+                sweep.path.display(),
+                n.kind.output
+            )));
         }
-        graphs.push(g);
     }
-    Ok(graphs)
+    Ok(g)
 }
 
 /// Loads every variant's graph and checks the metric names, running nothing: the variants.
 pub fn check_variants(sweep: &Sweep, opts: &SweepOptions) -> Result<Vec<Variant>, String> {
     let variants = sweep.variants();
-    checked_graphs(sweep, opts, &variants).map_err(|e| match e {
-        SweepError::Graph(m) | SweepError::Failed(m) => m,
-        SweepError::Run(e) => e.to_string(),
-    })?;
+    checked_graphs(sweep, opts, &variants).map_err(|e| e.to_string())?;
     Ok(variants)
 }
 
