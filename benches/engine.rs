@@ -129,7 +129,7 @@ fn run_quiet(g: &Graph, cache: &Cache) {
     let opts = RunOptions {
         jobs: None,
         targets: vec![],
-        out_dir: TMP.path().join("out"),
+        out_dir: Some(TMP.path().join("out")),
     };
     run(g, cache, &opts, &reporter).unwrap();
 }

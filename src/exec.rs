@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
-use kodama_nodes::io::export::{Encoded, check_names, encode, output_file};
+use kodama_nodes::io::export::{Encoded, check_names, encode_with_parts, output_file};
 use kodama_nodes::stage::{Arity, Slot};
 use kodama_nodes::{Artifact, Ctx, Inputs, StageError};
 use rayon::prelude::*;
@@ -492,7 +492,8 @@ impl<'a> Exec<'a> {
         if let Some(action) = self.cache.get_action(&key) {
             let (digest, size) = action.output;
             let reports = self.stored_reports(i, &action);
-            if self.cache.has_blob(&digest, size) && reports.is_some() {
+            let parts_stored = || action.parts.iter().all(|(d, s)| self.cache.has_blob(d, *s));
+            if self.cache.has_blob(&digest, size) && reports.is_some() && parts_stored() {
                 let unchanged = last.is_some_and(|l| l.key == snapshot.key);
                 let (status, why) = match (ran_upstream, unchanged) {
                     (true, true) => (
@@ -522,11 +523,12 @@ impl<'a> Exec<'a> {
                 };
             }
             self.reporter.warn(&format!(
-                "node \"{}\": its cached output or a report is missing from the store; rebuilding",
+                "node \"{}\": its cached output, a report or a part is missing from the store; rebuilding",
                 node.id
             ));
-            reason =
-                Some("cached output or a report was missing from the store; rebuilt".to_owned());
+            reason = Some(
+                "cached output, a report or a part was missing from the store; rebuilt".to_owned(),
+            );
         }
         let reason = reason.unwrap_or_else(|| what_changed(&snapshot, last));
         match self.execute(i) {
@@ -619,6 +621,7 @@ impl<'a> Exec<'a> {
                 files: &paths,
                 progress: &progress,
                 seed: *key.as_bytes(),
+                parts: self.cache,
             };
             let result = catch_unwind(AssertUnwindSafe(|| node.params.run(inputs, &ctx)));
             drop(progress);
@@ -674,9 +677,17 @@ impl<'a> Exec<'a> {
             ))
         };
         let (digest, size) = self.store(&ran.output).map_err(store)?;
+        // The parts were stored by the stage as it made them; the entry names them, so gc and
+        // the remote tier keep them with the output.
         let mut action = Action {
             output: (digest, size),
             reports: Vec::new(),
+            parts: ran
+                .output
+                .parts()
+                .iter()
+                .map(|p| (Digest::from(p.digest), p.size))
+                .collect(),
         };
         let mut reports = BTreeMap::new();
         for (name, report) in &ran.reports {
@@ -938,7 +949,8 @@ impl<'a> Exec<'a> {
             .map_err(|e| OutputError::io(e.to_string()))?;
         check_names(&art).map_err(OutputError::user)?;
         let (file_name, format) = output_file(name, art.ty()).map_err(OutputError::io)?;
-        let encoded = encode(&art, &self.graph.site, format).map_err(OutputError::io)?;
+        let encoded = encode_with_parts(&art, &self.graph.site, format, self.cache)
+            .map_err(OutputError::io)?;
         let path = dir.join(&file_name);
         let stamps = write_output(dir, &file_name, encoded)
             .map_err(|e| OutputError::io(format!("cannot write {}: {e}", path.display())))?;

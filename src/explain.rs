@@ -106,6 +106,7 @@ pub fn explain(
                     a.report(r.name)
                         .is_some_and(|(d, size)| cache.can_get_blob(&d, size))
                 })
+                && a.parts.iter().all(|(d, size)| cache.can_get_blob(d, *size))
         });
         match hit {
             Some(a) => {

@@ -17,6 +17,7 @@ use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use crate::artifact::{Artifact, ArtifactType, Typed};
+pub use crate::artifact::{MemParts, PartError, PartRef, PartStore, process_parts};
 pub use crate::params::ParamError;
 use crate::site::Site;
 
@@ -172,6 +173,12 @@ impl Progress for NoProgress {
     fn advance(&self, _: u64) {}
 }
 
+impl From<PartError> for StageError {
+    fn from(e: PartError) -> StageError {
+        StageError::Failed(e.0)
+    }
+}
+
 /// What a stage may know of the world besides its inputs.
 pub struct Ctx<'a> {
     /// The site frame.
@@ -183,17 +190,27 @@ pub struct Ctx<'a> {
     /// 32 bytes derived from the node's action key, for stages that need randomness but have no
     /// seed parameter.
     pub seed: [u8; 32],
+    /// Where the parts of artifacts live (a view set's pixels): the output's are put here, the
+    /// inputs' read from here.
+    pub parts: &'a dyn PartStore,
 }
 
 impl<'a> Ctx<'a> {
-    /// A context for calling a stage directly (tests, benchmarks, other programs).
+    /// A context for calling a stage directly (tests, benchmarks, other programs). Parts go to
+    /// [`process_parts`], held in memory until the process ends: a caller making many views
+    /// gives a store of its own with [`Ctx::with_parts`].
     pub fn new(site: &'a Site, files: &'a [PathBuf]) -> Self {
         Ctx {
             site,
             files,
             progress: &NoProgress,
             seed: [0; 32],
+            parts: process_parts(),
         }
+    }
+    /// The same context with parts in `parts`.
+    pub fn with_parts(self, parts: &'a dyn PartStore) -> Self {
+        Ctx { parts, ..self }
     }
     /// The resolved path of the `i`-th declared file.
     pub fn file(&self, i: usize) -> Result<&Path, StageError> {

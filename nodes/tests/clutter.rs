@@ -5,6 +5,7 @@
 
 mod common;
 use common::*;
+use kodama_nodes::stage::process_parts;
 
 use std::collections::BTreeMap;
 
@@ -291,7 +292,8 @@ fn scores(
             min_view_share: if support { cfg.min_view_share } else { 0.0 },
             ..ClutterConfig::default()
         };
-        let (placed, metrics) = place_clutter(&views.views, twin, terrain, None, &cfg);
+        let (placed, metrics) =
+            place_clutter(views.with(process_parts()), twin, terrain, None, &cfg).unwrap();
         println!(
             "support test {support}, drop_vehicles_in_intersections {drop_int}: {:?}",
             metrics.values
@@ -320,7 +322,7 @@ fn clutter_recall_and_precision_on_the_demo_site() {
     let (city, truth, views, twin, terrain) = demo_site(64);
     // Calibration: every view's fit against the truth bias (z = 1.25 d - 1.25).
     let cfg = ClutterConfig::default();
-    let cals = calibrate(&views.views, &twin, &cfg);
+    let cals = calibrate(views.with(process_parts()), &twin, &cfg).unwrap();
     let slopes: Vec<f64> = cals.iter().flatten().map(|c| c.fit.slope).collect();
     let icepts: Vec<f64> = cals.iter().flatten().map(|c| c.fit.intercept).collect();
     println!(

@@ -12,7 +12,7 @@ use std::sync::Arc;
 
 use kodama_nodes::artifact::{Instances, Intrinsics, PodVec, Pose, RMSNET_CLASSES, View, ViewSet};
 use kodama_nodes::io::onnx::ImageInput;
-use kodama_nodes::stage::Slot;
+use kodama_nodes::stage::{Slot, process_parts};
 use kodama_nodes::stages::models::estimate_depth::{
     EstimateDepth, EstimateDepthParams, Predicts, Units,
 };
@@ -74,30 +74,31 @@ fn view_set(rows: &[&str], materials: &[&str]) -> ViewSet {
         .iter()
         .map(|r| r.iter().map(|&c| colour(c)).collect())
         .collect();
-    ViewSet {
-        views: vec![View {
-            id: "v0".into(),
-            width: w,
-            height: h,
-            intrinsics: Intrinsics {
-                fx: 2.0 * w as f64,
-                fy: 2.0 * w as f64,
-                cx: w as f64 / 2.0,
-                cy: h as f64 / 2.0,
-            },
-            pose: Pose::from_angles([0.0, 0.0, 2.0], 0.0, 0.0, 0.0),
-            captured_at: None,
-            pose_source: None,
-            distortion: None,
-            image: PodVec(expand(&colours)),
-            arch: None,
-            clutter: None,
-            material: None,
-            depth: None,
-            normal: None,
-        }],
-        material_classes: materials.iter().map(|m| m.to_string()).collect(),
-    }
+    let view = View {
+        id: "v0".into(),
+        width: w,
+        height: h,
+        intrinsics: Intrinsics {
+            fx: 2.0 * w as f64,
+            fy: 2.0 * w as f64,
+            cx: w as f64 / 2.0,
+            cy: h as f64 / 2.0,
+        },
+        pose: Pose::from_angles([0.0, 0.0, 2.0], 0.0, 0.0, 0.0),
+        captured_at: None,
+        pose_source: None,
+        distortion: None,
+        image: PodVec(expand(&colours)),
+        arch: None,
+        clutter: None,
+        material: None,
+        depth: None,
+        normal: None,
+    };
+    let classes = materials.iter().map(|m| m.to_string()).collect();
+    ViewSet::store(vec![view], classes, process_parts())
+        .unwrap()
+        .unwrap()
 }
 
 /// A label table file for the four classes of the tiny models.
@@ -147,10 +148,24 @@ fn inputs(set: &ViewSet) -> Inputs {
     Inputs::new().with("views", Slot::One(Arc::new(Artifact::Views(set.clone()))))
 }
 
-fn segment(p: &SegmentViewsParams, set: &ViewSet) -> Result<ViewSet, StageError> {
+/// A view set with its views' pixels read back.
+#[derive(Debug)]
+struct Full {
+    views: Vec<View>,
+    material_classes: Vec<String>,
+}
+
+fn full(set: &ViewSet) -> Full {
+    Full {
+        views: set.with(process_parts()).load_all().unwrap(),
+        material_classes: set.material_classes.clone(),
+    }
+}
+
+fn segment(p: &SegmentViewsParams, set: &ViewSet) -> Result<Full, StageError> {
     SegmentViews::validate(p).map_err(StageError::Param)?;
     let files = vec![PathBuf::from(&p.labels), PathBuf::from(&p.model)];
-    SegmentViews::run(p, &inputs(set), &Ctx::new(&site(), &files))
+    SegmentViews::run(p, &inputs(set), &Ctx::new(&site(), &files)).map(|s| full(&s))
 }
 
 fn depth_params(model_file: &Path, predicts: Predicts, units: Units) -> EstimateDepthParams {
@@ -165,10 +180,10 @@ fn depth_params(model_file: &Path, predicts: Predicts, units: Units) -> Estimate
     }
 }
 
-fn estimate(p: &EstimateDepthParams, set: &ViewSet) -> Result<ViewSet, StageError> {
+fn estimate(p: &EstimateDepthParams, set: &ViewSet) -> Result<Full, StageError> {
     EstimateDepth::validate(p).map_err(StageError::Param)?;
     let files = vec![PathBuf::from(&p.model)];
-    EstimateDepth::run(p, &inputs(set), &Ctx::new(&site(), &files))
+    EstimateDepth::run(p, &inputs(set), &Ctx::new(&site(), &files)).map(|s| full(&s))
 }
 
 /// 8 x 6 pixels: red wall, green cars (three regions), blue window, grey nothing.
@@ -210,7 +225,7 @@ fn logits_become_arch_and_clutter_instances() {
         )
     );
     assert_eq!(v.material, None);
-    assert_eq!(v.image, view_set(SCENE, &[]).views[0].image);
+    assert_eq!(v.image, full(&view_set(SCENE, &[])).views[0].image);
 
     // Small regions are dropped: only the 8-pixel car is left.
     p.min_pixels = 5;
@@ -277,7 +292,7 @@ fn depth_in_each_of_its_meanings() {
     let depth_of = |p: EstimateDepthParams| {
         let out = estimate(&p, &set).unwrap();
         let v = &out.views[0];
-        assert_eq!(v.image, set.views[0].image);
+        assert_eq!(v.image, full(&set).views[0].image);
         v.depth.as_ref().unwrap().0.clone()
     };
     let onnx = model("depth.onnx");

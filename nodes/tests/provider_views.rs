@@ -248,6 +248,7 @@ fn yaw_disagreement_drops_the_view_with_a_warning() {
         files: &files,
         progress: &warnings,
         seed: [0; 32],
+        parts: kodama_nodes::stage::process_parts(),
     };
     let p: ReadMapillaryParams =
         serde_json::from_value(serde_json::json!({"path": "x", "trust_altitude": true})).unwrap();
@@ -513,13 +514,15 @@ fn synthetic_views_round_trip_through_the_mapillary_layout() {
     let set: ViewSet = SynthViews::run(&p, &inputs, &Ctx::new(&site(), &[])).unwrap();
     assert_eq!(set.views.len(), 6);
     let dir = tempfile::tempdir().unwrap();
-    for (rel, bytes) in write_mapillary(&set, &site()).unwrap() {
+    for (rel, bytes) in
+        write_mapillary(&set, &site(), kodama_nodes::stage::process_parts()).unwrap()
+    {
         std::fs::write(dir.path().join(rel), bytes).unwrap();
     }
     let back = read_mapillary(dir.path(), &site(), &options(Heights::Provider)).unwrap();
     assert!(back.dropped.is_empty());
     assert_eq!(back.views.len(), set.views.len());
-    for (a, b) in back.views.iter().map(|v| &v.view).zip(&set.views) {
+    for (a, b) in back.views.iter().map(|v| &v.view).zip(&loaded(&set).views) {
         assert_eq!((&a.id, a.width, a.height), (&b.id, b.width, b.height));
         let off = (0..3)
             .map(|k| (a.pose.position[k] - b.pose.position[k]).powi(2))

@@ -674,7 +674,7 @@ fn relief_on_every_street_of_the_demo_city() {
 /// `views` as a segmentation model would give them that missed every instance of `class`: its
 /// pixels unlabelled.
 fn missing_class(views: &ViewSet, class: &str) -> ViewSet {
-    let mut views = views.clone();
+    let mut views = loaded(views);
     for v in &mut views.views {
         if let Some(arch) = v.arch.as_mut() {
             let missed: Vec<u16> = arch
@@ -691,7 +691,7 @@ fn missing_class(views: &ViewSet, class: &str) -> ViewSet {
             arch.classes.retain(|id, _| !missed.contains(id));
         }
     }
-    views
+    stored(views.views, views.material_classes)
 }
 
 /// The segmentation model missing every wall (each view's wall pixels unlabelled, as the demo's
@@ -825,8 +825,7 @@ fn registration_brings_the_views_back_to_where_they_were_taken() {
     let (mut before, mut after, mut yaw_before, mut yaw_after) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut moved = 0;
-    for ((n, r), t) in noisy
-        .views
+    for ((n, r), t) in loaded(&noisy.views)
         .views
         .iter()
         .zip(&reg.views)
@@ -1266,7 +1265,7 @@ fn registration_by_error() {
         let s = make_site(p);
         let reg = register_views(&s.views, &s.walls);
         let (mut pos, mut yaw) = (Vec::new(), Vec::new());
-        for (r, t) in reg.views.iter().zip(&truth.views.views) {
+        for (r, t) in loaded(&reg).views.iter().zip(&truth.views.views) {
             if !r
                 .arch
                 .as_ref()

@@ -7,9 +7,9 @@ use common::*;
 use std::sync::Arc;
 
 use kodama_nodes::artifact::height_at;
-use kodama_nodes::artifact::{City, RMSNET_CLASSES, Scene, ViewSet};
+use kodama_nodes::artifact::{City, RMSNET_CLASSES, Scene};
 use kodama_nodes::io::views_io::{read_viewset, write_viewset};
-use kodama_nodes::stage::Slot;
+use kodama_nodes::stage::{Slot, process_parts};
 use kodama_nodes::synth::synth_city::generate;
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
 use kodama_nodes::{Artifact, Ctx, Inputs, Stage};
@@ -20,14 +20,14 @@ fn city_and_scene() -> (City, Scene) {
     (city, scene)
 }
 
-fn render(p: &SynthViewsParams) -> (City, ViewSet) {
+fn render(p: &SynthViewsParams) -> (City, Loaded) {
     let (city, scene) = city_and_scene();
     let inputs = Inputs::new()
         .with("scene", Slot::One(Arc::new(Artifact::Scene(scene))))
         .with("city", Slot::One(Arc::new(Artifact::City(city.clone()))));
     (
         city.clone(),
-        SynthViews::run(p, &inputs, &Ctx::new(&site(), &[])).unwrap(),
+        loaded(&SynthViews::run(p, &inputs, &Ctx::new(&site(), &[])).unwrap()),
     )
 }
 
@@ -83,14 +83,15 @@ fn ground_pixels_back_project_onto_the_terrain() {
 #[test]
 fn views_round_trip_through_the_on_disk_layout() {
     let (_, set) = render(&small(SynthViewsParams::default()));
-    let files = write_viewset(&set).unwrap();
+    let files = write_viewset(&set.set, process_parts()).unwrap();
     let dir = tempfile::tempdir().unwrap();
     for (rel, bytes) in files {
         let f = dir.path().join(rel);
         std::fs::create_dir_all(f.parent().unwrap()).unwrap();
         std::fs::write(f, bytes).unwrap();
     }
-    let back = read_viewset(&dir.path().join("views.json"), &site()).unwrap();
+    let back =
+        loaded(&read_viewset(&dir.path().join("views.json"), &site(), process_parts()).unwrap());
     assert_eq!(back.material_classes, set.material_classes);
     assert_eq!(back.views.len(), set.views.len());
     for (a, b) in back.views.iter().zip(&set.views) {
@@ -186,7 +187,7 @@ fn a_view_pointing_at_a_missing_image_names_it() {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("views.json");
     std::fs::write(&json, r#"[{"id": "a", "image": "img/a.jpg", "width": 4, "height": 3, "intrinsics": {"hfov_deg": 90}, "pose": {"x": 0, "y": 0, "z": 2}, "orientation": {"heading_deg": 0}}]"#).unwrap();
-    let e = read_viewset(&json, &site()).unwrap_err();
+    let e = read_viewset(&json, &site(), process_parts()).unwrap_err();
     assert!(
         e.to_string()
             .contains("views.json: view \"a\", image: the image")
@@ -195,7 +196,7 @@ fn a_view_pointing_at_a_missing_image_names_it() {
     );
     std::fs::write(&json, r#"[{"id": "a", "image": "img/a.jpg", "width": 4, "height": 3, "pose": {"x": 0, "y": 0, "z": 2}, "orientation": {"heading_deg": 0}}]"#).unwrap();
     assert!(
-        read_viewset(&json, &site())
+        read_viewset(&json, &site(), process_parts())
             .unwrap_err()
             .to_string()
             .contains("intrinsics")
@@ -274,7 +275,7 @@ fn model_outputs_attach_to_provider_views_by_id() {
     use kodama_nodes::stages::ingest::read_view_outputs::{ReadViewOutputs, ReadViewOutputsParams};
     let (_, set) = render(&small(SynthViewsParams::default()));
     let dir = tempfile::tempdir().unwrap();
-    for (rel, bytes) in write_viewset(&set).unwrap() {
+    for (rel, bytes) in write_viewset(&set.set, process_parts()).unwrap() {
         // The images and views.json stay with the provider; only the model outputs are here.
         if rel.starts_with("img/") || rel == "views.json" {
             continue;
@@ -283,11 +284,11 @@ fn model_outputs_attach_to_provider_views_by_id() {
         std::fs::create_dir_all(f.parent().unwrap()).unwrap();
         std::fs::write(f, bytes).unwrap();
     }
-    let mut bare = set.clone();
-    bare.material_classes.clear();
-    for v in &mut bare.views {
+    let mut bare = set.views.clone();
+    for v in &mut bare {
         (v.arch, v.clutter, v.material, v.depth, v.normal) = (None, None, None, None, None);
     }
+    let bare = stored(bare, Vec::new());
     let last = &set.views.last().unwrap().id;
     for kind in ["arch", "clutter", "material", "depth", "normal"] {
         for ext in ["png", "json", "exr"] {
@@ -307,7 +308,7 @@ fn model_outputs_attach_to_provider_views_by_id() {
             &Ctx::new(&site(), &files),
         )
     };
-    let got = run(&params(false), dir.path()).unwrap();
+    let got = loaded(&run(&params(false), dir.path()).unwrap());
     assert_eq!(got.material_classes, set.material_classes);
     let n = set.views.len();
     for (a, b) in got.views.iter().zip(&set.views).take(n - 1) {

@@ -73,6 +73,16 @@ pub fn gc(
         lock.lock()?;
     }
     let mut report = GcReport::default();
+    // A kept output keeps the parts it names (a view set's pixels) and its reports.
+    let actions = list(&cache.root.join("ac"), &mut report.foreign)?;
+    let mut keep = keep.clone();
+    for p in &actions {
+        if let Some(a) = fs::read_to_string(p).ok().and_then(|t| parse_action(&t))
+            && keep.contains(a.output.0.as_bytes())
+        {
+            keep.extend(a.blobs().map(|(d, _)| *d.as_bytes()));
+        }
+    }
     let mut blobs: Vec<(SystemTime, u64, PathBuf, bool)> = Vec::new();
     for p in list(&cache.root.join("cas"), &mut report.foreign)? {
         let Ok(m) = fs::symlink_metadata(&p) else {
@@ -105,14 +115,12 @@ pub fn gc(
         report.blobs_removed += 1;
     }
     report.bytes_after = total;
-    for p in list(&cache.root.join("ac"), &mut report.foreign)? {
+    for p in actions {
         let present = |(d, size): (Digest, u64)| {
             fs::metadata(cache.blob_path(&d)).is_ok_and(|m| m.len() == size)
         };
         let stale = match fs::read_to_string(&p).ok().and_then(|t| parse_action(&t)) {
-            Some(a) => {
-                !present(a.output) || a.reports.iter().any(|(_, d, size)| !present((*d, *size)))
-            }
+            Some(a) => !a.blobs().all(present),
             None => true,
         };
         if stale {

@@ -33,6 +33,8 @@ use std::io;
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
+use kodama_nodes::artifact::{PartError, PartRef, PartStore};
+
 pub use atomic::write_atomic;
 pub use files::{InputStamp, check_folder, describe_file_type, folder_files, hash_file};
 pub use gc::{GcReport, gc};
@@ -585,12 +587,14 @@ impl Cache {
         for (name, d, size) in &action.reports {
             text.push_str(&format!("report {name} blake3:{} {size}\n", d.to_hex()));
         }
+        for (d, size) in &action.parts {
+            text.push_str(&format!("part blake3:{} {size}\n", d.to_hex()));
+        }
         write_atomic(&self.tmp(), &path, text.as_bytes())?;
         if let Some(remote) = &self.remote {
-            let blobs = std::iter::once(action.output)
-                .chain(action.reports.iter().map(|(_, d, s)| (*d, *s)));
             // Every blob first: a remote entry never names a blob that did not arrive.
-            if blobs
+            if action
+                .blobs()
                 .collect::<Vec<_>>()
                 .iter()
                 .all(|(d, s)| self.upload(remote, d, *s))
@@ -608,16 +612,35 @@ impl Cache {
     }
 }
 
-/// What one action produced: the output blob (digest, size) and each report's, by name.
+/// What one action produced: the output blob (digest, size), each report's, by name, and the
+/// parts the output names (a view set's pixels).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Action {
     /// The output's blob.
     pub output: (Digest, u64),
     /// (report name, digest, size) of each report, in the kind's order.
     pub reports: Vec<(String, Digest, u64)>,
+    /// (digest, size) of each part the output names, in its order.
+    pub parts: Vec<(Digest, u64)>,
 }
 
 impl Action {
+    /// An action that made `output` and nothing else.
+    pub fn of(output: (Digest, u64)) -> Action {
+        Action {
+            output,
+            reports: Vec::new(),
+            parts: Vec::new(),
+        }
+    }
+
+    /// Every blob the action needs: the output, the reports, the parts.
+    pub fn blobs(&self) -> impl Iterator<Item = (Digest, u64)> + '_ {
+        std::iter::once(self.output)
+            .chain(self.reports.iter().map(|(_, d, s)| (*d, *s)))
+            .chain(self.parts.iter().copied())
+    }
+
     /// The blob of report `name`, if recorded.
     pub fn report(&self, name: &str) -> Option<(Digest, u64)> {
         self.reports
@@ -628,7 +651,8 @@ impl Action {
 }
 
 /// Parses an action entry: `blake3:<hex> <size>`, then a line `report <name> blake3:<hex> <size>`
-/// per report (entries written before reports existed have none).
+/// per report and `part blake3:<hex> <size>` per part (entries written before reports or parts
+/// existed have none).
 pub(crate) fn parse_action(text: &str) -> Option<Action> {
     let blob = |t: &str| -> Option<(Digest, u64)> {
         let (d, size) = t.trim().strip_prefix("blake3:")?.split_once(' ')?;
@@ -636,13 +660,53 @@ pub(crate) fn parse_action(text: &str) -> Option<Action> {
     };
     let mut lines = text.lines();
     let output = blob(lines.next()?)?;
-    let mut reports = Vec::new();
+    let mut action = Action::of(output);
     for line in lines {
+        if let Some(rest) = line.strip_prefix("part ") {
+            action.parts.push(blob(rest)?);
+            continue;
+        }
         let (name, rest) = line.strip_prefix("report ")?.split_once(' ')?;
         let (d, size) = blob(rest)?;
-        reports.push((name.to_string(), d, size));
+        action.reports.push((name.to_string(), d, size));
     }
-    Some(Action { output, reports })
+    Some(action)
+}
+
+/// Action entries name a part by digest and size; stages by [`PartRef`].
+pub fn part_ref((d, size): (Digest, u64)) -> PartRef {
+    PartRef {
+        digest: *d.as_bytes(),
+        size,
+    }
+}
+
+/// The cache as the store of the parts stages make and read: each part a blob, so it is written
+/// whole or not at all, verified on every read, fetched from and sent to the remote tier like
+/// any other.
+impl PartStore for Cache {
+    fn put(&self, bytes: &[u8]) -> Result<PartRef, PartError> {
+        let (d, size) = self
+            .put_blob_with(|w| io::Write::write_all(w, bytes))
+            .map_err(|e| {
+                PartError(format!(
+                    "cannot store a part in {}: {e}",
+                    self.root.display()
+                ))
+            })?;
+        Ok(part_ref((d, size)))
+    }
+
+    fn get(&self, part: &PartRef) -> Result<Vec<u8>, PartError> {
+        let d = Digest::from(part.digest);
+        self.get_blob(&d).map(|b| b.to_vec()).map_err(|e| {
+            PartError(format!(
+                "part blake3:{} in {} is {e}; run again to rebuild it",
+                d.to_hex(),
+                self.root.display()
+            ))
+        })
+    }
 }
 
 /// Marks a file as recently used (its mtime is the LRU clock gc reads). Best effort: a read-only
@@ -695,13 +759,7 @@ mod tests {
         let cache = Cache::open(root).unwrap();
         let (d, size) = cache.put_blob_with(|w| w.write_all(b"artifact")).unwrap();
         cache
-            .put_action(
-                &blake3::hash(b"key"),
-                &Action {
-                    output: (d, size),
-                    reports: Vec::new(),
-                },
-            )
+            .put_action(&blake3::hash(b"key"), &Action::of((d, size)))
             .unwrap();
         fs::write(root.join("tmp/.kodama-999999999-0-0.tmp"), b"left").unwrap();
         d

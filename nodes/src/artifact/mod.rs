@@ -9,6 +9,7 @@ mod material_layers;
 mod measurements;
 mod metrics;
 mod ortho;
+mod parts;
 mod points;
 mod raster;
 mod relief;
@@ -33,13 +34,14 @@ pub use material_layers::{
 pub use measurements::{Endpoint, Height, Link, Measurements, link_distance, measured_loss};
 pub use metrics::{Half, Metrics, block_half, carrier_label};
 pub use ortho::Ortho;
+pub use parts::{MemParts, PartError, PartRef, PartStore, process_parts};
 pub use points::PointSet;
 pub use raster::{Grid, Raster};
 pub use relief::{ReliefInstance, ReliefLayers, ReliefSet, ReliefStats};
 pub use report::ReportFiles;
 pub use scene::{MAX_COORD_M, Mesh, ObjectClass, Scene, SceneObject};
 pub use terrain_model::{TerrainModel, height_at};
-pub use views::{Instances, Intrinsics, Pose, RMSNET_CLASSES, View, ViewSet};
+pub use views::{Instances, Intrinsics, Pose, RMSNET_CLASSES, View, ViewHead, ViewSet, Views};
 
 /// The type of an artifact, as the loader checks it on every edge.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
@@ -131,6 +133,15 @@ impl Artifact {
             Artifact::Texels(_) => ArtifactType::Texels,
             Artifact::Relief(_) => ArtifactType::Relief,
             Artifact::Materials(_) => ArtifactType::Materials,
+        }
+    }
+
+    /// The parts the artifact names (a view set's pixels), in order: the engine keeps them with
+    /// the artifact (stored, uploaded and collected together).
+    pub fn parts(&self) -> Vec<PartRef> {
+        match self {
+            Artifact::Views(set) => set.parts().collect(),
+            _ => Vec::new(),
         }
     }
 }

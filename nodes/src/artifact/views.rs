@@ -9,6 +9,7 @@ use std::collections::BTreeMap;
 use serde::{Deserialize, Serialize};
 
 use super::PodVec;
+use super::{PartError, PartRef, PartStore};
 
 /// The 20 material classes of RMSNet (Cai et al. 2024), the vocabulary material maps use by
 /// default; `shared/DESIGN.md` maps them to ITU-R P.2040.
@@ -231,24 +232,250 @@ impl View {
     }
 }
 
-impl ViewSet {
-    /// [`View::check`] for every view, the place naming the view by index and id.
-    pub fn check(&self) -> Result<(), (String, String)> {
-        for (i, v) in self.views.iter().enumerate() {
-            v.check(self.material_classes.len())
-                .map_err(|(what, m)| (format!("view {i} ({:?}), {what}", v.id), m))?;
-        }
-        Ok(())
-    }
-}
-
-/// A set of views sharing a material class table.
+/// A set of views sharing a material class table. The set holds each view's head (everything
+/// but its per-pixel layers); the layers are one part per view in a [`PartStore`], compressed,
+/// read one view at a time through [`Views`]. So a set of any size loads in kilobytes, a stage
+/// that moves poses copies no pixel, and a stage reading views holds a few at once.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ViewSet {
     /// The views, in file order.
-    pub views: Vec<View>,
+    pub views: Vec<ViewHead>,
     /// Material class names, indexed by the material maps.
     pub material_classes: Vec<String>,
+}
+
+/// A view without its per-pixel layers, which are the part `pixels` names.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ViewHead {
+    /// See [`View::id`].
+    pub id: String,
+    /// Pixels across.
+    pub width: u32,
+    /// Pixels down.
+    pub height: u32,
+    /// Camera intrinsics.
+    pub intrinsics: Intrinsics,
+    /// Camera pose.
+    pub pose: Pose,
+    /// See [`View::captured_at`].
+    pub captured_at: Option<String>,
+    /// See [`View::pose_source`].
+    pub pose_source: Option<String>,
+    /// See [`View::distortion`].
+    pub distortion: Option<[f64; 2]>,
+    /// The architectural instances' classes, when the view has them.
+    pub arch_classes: Option<BTreeMap<u16, String>>,
+    /// The clutter instances' classes, when the view has them.
+    pub clutter_classes: Option<BTreeMap<u16, String>>,
+    /// The per-pixel layers: [`ViewPixels`], MessagePack compressed with zstd.
+    pub pixels: PartRef,
+}
+
+/// A view's per-pixel layers as one part stores them.
+#[derive(Serialize, Deserialize)]
+struct ViewPixels {
+    image: PodVec<[u8; 3]>,
+    arch: Option<PodVec<u16>>,
+    clutter: Option<PodVec<u16>>,
+    material: Option<PodVec<u8>>,
+    depth: Option<PodVec<f32>>,
+    normal: Option<PodVec<[f32; 3]>>,
+}
+
+/// zstd's level for view parts: level 1 compresses at several hundred MB/s a core, so storing a
+/// view costs less than rendering or reading it, and halves what the model layers take.
+const PIXELS_ZSTD_LEVEL: i32 = 1;
+
+impl View {
+    /// Stores this view's pixels in `parts` and returns its head. The view is checked first
+    /// ([`View::check`] against `n_classes` material classes): the error is the place (`what`)
+    /// and what was expected.
+    pub fn store(
+        self,
+        n_classes: usize,
+        parts: &dyn PartStore,
+    ) -> Result<Result<ViewHead, (&'static str, String)>, PartError> {
+        if let Err(e) = self.check(n_classes) {
+            return Ok(Err(e));
+        }
+        let (arch, arch_classes) = split_instances(self.arch);
+        let (clutter, clutter_classes) = split_instances(self.clutter);
+        let pixels = ViewPixels {
+            image: self.image,
+            arch,
+            clutter,
+            material: self.material,
+            depth: self.depth,
+            normal: self.normal,
+        };
+        let packed = rmp_serde::to_vec(&pixels)
+            .map_err(|e| PartError(format!("cannot encode view {:?}: {e}", self.id)))?;
+        let zipped = zstd::bulk::compress(&packed, PIXELS_ZSTD_LEVEL)
+            .map_err(|e| PartError(format!("cannot compress view {:?}: {e}", self.id)))?;
+        Ok(Ok(ViewHead {
+            pixels: parts.put(&zipped)?,
+            id: self.id,
+            width: self.width,
+            height: self.height,
+            intrinsics: self.intrinsics,
+            pose: self.pose,
+            captured_at: self.captured_at,
+            pose_source: self.pose_source,
+            distortion: self.distortion,
+            arch_classes,
+            clutter_classes,
+        }))
+    }
+}
+
+fn split_instances(i: Option<Instances>) -> (Option<PodVec<u16>>, Option<BTreeMap<u16, String>>) {
+    match i {
+        Some(i) => (Some(i.ids), Some(i.classes)),
+        None => (None, None),
+    }
+}
+
+impl ViewHead {
+    /// The whole view: the head with its pixels read from `parts`.
+    pub fn load(&self, parts: &dyn PartStore) -> Result<View, PartError> {
+        let bad = |why: String| {
+            PartError(format!(
+                "the pixels of view {:?} cannot be read back: {why}",
+                self.id
+            ))
+        };
+        let zipped = parts.get(&self.pixels)?;
+        // The bound is the layers of a view of this size, so a part can never ask for more.
+        let n = self.width as usize * self.height as usize;
+        let bound = 64 + n * (3 + 2 + 2 + 1 + 4 + 12) + 64;
+        let packed = zstd::bulk::decompress(&zipped, bound).map_err(|e| bad(e.to_string()))?;
+        let px: ViewPixels = rmp_serde::from_slice(&packed).map_err(|e| bad(e.to_string()))?;
+        let instances = |ids: Option<PodVec<u16>>, classes: &Option<BTreeMap<u16, String>>| {
+            ids.map(|ids| Instances {
+                ids,
+                classes: classes.clone().unwrap_or_default(),
+            })
+        };
+        Ok(View {
+            id: self.id.clone(),
+            width: self.width,
+            height: self.height,
+            intrinsics: self.intrinsics,
+            pose: self.pose,
+            captured_at: self.captured_at.clone(),
+            pose_source: self.pose_source.clone(),
+            distortion: self.distortion,
+            image: px.image,
+            arch: instances(px.arch, &self.arch_classes),
+            clutter: instances(px.clutter, &self.clutter_classes),
+            material: px.material,
+            depth: px.depth,
+            normal: px.normal,
+        })
+    }
+}
+
+impl ViewSet {
+    /// An empty set with material class table `material_classes`.
+    pub fn new(material_classes: Vec<String>) -> ViewSet {
+        ViewSet {
+            views: Vec::new(),
+            material_classes,
+        }
+    }
+
+    /// A set of `views`, each stored in `parts` on all threads, in order. Each view is checked
+    /// ([`View::check`]): the error is the place (the view's index and id, then the part) and
+    /// what was expected.
+    pub fn store(
+        views: Vec<View>,
+        material_classes: Vec<String>,
+        parts: &dyn PartStore,
+    ) -> Result<Result<ViewSet, (String, String)>, PartError> {
+        use rayon::prelude::*;
+        let n = material_classes.len();
+        let heads: Vec<_> = views
+            .into_par_iter()
+            .enumerate()
+            .map(|(i, v)| {
+                let id = v.id.clone();
+                v.store(n, parts)
+                    .map(|r| r.map_err(|(what, m)| (format!("view {i} ({id:?}), {what}"), m)))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(heads
+            .into_iter()
+            .collect::<Result<Vec<_>, _>>()
+            .map(|views| ViewSet {
+                views,
+                material_classes,
+            }))
+    }
+
+    /// The views with the store their pixels are in.
+    pub fn with<'a>(&'a self, parts: &'a dyn PartStore) -> Views<'a> {
+        Views { set: self, parts }
+    }
+
+    /// Every part the set names.
+    pub fn parts(&self) -> impl Iterator<Item = PartRef> + '_ {
+        self.views.iter().map(|v| v.pixels)
+    }
+}
+
+/// A view set and the store of its pixels: views read one at a time, so a stage going through
+/// them in parallel holds as many as it has threads, whatever the set's size.
+#[derive(Clone, Copy)]
+pub struct Views<'a> {
+    /// The heads.
+    pub set: &'a ViewSet,
+    /// Where the pixels are.
+    pub parts: &'a dyn PartStore,
+}
+
+impl Views<'_> {
+    /// How many views.
+    pub fn len(&self) -> usize {
+        self.set.views.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.set.views.is_empty()
+    }
+
+    /// The head of view `i`.
+    pub fn head(&self, i: usize) -> &ViewHead {
+        &self.set.views[i]
+    }
+
+    /// View `i` with its pixels.
+    pub fn load(&self, i: usize) -> Result<View, PartError> {
+        self.set.views[i].load(self.parts)
+    }
+
+    /// Every view with its pixels, for a stage that needs them all at once: memory grows with
+    /// the set.
+    pub fn load_all(&self) -> Result<Vec<View>, PartError> {
+        use rayon::prelude::*;
+        (0..self.len())
+            .into_par_iter()
+            .map(|i| self.load(i))
+            .collect()
+    }
+
+    /// Runs `f` on every view in parallel, each loaded for its turn only, and returns what it
+    /// made, in view order.
+    pub fn map<R: Send>(
+        &self,
+        f: impl Fn(usize, &View) -> R + Sync + Send,
+    ) -> Result<Vec<R>, PartError> {
+        use rayon::prelude::*;
+        (0..self.len())
+            .into_par_iter()
+            .map(|i| self.load(i).map(|v| f(i, &v)))
+            .collect()
+    }
 }
 
 impl Pose {

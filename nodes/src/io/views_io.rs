@@ -19,40 +19,74 @@ use std::path::{Path, PathBuf};
 
 use serde_json::{Value, json};
 
-use crate::artifact::{Instances, Intrinsics, PodVec, Pose, View, ViewSet};
+use crate::artifact::{Instances, Intrinsics, PodVec, Pose, View, ViewHead, ViewSet};
 use crate::io::crs::{Crs, ToSite};
 use crate::io::exr_io::{Channels, read_exr, write_exr};
 use crate::site::Site;
-use crate::stage::StageError;
+use crate::stage::{PartStore, StageError};
 
 fn num(v: &Value, key: &str) -> Option<f64> {
     v.get(key).and_then(Value::as_f64)
 }
 
-/// Reads the view set described by `views_json`.
-pub fn read_viewset(views_json: &Path, site: &Site) -> Result<ViewSet, StageError> {
+/// Reads the view set described by `views_json`, each view's pixels stored in `parts` as soon
+/// as it is read (one view at a time in memory).
+pub fn read_viewset(
+    views_json: &Path,
+    site: &Site,
+    parts: &dyn PartStore,
+) -> Result<ViewSet, StageError> {
     let dir = views_json.parent().unwrap_or(Path::new("."));
     let doc = read_views_json(views_json)?;
     let (list, material_classes) = view_list(views_json, &doc)?;
     let wgs84 = ToSite::new(&Crs::from_epsg(4326).map_err(StageError::Failed)?, site)
         .map_err(StageError::Failed)?;
-    let mut set = ViewSet {
-        views: Vec::new(),
-        material_classes,
-    };
+    let mut set = ViewSet::new(material_classes);
     for (i, v) in list.iter().enumerate() {
         let view = read_view(views_json, dir, &wgs84, &set.material_classes, i, v)?;
-        set.views.push(view);
+        let head = store_checked(views_json, i, view, set.material_classes.len(), parts)?;
+        set.views.push(head);
     }
-    check_viewset(views_json, &set)?;
     Ok(set)
 }
 
-/// [`ViewSet::check`] as an error on `file`, where the view set came from: what every reader of
-/// views (views.json, provider downloads, model outputs) runs before handing a set on.
-pub fn check_viewset(file: &Path, set: &ViewSet) -> Result<(), StageError> {
-    set.check().map_err(|(place, expected)| {
-        StageError::bad_input(file, place, format!("expected {expected}"))
+/// Stores view `i` of a set read from `file`, after [`View::check`]: what every reader of views
+/// (views.json, provider downloads, model outputs) runs on each view before handing it on. A
+/// view that fails the check is an error on `file` naming it.
+pub fn store_checked(
+    file: &Path,
+    i: usize,
+    view: View,
+    n_classes: usize,
+    parts: &dyn PartStore,
+) -> Result<ViewHead, StageError> {
+    let id = view.id.clone();
+    view.store(n_classes, parts)?.map_err(|(what, m)| {
+        StageError::bad_input(
+            file,
+            format!("view {i} ({id:?}), {what}"),
+            format!("expected {m}"),
+        )
+    })
+}
+
+/// Every view of `views`, stored in `parts` on all threads through [`store_checked`].
+pub fn store_all_checked(
+    file: &Path,
+    views: Vec<View>,
+    material_classes: Vec<String>,
+    parts: &dyn PartStore,
+) -> Result<ViewSet, StageError> {
+    use rayon::prelude::*;
+    let n = material_classes.len();
+    let heads = views
+        .into_par_iter()
+        .enumerate()
+        .map(|(i, v)| store_checked(file, i, v, n, parts))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(ViewSet {
+        views: heads,
+        material_classes,
     })
 }
 
@@ -562,10 +596,14 @@ fn png(w: u32, h: u32, color: image::ExtendedColorType, bytes: &[u8]) -> Result<
 
 /// The files of a view set in the DESIGN layout, `views.json` first. Images are written as PNG so
 /// the model outputs stay pixel-exact.
-pub fn write_viewset(set: &ViewSet) -> Result<Vec<(String, Vec<u8>)>, String> {
+pub fn write_viewset(
+    set: &ViewSet,
+    parts: &dyn crate::stage::PartStore,
+) -> Result<Vec<(String, Vec<u8>)>, String> {
     let mut files = Vec::new();
     let mut entries = Vec::new();
-    for v in &set.views {
+    for head in &set.views {
+        let v = &head.load(parts).map_err(|e| e.to_string())?;
         let (w, h) = (v.width, v.height);
         entries.push(json!({
             "id": v.id,

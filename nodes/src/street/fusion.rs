@@ -6,10 +6,10 @@
 use rayon::prelude::*;
 
 use crate::artifact::{
-    Chart, ChartLayers, ChartSet, FusionStats, PodVec, Scene, TexelLayers, View,
+    Chart, ChartLayers, ChartSet, FusionStats, PodVec, Scene, TexelLayers, View, Views,
 };
 use crate::geom::raycast::SceneRays;
-use crate::stage::Progress;
+use crate::stage::{Progress, StageError};
 
 /// What one pixel says about the surface its ray hits.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -86,8 +86,8 @@ pub fn gaussian_kernel(sigma: f64) -> Vec<f64> {
 ///
 /// ω_ipq = J_ip^γ K_σ(q − u_ip),  W_exp(q) = Σ_ip ω_ipq,
 ///
-/// and votes E_c(q) = Σ_ip ω_ipq 1[vote(i, p) = c] per class c (`vote` takes the view's index
-/// in `views` and the pixel's row-major index). The kernel is applied as one
+/// and votes E_c(q) = Σ_ip ω_ipq 1[vote(i, p) = c] per class c (`vote` takes what `prepare` made of
+/// view i, the view and the pixel's row-major index). The kernel is applied as one
 /// separable convolution of the per-texel deposits after all views, which equals splatting each
 /// hit's kernel at its texel-centre-bilinear position (exact in mass: a splat sums to its weight
 /// away from the chart's border; texels off the surface are zeroed). `hits` counts the rays
@@ -99,113 +99,106 @@ pub fn gaussian_kernel(sigma: f64) -> Vec<f64> {
 /// # Units
 /// Weights are in pixels² per m² raised to γ (times stride², so strides compare).
 #[allow(clippy::too_many_arguments)]
-pub fn fuse_views(
+pub fn fuse_views<P: Send>(
     scene: &Scene,
     rays: &SceneRays,
     charts: &ChartSet,
-    views: &[View],
+    views: Views,
     classes: Vec<String>,
-    vote: &(dyn Fn(usize, usize) -> Vote + Sync),
+    prepare: &(dyn Fn(usize, &View) -> P + Sync),
+    vote: &(dyn Fn(&P, &View, usize) -> Vote + Sync),
     p: &FusionParams,
     progress: &dyn Progress,
-) -> TexelLayers {
-    fuse_views_displaced(
-        scene,
-        rays,
-        charts,
-        views,
-        classes,
-        vote,
-        &|_, _| 0.0,
-        p,
-        progress,
-    )
-}
-
-/// [`fuse_views`] with each pixel's hit moved onto the chart's plane offset by `displace(view
-/// index, pixel)` metres along its outward normal (0: the chart itself): a pixel that sees a protrusion
-/// standing `h` in front of the wall is deposited where the ray crosses the plane at `h`, then
-/// projected along the normal onto the chart, so the feature lands where it stands rather than
-/// where its parallax throws it (façade relief, eq. (4)). The weight J is the one at the wall hit.
-#[allow(clippy::too_many_arguments)]
-pub fn fuse_views_displaced(
-    scene: &Scene,
-    rays: &SceneRays,
-    charts: &ChartSet,
-    views: &[View],
-    classes: Vec<String>,
-    vote: &(dyn Fn(usize, usize) -> Vote + Sync),
-    displace: &(dyn Fn(usize, usize) -> f64 + Sync),
-    p: &FusionParams,
-    progress: &dyn Progress,
-) -> TexelLayers {
+) -> Result<TexelLayers, StageError> {
     let (layers, stats) = fuse_views_each(
         scene,
         rays,
         charts,
         views,
+        prepare,
         vote,
-        displace,
+        &|_, _| 0.0,
         p,
         progress,
         // A chart no pixel reached is stored as layers of zeros (no votes).
         |_, c, l| l.unwrap_or_else(|| ChartDeposits::new(c).into_layers(c, &[1.0])),
-    );
-    TexelLayers {
+    )?;
+    Ok(TexelLayers {
         classes,
         charts: layers,
         frames: charts.charts.iter().map(Chart::frame).collect(),
         stats,
-    }
+    })
 }
 
-/// [`fuse_views_displaced`] with each chart's layers handed to `finish` (its index, the chart,
-/// the layers) as soon as they are blurred, charts in parallel: a caller that reduces the
-/// layers to something smaller never holds every chart's layers at once (on a 1 km² site they
-/// are 1.5 GB). A chart no pixel reached gets `None` rather than layers of zeros (most of the
-/// charts of a street-level site: roofs, backs, courtyards). Returns what `finish` made, in
+/// [`fuse_views`] with each pixel's hit moved onto the chart's plane offset by `displace(what
+/// prepare made of the view, pixel)` metres along its outward normal (0: the chart itself): a
+/// pixel that sees a protrusion standing `h` in front of the wall is deposited where the ray
+/// crosses the plane at `h`, then projected along the normal onto the chart, so the feature
+/// lands where it stands rather than where its parallax throws it (façade relief, eq. (4)). The
+/// weight J is the one at the wall hit. Each chart's layers are handed to `finish` (its index,
+/// the chart, the layers) as soon as they are blurred, charts in parallel: a caller that reduces
+/// the layers to something smaller never holds every chart's layers at once (on a 1 km² site
+/// they are 1.5 GB). A chart no pixel reached gets `None` rather than layers of zeros (most of
+/// the charts of a street-level site: roofs, backs, courtyards). Returns what `finish` made, in
 /// chart order, and the counts.
+///
+/// Views are read a batch at a time, and `prepare` runs once per view as it is read (a view's
+/// refined labels, say): memory holds two batches' views, preparations and deposits, whatever
+/// the number of views.
 #[allow(clippy::too_many_arguments)]
-pub fn fuse_views_each<R: Send>(
+pub fn fuse_views_each<P: Send, R: Send>(
     scene: &Scene,
     rays: &SceneRays,
     charts: &ChartSet,
-    views: &[View],
-    vote: &(dyn Fn(usize, usize) -> Vote + Sync),
-    displace: &(dyn Fn(usize, usize) -> f64 + Sync),
+    views: Views,
+    prepare: &(dyn Fn(usize, &View) -> P + Sync),
+    vote: &(dyn Fn(&P, &View, usize) -> Vote + Sync),
+    displace: &(dyn Fn(&P, usize) -> f64 + Sync),
     p: &FusionParams,
     progress: &dyn Progress,
     finish: impl Fn(usize, &Chart, Option<ChartLayers>) -> R + Sync,
-) -> (Vec<R>, FusionStats) {
+) -> Result<(Vec<R>, FusionStats), StageError> {
     let lookup = ChartLookup::new(scene, charts);
     let mut per_chart: Vec<ChartDeposits> = charts.charts.iter().map(ChartDeposits::new).collect();
     let mut stats = FusionStats::default();
     progress.set_total(views.len() as u64);
+    // Views are read a batch at a time: memory holds two batches' views and deposits, whatever
+    // the number of views.
     let chunk = (rayon::current_num_threads() * 2).max(1);
-    let compute = |b: usize, batch: &[View]| -> Vec<ViewDeposits> {
+    let compute = |batch: std::ops::Range<usize>| -> Result<Vec<ViewDeposits>, StageError> {
         batch
-            .par_iter()
-            .enumerate()
-            .map(|(k, v)| {
-                let d = view_deposits(b * chunk + k, v, rays, charts, &lookup, vote, displace, p);
+            .into_par_iter()
+            .map(|k| {
+                let v = views.load(k)?;
+                let pre = prepare(k, &v);
+                let d = view_deposits(
+                    &v,
+                    rays,
+                    charts,
+                    &lookup,
+                    &|px| vote(&pre, &v, px),
+                    &|px| displace(&pre, px),
+                    p,
+                );
                 progress.advance(1);
-                d
+                Ok(d)
             })
             .collect()
     };
     // Each batch is merged in view order while the next is computed: the merge is serial, and
     // would otherwise leave every other thread idle.
     let mut pending: Vec<ViewDeposits> = Vec::new();
-    for (b, batch) in views.chunks(chunk).enumerate() {
+    for start in (0..views.len()).step_by(chunk) {
         let ((), next) = rayon::join(
             || {
                 for d in pending.drain(..) {
                     d.merge_into(&mut per_chart, &mut stats);
                 }
             },
-            || compute(b, batch),
+            || compute(start..(start + chunk).min(views.len())),
         );
-        pending = next;
+        pending = next?;
     }
     for d in pending {
         d.merge_into(&mut per_chart, &mut stats);
@@ -221,7 +214,7 @@ pub fn fuse_views_each<R: Send>(
             finish(ci, c, layers)
         })
         .collect();
-    (out, stats)
+    Ok((out, stats))
 }
 
 /// Object and triangle -> chart index.
@@ -399,13 +392,12 @@ impl ViewDeposits {
 
 #[allow(clippy::too_many_arguments)]
 fn view_deposits(
-    index: usize,
     view: &View,
     rays: &SceneRays,
     charts: &ChartSet,
     lookup: &ChartLookup,
-    vote: &(dyn Fn(usize, usize) -> Vote + Sync),
-    displace: &(dyn Fn(usize, usize) -> f64 + Sync),
+    vote: &dyn Fn(usize) -> Vote,
+    displace: &dyn Fn(usize) -> f64,
     p: &FusionParams,
 ) -> ViewDeposits {
     let mut out = ViewDeposits {
@@ -464,7 +456,7 @@ fn view_deposits(
             if j == 0.0 {
                 continue;
             }
-            let v = vote(index, (y * view.width + x) as usize);
+            let v = vote((y * view.width + x) as usize);
             let slot = match v {
                 Vote::Masked => {
                     out.stats.masked += 1;
@@ -475,7 +467,7 @@ fn view_deposits(
             };
             out.stats.accepted += 1;
             // On the plane `h` in front of the chart the ray arrives h / cos(theta) earlier.
-            let h = displace(index, (y * view.width + x) as usize);
+            let h = displace((y * view.width + x) as usize);
             let t = hit.t as f64 - if h.is_finite() { h / cos_theta } else { 0.0 };
             let at = std::array::from_fn(|a| view.pose.position[a] + d[a] * t);
             let (u, vv) = c.uv_of(at);

@@ -177,7 +177,8 @@ impl Stage for SynthViews {
     // 3: sensor errors after real models' and metadata's (issue 51): per-image depth scale and
     // offset, warp, far-range growth and edge bleeding; normal noise and edge blur; mask
     // boundaries, spurious, merged and confused instances; height, pitch, roll and focal noise.
-    const VERSION: u32 = 3;
+    // 4: the views' pixels are parts (one per view), the set holds their heads.
+    const VERSION: u32 = 4;
     const DOC: &'static str = "synthetic street views with instance, material, depth and normal maps (with error knobs), Sec. 4.2";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the ground-truth scene"),
@@ -262,6 +263,8 @@ impl Stage for SynthViews {
         let material_classes: Vec<String> = RMSNET_CLASSES.iter().map(|s| s.to_string()).collect();
         let buildings: HashMap<&str, &BuildingSpec> =
             city.buildings.iter().map(|b| (b.id.as_str(), b)).collect();
+        let n_classes = material_classes.len();
+        // Each view is stored as soon as it is rendered: a few in memory at a time.
         let views = poses
             .par_iter()
             .enumerate()
@@ -270,9 +273,12 @@ impl Stage for SynthViews {
                 v.pose = reported_pose(&v.pose, p, k);
                 v.intrinsics = reported_intrinsics(&v.intrinsics, p, k);
                 ctx.progress.advance(1);
-                v
+                let id = v.id.clone();
+                v.store(n_classes, ctx.parts)?.map_err(|(what, m)| {
+                    StageError::Failed(format!("rendered view {id:?}: {what}: expected {m}"))
+                })
             })
-            .collect();
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(ViewSet {
             views,
             material_classes,

@@ -6,8 +6,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use kodama_nodes::artifact::TerrainModel;
-use kodama_nodes::artifact::{City, PointSet, Raster, Scene, ViewSet};
+use kodama_nodes::artifact::{City, PointSet, Raster, Scene, View, ViewHead, ViewSet};
 use kodama_nodes::stage::Slot;
+use kodama_nodes::stage::process_parts;
 use kodama_nodes::stages::buildings::above_ground::{AboveGround, AboveGroundParams};
 use kodama_nodes::stages::buildings::terrain_pass::{TerrainPass, TerrainPassParams};
 use kodama_nodes::stages::heights::rasterize_surface::{
@@ -74,6 +75,47 @@ pub fn register_views(views: &ViewSet, scene: &Scene) -> ViewSet {
         &Ctx::new(&site(), &[]),
     )
     .unwrap()
+}
+
+/// A view set with every view's pixels read back, for tests that look at them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Loaded {
+    /// The views, pixels and all.
+    pub views: Vec<View>,
+    /// The set's material classes.
+    pub material_classes: Vec<String>,
+    /// The set as stages pass it.
+    pub set: ViewSet,
+}
+
+/// `set` with its views' pixels read from the store [`Ctx::new`] gives stages.
+pub fn loaded(set: &ViewSet) -> Loaded {
+    Loaded {
+        views: set.with(process_parts()).load_all().unwrap(),
+        material_classes: set.material_classes.clone(),
+        set: set.clone(),
+    }
+}
+
+/// `views` stored as a set in the store [`Ctx::new`] gives stages.
+pub fn stored(views: Vec<View>, material_classes: Vec<String>) -> ViewSet {
+    ViewSet::store(views, material_classes, process_parts())
+        .unwrap()
+        .unwrap()
+}
+
+/// The same set over the views `keep` keeps (their index, the view head).
+pub fn subset(set: &ViewSet, keep: impl Fn(usize, &ViewHead) -> bool) -> ViewSet {
+    ViewSet {
+        views: set
+            .views
+            .iter()
+            .enumerate()
+            .filter(|(i, v)| keep(*i, v))
+            .map(|(_, v)| v.clone())
+            .collect(),
+        material_classes: set.material_classes.clone(),
+    }
 }
 
 /// An input slot holding one artifact.

@@ -95,8 +95,18 @@ pub fn check_names(a: &Artifact) -> Result<(), String> {
 /// Encodes `a` in `format`, one of [`formats`] for its type. Every file of a folder output passes
 /// [`check_folder`]: nothing lands outside the folder or replaces a sibling.
 pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String> {
+    encode_with_parts(a, site, format, crate::stage::process_parts())
+}
+
+/// [`encode`] for an artifact whose parts (a view set's pixels) are in `parts`.
+pub fn encode_with_parts(
+    a: &Artifact,
+    site: &Site,
+    format: &str,
+    parts: &dyn crate::stage::PartStore,
+) -> Result<Encoded, String> {
     check_names(a)?;
-    let encoded = encode_unchecked(a, site, format)?;
+    let encoded = encode_unchecked(a, site, format, parts)?;
     if let Encoded::Folder(files) = &encoded {
         check_folder(files.iter().map(|(rel, _)| rel.as_str()))
             .map_err(|e| format!("{} as {format}: {e}", a.ty()))?;
@@ -104,7 +114,12 @@ pub fn encode(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String
     Ok(encoded)
 }
 
-fn encode_unchecked(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, String> {
+fn encode_unchecked(
+    a: &Artifact,
+    site: &Site,
+    format: &str,
+    parts: &dyn crate::stage::PartStore,
+) -> Result<Encoded, String> {
     let file = |bytes: Vec<u8>| Ok(Encoded::File(bytes));
     match (a, format) {
         (Artifact::Raster(r), "tif") => {
@@ -143,9 +158,9 @@ fn encode_unchecked(a: &Artifact, site: &Site, format: &str) -> Result<Encoded, 
         (Artifact::Points(p), "las") => file(write_las(p, site, false)?),
         (Artifact::Points(p), "laz") => file(write_las(p, site, true)?),
         (Artifact::Points(p), "xyz") => file(xyz_text(p, site).into_bytes()),
-        (Artifact::Views(v), "views") => {
-            Ok(Encoded::Folder(crate::io::views_io::write_viewset(v)?))
-        }
+        (Artifact::Views(v), "views") => Ok(Encoded::Folder(crate::io::views_io::write_viewset(
+            v, parts,
+        )?)),
         (Artifact::Report(r), "report") => Ok(Encoded::Folder(r.files.clone())),
         (Artifact::Charts(c), "json") => file(charts_json(c)?),
         (Artifact::Materials(m), "atlas") => {

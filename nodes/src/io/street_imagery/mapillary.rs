@@ -375,10 +375,15 @@ fn stored_image(
 /// A view set in the Mapillary layout: `<id>.json` (an API v4 image entity: perspective camera,
 /// computed pose, `computed_altitude` = the site z) and `<id>.jpg` per view. Needs square pixels
 /// and a centred principal point.
-pub fn write_mapillary(set: &ViewSet, site: &Site) -> Result<Vec<(String, Vec<u8>)>, String> {
+pub fn write_mapillary(
+    set: &ViewSet,
+    site: &Site,
+    parts: &dyn crate::stage::PartStore,
+) -> Result<Vec<(String, Vec<u8>)>, String> {
     let geo = Geo::new(site).map_err(|e| e.to_string())?;
     let mut files = Vec::new();
-    for v in &set.views {
+    for head in &set.views {
+        let v = &head.load(parts).map_err(|e| e.to_string())?;
         let k = v.intrinsics;
         let centred = (k.cx - v.width as f64 / 2.0).abs() < 1e-6
             && (k.cy - v.height as f64 / 2.0).abs() < 1e-6;

@@ -248,6 +248,7 @@ impl ProviderViews {
         folder: &Path,
         opts: &ReadOptions,
         progress: &dyn Progress,
+        parts: &dyn crate::stage::PartStore,
     ) -> Result<ViewSet, StageError> {
         let warnings = self.warnings(opts.max_yaw_disagreement_deg);
         if self.views.is_empty() {
@@ -260,10 +261,12 @@ impl ProviderViews {
         for w in &warnings {
             progress.warn(w);
         }
-        Ok(ViewSet {
-            views: self.views.into_iter().map(|v| v.view).collect(),
-            material_classes: Vec::new(),
-        })
+        crate::io::views_io::store_all_checked(
+            folder,
+            self.views.into_iter().map(|v| v.view).collect(),
+            Vec::new(),
+            parts,
+        )
     }
 }
 

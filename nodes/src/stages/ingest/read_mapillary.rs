@@ -51,7 +51,8 @@ pub struct ReadMapillary;
 
 impl Stage for ReadMapillary {
     const KIND: &'static str = "ReadMapillary";
-    const VERSION: u32 = 1;
+    // 2: the views' pixels are parts (one per view), the set holds their heads.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "Mapillary API v4 download (entities + JPEGs) into street views in the site frame, panoramas cut into pinhole views, Sec. 4.2";
     const INPUTS: &'static [InputSpec] = &[InputSpec::optional(
         "terrain",
@@ -89,9 +90,7 @@ impl Stage for ReadMapillary {
             p.max_yaw_disagreement_deg,
         )?;
         let folder = ctx.file(0)?;
-        let set = read_mapillary(folder, ctx.site, &opts)?.finish(folder, &opts, ctx.progress)?;
-        crate::io::views_io::check_viewset(folder, &set)?;
-        Ok(set)
+        read_mapillary(folder, ctx.site, &opts)?.finish(folder, &opts, ctx.progress, ctx.parts)
     }
 }
 

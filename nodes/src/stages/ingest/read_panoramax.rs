@@ -42,7 +42,8 @@ pub struct ReadPanoramax;
 
 impl Stage for ReadPanoramax {
     const KIND: &'static str = "ReadPanoramax";
-    const VERSION: u32 = 1;
+    // 2: the views' pixels are parts (one per view), the set holds their heads.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "Panoramax STAC items (+ images) into street views in the site frame, panoramas cut into pinhole views, Sec. 4.2";
     const INPUTS: &'static [InputSpec] = &[InputSpec::optional(
         "terrain",
@@ -67,9 +68,7 @@ impl Stage for ReadPanoramax {
         let terrain = inputs.optional::<Raster>("terrain")?;
         let opts = ReadOptions::new(terrain, p.trust_altitude, p.camera_height_m, cut(p), 180.0)?;
         let folder = ctx.file(0)?;
-        let set = read_panoramax(folder, ctx.site, &opts)?.finish(folder, &opts, ctx.progress)?;
-        crate::io::views_io::check_viewset(folder, &set)?;
-        Ok(set)
+        read_panoramax(folder, ctx.site, &opts)?.finish(folder, &opts, ctx.progress, ctx.parts)
     }
 }
 

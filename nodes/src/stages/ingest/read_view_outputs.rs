@@ -34,7 +34,8 @@ pub struct ReadViewOutputs;
 
 impl Stage for ReadViewOutputs {
     const KIND: &'static str = "ReadViewOutputs";
-    const VERSION: u32 = 1;
+    // 2: the views' pixels are parts (one per view), the set holds their heads.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "model outputs (instances, materials, depth, normals) read from files and attached to provider views by id, Sec. 4.2.1";
     const INPUTS: &'static [InputSpec] = &[InputSpec::one(
         "views",
@@ -74,21 +75,40 @@ impl Stage for ReadViewOutputs {
         let mut out = views.clone();
         let mut bare = Vec::new();
         let mut from_files = vec![false; out.views.len()];
+        let uses_table = |read_any: bool| {
+            if read_any {
+                p.material_classes.len()
+            } else {
+                views.material_classes.len()
+            }
+        };
         ctx.progress.set_total(out.views.len() as u64);
-        for (v, material_read) in out.views.iter_mut().zip(&mut from_files) {
-            let o = read_view_outputs(dir, &v.id, (v.width, v.height), &p.material_classes, dir)?;
+        // One view in memory at a time: read its outputs, merge, store, drop.
+        for (i, (head, material_read)) in out.views.iter_mut().zip(&mut from_files).enumerate() {
+            let o = read_view_outputs(
+                dir,
+                &head.id,
+                (head.width, head.height),
+                &p.material_classes,
+                dir,
+            )?;
             ctx.progress.advance(1);
             if o.is_empty() {
-                bare.push(v.id.clone());
+                bare.push(head.id.clone());
                 continue;
             }
             *material_read = o.material.is_some();
+            let mut v = head.load(ctx.parts)?;
             // What the files give replaces what the view had; what they lack is kept.
             v.arch = o.arch.or(v.arch.take());
             v.clutter = o.clutter.or(v.clutter.take());
             v.material = o.material.or(v.material.take());
             v.depth = o.depth.or(v.depth.take());
             v.normal = o.normal.or(v.normal.take());
+            // A map the files gave is checked against their table; one the view kept was
+            // checked against the set's when it was stored, and goes below if the table changes.
+            let n = uses_table(*material_read);
+            *head = crate::io::views_io::store_checked(dir, i, v, n, ctx.parts)?;
         }
         if bare.len() == out.views.len() && !out.views.is_empty() {
             return Err(StageError::bad_input(
@@ -117,14 +137,22 @@ impl Stage for ReadViewOutputs {
         }
         if from_files.iter().any(|&m| m) && out.material_classes != p.material_classes {
             // One class table per view set: maps the views brought under another table go.
-            for (v, &read) in out.views.iter_mut().zip(&from_files) {
+            for (i, (head, &read)) in out.views.iter_mut().zip(&from_files).enumerate() {
                 if !read {
-                    v.material = None;
+                    let mut v = head.load(ctx.parts)?;
+                    if v.material.take().is_some() {
+                        *head = crate::io::views_io::store_checked(
+                            dir,
+                            i,
+                            v,
+                            p.material_classes.len(),
+                            ctx.parts,
+                        )?;
+                    }
                 }
             }
             out.material_classes = p.material_classes.clone();
         }
-        crate::io::views_io::check_viewset(dir, &out)?;
         Ok(out)
     }
 }

@@ -22,7 +22,8 @@ pub struct ReadViews;
 
 impl Stage for ReadViews {
     const KIND: &'static str = "ReadViews";
-    const VERSION: u32 = 1;
+    // 2: the views' pixels are parts (one per view), the set holds their heads.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "street-view set (views.json, images, instance/material/depth/normal maps) into the site frame, Sec. 4.2";
     const INPUTS: &'static [InputSpec] = &[];
     type Params = ReadViewsParams;
@@ -48,6 +49,7 @@ impl Stage for ReadViews {
         read_viewset(
             &folder.join(Path::new(&p.path).file_name().unwrap_or_default()),
             ctx.site,
+            ctx.parts,
         )
     }
 }

@@ -72,7 +72,8 @@ pub struct EstimateDepth;
 
 impl Stage for EstimateDepth {
     const KIND: &'static str = "EstimateDepth";
-    const VERSION: u32 = 1;
+    // 2: the views' pixels are parts (one per view), the set holds their heads.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "monocular depth of street views in process by an ONNX model (feature `onnx`), metric or relative, Sec. 4.2.2";
     const INPUTS: &'static [InputSpec] = &[InputSpec::one(
         "views",
@@ -103,7 +104,10 @@ impl Stage for EstimateDepth {
             OnnxModel::open(ctx.file(0)?, p.threads, p.input.layout, p.output.as_deref())?;
         let mut out = views.clone();
         ctx.progress.set_total(out.views.len() as u64);
-        for view in &mut out.views {
+        let n_classes = out.material_classes.len();
+        // One view in memory at a time: load, run the model, store, drop.
+        for head in &mut out.views {
+            let mut view = head.load(ctx.parts)?;
             let result = model.run(&view.image, view.width, view.height, &p.input, "input")?;
             let expected = "a float32 depth map of shape [1, 1, H, W] or [1, H, W]";
             let (OutputData::F32(values), Some((h, w))) =
@@ -112,11 +116,12 @@ impl Stage for EstimateDepth {
                 return Err(model.bad_output(expected, &result.shape));
             };
             let mut depth = resize_nearest(values, w, h, view.width as usize, view.height as usize);
-            to_depth(&mut depth, p.predicts, view);
+            to_depth(&mut depth, p.predicts, &view);
             if p.units == Units::Relative {
                 normalise_median(&mut depth);
             }
             view.depth = Some(PodVec(depth));
+            *head = super::store_output(view, n_classes, ctx.parts)?;
             ctx.progress.advance(1);
         }
         Ok(out)

@@ -9,3 +9,19 @@
 pub mod estimate_depth;
 #[cfg(feature = "onnx")]
 pub mod segment_views;
+
+/// Stores a view a model stage filled in: its layers were sized to the view by the stage, so a
+/// view that fails [`crate::artifact::View::check`] is the stage's fault, not the user's.
+#[cfg(feature = "onnx")]
+fn store_output(
+    view: crate::artifact::View,
+    n_classes: usize,
+    parts: &dyn crate::stage::PartStore,
+) -> Result<crate::artifact::ViewHead, crate::stage::StageError> {
+    let id = view.id.clone();
+    view.store(n_classes, parts)?.map_err(|(what, m)| {
+        crate::stage::StageError::Failed(format!(
+            "view {id:?}: the model's {what} is not what the view needs (expected {m}; a bug)"
+        ))
+    })
+}

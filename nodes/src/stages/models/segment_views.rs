@@ -134,7 +134,8 @@ pub struct SegmentViews;
 
 impl Stage for SegmentViews {
     const KIND: &'static str = "SegmentViews";
-    const VERSION: u32 = 1;
+    // 2: the views' pixels are parts (one per view), the set holds their heads.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "street views segmented in process by an ONNX model (feature `onnx`), mapped by a label table into arch/clutter instances (Sec. 4.2.1) or material maps (Sec. 4.2.3)";
     const INPUTS: &'static [InputSpec] = &[InputSpec::one(
         "views",
@@ -174,7 +175,10 @@ impl Stage for SegmentViews {
             .iter()
             .rposition(|(_, ours)| ours.is_some())
             .map_or(0, |i| i + 1);
-        for view in &mut out.views {
+        let n_classes = out.material_classes.len();
+        // One view in memory at a time: load, run the model, store, drop.
+        for head in &mut out.views {
+            let mut view = head.load(ctx.parts)?;
             let result = model.run(&view.image, view.width, view.height, &p.input, "input")?;
             let (ids, (oh, ow)) = class_ids(&model, &result, table.classes.len(), needed)?;
             let (w, h) = (view.width as usize, view.height as usize);
@@ -205,6 +209,7 @@ impl Stage for SegmentViews {
                     }
                 }
             }
+            *head = super::store_output(view, n_classes, ctx.parts)?;
             ctx.progress.advance(1);
         }
         Ok(out)

@@ -4,13 +4,13 @@
 //! eq. (5) with the class weights mu_m, and extended onto what no view saw.
 
 use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicU64, Ordering};
 
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::Material;
 use crate::artifact::{
-    ArtifactType, ChartSet, MaterialLayers, MaterialStats, NO_MATERIAL, Scene, ViewSet,
+    ArtifactType, ChartSet, MaterialLayers, MaterialStats, NO_MATERIAL, Scene, View, ViewSet,
 };
 use crate::geom::raycast::SceneRays;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
@@ -216,13 +216,16 @@ impl Stage for FuseMaterials {
                 )
             })
             .collect();
-        // Every view's material map as refined votes, in view order.
-        let refined: Vec<(Vec<u8>, _)> = views
-            .views
-            .par_iter()
-            .map(|v| refine_view(v, &table, &refine, p.mask_clutter))
-            .collect();
-        let vote = |k: usize, px: usize| match refined.get(k).and_then(|r| r.0.get(px)).copied() {
+        // Each view's material map as refined votes, made as the fusion reads the view; the
+        // counts are sums, the same in any order.
+        let (refined_pixels, refined_instances) = (AtomicU64::new(0), AtomicU64::new(0));
+        let prepare = |_: usize, v: &View| {
+            let (votes, s) = refine_view(v, &table, &refine, p.mask_clutter);
+            refined_pixels.fetch_add(s.pixels, Ordering::Relaxed);
+            refined_instances.fetch_add(s.instances, Ordering::Relaxed);
+            votes
+        };
+        let vote = |votes: &Vec<u8>, _: &View, px: usize| match votes.get(px).copied() {
             Some(MASKED) => Vote::Masked,
             Some(SEEN) | None => Vote::Seen,
             Some(m) => Vote::Class(m as u16),
@@ -239,12 +242,13 @@ impl Stage for FuseMaterials {
             scene,
             &rays,
             charts,
-            &views.views,
+            views.with(ctx.parts),
             classes.clone(),
+            &prepare,
             &vote,
             &fp,
             ctx.progress,
-        );
+        )?;
         let mut weights = vec![1.0; classes.len()];
         for (name, &w) in &p.weights {
             if let Some(m) = surface_material(name) {
@@ -274,10 +278,8 @@ impl Stage for FuseMaterials {
                 }
             }
         }
-        for (_, s) in &refined {
-            stats.refined_pixels += s.pixels;
-            stats.refined_instances += s.instances;
-        }
+        stats.refined_pixels = refined_pixels.into_inner();
+        stats.refined_instances = refined_instances.into_inner();
         stats.masked_rays = fused.stats.masked;
         Ok(MaterialLayers {
             fused,

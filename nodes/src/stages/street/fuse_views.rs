@@ -96,7 +96,7 @@ impl Stage for FuseViews {
             ))
         })?;
         let classes = class_table(views, p.labels)?;
-        let vote = |k: usize, px: usize| pixel_vote(&views.views[k], px, p, &classes);
+        let vote = |_: &(), v: &View, px: usize| pixel_vote(v, px, p, &classes);
         let rays = SceneRays::new(scene);
         let fp = FusionParams {
             gamma: p.gamma,
@@ -104,16 +104,17 @@ impl Stage for FuseViews {
             sigma_texels: p.sigma_texels,
             stride: p.stride,
         };
-        Ok(fuse_views(
+        fuse_views(
             scene,
             &rays,
             charts,
-            &views.views,
+            views.with(ctx.parts),
             classes.clone(),
+            &|_, _| (),
             &vote,
             &fp,
             ctx.progress,
-        ))
+        )
     }
 }
 
@@ -125,8 +126,8 @@ fn class_table(views: &ViewSet, labels: LabelSource) -> Result<Vec<String>, Stag
         LabelSource::Architecture => views
             .views
             .iter()
-            .filter_map(|v| v.arch.as_ref())
-            .flat_map(|a| a.classes.values().cloned())
+            .filter_map(|v| v.arch_classes.as_ref())
+            .flat_map(|a| a.values().cloned())
             .collect(),
     };
     names.sort();

@@ -172,7 +172,11 @@ const INPUTS: &[InputSpec] = &[
     ),
 ];
 
-fn chain(p: &PlaceClutterParams, inputs: &Inputs) -> Result<(Vec<Placed>, Metrics), StageError> {
+fn chain(
+    p: &PlaceClutterParams,
+    inputs: &Inputs,
+    ctx: &Ctx,
+) -> Result<(Vec<Placed>, Metrics), StageError> {
     let views: &ViewSet = inputs.one("views")?;
     let scene: &Scene = inputs.one("scene")?;
     let terrain: &Raster = inputs.one("terrain")?;
@@ -180,13 +184,7 @@ fn chain(p: &PlaceClutterParams, inputs: &Inputs) -> Result<(Vec<Placed>, Metric
     if terrain.grid.is_empty() {
         return Err(StageError::Failed("the terrain raster is empty".into()));
     }
-    Ok(place_clutter(
-        &views.views,
-        scene,
-        terrain,
-        canopies,
-        &p.config(),
-    ))
+    place_clutter(views.with(ctx.parts), scene, terrain, canopies, &p.config())
 }
 
 /// Street clutter placed from the views, as a scene of asset instances.
@@ -225,9 +223,9 @@ impl Stage for PlaceClutter {
     fn run_reported(
         p: &Self::Params,
         inputs: &Inputs,
-        _: &Ctx,
+        ctx: &Ctx,
     ) -> Result<Reported<Scene>, StageError> {
-        let (placed, counts) = chain(p, inputs)?;
+        let (placed, counts) = chain(p, inputs, ctx)?;
         let scene = instantiate(&placed);
         for o in &scene.objects {
             check_solid(&o.mesh).map_err(|e| StageError::Failed(format!("{}: {e}", o.id)))?;

@@ -17,7 +17,8 @@ impl Stage for RegisterViews {
     // 3: camera height, pitch and focal length searched too (issue 51: the views' metadata errs in all six
     // degrees of freedom).
     // 4: roll can be searched too (`search_roll_deg`, off by default).
-    const VERSION: u32 = 4;
+    // 5: the views' pixels are parts (one per view), the set holds their heads.
+    const VERSION: u32 = 5;
     const DOC: &'static str = "street views with position, height, heading, pitch and focal length (roll optionally) refined against the twin's building silhouettes (bounded search; a view is left alone when nothing beats its metadata)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -44,7 +45,7 @@ impl Stage for RegisterViews {
         if p.is_off() {
             return Ok(views.clone());
         }
-        let refined = register_views(scene, &views.views, p, ctx.progress);
+        let refined = register_views(scene, views.with(ctx.parts), p, ctx.progress)?;
         let mut out = views.clone();
         for (v, (pose, r)) in out.views.iter_mut().zip(refined) {
             let was = v.pose_source.clone().unwrap_or_else(|| "metadata".into());

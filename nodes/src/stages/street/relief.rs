@@ -77,6 +77,6 @@ impl Stage for Relief {
                 "{e}: give Relief the scene its SurfaceCharts node read"
             ))
         })?;
-        Ok(relief(scene, charts, &views.views, mesh, p, ctx.progress))
+        relief(scene, charts, views.with(ctx.parts), mesh, p, ctx.progress)
     }
 }

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use rayon::prelude::*;
 
-use crate::artifact::{ObjectClass, Raster, Scene, View};
+use crate::artifact::{ObjectClass, Raster, Scene, ViewHead};
 use crate::geom::from_above::{down, top_z};
 use crate::geom::polygon::convex_hull;
 use crate::geom::raycast::SceneRays;
@@ -33,7 +33,7 @@ impl<'a> Ground<'a> {
     pub fn new(
         terrain: &'a Raster,
         twin: &Scene,
-        views: &[View],
+        views: &[ViewHead],
         canopies: Option<&Scene>,
     ) -> Ground<'a> {
         let g = terrain.grid;

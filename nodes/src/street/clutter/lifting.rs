@@ -3,11 +3,10 @@
 
 use std::collections::BTreeMap;
 
-use rayon::prelude::*;
-
-use crate::artifact::{Scene, View};
+use crate::artifact::{Scene, View, Views};
 use crate::geom::raycast::SceneRays;
 use crate::geom::theil_sen::{LineFit, median, theil_sen};
+use crate::stage::StageError;
 
 use super::assets::AssetKind;
 use super::config::ClutterConfig;
@@ -61,19 +60,21 @@ pub fn calibration_samples(view: &View, rays: &SceneRays, stride: u32) -> Vec<(f
 /// Per view: the Theil-Sen fit of twin depth on predicted depth, or the pooled fit of every
 /// view's samples where a view has fewer than `min_calib_samples`. `None` for a view when no fit
 /// exists at all.
-pub fn calibrate(views: &[View], twin: &Scene, cfg: &ClutterConfig) -> Vec<Option<Calibration>> {
+pub fn calibrate(
+    views: Views,
+    twin: &Scene,
+    cfg: &ClutterConfig,
+) -> Result<Vec<Option<Calibration>>, StageError> {
     let rays = SceneRays::new(twin);
-    let samples: Vec<Vec<(f64, f64)>> = views
-        .par_iter()
-        .map(|v| calibration_samples(v, &rays, cfg.calib_stride))
-        .collect();
+    let samples: Vec<Vec<(f64, f64)>> =
+        views.map(|_, v| calibration_samples(v, &rays, cfg.calib_stride))?;
     let fit = |s: &[(f64, f64)], seed: u64| {
         let (xs, ys): (Vec<f64>, Vec<f64>) = s.iter().copied().unzip();
         theil_sen(&xs, &ys, 0.5, 20_000, seed).filter(|f| f.slope > 0.0)
     };
     let pooled_samples: Vec<(f64, f64)> = samples.iter().flatten().copied().collect();
     let pooled = fit(&pooled_samples, cfg.seed ^ 0xF00D);
-    samples
+    Ok(samples
         .iter()
         .enumerate()
         .map(|(k, s)| {
@@ -93,7 +94,7 @@ pub fn calibrate(views: &[View], twin: &Scene, cfg: &ClutterConfig) -> Vec<Optio
                 }),
             }
         })
-        .collect()
+        .collect())
 }
 
 /// One clutter instance of one view, lifted to the site frame.

@@ -16,10 +16,9 @@ mod track;
 
 use std::collections::BTreeMap;
 
-use rayon::prelude::*;
-
-use crate::artifact::{Metrics, Raster, Scene, SceneObject, View};
+use crate::artifact::{Metrics, Raster, Scene, SceneObject, Views};
 use crate::geom::theil_sen::median;
+use crate::stage::StageError;
 
 pub use clustering::{Cluster, cluster, nms};
 pub use config::{ClutterConfig, default_classes};
@@ -31,23 +30,25 @@ pub use track::Track;
 /// The whole chain over a view set: calibration, lifting, clustering, support, NMS, grammar.
 /// Returns the placed objects and the counts (detections, clusters, unsupported, suppressed, each
 /// grammar rule, placed per class, calibration figures).
+///
+/// Three passes over the views (calibration, lifting, support), each reading a view at a time.
 pub fn place_clutter(
-    views: &[View],
+    views: Views,
     twin: &Scene,
     terrain: &Raster,
     canopies: Option<&Scene>,
     cfg: &ClutterConfig,
-) -> (Vec<Placed>, Metrics) {
-    let cals = calibrate(views, twin, cfg);
-    let track = Track::new(views);
+) -> Result<(Vec<Placed>, Metrics), StageError> {
+    let cals = calibrate(views, twin, cfg)?;
+    let track = Track::new(&views.set.views);
     let dets: Vec<Detection> = views
-        .par_iter()
-        .zip(cals.par_iter())
-        .enumerate()
-        .flat_map_iter(|(k, (v, c))| {
-            c.map(|c| lift_view(k, v, &c, Some(&track), cfg))
+        .map(|k, v| {
+            cals[k]
+                .map(|c| lift_view(k, v, &c, Some(&track), cfg))
                 .unwrap_or_default()
-        })
+        })?
+        .into_iter()
+        .flatten()
         .collect();
     let mut m = Metrics::default();
     let fitted: Vec<&Calibration> = cals.iter().flatten().collect();
@@ -75,11 +76,11 @@ pub fn place_clutter(
     m.set("detections", dets.len() as f64);
     let clusters = cluster(&dets, cfg);
     m.set("clusters", clusters.len() as f64);
-    let (clusters, unsupported) = supported(clusters, views, &cals, cfg);
+    let (clusters, unsupported) = supported(clusters, views, &cals, cfg)?;
     m.set("unsupported", unsupported as f64);
     let (kept, suppressed) = nms(clusters, cfg);
     m.set("nms_suppressed", suppressed as f64);
-    let ground = Ground::new(terrain, twin, views, canopies);
+    let ground = Ground::new(terrain, twin, &views.set.views, canopies);
     let mut counts = BTreeMap::new();
     let mut placed = grammar(kept, &ground, cfg, &mut counts);
     placed.sort_by(|a, b| {
@@ -97,7 +98,7 @@ pub fn place_clutter(
         m.set(key, n + 1.0);
     }
     m.set("placed", placed.len() as f64);
-    (placed, m)
+    Ok((placed, m))
 }
 
 /// The placed objects as scene objects from the asset library, ids `<class>-<n>` (and

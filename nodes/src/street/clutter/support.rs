@@ -5,9 +5,8 @@
 //! a cluster (`min_views`) cannot tell the two apart where coverage varies: an object at the end
 //! of a drive is seen once and rightly so.
 
-use rayon::prelude::*;
-
-use crate::artifact::View;
+use crate::artifact::{View, Views};
+use crate::stage::StageError;
 
 use super::clustering::Cluster;
 use super::config::ClutterConfig;
@@ -64,26 +63,39 @@ pub fn should_see(view: &View, cal: &Calibration, c: &Cluster, cfg: &ClutterConf
 /// have seen them (those [`should_see`] counts, with the detecting views themselves added: a
 /// detection is evidence the view saw it whatever the check says). Returns the kept clusters
 /// and the number dropped.
+///
+/// Each view is read once and checked against every cluster; the counts are summed in view
+/// order.
 pub fn supported(
     clusters: Vec<Cluster>,
-    views: &[View],
+    views: Views,
     cals: &[Option<Calibration>],
     cfg: &ClutterConfig,
-) -> (Vec<Cluster>, usize) {
+) -> Result<(Vec<Cluster>, usize), StageError> {
+    let n = views.len().min(cals.len());
+    let expected_by_view: Vec<Vec<u32>> = views.map(|k, v| {
+        let cal = cals.get(k).and_then(Option::as_ref);
+        clusters
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| {
+                k < n
+                    && (c.seen_by.binary_search(&k).is_ok()
+                        || cal.is_some_and(|cal| should_see(v, cal, c, cfg)))
+            })
+            .map(|(i, _)| i as u32)
+            .collect()
+    })?;
+    let mut expected = vec![0usize; clusters.len()];
+    for list in &expected_by_view {
+        for &i in list {
+            expected[i as usize] += 1;
+        }
+    }
     let keep: Vec<bool> = clusters
-        .par_iter()
-        .map(|c| {
-            let expected = views
-                .iter()
-                .zip(cals)
-                .enumerate()
-                .filter(|(k, (v, cal))| {
-                    c.seen_by.binary_search(k).is_ok()
-                        || cal.as_ref().is_some_and(|cal| should_see(v, cal, c, cfg))
-                })
-                .count();
-            c.seen_by.len() as f64 >= cfg.min_view_share * expected as f64
-        })
+        .iter()
+        .zip(&expected)
+        .map(|(c, &e)| c.seen_by.len() as f64 >= cfg.min_view_share * e as f64)
         .collect();
     let dropped = keep.iter().filter(|k| !**k).count();
     let kept = clusters
@@ -91,7 +103,7 @@ pub fn supported(
         .zip(keep)
         .filter_map(|(c, k)| k.then_some(c))
         .collect();
-    (kept, dropped)
+    Ok((kept, dropped))
 }
 
 #[cfg(test)]
@@ -151,19 +163,29 @@ mod tests {
             &car_seen_by(vec![]),
             &cfg
         )));
+        let parts = crate::stage::MemParts::new();
+        let store = |views: &[View]| {
+            crate::artifact::ViewSet::store(views.to_vec(), Vec::new(), &parts)
+                .unwrap()
+                .unwrap()
+        };
+        let set = store(&views);
         let (kept, dropped) = supported(
             vec![car_seen_by(vec![0, 1, 3, 4, 5]), car_seen_by(vec![2])],
-            &views,
+            set.with(&parts),
             &cals,
             &cfg,
-        );
+        )
+        .unwrap();
         assert_eq!((kept.len(), dropped), (1, 1));
         assert_eq!(kept[0].views, 5);
         // A wall 5 m ahead hides it from all but the view that saw it: that view is all the
         // evidence there could be, and the car stays.
         let mut hidden: Vec<View> = (0..6).map(|k| view(k as f64 - 2.5, 5.0)).collect();
         hidden[2] = view(-0.5, 30.0);
-        let (kept, dropped) = supported(vec![car_seen_by(vec![2])], &hidden, &cals, &cfg);
+        let hidden = store(&hidden);
+        let (kept, dropped) =
+            supported(vec![car_seen_by(vec![2])], hidden.with(&parts), &cals, &cfg).unwrap();
         assert_eq!((kept.len(), dropped), (1, 0));
         // Far beyond the range, nothing should see it.
         let far = Cluster {

@@ -1,7 +1,7 @@
 //! The track the views were taken along: the streets the cameras drove, as lines fitted to
 //! their positions near a point.
 
-use crate::artifact::View;
+use crate::artifact::ViewHead;
 
 use super::spread::Spread;
 
@@ -13,7 +13,7 @@ pub struct Track {
 
 impl Track {
     /// The views' positions.
-    pub fn new(views: &[View]) -> Track {
+    pub fn new(views: &[ViewHead]) -> Track {
         Track {
             positions: views
                 .iter()

@@ -30,13 +30,12 @@ mod twin;
 use std::cell::RefCell;
 use std::collections::HashMap;
 
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{Pose, Scene, View};
+use crate::artifact::{Pose, Scene, View, Views};
 use crate::geom::raycast::SceneRays;
 use crate::raster::morph::dilate_square;
-use crate::stage::Progress;
+use crate::stage::{Progress, StageError};
 
 use consensus::{Consensus, OthersSay, Pool};
 use labels::{Sample, Seen, edges, samples, strides};
@@ -706,15 +705,18 @@ fn turned(pose: &Pose, c: Candidate) -> Pose {
 }
 
 /// Refines every view's pose against `scene`; per view in order, its new pose and what was
-/// done. Deterministic at any thread count (each view on its own).
+/// done. Deterministic at any thread count (each view on its own). Views are read one at a time
+/// in each pass, so memory does not grow with their number.
 pub fn register_views(
     scene: &Scene,
-    views: &[View],
+    views: Views,
     p: &RegistrationParams,
     progress: &dyn Progress,
-) -> Vec<(Pose, Refinement)> {
+) -> Result<Vec<(Pose, Refinement)>, StageError> {
     if p.is_off() {
-        return views
+        return Ok(views
+            .set
+            .views
             .iter()
             .map(|v| {
                 let kept = Refinement {
@@ -731,7 +733,7 @@ pub fn register_views(
                 };
                 (v.pose, kept)
             })
-            .collect();
+            .collect());
     }
     let rays = SceneRays::new(scene);
     let by_triangle = shown_by_triangle(scene);
@@ -741,22 +743,11 @@ pub fn register_views(
         max_range: p.max_range_m as f32,
     };
     progress.set_total(views.len() as u64);
-    let mut out: Vec<(Pose, Refinement)> = views
-        .par_iter()
-        .map(|v| {
-            let r = refine_view(v, &twin, None, None, p);
-            progress.advance(1);
-            r
-        })
-        .collect();
-    // Second pass: every view again, now also against the façade labels the views placed by
-    // their silhouettes pooled (less its own), which places the views the silhouettes could not
-    // and sharpens the rest. Pools are summed in view order: the same at any thread count.
-    let pools: Vec<Option<Pool>> = views
-        .par_iter()
-        .zip(&out)
-        .map(|(v, (_, r))| {
-            r.accepted.then(|| {
+    // First pass, and each placed view's façade labels pooled for the second while it is loaded.
+    let (mut out, pools): (Vec<(Pose, Refinement)>, Vec<Option<Pool>>) = views
+        .map(|_, v| {
+            let (pose, r) = refine_view(v, &twin, None, None, p);
+            let pool = r.accepted.then(|| {
                 let c = r.candidate();
                 let at = [
                     v.pose.position[0] + c[0],
@@ -764,9 +755,15 @@ pub fn register_views(
                     v.pose.position[2] + c[3],
                 ];
                 twin.pool(p.consensus_cell_m, v, at, Turn::of(&v.pose, c), p)
-            })
-        })
-        .collect();
+            });
+            progress.advance(1);
+            ((pose, r), pool)
+        })?
+        .into_iter()
+        .unzip();
+    // Second pass: every view again, now also against the façade labels the views placed by
+    // their silhouettes pooled (less its own), which places the views the silhouettes could not
+    // and sharpens the rest. Pools are summed in view order: the same at any thread count.
     let mut consensus = Consensus {
         cell_m: p.consensus_cell_m,
         cells: Default::default(),
@@ -775,27 +772,23 @@ pub fn register_views(
         consensus.add(pool);
     }
     if consensus.cells.is_empty() {
-        return out;
+        return Ok(out);
     }
-    let second: Vec<(Pose, Refinement)> = views
-        .par_iter()
-        .zip(&pools)
-        .zip(&out)
-        .map(|((v, own), (_, first))| {
-            let others = OthersSay {
-                all: &consensus,
-                own: own.as_ref(),
-            };
-            let start = first.accepted.then(|| first.candidate());
-            refine_view(v, &twin, Some(&others), start, p)
-        })
-        .collect();
+    let second: Vec<(Pose, Refinement)> = views.map(|k, v| {
+        let others = OthersSay {
+            all: &consensus,
+            own: pools[k].as_ref(),
+        };
+        let first = &out[k].1;
+        let start = first.accepted.then(|| first.candidate());
+        refine_view(v, &twin, Some(&others), start, p)
+    })?;
     for (slot, s) in out.iter_mut().zip(second) {
         if s.1.accepted {
             *slot = s;
         }
     }
-    out
+    Ok(out)
 }
 
 #[cfg(test)]

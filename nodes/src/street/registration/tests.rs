@@ -119,6 +119,15 @@ fn view(scene: &Scene, pose: Pose, reported: Pose) -> View {
 
 /// Two detached houses across the street from a camera at (0, 0, 2) looking north: 8 m and 9 m
 /// wide, 7 m and 9 m tall, a 3.5 m gap between them.
+/// `register_views` on `v` alone.
+fn register_one(s: &Scene, v: &View, p: &RegistrationParams) -> Vec<(Pose, Refinement)> {
+    let parts = crate::stage::MemParts::new();
+    let set = crate::artifact::ViewSet::store(vec![v.clone()], Vec::new(), &parts)
+        .unwrap()
+        .unwrap();
+    register_views(s, set.with(&parts), p, &NoProgress).unwrap()
+}
+
 fn two_houses() -> Scene {
     scene(&[
         ([-6.0, 12.0], [8.0, 6.0, 7.0]),
@@ -156,17 +165,12 @@ fn a_rolled_view_is_rolled_back() {
             search_roll_deg: 1.0,
             ..Default::default()
         };
-        let (pose, r) = register_views(&s, std::slice::from_ref(&v), &with_roll, &NoProgress)[0];
+        let (pose, r) = register_one(&s, &v, &with_roll)[0];
         assert!(r.accepted, "{r:?}");
         let left = tilt_between(&pose, &truth);
         println!("rolled {roll_deg} deg: {left:.3} deg left, {r:?}");
         assert!(left <= 0.15, "rolled {roll_deg}: {left:.3} deg left, {r:?}");
-        let (kept, _) = register_views(
-            &s,
-            std::slice::from_ref(&v),
-            &RegistrationParams::default(),
-            &NoProgress,
-        )[0];
+        let (kept, _) = register_one(&s, &v, &RegistrationParams::default())[0];
         assert!(
             tilt_between(&kept, &truth) >= 0.5 * roll_deg.abs(),
             "without the roll search the tilt stays"
@@ -201,7 +205,7 @@ fn a_view_of_two_houses_is_moved_back_to_where_it_was() {
     let p = RegistrationParams::default();
     for (dx, dy, dyaw) in [(0.6, -0.4, 1.0), (-0.9, 0.3, -1.5), (0.2, 0.8, 0.5)] {
         let v = view(&s, truth, moved(truth, dx, dy, dyaw));
-        let out = register_views(&s, std::slice::from_ref(&v), &p, &NoProgress);
+        let out = register_one(&s, &v, &p);
         let (pose, r) = out[0];
         assert!(r.accepted, "{r:?}");
         let err = ((pose.position[0] - truth.position[0]).powi(2)
@@ -281,12 +285,7 @@ fn a_view_of_one_endless_wall_keeps_its_metadata() {
     let truth = look([0.0, 0.0, 2.0], 90f64.to_radians());
     let reported = moved(truth, 0.8, 0.0, 0.0);
     let v = view(&s, truth, reported);
-    let out = register_views(
-        &s,
-        std::slice::from_ref(&v),
-        &RegistrationParams::default(),
-        &NoProgress,
-    );
+    let out = register_one(&s, &v, &RegistrationParams::default());
     let (pose, r) = out[0];
     assert!(!r.accepted, "{r:?}");
     assert_eq!(pose, reported);
@@ -303,7 +302,7 @@ fn a_window_of_zero_keeps_the_metadata() {
         search_deg: 0.0,
         ..Default::default()
     };
-    let out = register_views(&s, std::slice::from_ref(&v), &off, &NoProgress);
+    let out = register_one(&s, &v, &off);
     assert_eq!(out[0].0, reported);
     assert!(!out[0].1.accepted);
     // Heading alone: the position stays, the heading comes back.
@@ -312,7 +311,7 @@ fn a_window_of_zero_keeps_the_metadata() {
         ..Default::default()
     };
     let v = view(&s, truth, moved(truth, 0.0, 0.0, 1.5));
-    let (pose, r) = register_views(&s, std::slice::from_ref(&v), &yaw_only, &NoProgress)[0];
+    let (pose, r) = register_one(&s, &v, &yaw_only)[0];
     assert!(r.accepted, "{r:?}");
     assert_eq!(pose.position, truth.position);
     assert!((heading(&pose) - heading(&truth)).to_degrees().abs() <= 0.4);
@@ -324,12 +323,7 @@ fn a_view_without_labels_is_left_alone_and_bad_knobs_are_refused() {
     let truth = look([0.0, 0.0, 2.0], 90f64.to_radians());
     let mut v = view(&s, truth, moved(truth, 0.5, 0.0, 0.0));
     v.arch = None;
-    let out = register_views(
-        &s,
-        std::slice::from_ref(&v),
-        &RegistrationParams::default(),
-        &NoProgress,
-    );
+    let out = register_one(&s, &v, &RegistrationParams::default());
     assert!(!out[0].1.accepted);
     assert_eq!(out[0].0, v.pose);
     for bad in [

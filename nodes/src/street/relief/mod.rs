@@ -24,15 +24,15 @@ mod silhouette;
 mod votes;
 
 use std::collections::BTreeMap;
-
-use rayon::prelude::*;
+use std::sync::{Mutex, OnceLock};
 
 use crate::artifact::{
     ChartKind, ChartSet, ReliefInstance, ReliefLayers, ReliefSet, ReliefStats, Scene, View,
+    ViewSet, Views,
 };
 use crate::geom::raycast::SceneRays;
 use crate::geom::theil_sen::median;
-use crate::stage::Progress;
+use crate::stage::{Progress, StageError};
 use crate::street::fusion::{FusionParams, Vote, fuse_views_each};
 
 pub use calibrate::depth_affine;
@@ -54,11 +54,11 @@ use votes::{MASKED, NEUTRAL, PROTRUDING, RECESSED, view_relief};
 pub fn relief(
     scene: &Scene,
     charts: &ChartSet,
-    views: &[View],
+    views: Views,
     mesh: Option<&Scene>,
     p: &ReliefParams,
     progress: &dyn Progress,
-) -> ReliefSet {
+) -> Result<ReliefSet, StageError> {
     let rays = SceneRays::new(scene);
     let lookup = Lookup::new(scene, charts);
     let deltas = mesh.map(|m| mesh_delta(charts, m, p.delta.search_m));
@@ -86,22 +86,17 @@ struct PassCtx<'a> {
 }
 
 /// Region votes per view, the fusion, evidence, posterior and instances.
-fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
-    let (rays, lookup, charts, p) = (ctx.rays, ctx.lookup, ctx.charts, ctx.p);
-    let per_view: Vec<ViewRelief> = views
-        .par_iter()
-        .enumerate()
-        .map(|(vi, v)| view_relief(vi, v, rays, charts, lookup, p))
-        .collect();
-    let mut stats = view_stats(&per_view, views.len());
-    let j_ref = exposure_unit(views, p);
-    let mut regions_by_chart: BTreeMap<u32, Vec<&RegionVote>> = BTreeMap::new();
-    for v in &per_view {
-        for r in &v.regions {
-            regions_by_chart.entry(r.chart).or_default().push(r);
-        }
-    }
-    let results = fuse_charts(ctx, views, &per_view, &regions_by_chart, j_ref);
+///
+/// One pass over the views: each view's votes are made as the fusion reads it and dropped with
+/// it; only its regions and counts are kept (a few per view), so memory does not grow with the
+/// views' pixels.
+fn relief_pass(ctx: &PassCtx, views: Views) -> Result<ReliefSet, StageError> {
+    let j_ref = exposure_unit(views.set, ctx.p);
+    let kept = Mutex::new(Vec::with_capacity(views.len()));
+    let results = fuse_charts(ctx, views, &kept, j_ref)?;
+    let mut kept = kept.into_inner().unwrap_or_else(|e| e.into_inner());
+    kept.sort_by_key(|k: &KeptVotes| k.view);
+    let mut stats = view_stats(&kept, views.len());
     let mut set = ReliefSet {
         with_mesh: ctx.deltas.is_some(),
         ..Default::default()
@@ -112,16 +107,24 @@ fn relief_pass(ctx: &PassCtx, views: &[View]) -> ReliefSet {
         stats.observed_texels += obs;
     }
     set.stats = stats;
-    set
+    Ok(set)
 }
 
-/// The counts of the views' votes (the texel counts come later).
-fn view_stats(per_view: &[ViewRelief], views: usize) -> ReliefStats {
+/// What stays of one view's votes once the fusion has deposited them: its regions and counts.
+struct KeptVotes {
+    view: usize,
+    regions: Vec<RegionVote>,
+    candidates: u64,
+    calibrated: bool,
+}
+
+/// The counts of the views' votes (the texel counts come later), `kept` in view order.
+fn view_stats(kept: &[KeptVotes], views: usize) -> ReliefStats {
     let mut stats = ReliefStats {
         views: views as u64,
         ..Default::default()
     };
-    for v in per_view {
+    for v in kept {
         stats.calibrated += v.calibrated as u64;
         stats.regions += v.candidates;
         stats.enclosed += v.regions.len() as u64;
@@ -131,28 +134,55 @@ fn view_stats(per_view: &[ViewRelief], views: usize) -> ReliefStats {
     stats
 }
 
+/// Every kept region in view order, and per chart the indices of its regions.
+fn regions_by_chart(kept: &Mutex<Vec<KeptVotes>>) -> (Vec<RegionVote>, BTreeMap<u32, Vec<usize>>) {
+    let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
+    kept.sort_by_key(|k| k.view);
+    let all: Vec<RegionVote> = kept
+        .iter()
+        .flat_map(|k| k.regions.iter().cloned())
+        .collect();
+    let mut by_chart: BTreeMap<u32, Vec<usize>> = BTreeMap::new();
+    for (i, r) in all.iter().enumerate() {
+        by_chart.entry(r.chart).or_default().push(i);
+    }
+    (all, by_chart)
+}
+
 /// The exposure unit: one head-on view from ref_distance_m at the views' median focal length,
 /// one ray per pixel: J_ref^gamma x (pixels per texel = J_ref texel²). Returns J_ref.
-fn exposure_unit(views: &[View], p: &ReliefParams) -> f64 {
-    let mut focals: Vec<f64> = views.iter().map(|v| v.intrinsics.fx).collect();
+fn exposure_unit(views: &ViewSet, p: &ReliefParams) -> f64 {
+    let mut focals: Vec<f64> = views.views.iter().map(|v| v.intrinsics.fx).collect();
     let f = median(&mut focals).unwrap_or(1.0);
     (f / p.ref_distance_m).powi(2)
 }
 
 /// The fusion of eq. (2)-(3) of every view's codes, and per chart, as soon as its fused layers
 /// are blurred, its evidence, posterior and instances, so no chart's dense layers outlive its
-/// own turn (all charts' at once were 1.5 GB on the 1 km² site). Per chart: its stored layers,
-/// its instances and its observed texels.
+/// own turn (all charts' at once were 1.5 GB on the 1 km² site). Each view's votes are made as
+/// the fusion reads the view; its regions go to `kept`. Per chart: its stored layers, its
+/// instances and its observed texels.
 fn fuse_charts(
     ctx: &PassCtx,
-    views: &[View],
-    per_view: &[ViewRelief],
-    regions_by_chart: &BTreeMap<u32, Vec<&RegionVote>>,
+    views: Views,
+    kept: &Mutex<Vec<KeptVotes>>,
     j_ref: f64,
-) -> Vec<(ReliefLayers, Vec<ReliefInstance>, u64)> {
+) -> Result<Vec<(ReliefLayers, Vec<ReliefInstance>, u64)>, StageError> {
     let (rays, lookup, charts, p) = (ctx.rays, ctx.lookup, ctx.charts, ctx.p);
-    let vote = |k: usize, px: usize| -> Vote {
-        match per_view.get(k).and_then(|r| r.codes.get(px)) {
+    let prepare = |vi: usize, v: &View| {
+        let mut r = view_relief(vi, v, rays, charts, lookup, p);
+        kept.lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(KeptVotes {
+                view: vi,
+                regions: std::mem::take(&mut r.regions),
+                candidates: r.candidates,
+                calibrated: r.calibrated,
+            });
+        r
+    };
+    let vote = |r: &ViewRelief, _: &View, px: usize| -> Vote {
+        match r.codes.get(px) {
             Some(&RECESSED) => Vote::Class(0),
             // No layer of neutral votes is read: a neutral pixel is exposure (R and P are
             // shares of it), which is what Seen deposits, without a grid of its own.
@@ -162,12 +192,10 @@ fn fuse_charts(
             _ => Vote::Seen,
         }
     };
-    let displace = |k: usize, px: usize| -> f64 {
-        per_view
-            .get(k)
-            .and_then(|r| r.displace.get(px))
-            .map_or(0.0, |&d| d as f64)
-    };
+    let displace =
+        |r: &ViewRelief, px: usize| -> f64 { r.displace.get(px).map_or(0.0, |&d| d as f64) };
+    // The charts are finished after every view is deposited: by then every region is in.
+    let regions = OnceLock::new();
     let fp = FusionParams {
         gamma: p.gamma,
         theta_max_deg: p.theta_max_deg,
@@ -182,6 +210,7 @@ fn fuse_charts(
         rays,
         charts,
         views,
+        &prepare,
         &vote,
         &displace,
         &fp,
@@ -194,14 +223,17 @@ fn fuse_charts(
                 return (unobserved_layers(c, with_mesh), Vec::new(), 0);
             }
             let (lay, observed) = chart_layers(c, l, delta, w_ref, &posterior, p);
-            let regions = regions_by_chart
+            let (all, by_chart) = regions.get_or_init(|| regions_by_chart(kept));
+            let regions: Vec<&RegionVote> = by_chart
                 .get(&(ci as u32))
-                .map(Vec::as_slice)
-                .unwrap_or(&[]);
+                .map_or(&[][..], Vec::as_slice)
+                .iter()
+                .map(|&i| &all[i])
+                .collect();
             let ground = |u: f64| ground_row(c, rays, lookup, u);
-            let inst = instances(ci as u32, c, &lay, regions, with_mesh, j_ref, &ground, p);
+            let inst = instances(ci as u32, c, &lay, &regions, with_mesh, j_ref, &ground, p);
             (lay.pack(c), inst, observed)
         },
-    );
-    results
+    )?;
+    Ok(results)
 }
