@@ -256,3 +256,91 @@ fn gc_bounds_the_cache_and_runs_rebuild_what_it_evicted() {
     );
     assert_eq!(r.digests(), clean.digests());
 }
+
+/// The parts the action entries in the cache name: their digests.
+fn parts(env: &Env) -> Vec<String> {
+    let mut out = Vec::new();
+    for shard in std::fs::read_dir(env.cache().join("ac")).unwrap() {
+        for entry in std::fs::read_dir(shard.unwrap().path()).unwrap() {
+            let text = std::fs::read_to_string(entry.unwrap().path()).unwrap();
+            for line in text.lines() {
+                if let Some(rest) = line.strip_prefix("part blake3:") {
+                    out.push(rest.split(' ').next().unwrap().to_string());
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn a_view_sets_parts_ride_with_it_and_a_missing_part_is_a_miss() {
+    let env = Env::new();
+    let g = env.write("views.ron", VIEWS);
+    let clean = env.run(&g, &[]).ok();
+    let parts = parts(&env);
+    assert_eq!(parts.len(), 6, "one part per view: {parts:?}");
+    assert!(parts.iter().all(|p| env.blob(p).is_file()));
+    // The view set's own blob is small: the pixels are not in it.
+    let set = env.blob(&clean.digests()["views"]);
+    let part = env.blob(&parts[0]);
+    assert!(
+        set.metadata().unwrap().len() < part.metadata().unwrap().len(),
+        "the set's blob holds heads only"
+    );
+    std::fs::remove_file(env.blob(&parts[2])).unwrap();
+    let r = env.run(&g, &[]).ok();
+    assert_eq!(r.status("views"), "ran");
+    assert!(r.reason("views").contains("part"), "{}", r.reason("views"));
+    assert_eq!(r.status("fused"), "cutoff");
+    assert_eq!(r.digests(), clean.digests());
+    assert!(env.blob(&parts[2]).is_file());
+}
+
+#[test]
+fn a_corrupt_part_fails_its_reader_by_name_and_the_next_run_rebuilds_it() {
+    let env = Env::new();
+    let g = env.write("views.ron", VIEWS);
+    let clean = env.run(&g, &[]).ok();
+    let part = parts(&env)[1].clone();
+    corrupt(&env.blob(&part));
+    // Same size: the entry still looks whole; the stage reading the view finds it out.
+    let r = env.run(&g, &["--set", "fused.stride=2"]);
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    assert!(
+        r.stderr.contains(&format!("part blake3:{part}")) && r.stderr.contains("run again"),
+        "{}",
+        r.stderr
+    );
+    // The bad part was dropped on reading it, so the set is rebuilt.
+    let r = env.run(&g, &["--set", "fused.stride=2"]).ok();
+    assert_eq!(r.status("views"), "ran");
+    assert_eq!(r.digests()["views"], clean.digests()["views"]);
+    env.assert_blobs_intact();
+}
+
+#[test]
+fn gc_keeps_a_kept_graphs_parts_and_drops_entries_whose_parts_it_evicted() {
+    let env = Env::new();
+    let g = env.write("views.ron", VIEWS);
+    env.run(&g, &[]).ok();
+    let cache = env.cache();
+    env.cli(&[
+        "gc",
+        "--cache",
+        cache.to_str().unwrap(),
+        "--max-bytes",
+        "0",
+        "--keep",
+        g.to_str().unwrap(),
+    ])
+    .ok();
+    assert!(parts(&env).iter().all(|p| env.blob(p).is_file()));
+    let r = env.run(&g, &[]).ok();
+    assert!(r.with_status("ran").is_empty(), "{:?}", r.statuses());
+    env.cli(&["gc", "--cache", cache.to_str().unwrap(), "--max-bytes", "0"])
+        .ok();
+    assert!(parts(&env).is_empty(), "no entry names a part gc removed");
+    let r = env.run(&g, &[]).ok();
+    assert_eq!(r.status("views"), "ran");
+}

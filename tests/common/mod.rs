@@ -27,6 +27,20 @@ Graph(
 )
 "#;
 
+/// A small street-level graph: a view set, whose pixels are a part per view, and a stage that
+/// reads the views.
+pub const VIEWS: &str = r#"Graph(
+    site: Site(crs: "EPSG:32618", origin: (583200.0, 4506600.0), cell_m: 0.5),
+    nodes: {
+        "city":   SynthCity(seed: 3, size_m: (200.0, 150.0), blocks: (2, 2)),
+        "truth":  TruthScene(city: "city"),
+        "views":  SynthViews(scene: "truth", city: "city", size: (64, 48), max_views: 6),
+        "charts": SurfaceCharts(scene: "truth"),
+        "fused":  FuseViews(views: "views", scene: "truth", charts: "charts"),
+    },
+    outputs: {},
+)"#;
+
 /// A temporary working folder with its own cache and output folder.
 pub struct Env {
     pub dir: tempfile::TempDir,

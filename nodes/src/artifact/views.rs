@@ -575,4 +575,58 @@ mod tests {
         let behind = std::array::from_fn(|a| view.pose.position[a] - dir[a]);
         assert!(view.project(behind).is_none());
     }
+
+    #[test]
+    fn a_view_stored_as_a_part_reads_back_whole() {
+        use crate::artifact::MemParts;
+        let k = Intrinsics {
+            fx: 50.0,
+            fy: 50.0,
+            cx: 8.0,
+            cy: 6.0,
+        };
+        let mut view = View::new(
+            "v",
+            16,
+            12,
+            k,
+            Pose::from_angles([1.0, 2.0, 3.0], 10.0, 0.0, 0.0),
+        );
+        view.image = PodVec((0..192).map(|i| [i as u8, 7, 9]).collect());
+        view.depth = Some(PodVec((0..192).map(|i| i as f32 * 0.5).collect()));
+        view.arch = Some(Instances {
+            ids: PodVec((0..192).map(|i| (i % 3) as u16).collect()),
+            classes: [(1, "wall".to_string()), (2, "window".to_string())].into(),
+        });
+        let parts = MemParts::new();
+        let set = ViewSet::store(vec![view.clone()], vec!["glass".into()], &parts)
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            set.views[0].arch_classes,
+            view.arch.as_ref().map(|a| a.classes.clone())
+        );
+        assert_eq!(set.with(&parts).load(0).unwrap(), view);
+        // The same pixels are the same part: a moved pose names the part it had.
+        let mut moved = view.clone();
+        moved.pose.position[0] += 1.0;
+        let again = ViewSet::store(vec![moved], vec!["glass".into()], &parts)
+            .unwrap()
+            .unwrap();
+        assert_eq!(again.views[0].pixels, set.views[0].pixels);
+        // A layer of another size is refused before anything is stored, naming the view.
+        let mut bad = view.clone();
+        bad.depth = Some(PodVec(vec![1.0; 5]));
+        let (place, expected) = ViewSet::store(vec![bad], Vec::new(), &parts)
+            .unwrap()
+            .unwrap_err();
+        assert!(
+            place.contains("view 0") && place.contains("depth"),
+            "{place}"
+        );
+        assert!(expected.contains("192 pixels"), "{expected}");
+        // Read with another store, the part is not there: an error, not a panic.
+        let e = set.with(&MemParts::new()).load(0).unwrap_err();
+        assert!(e.0.contains("not in this store"), "{e}");
+    }
 }

@@ -253,10 +253,66 @@ impl ChartLookup {
 /// chart no view saw costs nothing.
 struct ChartDeposits {
     len: usize,
-    slots: Vec<Vec<f64>>,
+    slots: Vec<TiledGrid>,
     hits: Vec<u16>,
     width: u32,
     height: u32,
+}
+
+/// A chart's texel grid of sums, allocated a tile of `TILE` x `TILE` texels at a time where a
+/// weight lands: the views see the street side of a wall, not its back, its gable's corners or
+/// what the next building hides, and the grids of every chart live until the last view is
+/// merged (dense, they were most of the 1 km² relief's memory). Read back dense, a chart at a
+/// time; the sums are the dense grid's, texel by texel.
+struct TiledGrid {
+    width: u32,
+    tiles: Vec<Option<Box<[f64]>>>,
+}
+
+/// A tile's side, texels.
+const TILE: u32 = 16;
+
+impl TiledGrid {
+    /// A grid with no tile allocated (no weight yet).
+    fn empty() -> TiledGrid {
+        TiledGrid {
+            width: 0,
+            tiles: Vec::new(),
+        }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.tiles.is_empty()
+    }
+
+    fn add(&mut self, width: u32, height: u32, texel: u32, w: f64) {
+        let across = width.div_ceil(TILE);
+        if self.tiles.is_empty() {
+            self.width = width;
+            self.tiles = (0..across * height.div_ceil(TILE)).map(|_| None).collect();
+        }
+        let (x, y) = (texel % width, texel / width);
+        let tile = self.tiles[((y / TILE) * across + x / TILE) as usize]
+            .get_or_insert_with(|| vec![0.0; (TILE * TILE) as usize].into_boxed_slice());
+        tile[((y % TILE) * TILE + x % TILE) as usize] += w;
+    }
+
+    /// The sums as a dense row-major grid of `len` texels.
+    fn to_dense(&self, len: usize) -> Vec<f64> {
+        let mut out = vec![0.0; len];
+        let across = self.width.div_ceil(TILE);
+        for (k, tile) in self.tiles.iter().enumerate() {
+            let Some(tile) = tile else { continue };
+            let (tx, ty) = (k as u32 % across * TILE, k as u32 / across * TILE);
+            for (i, &v) in tile.iter().enumerate() {
+                let (x, y) = (tx + i as u32 % TILE, ty + i as u32 / TILE);
+                if x < self.width && ((y * self.width + x) as usize) < len {
+                    out[(y * self.width + x) as usize] = v;
+                }
+            }
+        }
+        out
+    }
 }
 
 impl ChartDeposits {
@@ -273,18 +329,14 @@ impl ChartDeposits {
     fn add(&mut self, texel: u32, slot: u32, w: f64) {
         let s = slot as usize;
         if self.slots.len() <= s {
-            self.slots.resize_with(s + 1, Vec::new);
+            self.slots.resize_with(s + 1, TiledGrid::empty);
         }
-        let grid = &mut self.slots[s];
-        if grid.is_empty() {
-            *grid = vec![0.0; self.len];
-        }
-        grid[texel as usize] += w;
+        self.slots[s].add(self.width, self.height, texel, w);
     }
 
     /// Whether no pixel deposited a weight or hit a texel here.
     fn untouched(&self) -> bool {
-        self.hits.is_empty() && self.slots.iter().all(Vec::is_empty)
+        self.hits.is_empty() && self.slots.iter().all(TiledGrid::is_empty)
     }
 
     fn hit(&mut self, texel: u32) {
@@ -314,11 +366,12 @@ impl ChartDeposits {
         } else {
             self.hits
         };
-        let used: Vec<(usize, &Vec<f64>)> = self
+        let used: Vec<(usize, Vec<f64>)> = self
             .slots
             .iter()
             .enumerate()
             .filter(|(_, g)| !g.is_empty())
+            .map(|(slot, g)| (slot, g.to_dense(n)))
             .collect();
         if used.is_empty() {
             return ChartLayers {
