@@ -83,6 +83,7 @@ fn options(heights: Heights) -> ReadOptions {
             size_px: None,
         },
         max_yaw_disagreement_deg: 10.0,
+        store: None,
     }
 }
 
@@ -774,4 +775,27 @@ fn cameras_off_the_terrain_are_dropped_with_a_warning() {
             .any(|m| m.starts_with("4 image(s) dropped because they lie outside the terrain")),
         "{w:?}"
     );
+}
+
+/// With a store (as the stages give), each view is stored as it is read: the set is the same
+/// views, a view at a time in memory.
+#[test]
+fn provider_views_stored_as_read_are_the_views_read_whole() {
+    let folder = fixtures("mapillary/per_image");
+    let whole = mapillary("mapillary/per_image", Heights::Provider);
+    let parts = kodama_nodes::artifact::MemParts::new();
+    let opts = options(Heights::Provider).storing_in(&parts);
+    let read = read_mapillary(&folder, &site(), &opts).unwrap();
+    assert!(
+        read.views
+            .iter()
+            .all(|v| v.stored.is_some() && v.view.image.is_empty())
+    );
+    let set = read
+        .finish(&folder, &opts, &kodama_nodes::stage::NoProgress, &parts)
+        .unwrap();
+    let loaded = set.with(&parts).load_all().unwrap();
+    let expected: Vec<View> = whole.views.into_iter().map(|v| v.view).collect();
+    assert!(!expected.is_empty());
+    assert_eq!(loaded, expected);
 }

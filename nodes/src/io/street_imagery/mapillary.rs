@@ -150,6 +150,7 @@ pub fn read_mapillary(
             "image",
             "Mapillary image entities: <id>.json files or a metadata.jsonl",
         ),
+        opts.store,
         |id, rec, geo| read_entity(id, rec, geo, &images, opts),
     )
 }
@@ -236,6 +237,7 @@ fn read_entity(
                 view,
                 pose_source: pose_source.clone(),
                 distortion,
+                stored: None,
             }
         })
         .collect()))

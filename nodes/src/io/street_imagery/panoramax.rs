@@ -70,6 +70,7 @@ pub fn read_panoramax(
             "item",
             "STAC Item JSON files (or an ItemCollection) with their images",
         ),
+        opts.store,
         |id, rec, geo| read_item(id, rec, geo, &images, opts),
     )
 }
@@ -177,6 +178,7 @@ fn read_item(
                 view,
                 pose_source: pose_source.clone(),
                 distortion: None,
+                stored: None,
             }
         })
         .collect()))

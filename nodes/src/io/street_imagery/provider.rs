@@ -13,7 +13,7 @@ use serde_json::Value;
 
 use super::record::{Record, record_id};
 use super::rotation::enu_to_grid;
-use crate::artifact::{Raster, View, ViewSet};
+use crate::artifact::{PartStore, Raster, View, ViewHead, ViewSet};
 use crate::io::crs::{Crs, ToSite};
 use crate::site::Site;
 use crate::stage::{ParamError, Progress, StageError};
@@ -72,7 +72,7 @@ pub struct PanoramaCut {
 }
 
 /// What a provider reader needs besides the folder and the site.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy)]
 pub struct ReadOptions<'a> {
     /// Camera heights.
     pub heights: Heights<'a>,
@@ -80,6 +80,10 @@ pub struct ReadOptions<'a> {
     pub panorama: PanoramaCut,
     /// Views whose rotation and compass heading disagree by more are dropped, degrees.
     pub max_yaw_disagreement_deg: f64,
+    /// Where each view's pixels go as soon as it is read (the stages give their `Ctx`'s store,
+    /// so a folder of any size is read a few images at a time); `None` keeps them in the
+    /// [`ProviderView`]s.
+    pub store: Option<&'a dyn PartStore>,
 }
 
 impl<'a> ReadOptions<'a> {
@@ -96,7 +100,16 @@ impl<'a> ReadOptions<'a> {
             heights: Heights::choose(terrain, trust_altitude, camera_height_m)?,
             panorama,
             max_yaw_disagreement_deg,
+            store: None,
         })
+    }
+
+    /// The same options, each view stored in `parts` as it is read.
+    pub fn storing_in(self, parts: &'a dyn PartStore) -> Self {
+        ReadOptions {
+            store: Some(parts),
+            ..self
+        }
     }
 }
 
@@ -155,6 +168,9 @@ pub struct ProviderView {
     /// Radial distortion [k1, k2] of the image (OpenSfM's perspective model on normalised
     /// coordinates), not applied to it; `None` where the image is distortion-free.
     pub distortion: Option<[f64; 2]>,
+    /// The view as stored, when the options gave a store: `view` is then a placeholder of no
+    /// pixels (its id, intrinsics and pose), the head holding the rest.
+    pub stored: Option<ViewHead>,
 }
 
 /// Why an entity gave no view.
@@ -261,9 +277,22 @@ impl ProviderViews {
         for w in &warnings {
             progress.warn(w);
         }
+        let (stored, unstored): (Vec<_>, Vec<_>) =
+            self.views.into_iter().partition(|v| v.stored.is_some());
+        if unstored.is_empty() {
+            return Ok(ViewSet {
+                views: stored.into_iter().filter_map(|v| v.stored).collect(),
+                material_classes: Vec::new(),
+            });
+        }
+        if !stored.is_empty() {
+            return Err(StageError::Failed(
+                "a provider folder's views were stored only in part (a bug)".into(),
+            ));
+        }
         crate::io::views_io::store_all_checked(
             folder,
-            self.views.into_iter().map(|v| v.view).collect(),
+            unstored.into_iter().map(|v| v.view).collect(),
             Vec::new(),
             parts,
         )
@@ -336,6 +365,26 @@ pub fn camera_z(
     }
 }
 
+/// `v` with its view stored in `parts` (checked by [`View::check`]; a view that fails it is an
+/// error on the record's file, at the record): the head kept, the pixels dropped.
+fn store_view(
+    mut v: ProviderView,
+    rec: &Record,
+    parts: &dyn PartStore,
+) -> Result<ProviderView, StageError> {
+    let (id, k, pose) = (v.view.id.clone(), v.view.intrinsics, v.view.pose);
+    let view = std::mem::replace(&mut v.view, View::new(&id, 0, 0, k, pose));
+    let head = view.store(0, parts)?.map_err(|(what, m)| {
+        StageError::bad_input(
+            rec.file,
+            format!("{} (view {id:?}), {what}", rec.at),
+            format!("expected {m}"),
+        )
+    })?;
+    v.stored = Some(head);
+    Ok(v)
+}
+
 /// What one record gave: its views, or why it gave none.
 pub type RecordViews = Result<Vec<ProviderView>, DropReason>;
 
@@ -347,6 +396,7 @@ pub fn read_records(
     (folder, site): (&Path, &Site),
     (docs, skipped): (&[(&PathBuf, String, Value)], Vec<PathBuf>),
     (kind, what): (&str, &str),
+    store: Option<&dyn PartStore>,
     read: impl Fn(&str, &Record, &Geo) -> Result<RecordViews, StageError> + Sync,
 ) -> Result<ProviderViews, StageError> {
     if docs.is_empty() {
@@ -386,7 +436,17 @@ pub fn read_records(
     }
     let done: Vec<Result<RecordViews, StageError>> = todo
         .par_iter()
-        .map(|(id, rec)| read(id, rec, &geo))
+        .map(|(id, rec)| {
+            let views = read(id, rec, &geo)?;
+            match (views, store) {
+                (Ok(views), Some(parts)) => views
+                    .into_iter()
+                    .map(|v| store_view(v, rec, parts))
+                    .collect::<Result<Vec<_>, _>>()
+                    .map(Ok),
+                (views, _) => Ok(views),
+            }
+        })
         .collect();
     for (r, (id, _)) in done.into_iter().zip(&todo) {
         match r? {

@@ -88,7 +88,8 @@ impl Stage for ReadMapillary {
             p.camera_height_m,
             cut(p),
             p.max_yaw_disagreement_deg,
-        )?;
+        )?
+        .storing_in(ctx.parts);
         let folder = ctx.file(0)?;
         read_mapillary(folder, ctx.site, &opts)?.finish(folder, &opts, ctx.progress, ctx.parts)
     }

@@ -66,7 +66,8 @@ impl Stage for ReadPanoramax {
 
     fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<ViewSet, StageError> {
         let terrain = inputs.optional::<Raster>("terrain")?;
-        let opts = ReadOptions::new(terrain, p.trust_altitude, p.camera_height_m, cut(p), 180.0)?;
+        let opts = ReadOptions::new(terrain, p.trust_altitude, p.camera_height_m, cut(p), 180.0)?
+            .storing_in(ctx.parts);
         let folder = ctx.file(0)?;
         read_panoramax(folder, ctx.site, &opts)?.finish(folder, &opts, ctx.progress, ctx.parts)
     }
