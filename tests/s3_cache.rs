@@ -159,6 +159,24 @@ impl Weed {
         cmd
     }
 
+    /// `kodama-dag ARGS` against the bucket under `prefix`, run in `env`; it must succeed.
+    fn run_ok(&self, env: &Env, prefix: &str, args: &[&str]) -> Run {
+        finish(self.cmd(env, prefix, args).output().unwrap()).ok()
+    }
+
+    /// The bucket under `prefix` holds every blob of `env`'s local cache, each intact.
+    fn assert_holds_every_blob_of(&self, prefix: &str, env: &Env) {
+        let mut remote = self.assert_blobs_intact(prefix);
+        let mut local: Vec<String> = env
+            .blobs()
+            .iter()
+            .map(|b| b.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        remote.sort();
+        local.sort();
+        assert_eq!(remote, local, "every blob the machine stored went up");
+    }
+
     /// Every object under `prefix`: (path, bytes).
     fn objects(&self, prefix: &str) -> Vec<(String, Vec<u8>)> {
         use futures_util::StreamExt;
@@ -232,16 +250,11 @@ fn a_sweep_shared_through_s3_is_all_hits_on_a_second_machine() {
     let sweep = |env: &Env| {
         env.write("g.ron", CHAIN);
         env.write("s.ron", SWEEP);
-        finish(
-            weed.cmd(
-                env,
-                "shared",
-                &["sweep", "s.ron", "--cache", "cache", "--out", "out"],
-            )
-            .output()
-            .unwrap(),
+        weed.run_ok(
+            env,
+            "shared",
+            &["sweep", "s.ron", "--cache", "cache", "--out", "out"],
         )
-        .ok()
     };
     let (first, second) = (Env::new(), Env::new());
     let a = sweep(&first);
@@ -262,15 +275,7 @@ fn a_sweep_shared_through_s3_is_all_hits_on_a_second_machine() {
             std::fs::read(second.out().join(f)).unwrap()
         );
     }
-    let mut remote = weed.assert_blobs_intact("shared");
-    let mut local: Vec<String> = first
-        .blobs()
-        .iter()
-        .map(|b| b.file_name().unwrap().to_string_lossy().into_owned())
-        .collect();
-    remote.sort();
-    local.sort();
-    assert_eq!(remote, local, "every blob the first machine stored went up");
+    weed.assert_holds_every_blob_of("shared", &first);
     // A prefix holding someone else's objects is refused, exit 2, before anything runs.
     let other = Env::new();
     other.write("g.ron", CHAIN);
@@ -293,29 +298,17 @@ fn a_view_sets_parts_are_shared_through_s3() {
     let weed = Weed::start(bin);
     let run = |env: &Env| {
         env.write("views.ron", VIEWS);
-        finish(
-            weed.cmd(
-                env,
-                "views",
-                &["run", "views.ron", "--cache", "cache", "--json", "--quiet"],
-            )
-            .output()
-            .unwrap(),
+        weed.run_ok(
+            env,
+            "views",
+            &["run", "views.ron", "--cache", "cache", "--json", "--quiet"],
         )
-        .ok()
     };
     let (first, second) = (Env::new(), Env::new());
     let a = run(&first);
     assert!(!a.with_status("ran").is_empty());
-    let mut remote = weed.assert_blobs_intact("views");
-    let mut local: Vec<String> = first
-        .blobs()
-        .iter()
-        .map(|b| b.file_name().unwrap().to_string_lossy().into_owned())
-        .collect();
-    remote.sort();
-    local.sort();
-    assert_eq!(remote, local, "every part went up with its set");
+    // Every part went up with its set.
+    weed.assert_holds_every_blob_of("views", &first);
     let b = run(&second);
     assert!(b.with_status("ran").is_empty(), "{:?}", b.statuses());
     assert_eq!(a.digests(), b.digests());
