@@ -1,6 +1,7 @@
 //! The second pass's evidence: the façade labels of the views already placed, pooled in cells
 //! on the twin's walls, and read by each view without its own.
 
+use std::cell::RefCell;
 use std::collections::HashMap;
 use std::hash::{BuildHasherDefault, Hasher};
 
@@ -60,17 +61,41 @@ impl Consensus {
 
 /// The consensus as one view may use it: without what that view itself put in.
 pub(super) struct OthersSay<'a> {
-    pub(super) all: &'a Consensus,
-    pub(super) own: Option<&'a Pool>,
+    all: &'a Consensus,
+    own: Option<&'a Pool>,
+    /// What `label_at` found per cell: one view's candidate poses look up the same few thousand
+    /// cells again and again, and a table that small answers from the processor's cache where
+    /// the consensus of every view (tens of MB) and the view's own pool took two lookups, the
+    /// first mostly a miss in memory (13 % of the registration's time on the demo).
+    seen: RefCell<HashMap<[i64; 3], Option<Facade>, BuildHasherDefault<CellHasher>>>,
 }
 
-impl OthersSay<'_> {
+impl<'a> OthersSay<'a> {
+    /// The consensus less `own`, a view's own pool.
+    pub(super) fn new(all: &'a Consensus, own: Option<&'a Pool>) -> OthersSay<'a> {
+        OthersSay {
+            all,
+            own,
+            seen: RefCell::default(),
+        }
+    }
+
     /// The majority label of the other views in the cell at `at`, if any saw it and they did not
     /// tie.
     pub(super) fn label_at(&self, at: [f64; 3]) -> Option<Facade> {
         let key = Consensus::key(self.all.cell_m, at);
-        let [mut f, mut w] = *self.all.cells.get(&key)?;
-        if let Some(own) = self.own.and_then(|o| o.get(&key)) {
+        if let Some(&label) = self.seen.borrow().get(&key) {
+            return label;
+        }
+        let label = self.count(&key);
+        self.seen.borrow_mut().insert(key, label);
+        label
+    }
+
+    /// The majority label of the other views in cell `key`.
+    fn count(&self, key: &[i64; 3]) -> Option<Facade> {
+        let [mut f, mut w] = *self.all.cells.get(key)?;
+        if let Some(own) = self.own.and_then(|o| o.get(key)) {
             f -= own[0];
             w -= own[1];
         }

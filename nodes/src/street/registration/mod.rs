@@ -775,10 +775,7 @@ pub fn register_views(
         return Ok(out);
     }
     let second: Vec<(Pose, Refinement)> = views.map(|k, v| {
-        let others = OthersSay {
-            all: &consensus,
-            own: pools[k].as_ref(),
-        };
+        let others = OthersSay::new(&consensus, pools[k].as_ref());
         let first = &out[k].1;
         let start = first.accepted.then(|| first.candidate());
         refine_view(v, &twin, Some(&others), start, p)
