@@ -444,11 +444,6 @@ impl Views<'_> {
         self.set.views.is_empty()
     }
 
-    /// The head of view `i`.
-    pub fn head(&self, i: usize) -> &ViewHead {
-        &self.set.views[i]
-    }
-
     /// View `i` with its pixels.
     pub fn load(&self, i: usize) -> Result<View, PartError> {
         self.set.views[i].load(self.parts)

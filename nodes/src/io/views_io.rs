@@ -70,24 +70,16 @@ pub fn store_checked(
     })
 }
 
-/// Every view of `views`, stored in `parts` on all threads through [`store_checked`].
+/// Every view of `views`, stored in `parts` on all threads ([`ViewSet::store`]); a view that
+/// fails [`View::check`] is an error on `file` naming it, as [`store_checked`] gives.
 pub fn store_all_checked(
     file: &Path,
     views: Vec<View>,
     material_classes: Vec<String>,
     parts: &dyn PartStore,
 ) -> Result<ViewSet, StageError> {
-    use rayon::prelude::*;
-    let n = material_classes.len();
-    let heads = views
-        .into_par_iter()
-        .enumerate()
-        .map(|(i, v)| store_checked(file, i, v, n, parts))
-        .collect::<Result<Vec<_>, _>>()?;
-    Ok(ViewSet {
-        views: heads,
-        material_classes,
-    })
+    ViewSet::store(views, material_classes, parts)?
+        .map_err(|(place, m)| StageError::bad_input(file, place, format!("expected {m}")))
 }
 
 fn read_views_json(views_json: &Path) -> Result<Value, StageError> {

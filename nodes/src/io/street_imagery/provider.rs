@@ -277,22 +277,16 @@ impl ProviderViews {
         for w in &warnings {
             progress.warn(w);
         }
-        let (stored, unstored): (Vec<_>, Vec<_>) =
-            self.views.into_iter().partition(|v| v.stored.is_some());
-        if unstored.is_empty() {
+        // With a store in the options every view was stored as it was read.
+        if self.views.iter().all(|v| v.stored.is_some()) {
             return Ok(ViewSet {
-                views: stored.into_iter().filter_map(|v| v.stored).collect(),
+                views: self.views.into_iter().filter_map(|v| v.stored).collect(),
                 material_classes: Vec::new(),
             });
         }
-        if !stored.is_empty() {
-            return Err(StageError::Failed(
-                "a provider folder's views were stored only in part (a bug)".into(),
-            ));
-        }
         crate::io::views_io::store_all_checked(
             folder,
-            unstored.into_iter().map(|v| v.view).collect(),
+            self.views.into_iter().map(|v| v.view).collect(),
             Vec::new(),
             parts,
         )

@@ -75,13 +75,6 @@ impl Stage for ReadViewOutputs {
         let mut out = views.clone();
         let mut bare = Vec::new();
         let mut from_files = vec![false; out.views.len()];
-        let uses_table = |read_any: bool| {
-            if read_any {
-                p.material_classes.len()
-            } else {
-                views.material_classes.len()
-            }
-        };
         ctx.progress.set_total(out.views.len() as u64);
         // One view in memory at a time: read its outputs, merge, store, drop.
         for (i, (head, material_read)) in out.views.iter_mut().zip(&mut from_files).enumerate() {
@@ -107,7 +100,11 @@ impl Stage for ReadViewOutputs {
             v.normal = o.normal.or(v.normal.take());
             // A map the files gave is checked against their table; one the view kept was
             // checked against the set's when it was stored, and goes below if the table changes.
-            let n = uses_table(*material_read);
+            let n = if *material_read {
+                p.material_classes.len()
+            } else {
+                views.material_classes.len()
+            };
             *head = crate::io::views_io::store_checked(dir, i, v, n, ctx.parts)?;
         }
         if bare.len() == out.views.len() && !out.views.is_empty() {

@@ -94,8 +94,8 @@ fn relief_pass(ctx: &PassCtx, views: Views) -> Result<ReliefSet, StageError> {
     let j_ref = exposure_unit(views.set, ctx.p);
     let kept = Mutex::new(Vec::with_capacity(views.len()));
     let results = fuse_charts(ctx, views, &kept, j_ref)?;
-    let mut kept = kept.into_inner().unwrap_or_else(|e| e.into_inner());
-    kept.sort_by_key(|k: &KeptVotes| k.view);
+    // The counts are sums: the order the views finished in does not change them.
+    let kept = kept.into_inner().unwrap_or_else(|e| e.into_inner());
     let mut stats = view_stats(&kept, views.len());
     let mut set = ReliefSet {
         with_mesh: ctx.deltas.is_some(),
@@ -118,7 +118,7 @@ struct KeptVotes {
     calibrated: bool,
 }
 
-/// The counts of the views' votes (the texel counts come later), `kept` in view order.
+/// The counts of the views' votes (the texel counts come later).
 fn view_stats(kept: &[KeptVotes], views: usize) -> ReliefStats {
     let mut stats = ReliefStats {
         views: views as u64,
