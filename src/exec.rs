@@ -24,7 +24,7 @@ use rayon::prelude::*;
 
 use crate::cache::{Action, Cache, Digest, InputStamp, write_atomic};
 use crate::graph::Graph;
-use crate::key::{action_key, site_digest};
+use crate::key::{action_key, node_site, site_digest};
 use crate::progress::Reporter;
 use crate::record::{LastRun, NodeRecord, RunRecord, Snapshot, Status, save_record, what_changed};
 use crate::registry;
@@ -486,7 +486,8 @@ impl<'a> Exec<'a> {
             return self.report_outcome(i, report);
         }
         let files = lock(&self.files[i]).digests.clone();
-        let (key, snapshot) = action_key(node, &self.site, &self.input_digests(i), &files);
+        let site = node_site(&self.site, node);
+        let (key, snapshot) = action_key(node, &site, &self.input_digests(i), &files);
         let last = self.last.nodes.get(&node.id);
         let mut reason = None;
         if let Some(action) = self.cache.get_action(&key) {
@@ -613,8 +614,8 @@ impl<'a> Exec<'a> {
         loop {
             let files = lock(&self.files[i]).clone();
             // Inputs are loaded now; a rebuilt input may have changed its digest, so key afresh.
-            let (key, snapshot) =
-                action_key(node, &self.site, &self.input_digests(i), &files.digests);
+            let site = node_site(&self.site, node);
+            let (key, snapshot) = action_key(node, &site, &self.input_digests(i), &files.digests);
             let progress = self.reporter.started(&node.id, node.kind.name);
             let ctx = Ctx {
                 site: &self.graph.site,
@@ -622,6 +623,7 @@ impl<'a> Exec<'a> {
                 progress: &progress,
                 seed: *key.as_bytes(),
                 parts: self.cache,
+                window: node.window,
             };
             let result = catch_unwind(AssertUnwindSafe(|| node.params.run(inputs, &ctx)));
             drop(progress);
@@ -765,7 +767,7 @@ impl<'a> Exec<'a> {
         let snapshot = Snapshot {
             kind: node.kind.name.to_owned(),
             version: node.kind.version,
-            site: self.site.to_hex().to_string(),
+            site: node_site(&self.site, node).to_hex().to_string(),
             params: BTreeMap::new(),
             inputs: vec![(
                 registry::Kind::REPORT_OF.to_owned(),

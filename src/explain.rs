@@ -5,7 +5,7 @@ use serde::Serialize;
 use crate::cache::{Action, Cache, Digest};
 use crate::exec::{RunError, file_digests, graph_key, target_indices};
 use crate::graph::Graph;
-use crate::key::{action_key, site_digest};
+use crate::key::{action_key, node_site, site_digest};
 use crate::record::{LastRun, what_changed};
 
 /// What would happen to one node.
@@ -98,7 +98,7 @@ pub fn explain(
             .iter()
             .map(|l| l.iter().map(|&d| digests[d].expect("known")).collect())
             .collect();
-        let (key, snapshot) = action_key(node, &site, &inputs, &files[i]);
+        let (key, snapshot) = action_key(node, &node_site(&site, node), &inputs, &files[i]);
         let hit = cache.get_action(&key).filter(|a| {
             let (d, size) = a.output;
             cache.can_get_blob(&d, size)

@@ -88,3 +88,21 @@ pub fn action_key(
 pub fn site_digest(site: &kodama_nodes::Site) -> Digest {
     blake3::hash(&rmp_serde::to_vec_named(site).expect("site serializes"))
 }
+
+/// The site digest a node's key takes: the graph's, or for a tile's node in a tiled run the graph's
+/// with the window its tile reads, so each tile's copy of a node has a key of its own.
+pub fn node_site(site: &Digest, node: &Node) -> Digest {
+    match &node.window {
+        None => *site,
+        Some(w) => {
+            let mut h = blake3::Hasher::new();
+            h.update(site.as_bytes());
+            put(&mut h, b"window");
+            put(
+                &mut h,
+                &rmp_serde::to_vec_named(w).expect("a window serializes"),
+            );
+            h.finalize()
+        }
+    }
+}

@@ -60,6 +60,14 @@ enum Command {
         /// Run only this node and what it needs (repeatable).
         #[arg(long = "target", value_name = "NODE")]
         targets: Vec<String>,
+        /// In a tiled run, make only tile I's nodes (numbered row by row from the south-west, as
+        /// `explain` lists them) and what they need: one task of a job array.
+        #[arg(long, value_name = "I")]
+        tile: Option<usize>,
+        /// In a tiled run, only the nodes of tile phase K: with --tile, that tile's; alone, the
+        /// nodes made once that tiles of phase K+1 wait for (0: the shared upstream).
+        #[arg(long, value_name = "K")]
+        phase: Option<u32>,
         /// Worker threads (default: all cores; at most 4 per core).
         #[arg(long, short, value_parser = parse_jobs)]
         jobs: Option<usize>,
@@ -203,6 +211,12 @@ struct SubmitArgs {
     /// A graph's nodes to run, with what they need (repeatable; graphs only).
     #[arg(long = "target", value_name = "NODE")]
     targets: Vec<String>,
+    /// Run the graph in tiles of this side, metres: a job array per tile phase (graphs only).
+    #[arg(long, value_name = "M", value_parser = parse_metres)]
+    tile_m: Option<f64>,
+    /// The halo around each tile, metres (default: the stages' reach plus half a building).
+    #[arg(long, value_name = "M", value_parser = parse_metres)]
+    halo_m: Option<f64>,
     /// CPUs per job (--cpus-per-task, and kodama-dag's -j); default 1.
     #[arg(long, short, value_parser = parse_jobs)]
     jobs: Option<usize>,
@@ -271,6 +285,22 @@ struct GraphArgs {
     /// Let data paths leave the graph file's folder (or --data): `..`, absolute paths, symlinks.
     #[arg(long)]
     allow_outside: bool,
+    /// Run in square tiles of this side, metres, over the graph's `tiling` area (README,
+    /// "City scale: tiles").
+    #[arg(long, value_name = "M", value_parser = parse_metres)]
+    tile_m: Option<f64>,
+    /// The halo around each tile, metres (default: the stages' reach plus half a building).
+    #[arg(long, value_name = "M", value_parser = parse_metres)]
+    halo_m: Option<f64>,
+}
+
+fn parse_metres(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!(
+            "expected a finite, non-negative length in metres, found {s:?}"
+        )),
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -332,6 +362,10 @@ fn load_graph(args: &GraphArgs) -> Result<Graph, Fail> {
         data_dir: args.data.clone(),
         sets: args.sets.clone(),
         allow_outside: args.allow_outside,
+        tiles: kodama_dag::graph::TileOverrides {
+            tile_m: args.tile_m,
+            halo_m: args.halo_m,
+        },
     };
     if let Some(d) = &args.data
         && !d.is_dir()
@@ -537,12 +571,26 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             graph,
             cache,
             out,
-            targets,
+            mut targets,
+            tile,
+            phase,
             jobs,
             json,
             quiet,
         } => {
             let g = load_graph(&graph)?;
+            if tile.is_some() || phase.is_some() {
+                let job = g
+                    .tile_job(tile, phase)
+                    .map_err(|m| Fail(2, format!("error: {m}")))?;
+                if job.is_empty() {
+                    if !quiet {
+                        eprintln!("nothing to make for this tile job");
+                    }
+                    return Ok(0);
+                }
+                targets.extend(job.into_iter().map(|i| g.nodes[i].id.clone()));
+            }
             let cache = open_cache(cache)?;
             let out_dir = out.unwrap_or_else(|| Path::new("out").join(&g.name));
             run_once(&g, &cache, out_dir, targets, jobs, json, quiet)
@@ -762,6 +810,8 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
             data: a.data.clone(),
             sets: a.sets.clone(),
             allow_outside: a.allow_outside,
+            tile_m: a.tile_m,
+            halo_m: a.halo_m,
         })?;
         kodama_dag::exec::target_indices(&g, &a.targets)?;
         let out_dir = a
@@ -922,6 +972,8 @@ fn gc_command(a: GcArgs) -> Result<u8, Fail> {
             data: data.clone(),
             sets: Vec::new(),
             allow_outside,
+            tile_m: None,
+            halo_m: None,
         })?;
         pinned.extend(kodama_dag::exec::last_run_digests(&graph, &cache));
     }

@@ -24,6 +24,10 @@ pub trait Params: Send + Sync {
     fn files(&self) -> Vec<FileRef>;
     /// Runs the stage: its output and its reports, by name.
     fn run(&self, inputs: &Inputs, ctx: &Ctx) -> Result<Ran, StageError>;
+    /// How far the output reaches into input away from it (`Stage::reach_m`), metres.
+    fn reach_m(&self) -> f64;
+    /// The same params, for a copy of the node (one per tile of a tiled run).
+    fn clone_box(&self) -> Box<dyn Params>;
 }
 
 /// What one run of a stage made: its output and each of its reports.
@@ -62,6 +66,12 @@ impl<S: Stage> Params for Erased<S> {
             reports: r.reports,
         })
     }
+    fn reach_m(&self) -> f64 {
+        S::reach_m(&self.0)
+    }
+    fn clone_box(&self) -> Box<dyn Params> {
+        Box::new(Erased::<S>(self.0.clone(), PhantomData))
+    }
 }
 
 /// The params of a report node (`"carved.outcomes"`): it has none, and runs nothing.
@@ -84,6 +94,12 @@ impl Params for ReportOf {
         Err(StageError::Failed(
             "a report is made by its node's run, never run alone".into(),
         ))
+    }
+    fn reach_m(&self) -> f64 {
+        0.0
+    }
+    fn clone_box(&self) -> Box<dyn Params> {
+        Box::new(ReportOf)
     }
 }
 
@@ -111,6 +127,8 @@ pub struct Kind {
     /// For the kind of a report node (`"carved.outcomes"`, made by the loader, never written in a
     /// graph): the report's name. Its one input, `of`, is the node that makes it.
     pub report: Option<&'static str>,
+    /// Whether the stage reads only its tile's window in a tiled run (`Stage::WINDOWED`).
+    pub windowed: bool,
 }
 
 impl Kind {
@@ -134,6 +152,7 @@ macro_rules! kinds {
             parse: parse_params::<$s>,
             reports: <$s as Stage>::REPORTS,
             report: None,
+            windowed: <$s as Stage>::WINDOWED,
         }),*]
     };
 }
@@ -159,6 +178,7 @@ static REPORT_KINDS: LazyLock<Vec<Kind>> = LazyLock::new(|| {
             parse: parse_report_of,
             reports: &[],
             report: Some(r.name),
+            windowed: false,
         })
         .collect()
 });

@@ -603,7 +603,7 @@ fn structure_keys(g: &Graph) -> Vec<[u8; 32]> {
         let mut h = blake3::Hasher::new();
         crate::key::put(&mut h, n.kind.name.as_bytes());
         h.update(&n.kind.version.to_le_bytes());
-        h.update(site.as_bytes());
+        h.update(crate::key::node_site(&site, n).as_bytes());
         crate::key::put(&mut h, &n.params.canonical());
         for f in &n.files {
             crate::key::put(&mut h, f.path.as_os_str().as_encoded_bytes());
@@ -695,6 +695,7 @@ fn load_variant(sweep: &Sweep, opts: &SweepOptions, v: &Variant) -> Result<Graph
         data_dir: opts.data_dir.clone(),
         sets: opts.sets.iter().chain(&v.sets).cloned().collect(),
         allow_outside: opts.allow_outside,
+        tiles: Default::default(),
     };
     load(&sweep.graph, &lo).map_err(|e| SweepError::Graph(format!("variant {}:\n{e}", v.name())))
 }

@@ -7,37 +7,10 @@ use common::*;
 
 use std::path::{Path, PathBuf};
 
-use kodama_nodes::artifact::{Mesh, PodVec};
 use kodama_nodes::geom::mesh_check::check_solid;
 
 fn repo(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
-}
-
-/// The meshes of a glb whose node names contain "building", with their names.
-fn building_meshes(glb: &Path) -> Vec<(String, Mesh)> {
-    let (doc, buffers, _) = gltf::import(glb).unwrap_or_else(|e| panic!("{}: {e}", glb.display()));
-    let mut out = Vec::new();
-    for node in doc.nodes() {
-        let name = node.name().unwrap_or_default().to_string();
-        let Some(mesh) = node.mesh() else { continue };
-        if !name.contains("building") {
-            continue;
-        }
-        let mut m = Mesh::default();
-        for prim in mesh.primitives() {
-            let r = prim.reader(|b| Some(&buffers[b.index()]));
-            if m.positions.is_empty() {
-                m.positions = PodVec(r.read_positions().unwrap().collect());
-            }
-            let idx: Vec<u32> = r.read_indices().unwrap().into_u32().collect();
-            m.triangles
-                .extend(idx.chunks_exact(3).map(|t| [t[0], t[1], t[2]]));
-            m.materials.extend(std::iter::repeat_n(0u8, idx.len() / 3));
-        }
-        out.push((name, m));
-    }
-    out
 }
 
 fn check_all(glb: &Path) -> usize {

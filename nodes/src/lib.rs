@@ -33,7 +33,7 @@ pub mod stages;
 pub mod synth;
 
 pub use artifact::{Artifact, ArtifactType};
-pub use site::Site;
+pub use site::{Site, Window};
 pub use stage::{
     Arity, Ctx, FileRef, InputSpec, Inputs, ParamError, Progress, ReportSpec, Reported, Stage,
     StageError,
@@ -109,6 +109,9 @@ macro_rules! for_each_stage {
             $crate::stages::eval::footprint_score::FootprintScore,
             $crate::stages::eval::raster_stats::RasterStats,
             $crate::stages::eval::point_stats::PointStats,
+            $crate::stages::tiles::merge_scenes::MergeScenes,
+            $crate::stages::tiles::merge_rasters::MergeRasters,
+            $crate::stages::tiles::merge_points::MergePoints,
         }
     };
 }

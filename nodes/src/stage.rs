@@ -19,7 +19,7 @@ use serde::de::DeserializeOwned;
 use crate::artifact::{Artifact, ArtifactType, Typed};
 pub use crate::artifact::{MemParts, PartError, PartRef, PartStore, process_parts};
 pub use crate::params::ParamError;
-use crate::site::Site;
+use crate::site::{Site, Window};
 
 /// How many upstream nodes an input takes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -193,6 +193,9 @@ pub struct Ctx<'a> {
     /// Where the parts of artifacts live (a view set's pixels): the output's are put here, the
     /// inputs' read from here.
     pub parts: &'a dyn PartStore,
+    /// In a tiled run, the part of the site a windowed stage ([`Stage::WINDOWED`]) reads: its
+    /// tile's core grown by the halo. `None` reads everything. Other stages never see one.
+    pub window: Option<Window>,
 }
 
 impl<'a> Ctx<'a> {
@@ -206,6 +209,14 @@ impl<'a> Ctx<'a> {
             progress: &NoProgress,
             seed: [0; 32],
             parts: process_parts(),
+            window: None,
+        }
+    }
+    /// The same context reading only `window` (a tile of a tiled run).
+    pub fn with_window(self, window: Window) -> Self {
+        Ctx {
+            window: Some(window),
+            ..self
         }
     }
     /// The same context with parts in `parts`.
@@ -356,6 +367,18 @@ pub trait Stage: 'static {
     }
     /// Computes the output.
     fn run(params: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Self::Output, StageError>;
+
+    /// Whether the stage reads only the part of its source that lies in `Ctx::window` when a
+    /// tiled run gives one (a reader cropping its file, a sensor flying only over the tile). Its
+    /// output, and everything made from it up to a merge, is then made once per tile.
+    const WINDOWED: bool = false;
+
+    /// How far, in metres, a value of the output may depend on input that lies away from it
+    /// (a blur's 3 sigma, a terrain pass's coarse windows); 0 for stages that work point by
+    /// point or object by object. A tiled run's default halo sums these along its chains.
+    fn reach_m(_params: &Self::Params) -> f64 {
+        0.0
+    }
 
     /// The reports the stage makes beside its output, each made by the same run (none by
     /// default).

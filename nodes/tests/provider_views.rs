@@ -250,6 +250,7 @@ fn yaw_disagreement_drops_the_view_with_a_warning() {
         progress: &warnings,
         seed: [0; 32],
         parts: kodama_nodes::stage::process_parts(),
+        window: None,
     };
     let p: ReadMapillaryParams =
         serde_json::from_value(serde_json::json!({"path": "x", "trust_altitude": true})).unwrap();

@@ -12,6 +12,7 @@ use petgraph::algo::tarjan_scc;
 use petgraph::graph::DiGraph;
 
 use super::data_source::{data_source_of, missing_data_note};
+use super::tiling::{TileOverrides, expand, tiling_spec};
 use super::{Graph, InputFile, Node};
 use crate::diag::{Diagnostic, GraphError, Sources};
 use crate::registry::{self, Kind};
@@ -27,6 +28,8 @@ pub struct LoadOptions {
     /// Let data paths reach outside the graph file's folder (or `--data`): `..`, absolute paths,
     /// symlinks that lead elsewhere.
     pub allow_outside: bool,
+    /// `--tile-m` and `--halo-m`: a tiled run of a graph with a `tiling` block.
+    pub tiles: TileOverrides,
 }
 
 /// The largest graph file read: far beyond any real graph, and a bound on memory when the path
@@ -108,6 +111,7 @@ fn check(
     };
     let top = top_fields(&ast, diags)?;
     let site = site_of(&ast, top.site, diags);
+    let tiling = top.tiling.map(|a| (a.span, tiling_spec(a, diags)));
     let Some(nodes_ast) = top.nodes else {
         diags.push(Diagnostic::at(
             ast.span,
@@ -156,13 +160,20 @@ fn check(
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "graph".into());
-    Some(Graph {
+    let graph = Graph {
         path: path.to_path_buf(),
         name,
         site,
         nodes,
         outputs,
-    })
+        tiling: None,
+    };
+    let (span, spec) = match tiling {
+        Some((span, Some(spec))) => (Some(span), Some(spec)),
+        Some((_, None)) => return None,
+        None => (None, None),
+    };
+    expand(graph, spec.as_ref(), opts.tiles, span, diags)
 }
 
 /// The fields of a graph file's `Graph(...)`, each as written, if given.
@@ -171,6 +182,7 @@ struct TopFields<'a> {
     nodes: Option<&'a Ast>,
     outputs: Option<&'a Ast>,
     data: Option<&'a Ast>,
+    tiling: Option<&'a Ast>,
 }
 
 /// The fields of the graph file's top value `ast`, which must be a `Graph(...)` (None, and a
@@ -190,12 +202,13 @@ fn top_fields<'a>(ast: &'a Ast, diags: &mut Vec<Diagnostic>) -> Option<TopFields
             return None;
         }
     };
-    const TOP: &[&str] = &["site", "nodes", "outputs", "data"];
+    const TOP: &[&str] = &["site", "nodes", "outputs", "data", "tiling"];
     let mut fields = TopFields {
         site: None,
         nodes: None,
         outputs: None,
         data: None,
+        tiling: None,
     };
     for (name, v) in top {
         match name.name.as_str() {
@@ -203,6 +216,7 @@ fn top_fields<'a>(ast: &'a Ast, diags: &mut Vec<Diagnostic>) -> Option<TopFields
             "nodes" => fields.nodes = Some(v),
             "outputs" => fields.outputs = Some(v),
             "data" => fields.data = Some(v),
+            "tiling" => fields.tiling = Some(v),
             other => diags.push(Diagnostic::at(
                 name.span,
                 None,
@@ -746,6 +760,9 @@ fn build_node(
         deps: Vec::new(),
         params: parsed,
         files,
+        tile: None,
+        window: None,
+        phase: 0,
     })
 }
 

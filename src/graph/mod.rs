@@ -3,15 +3,17 @@
 mod data_source;
 mod load;
 mod render;
+mod tiling;
 
 use std::path::PathBuf;
 
-use kodama_nodes::Site;
+use kodama_nodes::{Site, Window};
 
 use crate::registry::{Kind, Params};
 
 pub use load::{LoadOptions, MAX_GRAPH_BYTES, load, read_graph_text};
 pub use render::{to_dot, to_mermaid};
+pub use tiling::{MAX_TILES, Tile, TileOverrides, Tiling};
 
 /// A graph that passed every check: every edge exists and has the right type, there is no cycle,
 /// every param is valid and every declared file exists.
@@ -26,6 +28,8 @@ pub struct Graph {
     pub nodes: Vec<Node>,
     /// Declared outputs: name and node index.
     pub outputs: Vec<(String, usize)>,
+    /// The tiles of a tiled run, None when the graph runs untiled.
+    pub tiling: Option<Tiling>,
 }
 
 /// One node of a [`Graph`].
@@ -42,6 +46,16 @@ pub struct Node {
     pub params: Box<dyn Params>,
     /// Declared files, resolved.
     pub files: Vec<InputFile>,
+    /// In a tiled run, the tile (an index into `Graph::tiling`) this copy of a node is made for;
+    /// None for a node made once.
+    pub tile: Option<usize>,
+    /// What a windowed stage of this tile reads (the tile's core grown by the halo); it enters
+    /// the node's key with the site. None untiled, and for nodes made once.
+    pub window: Option<Window>,
+    /// In a tiled run, the phase: for a tile's node, the tile job that makes it (1 for nodes that
+    /// need no merge, k + 1 for those reading what a merge of phase k made); for a node made once,
+    /// the phase of the tile nodes it waits for (0: none, it can run before any tile).
+    pub phase: u32,
 }
 
 /// A file a node reads.

@@ -236,3 +236,29 @@ pub fn ids(list: &[&str]) -> Vec<String> {
     v.sort();
     v
 }
+
+/// The meshes of a glb whose node names contain "building", with their names.
+pub fn building_meshes(glb: &Path) -> Vec<(String, kodama_nodes::artifact::Mesh)> {
+    let (doc, buffers, _) = gltf::import(glb).unwrap_or_else(|e| panic!("{}: {e}", glb.display()));
+    let mut out = Vec::new();
+    for node in doc.nodes() {
+        let name = node.name().unwrap_or_default().to_string();
+        let Some(mesh) = node.mesh() else { continue };
+        if !name.contains("building") {
+            continue;
+        }
+        let mut m = kodama_nodes::artifact::Mesh::default();
+        for prim in mesh.primitives() {
+            let r = prim.reader(|b| Some(&buffers[b.index()]));
+            if m.positions.is_empty() {
+                m.positions = kodama_nodes::artifact::PodVec(r.read_positions().unwrap().collect());
+            }
+            let idx: Vec<u32> = r.read_indices().unwrap().into_u32().collect();
+            m.triangles
+                .extend(idx.chunks_exact(3).map(|t| [t[0], t[1], t[2]]));
+            m.materials.extend(std::iter::repeat_n(0u8, idx.len() / 3));
+        }
+        out.push((name, m));
+    }
+    out
+}

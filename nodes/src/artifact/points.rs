@@ -35,6 +35,59 @@ impl PointSet {
     pub fn is_empty(&self) -> bool {
         self.xyz.is_empty()
     }
+    /// Appends the points of `other` at `indices`, with the attributes both sets carry; an
+    /// attribute one of them lacks (when this set is not empty) is an error naming it.
+    pub fn append_selected(&mut self, other: &PointSet, indices: &[usize]) -> Result<(), String> {
+        let first = self.is_empty();
+        fn take<T: Copy + bytemuck::Pod>(
+            name: &str,
+            into: &mut PodVec<T>,
+            from: &PodVec<T>,
+            n_from: usize,
+            first: bool,
+            indices: &[usize],
+        ) -> Result<(), String> {
+            let has = from.len() == n_from && n_from > 0;
+            if !first && has == into.is_empty() {
+                return Err(format!(
+                    "the point sets disagree on whether points have {name}"
+                ));
+            }
+            if has {
+                into.extend(indices.iter().map(|&i| from[i]));
+            }
+            Ok(())
+        }
+        let n = other.len();
+        self.xyz.extend(indices.iter().map(|&i| other.xyz[i]));
+        take("a class", &mut self.class, &other.class, n, first, indices)?;
+        take(
+            "an intensity",
+            &mut self.intensity,
+            &other.intensity,
+            n,
+            first,
+            indices,
+        )?;
+        take(
+            "a return number",
+            &mut self.return_number,
+            &other.return_number,
+            n,
+            first,
+            indices,
+        )?;
+        take(
+            "a number of returns",
+            &mut self.number_of_returns,
+            &other.number_of_returns,
+            n,
+            first,
+            indices,
+        )?;
+        take("a colour", &mut self.rgb, &other.rgb, n, first, indices)?;
+        Ok(())
+    }
     /// Axis-aligned bounds `(min, max)`, or `None` when empty.
     pub fn bounds(&self) -> Option<([f32; 3], [f32; 3])> {
         let mut it = self.xyz.iter();

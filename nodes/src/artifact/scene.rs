@@ -87,6 +87,46 @@ impl Mesh {
         self.triangles.is_empty()
     }
 
+    /// The horizontal point that says where the object is, for a tiled run's ownership: the
+    /// centroid of the enclosed volume (a prism's footprint centroid) for a closed solid, else the
+    /// middle of its horizontal bounds. None for a mesh without vertices.
+    pub fn owner_point(&self) -> Option<(f64, f64)> {
+        let o = self.positions.first()?.map(|v| v as f64);
+        let (mut vol, mut mx, mut my) = (0.0, 0.0, 0.0);
+        for t in self.triangles.iter() {
+            // Tetrahedra from the first vertex, which keeps the sums small far from the origin.
+            let [a, b, c] = t.map(|i| {
+                let p = self.positions[i as usize];
+                [p[0] as f64 - o[0], p[1] as f64 - o[1], p[2] as f64 - o[2]]
+            });
+            let v = (a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+                + a[2] * (b[0] * c[1] - b[1] * c[0]))
+                / 6.0;
+            vol += v;
+            mx += v * (a[0] + b[0] + c[0]) / 4.0;
+            my += v * (a[1] + b[1] + c[1]) / 4.0;
+        }
+        let (mut lo, mut hi) = (
+            (f64::INFINITY, f64::INFINITY),
+            (f64::NEG_INFINITY, f64::NEG_INFINITY),
+        );
+        for p in self.positions.iter() {
+            lo = (lo.0.min(p[0] as f64), lo.1.min(p[1] as f64));
+            hi = (hi.0.max(p[0] as f64), hi.1.max(p[1] as f64));
+        }
+        let (x, y) = if vol > 1e-6 {
+            (o[0] + mx / vol, o[1] + my / vol)
+        } else {
+            ((lo.0 + hi.0) / 2.0, (lo.1 + hi.1) / 2.0)
+        };
+        // A centroid outside the bounds can only be a mesh that is not closed after all.
+        if (lo.0..=hi.0).contains(&x) && (lo.1..=hi.1).contains(&y) {
+            Some((x, y))
+        } else {
+            Some(((lo.0 + hi.0) / 2.0, (lo.1 + hi.1) / 2.0))
+        }
+    }
+
     /// Signed volume (positive for a closed, outward-oriented solid), m³.
     pub fn volume(&self) -> f64 {
         self.triangles

@@ -12,9 +12,10 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::Material;
-use crate::artifact::{ArtifactType, ObjectClass, PointSet, Scene};
+use crate::artifact::{ArtifactType, ObjectClass, PointSet, Scene, SceneObject};
 use crate::geom::raycast::SceneRays;
 use crate::rng::{gaussian, mix, unit};
+use crate::site::Window;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`SynthLidar`].
@@ -84,6 +85,9 @@ impl Stage for SynthLidar {
     )];
     type Params = SynthLidarParams;
     type Output = PointSet;
+    // In a tiled run the survey is planned over the whole scene, as untiled, and only the pulses
+    // aimed into the window are fired: tiles get exactly the untiled returns that fall in them.
+    const WINDOWED: bool = true;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         let prob = |v: f64| (0.0..=1.0).contains(&v);
@@ -215,7 +219,6 @@ pub fn survey(scene: &Scene, p: &SynthLidarParams, ctx: &Ctx) -> Result<PointSet
             "the scene is empty: nothing to survey".into(),
         ));
     }
-    let rays = SceneRays::new(scene);
     let z_sensor = hi[2] + p.altitude_m;
     let z_ref = (lo[2] + hi[2]) / 2.0;
     let half_swath = (z_sensor - z_ref) * p.scan_angle_deg.to_radians().tan();
@@ -235,8 +238,31 @@ pub fn survey(scene: &Scene, p: &SynthLidarParams, ctx: &Ctx) -> Result<PointSet
     let step = 1.0 / (p.density_per_m2 / multiplicity).sqrt();
     let n_along = ((hi[0] - lo[0]) / step).ceil() as u64 + 1;
     let n_across = (2.0 * half_swath / step).ceil() as u64;
-    ctx.progress.set_total(n_lines * n_along);
-    let rows: Vec<Vec<(u64, Return)>> = (0..n_lines * n_along)
+    // A pulse aimed at (x, y) leaves the sensor at most half a swath away across track (a little
+    // more where it goes on below the reference height): what lies farther from the window can
+    // neither be hit nor shadow a pulse into it.
+    let window = ctx.window;
+    let cropped;
+    let scene = match window {
+        Some(w) => {
+            cropped = objects_near(scene, w.grown(1.5 * half_swath + step));
+            &cropped
+        }
+        None => scene,
+    };
+    let rays = SceneRays::new(scene);
+    let row_meets_window = |line: u64, i: u64| {
+        window.is_none_or(|w| {
+            let y_line = first_line + line as f64 * spacing;
+            let x = lo[0] + i as f64 * step;
+            w.meets((x, y_line - half_swath), (x + step, y_line + half_swath))
+        })
+    };
+    let rows_fired: Vec<u64> = (0..n_lines * n_along)
+        .filter(|row| row_meets_window(row / n_along, row % n_along))
+        .collect();
+    ctx.progress.set_total(rows_fired.len() as u64);
+    let rows: Vec<Vec<(u64, Return)>> = rows_fired
         .into_par_iter()
         .map(|row| {
             let (line, i) = (row / n_along, row % n_along);
@@ -248,6 +274,9 @@ pub fn survey(scene: &Scene, p: &SynthLidarParams, ctx: &Ctx) -> Result<PointSet
                 let x = lo[0] + (i as f64 + unit(h)) * step;
                 let y = y_line - half_swath + (k as f64 + unit(mix(h))) * step;
                 if x > hi[0] || y < lo[1] || y > hi[1] {
+                    continue;
+                }
+                if window.is_some_and(|w| !w.contains(x, y)) {
                     continue;
                 }
                 let (sx, sy, sz) = (x, y_line, z_sensor);
@@ -282,6 +311,24 @@ pub fn survey(scene: &Scene, p: &SynthLidarParams, ctx: &Ctx) -> Result<PointSet
         }
     }
     Ok(ps)
+}
+
+/// The objects of `scene` whose horizontal bounds meet `w`, in their order.
+fn objects_near(scene: &Scene, w: Window) -> Scene {
+    let meets = |o: &&SceneObject| {
+        let (mut lo, mut hi) = (
+            (f64::INFINITY, f64::INFINITY),
+            (f64::NEG_INFINITY, f64::NEG_INFINITY),
+        );
+        for q in o.mesh.positions.iter() {
+            lo = (lo.0.min(q[0] as f64), lo.1.min(q[1] as f64));
+            hi = (hi.0.max(q[0] as f64), hi.1.max(q[1] as f64));
+        }
+        w.meets(lo, hi)
+    };
+    Scene {
+        objects: scene.objects.iter().filter(meets).cloned().collect(),
+    }
 }
 
 fn trace_pulse(

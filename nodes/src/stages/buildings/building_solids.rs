@@ -425,6 +425,11 @@ impl HasPosition for RoofVertex {
 }
 
 /// One closed shell: the adaptive roof over `poly`, walls along its rings, a flat floor.
+///
+/// spade 2.15 can panic ("Failed to locate position") on a triangulation whose constraint edges
+/// (nearly parallel roof lines a fraction of a cell apart) leave slivers its point location
+/// cannot walk; such a roof is built again without its lines, its ridges then kept only as far
+/// as the refinement's vertices keep them.
 fn shell(
     cells: &CellHeights,
     roof: &RoofFit,
@@ -433,6 +438,34 @@ fn shell(
     poly: &Polygon,
     floor: f64,
     p: &BuildingSolidsParams,
+) -> Result<crate::artifact::Mesh, String> {
+    let build = |lines: bool| {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            shell_with(cells, roof, label, members, poly, floor, p, lines)
+        }))
+    };
+    match build(true) {
+        Ok(made) => made,
+        Err(_) => build(false).unwrap_or_else(|_| {
+            Err(
+                "the roof's triangulation failed inside spade, with and without its roof lines"
+                    .into(),
+            )
+        }),
+    }
+}
+
+/// [`shell`], with the roof lines as constraints when `roof_lines`.
+#[allow(clippy::too_many_arguments)]
+fn shell_with(
+    cells: &CellHeights,
+    roof: &RoofFit,
+    label: u32,
+    members: &[u32],
+    poly: &Polygon,
+    floor: f64,
+    p: &BuildingSolidsParams,
+    roof_lines: bool,
 ) -> Result<crate::artifact::Mesh, String> {
     let g = cells.grid;
     let mut cdt = ConstrainedDelaunayTriangulation::<RoofVertex>::new();
@@ -484,7 +517,7 @@ fn shell(
                 .iter()
                 .all(|&(a, b)| segment_distance(q, a, b) > margin)
     };
-    for &(pa, _, from, to) in &roof.lines {
+    for &(pa, _, from, to) in roof.lines.iter().filter(|_| roof_lines) {
         let Some((a, b)) = clear_stretch(from, to, &clear) else {
             continue;
         };

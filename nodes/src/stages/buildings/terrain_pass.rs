@@ -38,7 +38,9 @@ pub struct TerrainPass;
 
 impl Stage for TerrainPass {
     const KIND: &'static str = "TerrainPass";
-    const VERSION: u32 = 1;
+    // 2: coarse cells on the site frame's lattice of coarse_m, not the surface raster's corner,
+    // so tiles of a tiled run (and any crop) see the same coarse cells.
+    const VERSION: u32 = 2;
     const DOC: &'static str = "terrain pass k: percentile of low, level samples per coarse cell, acceptance within tau, Gaussian, eq. (1)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("surface", ArtifactType::Raster, "the height field H"),
@@ -85,6 +87,12 @@ impl Stage for TerrainPass {
         Ok(())
     }
 
+    /// Two coarse cells (a percentile's cell and the bilinear interpolation reaching into its
+    /// neighbour) plus the final Gaussian's 3 sigma.
+    fn reach_m(p: &Self::Params) -> f64 {
+        2.0 * p.coarse_m + 3.0 * p.sigma_m
+    }
+
     fn run(p: &Self::Params, inputs: &Inputs, ctx: &Ctx) -> Result<Raster, StageError> {
         let h: &Raster = inputs.one("surface")?;
         let previous: Option<&Raster> = inputs.optional("previous")?;
@@ -108,12 +116,18 @@ impl Stage for TerrainPass {
 fn coarse_estimate(h: &Raster, previous: Option<&Raster>, p: &TerrainPassParams) -> Option<Raster> {
     let g = h.grid;
     let k = (p.coarse_m / g.cell_m).round().max(1.0) as u32;
+    // Coarse cells on the site frame's lattice of k fine cells: (off_c, off_r) fine cells of
+    // padding west and north of the raster, so a crop of the surface sees the same coarse cells.
+    let ck = g.cell_m * k as f64;
+    let fine_index = |v: f64| (v / g.cell_m).round() as i64;
+    let off_c = fine_index(g.x0).rem_euclid(k as i64) as u32;
+    let off_r = (-fine_index(g.y0)).rem_euclid(k as i64) as u32;
     let cg = Grid {
-        x0: g.x0,
-        y0: g.y0,
-        cell_m: g.cell_m * k as f64,
-        width: g.width.div_ceil(k),
-        height: g.height.div_ceil(k),
+        x0: g.x0 - off_c as f64 * g.cell_m,
+        y0: g.y0 + off_r as f64 * g.cell_m,
+        cell_m: ck,
+        width: (g.width + off_c).div_ceil(k),
+        height: (g.height + off_r).div_ceil(k),
     };
     let nz = normal_z(h);
     let prev_at = |x: f64, y: f64| {
@@ -126,8 +140,11 @@ fn coarse_estimate(h: &Raster, previous: Option<&Raster>, p: &TerrainPassParams)
         .map(|ci| {
             let (cc, cr) = (ci as u32 % cg.width, ci as u32 / cg.width);
             let mut z = Vec::new();
-            for r in cr * k..((cr + 1) * k).min(g.height) {
-                for c in cc * k..((cc + 1) * k).min(g.width) {
+            let fine = |cell: u32, off: u32, n: u32| {
+                (cell * k).saturating_sub(off)..((cell + 1) * k).saturating_sub(off).min(n)
+            };
+            for r in fine(cr, off_r, g.height) {
+                for c in fine(cc, off_c, g.width) {
                     let i = (r * g.width + c) as usize;
                     let v = h.data[i];
                     let (x, y) = g.center(c, r);

@@ -32,6 +32,11 @@ impl Stage for GaussianBlur {
     type Params = GaussianBlurParams;
     type Output = Raster;
 
+    /// The kernel's 3 sigma.
+    fn reach_m(p: &Self::Params) -> f64 {
+        3.0 * p.sigma_m
+    }
+
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         if !(p.sigma_m >= 0.0 && p.sigma_m.is_finite()) {
             return Err(ParamError::new(

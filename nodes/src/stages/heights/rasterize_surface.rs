@@ -62,6 +62,11 @@ impl Stage for RasterizeSurface {
     type Params = RasterizeSurfaceParams;
     type Output = Raster;
 
+    /// The widest gap filled from its rim.
+    fn reach_m(p: &Self::Params) -> f64 {
+        p.max_gap_m
+    }
+
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         crate::params::check_cell(p.cell_m)?;
         if let CellMode::Percentile(q) = p.mode

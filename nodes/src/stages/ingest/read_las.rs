@@ -50,13 +50,27 @@ impl Stage for ReadLas {
         }]
     }
 
+    // A tile of a tiled run keeps the points in its window.
+    const WINDOWED: bool = true;
+
     fn run(p: &Self::Params, _: &Inputs, ctx: &Ctx) -> Result<PointSet, StageError> {
         let path = ctx.file(0)?;
-        if path.is_dir() {
+        let points = if path.is_dir() {
             read_las_folder(path, p.crs.as_deref(), ctx)
         } else {
             read_las(path, p.crs.as_deref(), ctx)
-        }
+        }?;
+        let Some(w) = ctx.window else {
+            return Ok(points);
+        };
+        let inside: Vec<usize> = (0..points.len())
+            .filter(|&i| w.contains(points.xyz[i][0] as f64, points.xyz[i][1] as f64))
+            .collect();
+        let mut cropped = PointSet::default();
+        cropped
+            .append_selected(&points, &inside)
+            .map_err(StageError::Failed)?;
+        Ok(cropped)
     }
 }
 
