@@ -824,8 +824,24 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
             common.push("--target".into());
             common.push(slurm::quote(t).map_err(usage)?);
         }
+        if let Some(m) = a.tile_m {
+            common.extend(["--tile-m".to_string(), m.to_string()]);
+        }
+        if let Some(m) = a.halo_m {
+            common.extend(["--halo-m".to_string(), m.to_string()]);
+        }
         common.extend(["--json".to_string(), "--quiet".to_string()]);
-        (slurm::plan_graph(&g, &common).map_err(usage)?, out_dir)
+        let plan = if g.tiling.is_some() {
+            if !a.targets.is_empty() {
+                return Err(usage(
+                    "--target with a tiled graph: its jobs are the tiles and the merges; submit the targets untiled or run them after".into(),
+                ));
+            }
+            slurm::plan_tiled(&g, &cache, &common)
+        } else {
+            slurm::plan_graph(&g, &common)
+        };
+        (plan.map_err(usage)?, out_dir)
     };
     for n in &plan.notes {
         eprintln!("{n}");
@@ -934,12 +950,35 @@ fn explain_command(
     let g = load_graph(graph)?;
     let cache = open_cache(cache)?;
     let plan = explain(&g, &cache, targets)?;
+    let tiles = g.tiling.as_ref().map(|t| {
+        serde_json::json!({
+            "tile_m": t.tile_m,
+            "halo_m": t.halo_m,
+            "halo_from": t.halo_from,
+            "phases": t.phases,
+            "tiles": t.tiles.iter().map(|tile| serde_json::json!({
+                "name": tile.name,
+                "core": [tile.core.min, tile.core.max],
+                "window": [tile.window.min, tile.window.max],
+            })).collect::<Vec<_>>(),
+        })
+    });
     if json {
         println!(
             "{}",
-            serde_json::json!({ "graph": g.path.display().to_string(), "nodes": plan })
+            serde_json::json!({ "graph": g.path.display().to_string(), "tiling": tiles, "nodes": plan })
         );
     } else {
+        if let Some(t) = &g.tiling {
+            println!(
+                "tiled: {} tiles of {} m (tile I = x<column>y<row> from the south-west, row by row), halo {} m ({}), {} tile phase(s)",
+                t.tiles.len(),
+                t.tile_m,
+                t.halo_m,
+                t.halo_from,
+                t.phases
+            );
+        }
         for e in &plan {
             let word = match e.plan {
                 Plan::Cached => "cached",

@@ -653,38 +653,14 @@ pub fn plan_sweep(
         ));
     }
     let prefix_job: Vec<usize> = (!plan.jobs.is_empty()).then_some(0).into_iter().collect();
-    let chunks: Vec<Vec<usize>> = pending
-        .chunk_by(|a, b| a / ARRAY_CHUNK == b / ARRAY_CHUNK)
-        .map(<[usize]>::to_vec)
-        .collect();
-    for chunk in &chunks {
-        let offset = chunk[0] / ARRAY_CHUNK * ARRAY_CHUNK;
-        let (name, task) = if chunks.len() == 1 {
-            (
-                "variants".to_string(),
-                "\"$SLURM_ARRAY_TASK_ID\"".to_string(),
-            )
-        } else {
-            (
-                format!("variants-{}", offset / ARRAY_CHUNK),
-                format!("\"$((SLURM_ARRAY_TASK_ID + {offset}))\""),
-            )
-        };
-        plan.jobs.push(Job {
-            name,
-            what: format!(
-                "one variant per array task (variant = task index{})",
-                if offset > 0 {
-                    format!(" + {offset}")
-                } else {
-                    String::new()
-                }
-            ),
-            args: base(&["--variant", &task]),
-            array: Some(chunk.iter().map(|i| i - offset).collect()),
-            after: prefix_job.clone(),
-        });
-    }
+    push_arrays(
+        &mut plan,
+        "variants",
+        "one variant per array task (variant",
+        &pending,
+        &prefix_job,
+        |task| base(&["--variant", task]),
+    );
     plan.jobs.push(Job {
         name: "table".into(),
         what: "the sweep's table, every variant a cache hit by now".into(),
@@ -693,6 +669,46 @@ pub fn plan_sweep(
         after: (0..plan.jobs.len()).collect(),
     });
     Ok(plan)
+}
+
+/// Job arrays over `pending` task indices, [`ARRAY_CHUNK`] at most per array (`NAME`, or
+/// `NAME-0`, `NAME-1`, ... when there are several), each after the jobs `after`; `args` makes a
+/// task's kodama-dag arguments from the shell word of its index.
+fn push_arrays(
+    plan: &mut Plan,
+    name: &str,
+    what: &str,
+    pending: &[usize],
+    after: &[usize],
+    args: impl Fn(&str) -> Vec<String>,
+) {
+    let chunks: Vec<Vec<usize>> = pending
+        .chunk_by(|a, b| a / ARRAY_CHUNK == b / ARRAY_CHUNK)
+        .map(<[usize]>::to_vec)
+        .collect();
+    for chunk in &chunks {
+        let offset = chunk[0] / ARRAY_CHUNK * ARRAY_CHUNK;
+        let (job_name, task) = if chunks.len() == 1 {
+            (name.to_string(), "\"$SLURM_ARRAY_TASK_ID\"".to_string())
+        } else {
+            (
+                format!("{name}-{}", offset / ARRAY_CHUNK),
+                format!("\"$((SLURM_ARRAY_TASK_ID + {offset}))\""),
+            )
+        };
+        let plus = if offset > 0 {
+            format!(" + {offset}")
+        } else {
+            String::new()
+        };
+        plan.jobs.push(Job {
+            name: job_name,
+            what: format!("{what} = task index{plus})"),
+            args: args(&task),
+            array: Some(chunk.iter().map(|i| i - offset).collect()),
+            after: after.to_vec(),
+        });
+    }
 }
 
 /// Node ids for a script's header: the first eight, then how many more.
@@ -708,6 +724,9 @@ fn list(ids: &[String]) -> String {
 /// The plan of a graph: one job running it. `args` is kodama-dag's arguments after `run GRAPH`,
 /// already quoted.
 pub fn plan_graph(graph: &crate::graph::Graph, args: &[String]) -> Result<Plan, String> {
+    if graph.tiling.is_some() {
+        return Err("a tiled graph is planned by plan_tiled".into());
+    }
     let mut a = vec!["run".to_string(), quote_path(&graph.path)?];
     a.extend(args.iter().cloned());
     Ok(Plan {
@@ -723,6 +742,129 @@ pub fn plan_graph(graph: &crate::graph::Graph, args: &[String]) -> Result<Plan, 
         notes: vec![],
         runs_key: crate::exec::graph_key(graph),
     })
+}
+
+/// A tiled graph's chain: a prefix job for the nodes made once that the tiles read (when the
+/// cache lacks them), then per tile phase a job array with one tile per task (tiles the cache
+/// holds whole are left out) and, between phases, a gather job for the merges the next phase
+/// reads; last, one `run` of the whole graph: merges, what reads them, and the outputs. Every job
+/// passes `args` (with the same `--tile-m`/`--halo-m`, so each expands the same tiles).
+pub fn plan_tiled(
+    graph: &crate::graph::Graph,
+    cache: &crate::cache::Cache,
+    args: &[String],
+) -> Result<Plan, String> {
+    use crate::explain::{Plan as Step, explain};
+    let tiling = graph.tiling.as_ref().ok_or("the graph is not tiled")?;
+    let graph_file = quote_path(&graph.path)?;
+    let base = |extra: &[&str]| -> Vec<String> {
+        let mut a = vec!["run".to_string(), graph_file.clone()];
+        a.extend(args.iter().cloned());
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let ids = |nodes: &[usize]| -> Vec<String> {
+        nodes.iter().map(|&i| graph.nodes[i].id.clone()).collect()
+    };
+    let cached = |nodes: &[usize]| -> Result<bool, String> {
+        Ok(explain(graph, cache, &ids(nodes))
+            .map_err(|e| e.to_string())?
+            .iter()
+            .all(|e| e.plan == Step::Cached))
+    };
+    let mut plan = Plan {
+        file: std::path::absolute(&graph.path).unwrap_or_else(|_| graph.path.clone()),
+        name: graph.name.clone(),
+        jobs: Vec::new(),
+        notes: vec![format!(
+            "{} tiles of {} m, halo {} m ({}), {} tile phase(s)",
+            tiling.tiles.len(),
+            tiling.tile_m,
+            tiling.halo_m,
+            tiling.halo_from,
+            tiling.phases
+        )],
+        runs_key: crate::exec::graph_key(graph),
+    };
+    let mut last: Vec<usize> = Vec::new();
+    for k in 0..=tiling.phases {
+        // The nodes made once that phase k + 1's tiles read: the shared upstream (k = 0), or
+        // the merges of phase k.
+        let once = graph.tile_job(None, Some(k))?;
+        if k < tiling.phases && !once.is_empty() && !cached(&once)? {
+            let (name, what) = if k == 0 {
+                (
+                    "prefix".to_string(),
+                    format!(
+                        "the nodes made once that the tiles read, up to {}",
+                        list(&ids(&once))
+                    ),
+                )
+            } else {
+                (
+                    format!("gather-{k}"),
+                    format!(
+                        "what phase {} reads of phase {k}'s merges, up to {}",
+                        k + 1,
+                        list(&ids(&once))
+                    ),
+                )
+            };
+            let phase = k.to_string();
+            plan.jobs.push(Job {
+                name,
+                what,
+                args: base(&["--phase", &phase]),
+                array: None,
+                after: last.clone(),
+            });
+            last = vec![plan.jobs.len() - 1];
+        }
+        if k == tiling.phases {
+            break;
+        }
+        let phase = (k + 1).to_string();
+        let mut pending = Vec::new();
+        for t in 0..tiling.tiles.len() {
+            let nodes = graph.tile_job(Some(t), Some(k + 1))?;
+            if !nodes.is_empty() && !cached(&nodes)? {
+                pending.push(t);
+            }
+        }
+        let held = tiling.tiles.len() - pending.len();
+        if held > 0 {
+            plan.notes.push(format!(
+                "phase {}: {held} of {} tiles are in the cache already: not submitted",
+                k + 1,
+                tiling.tiles.len()
+            ));
+        }
+        let before = plan.jobs.len();
+        let name = if tiling.phases == 1 {
+            "tiles".to_string()
+        } else {
+            format!("tiles-{}", k + 1)
+        };
+        push_arrays(
+            &mut plan,
+            &name,
+            "one tile per array task (tile",
+            &pending,
+            &last,
+            |task| base(&["--tile", task, "--phase", &phase]),
+        );
+        if plan.jobs.len() > before {
+            last = (before..plan.jobs.len()).collect();
+        }
+    }
+    plan.jobs.push(Job {
+        name: "merge".into(),
+        what: "the merges, what reads them and the outputs, every tile a cache hit by now".into(),
+        args: base(&[]),
+        array: None,
+        after: last,
+    });
+    Ok(plan)
 }
 
 #[cfg(test)]

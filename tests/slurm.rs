@@ -235,6 +235,107 @@ fn a_submitted_graph_is_one_run_job() {
     assert_eq!(by_hand.digests(), want.digests());
 }
 
+/// The scene a local tiled run of TILED_CITY in 300 m tiles exports, from a cache of its own.
+fn local_tiled_scene(env: &Env) -> Vec<u8> {
+    env.cli(&[
+        "run",
+        "city.ron",
+        "--cache",
+        "local-cache",
+        "--out",
+        "local-out",
+        "--quiet",
+        "--tile-m",
+        "300",
+    ])
+    .ok();
+    std::fs::read(env.path("local-out").join("scene.glb")).unwrap()
+}
+
+/// A tiled graph is a prefix job (the city and its truth, made once), one array task per tile
+/// and a merge job. The scripts, run by hand as compute nodes run them, give the local tiled
+/// run's scene byte for byte; each tile task makes only its own tile's nodes, and the merge job
+/// makes only the merges and what reads them. Runs everywhere: no Slurm needed.
+#[test]
+fn a_tiled_graph_is_prefix_tiles_and_merge() {
+    let env = Env::new();
+    env.write("city.ron", TILED_CITY);
+    let r = env
+        .cli(&[
+            "submit",
+            "city.ron",
+            "--cache",
+            "cache",
+            "--out",
+            "out",
+            "--dry-run",
+            "--tile-m",
+            "300",
+        ])
+        .ok();
+    assert!(r.stderr.contains("4 tiles of 300 m, halo"), "{}", r.stderr);
+    let dir = submission(&env, 1);
+    let submit = std::fs::read_to_string(dir.join("submit.sh")).unwrap();
+    assert!(submit.contains("--array=0-3 tiles.sh"), "{submit}");
+    assert!(submit.contains("afterok:${tiles%%;*}"), "{submit}");
+    let prefix = run_script(&dir.join("prefix.sh"), None).ok();
+    assert_eq!(prefix.with_status("ran"), ids(&["city", "truth"]));
+    for t in 0..4 {
+        let task = run_script(&dir.join("tiles.sh"), Some(t)).ok();
+        let ran = task.with_status("ran");
+        let tile = ["x0y0", "x1y0", "x0y1", "x1y1"][t];
+        assert_eq!(ran.len(), 9, "tile {t}: {ran:?}");
+        assert!(
+            ran.iter().all(|id| id.ends_with(&format!("@{tile}"))),
+            "tile {t} made another tile's nodes: {ran:?}"
+        );
+    }
+    let merge = run_script(&dir.join("merge.sh"), None).ok();
+    assert_eq!(
+        merge.with_status("ran"),
+        ids(&["terrain2", "solids", "scene"])
+    );
+    let scene = std::fs::read(env.out().join("scene.glb")).unwrap();
+    assert!(
+        scene == local_tiled_scene(&env),
+        "the scripts' scene differs from a local run's"
+    );
+}
+
+/// Needs Slurm. A tiled graph submitted and waited for gives the local tiled run's scene; submitted
+/// again it queues only the merge job, every tile being cached.
+#[test]
+fn a_tiled_graph_through_slurm_gives_the_local_scene() {
+    if !slurm_up("a_tiled_graph_through_slurm_gives_the_local_scene") {
+        return;
+    }
+    let env = Env::new();
+    env.write("city.ron", TILED_CITY);
+    let submit = || {
+        env.cli(&[
+            "submit", "city.ron", "--cache", "cache", "--out", "out", "--tile-m", "300", "--wait",
+            "--poll-s", "1",
+        ])
+    };
+    let r = submit().ok();
+    assert!(
+        r.stdout.contains("prefix=") && r.stdout.contains("tiles=") && r.stdout.contains("merge="),
+        "{}",
+        r.stdout
+    );
+    let scene = std::fs::read(env.out().join("scene.glb")).unwrap();
+    assert!(
+        scene == local_tiled_scene(&env),
+        "Slurm's scene differs from a local run's"
+    );
+    let again = submit().ok();
+    assert!(
+        again.stdout.starts_with("merge="),
+        "only the merge job: {}",
+        again.stdout
+    );
+}
+
 /// Bad input exits 2 before anything is written or queued: a variant whose graph is invalid, a
 /// --sbatch with unbalanced quotes, a poll interval out of range, --target on a sweep.
 #[test]

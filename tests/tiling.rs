@@ -7,32 +7,6 @@ use common::*;
 
 use kodama_nodes::artifact::Mesh;
 
-/// A 600 m x 600 m synthetic city through the Sec. 4.1 chain; `tiling` without a tile size runs
-/// untiled until `--tile-m` gives one. The terrain raster and the solids are merged, and the
-/// scene is assembled once over the merged terrain.
-const CITY: &str = r#"
-Graph(
-    site: Site(crs: "EPSG:32618", origin: (583200.0, 4506600.0), cell_m: 0.5),
-    tiling: Tiling(area: (min: (0.0, 0.0), max: (600.0, 600.0)), merge: ["terrain2", "solids"]),
-    nodes: {
-        "city":      SynthCity(seed: 11, size_m: (600.0, 600.0), blocks: (6, 6),
-                               terrain: (seed: 11, size_m: (600.0, 600.0))),
-        "truth":     TruthScene(city: "city"),
-        "lidar":     SynthLidar(scene: "truth", density_per_m2: 8.0, noise_m: 0.05, seed: 11),
-        "dsm":       RasterizeSurface(points: "lidar", mode: Max, max_gap_m: 1.0),
-        "terrain1":  TerrainPass(surface: "dsm", coarse_m: 32.0, percentile: 5.0, n_min: 0.9, tau_m: 4.0, sigma_m: 2.0),
-        "terrain2":  TerrainPass(surface: "dsm", previous: "terrain1", coarse_m: 8.0, percentile: 10.0, n_min: 0.9, tau_m: 1.0, sigma_m: 1.0),
-        "above":     AboveGround(surface: "dsm", terrain: "terrain2"),
-        "buildings": BuildingMask(above: "above", points: "lidar"),
-        "roofs":     RoofClean(labels: "buildings", above: "above", points: "lidar", terrain: "terrain2"),
-        "parts":     SplitBuildings(labels: "buildings", roofs: "roofs"),
-        "solids":    BuildingSolids(labels: "parts", roofs: "roofs", terrain: "terrain2", points: "lidar"),
-        "scene":     AssembleScene(terrain: "terrain2", objects: ["solids"]),
-    },
-    outputs: { "scene": "scene" },
-)
-"#;
-
 /// A building as compared: where it stands (its volume centroid, from glTF's y-up frame back to
 /// the site's), its volume and its horizontal bounds.
 struct Solid {
@@ -97,7 +71,7 @@ fn run_scene(env: &Env, graph: &std::path::Path, out: &str, extra: &[&str]) -> V
 #[test]
 fn tiled_and_untiled_runs_give_the_same_buildings() {
     let env = Env::new();
-    let graph = env.write("city.ron", CITY);
+    let graph = env.write("city.ron", TILED_CITY);
     let untiled = run_scene(&env, &graph, "untiled", &[]);
     let tiled = run_scene(&env, &graph, "tiled", &["--tile-m", "300"]);
     assert!(untiled.len() >= 20, "{} buildings untiled", untiled.len());
@@ -164,7 +138,7 @@ fn tiled_and_untiled_runs_give_the_same_buildings() {
 #[test]
 fn tiling_mistakes_are_refused() {
     let env = Env::new();
-    let graph = env.write("city.ron", CITY);
+    let graph = env.write("city.ron", TILED_CITY);
     let g = graph.to_str().unwrap();
     let refused = |args: &[&str], says: &str| {
         let mut all = vec!["explain", g, "--cache", "c"];
@@ -178,7 +152,7 @@ fn tiling_mistakes_are_refused() {
     refused(&["--tile-m", "4"], "more than the 10000");
     refused(&["--tile-m", "nan"], "finite");
     refused(&["--tile-m", "300", "--halo-m", "1e9"], "halo");
-    let bad = |from: &str, to: &str| env.write("bad.ron", &CITY.replace(from, to));
+    let bad = |from: &str, to: &str| env.write("bad.ron", &TILED_CITY.replace(from, to));
     for (from, to, says) in [
         (
             r#"merge: ["terrain2", "solids"]"#,
@@ -215,7 +189,7 @@ fn tiling_mistakes_are_refused() {
         assert!(r.stderr.contains(says), "{to}: {}", r.stderr);
     }
     // Metrics are not merged.
-    let stats = CITY
+    let stats = TILED_CITY
         .replace(
             r#""scene":     AssembleScene"#,
             r#""pstats": PointStats(points: "lidar"), "scene": AssembleScene"#,
@@ -240,7 +214,7 @@ fn tiling_mistakes_are_refused() {
         r.stderr
     );
     // A graph without a tiling block cannot be tiled from the command line.
-    let plain = env.write("plain.ron", &CITY.replace(
+    let plain = env.write("plain.ron", &TILED_CITY.replace(
         r#"tiling: Tiling(area: (min: (0.0, 0.0), max: (600.0, 600.0)), merge: ["terrain2", "solids"]),"#,
         "",
     ));

@@ -27,6 +27,32 @@ Graph(
 )
 "#;
 
+/// A 600 m x 600 m synthetic city through the Sec. 4.1 chain; `tiling` without a tile size runs
+/// untiled until `--tile-m` gives one. The terrain raster and the solids are merged, and the
+/// scene is assembled once over the merged terrain.
+pub const TILED_CITY: &str = r#"
+Graph(
+    site: Site(crs: "EPSG:32618", origin: (583200.0, 4506600.0), cell_m: 0.5),
+    tiling: Tiling(area: (min: (0.0, 0.0), max: (600.0, 600.0)), merge: ["terrain2", "solids"]),
+    nodes: {
+        "city":      SynthCity(seed: 11, size_m: (600.0, 600.0), blocks: (6, 6),
+                               terrain: (seed: 11, size_m: (600.0, 600.0))),
+        "truth":     TruthScene(city: "city"),
+        "lidar":     SynthLidar(scene: "truth", density_per_m2: 8.0, noise_m: 0.05, seed: 11),
+        "dsm":       RasterizeSurface(points: "lidar", mode: Max, max_gap_m: 1.0),
+        "terrain1":  TerrainPass(surface: "dsm", coarse_m: 32.0, percentile: 5.0, n_min: 0.9, tau_m: 4.0, sigma_m: 2.0),
+        "terrain2":  TerrainPass(surface: "dsm", previous: "terrain1", coarse_m: 8.0, percentile: 10.0, n_min: 0.9, tau_m: 1.0, sigma_m: 1.0),
+        "above":     AboveGround(surface: "dsm", terrain: "terrain2"),
+        "buildings": BuildingMask(above: "above", points: "lidar"),
+        "roofs":     RoofClean(labels: "buildings", above: "above", points: "lidar", terrain: "terrain2"),
+        "parts":     SplitBuildings(labels: "buildings", roofs: "roofs"),
+        "solids":    BuildingSolids(labels: "parts", roofs: "roofs", terrain: "terrain2", points: "lidar"),
+        "scene":     AssembleScene(terrain: "terrain2", objects: ["solids"]),
+    },
+    outputs: { "scene": "scene" },
+)
+"#;
+
 /// A small street-level graph: a view set, whose pixels are a part per view, and a stage that
 /// reads the views.
 pub const VIEWS: &str = r#"Graph(

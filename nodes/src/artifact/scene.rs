@@ -87,6 +87,29 @@ impl Mesh {
         self.triangles.is_empty()
     }
 
+    /// The triangles for which `keep` (given their three corners) says yes, with their materials
+    /// and only the vertices they use, in their order.
+    pub fn select_triangles(&self, keep: impl Fn(&[[f32; 3]; 3]) -> bool) -> Mesh {
+        let mut out = Mesh::default();
+        let mut new_index = vec![u32::MAX; self.positions.len()];
+        for (t, tri) in self.triangles.iter().enumerate() {
+            if !keep(&tri.map(|i| self.positions[i as usize])) {
+                continue;
+            }
+            let tri = tri.map(|i| {
+                let slot = &mut new_index[i as usize];
+                if *slot == u32::MAX {
+                    *slot = out.positions.len() as u32;
+                    out.positions.push(self.positions[i as usize]);
+                }
+                *slot
+            });
+            out.triangles.push(tri);
+            out.materials.push(self.materials[t]);
+        }
+        out
+    }
+
     /// The horizontal point that says where the object is, for a tiled run's ownership: the
     /// centroid of the enclosed volume (a prism's footprint centroid) for a closed solid, else the
     /// middle of its horizontal bounds. None for a mesh without vertices.

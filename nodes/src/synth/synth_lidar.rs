@@ -313,21 +313,31 @@ pub fn survey(scene: &Scene, p: &SynthLidarParams, ctx: &Ctx) -> Result<PointSet
     Ok(ps)
 }
 
-/// The objects of `scene` whose horizontal bounds meet `w`, in their order.
+/// The triangles of `scene` whose horizontal bounds meet `w`, object by object in their order
+/// (a city's terrain is one object: its BVH would be the city's, not the tile's).
 fn objects_near(scene: &Scene, w: Window) -> Scene {
-    let meets = |o: &&SceneObject| {
-        let (mut lo, mut hi) = (
-            (f64::INFINITY, f64::INFINITY),
-            (f64::NEG_INFINITY, f64::NEG_INFINITY),
-        );
-        for q in o.mesh.positions.iter() {
-            lo = (lo.0.min(q[0] as f64), lo.1.min(q[1] as f64));
-            hi = (hi.0.max(q[0] as f64), hi.1.max(q[1] as f64));
-        }
+    let meets = |ps: &[[f32; 3]; 3]| {
+        let lo = ps.iter().fold((f64::INFINITY, f64::INFINITY), |m, p| {
+            (m.0.min(p[0] as f64), m.1.min(p[1] as f64))
+        });
+        let hi = ps
+            .iter()
+            .fold((f64::NEG_INFINITY, f64::NEG_INFINITY), |m, p| {
+                (m.0.max(p[0] as f64), m.1.max(p[1] as f64))
+            });
         w.meets(lo, hi)
     };
     Scene {
-        objects: scene.objects.iter().filter(meets).cloned().collect(),
+        objects: scene
+            .objects
+            .iter()
+            .map(|o| SceneObject {
+                id: o.id.clone(),
+                class: o.class,
+                mesh: o.mesh.select_triangles(meets),
+            })
+            .filter(|o| !o.mesh.is_empty())
+            .collect(),
     }
 }
 

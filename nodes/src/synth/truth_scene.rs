@@ -15,6 +15,7 @@ use crate::geom::boolean::{subtract_then_add, to_manifold};
 use crate::geom::mesh_build::{
     cone, cuboid, dome, ellipsoid, gabled, height_surface, hipped, prism, quad_prism,
 };
+use crate::geom::mesh_check::check_solid;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`TruthScene`].
@@ -241,11 +242,35 @@ pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
     }
     let body = prism(&b.footprint, b.base_z, eave, b.facade, b.roof_material)?;
     let (recesses, protrusions) = facade_relief(b);
-    parts.extend(protrusions);
+    let with_relief = |relief: bool| {
+        let mut all = parts.clone();
+        let mut cut: &[Mesh] = &[];
+        if relief {
+            all.extend(protrusions.iter().cloned());
+            cut = &recesses;
+        }
+        join(&body, cut, &all, b.facade)
+    };
+    // Rarely (a building in several thousand), the Booleans leave an edge or a crossing the
+    // solid check refuses; the truth then keeps that building's plain walls, and failing that
+    // its plain body, rather than a bad solid.
+    with_relief(true)
+        .or_else(|e| with_relief(false).map_err(|_| e))
+        .or_else(|e| check_solid(&body).map(|_| body.clone()).map_err(|_| e))
+}
+
+/// `body` less `recesses`, plus `parts`, by exact Booleans; `body` itself when there is nothing
+/// to join.
+fn join(
+    body: &Mesh,
+    recesses: &[Mesh],
+    parts: &[Mesh],
+    fallback: Material,
+) -> Result<Mesh, String> {
     if parts.is_empty() && recesses.is_empty() {
-        return Ok(body);
+        return Ok(body.clone());
     }
-    let base = to_manifold(&body)?;
+    let base = to_manifold(body)?;
     let recesses = recesses
         .iter()
         .map(to_manifold)
@@ -258,7 +283,7 @@ pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
         &base,
         &recesses.iter().collect::<Vec<_>>(),
         &parts.iter().collect::<Vec<_>>(),
-        b.facade,
+        fallback,
     )
 }
 

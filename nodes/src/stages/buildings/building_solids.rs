@@ -517,7 +517,8 @@ fn shell_with(
                 .iter()
                 .all(|&(a, b)| segment_distance(q, a, b) > margin)
     };
-    for &(pa, _, from, to) in roof.lines.iter().filter(|_| roof_lines) {
+    let lines: &[_] = if roof_lines { &roof.lines } else { &[] };
+    for &(pa, _, from, to) in lines {
         let Some((a, b)) = clear_stretch(from, to, &clear) else {
             continue;
         };

@@ -1,6 +1,6 @@
 //! A tiled run's scenes into one: each object from the tile that owns it.
 
-use crate::artifact::{ArtifactType, Mesh, ObjectClass, PodVec, Scene, SceneObject};
+use crate::artifact::{ArtifactType, Mesh, ObjectClass, Scene, SceneObject};
 use crate::site::{MergeTilesParams, Window};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
@@ -71,27 +71,9 @@ fn is_surface(class: ObjectClass) -> bool {
 
 /// The triangles of `mesh` whose centroids lie in `core`, with the vertices they use.
 fn triangles_in(mesh: &Mesh, core: Window) -> Mesh {
-    let mut out = Mesh::default();
-    let mut new_index = vec![u32::MAX; mesh.positions.len()];
-    let mut positions = Vec::new();
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        let ps = tri.map(|i| mesh.positions[i as usize]);
+    mesh.select_triangles(|ps| {
         let cx = (ps[0][0] as f64 + ps[1][0] as f64 + ps[2][0] as f64) / 3.0;
         let cy = (ps[0][1] as f64 + ps[1][1] as f64 + ps[2][1] as f64) / 3.0;
-        if !core.contains(cx, cy) {
-            continue;
-        }
-        let tri = tri.map(|i| {
-            let slot = &mut new_index[i as usize];
-            if *slot == u32::MAX {
-                *slot = positions.len() as u32;
-                positions.push(mesh.positions[i as usize]);
-            }
-            *slot
-        });
-        out.triangles.push(tri);
-        out.materials.push(mesh.materials[t]);
-    }
-    out.positions = PodVec(positions);
-    out
+        core.contains(cx, cy)
+    })
 }
