@@ -36,7 +36,8 @@ fn demo_scenes_hold_only_valid_building_solids() {
     check_report(&env.out().join("report"));
 }
 
-/// The full twin's P2P RMSE on the demo's default city, dB: 8.21 measured on SynthCity v3's
+/// The full twin's P2P RMSE on the demo's default city, dB: 8.49 with TerrainPass v2 (8.21
+/// before it) measured on SynthCity v3's
 /// varied façades (BENCHMARKS.md, "The demo's Table 1 since issue 51"; 8.30 on v2's uniform
 /// ones, 7.92 before PlaceClutter v5), inside about +-1 dB of 8.30, about the range
 /// four seeds of the views' noise alone gave the full twin before (5.77-6.86 dB). Outside it, a

@@ -426,3 +426,48 @@ fn default_sensor_errors_are_at_the_levels_of_real_models() {
         .install(|| render(&p).1);
     assert!(one == noisy, "views differ between thread counts");
 }
+
+/// In a tiled run, a tile renders the untiled run's stations whose cameras stand in its window:
+/// the same views, ids and pixels, and no other.
+#[test]
+fn a_window_renders_the_untiled_views_standing_in_it() {
+    let p = SynthViewsParams {
+        size: (96, 72),
+        max_views: 40,
+        ..SynthViewsParams::default()
+    };
+    let (city, scene) = city_and_scene();
+    let inputs = Inputs::new()
+        .with("scene", Slot::One(Arc::new(Artifact::Scene(scene))))
+        .with("city", Slot::One(Arc::new(Artifact::City(city))));
+    let site = site();
+    let all = loaded(&SynthViews::run(&p, &inputs, &Ctx::new(&site, &[])).unwrap());
+    // The window's edge in the widest gap between cameras: the reported poses carry noise, the
+    // window is applied to the true stations.
+    let mut xs: Vec<f64> = all.views.iter().map(|v| v.pose.position[0]).collect();
+    xs.sort_by(f64::total_cmp);
+    let gap = (1..xs.len())
+        .max_by(|&a, &b| (xs[a] - xs[a - 1]).total_cmp(&(xs[b] - xs[b - 1])))
+        .unwrap();
+    assert!(xs[gap] - xs[gap - 1] > 5.0, "{xs:?}");
+    let mid = (xs[gap] + xs[gap - 1]) / 2.0;
+    let window = kodama_nodes::Window {
+        min: (-1e4, -1e4),
+        max: (mid, 1e4),
+    };
+    let ctx = Ctx::new(&site, &[]).with_window(window);
+    let tile = loaded(&SynthViews::run(&p, &inputs, &ctx).unwrap());
+    let want: Vec<_> = all
+        .views
+        .iter()
+        .zip(&all.set.views)
+        .filter(|(v, _)| v.pose.position[0] < mid)
+        .collect();
+    assert!(!want.is_empty() && want.len() < all.views.len(), "{} of {}", want.len(), all.views.len());
+    assert_eq!(tile.views.len(), want.len());
+    for ((got, head), (v, untiled_head)) in tile.views.iter().zip(&tile.set.views).zip(want) {
+        assert_eq!(got.id, v.id);
+        assert_eq!(got.pose, v.pose, "{}", v.id);
+        assert_eq!(head.pixels, untiled_head.pixels, "{}: pixels differ", v.id);
+    }
+}

@@ -190,6 +190,8 @@ impl Stage for SynthViews {
     ];
     type Params = SynthViewsParams;
     type Output = ViewSet;
+    // A tile renders the stations whose cameras stand in its window.
+    const WINDOWED: bool = true;
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         let prob = |v: f64| (0.0..=1.0).contains(&v);
@@ -258,7 +260,16 @@ impl Stage for SynthViews {
         let scene: &Scene = inputs.one("scene")?;
         let city: &City = inputs.one("city")?;
         let rays = SceneRays::new(scene);
-        let poses = stations(city, p);
+        // In a tiled run, the stations are the untiled run's (numbered as there, which seeds
+        // each view's errors) whose cameras stand in the window.
+        let poses: Vec<(usize, Pose)> = stations(city, p)
+            .into_iter()
+            .enumerate()
+            .filter(|(_, pose)| {
+                ctx.window
+                    .is_none_or(|w| w.contains(pose.position[0], pose.position[1]))
+            })
+            .collect();
         ctx.progress.set_total(poses.len() as u64);
         let material_classes: Vec<String> = RMSNET_CLASSES.iter().map(|s| s.to_string()).collect();
         let buildings: HashMap<&str, &BuildingSpec> =
@@ -267,8 +278,8 @@ impl Stage for SynthViews {
         // Each view is stored as soon as it is rendered: a few in memory at a time.
         let views = poses
             .par_iter()
-            .enumerate()
             .map(|(k, pose)| {
+                let (k, pose) = (*k, pose);
                 let mut v = render(scene, &rays, &buildings, p, k, *pose);
                 v.pose = reported_pose(&v.pose, p, k);
                 v.intrinsics = reported_intrinsics(&v.intrinsics, p, k);
