@@ -396,15 +396,20 @@ fn solid(
         );
     }
     candidates.push(polygons.to_vec());
-    for outline in candidates {
-        let mut mesh = crate::artifact::Mesh::default();
-        let built: Result<(), String> = outline.iter().try_for_each(|poly| {
-            mesh.append(&shell(cells, &roof, label, members, poly, floor, p)?);
-            Ok(())
-        });
-        match built.and_then(|()| check_solid(&mesh).map(|_| ())) {
-            Ok(()) => return Ok(mesh),
-            Err(e) => last_error = e,
+    // Each outline with the roof lines as edges, then (a roof whose lines cross into a surface
+    // that intersects itself, seen in about one building in ten thousand) without them.
+    for roof_lines in [true, false] {
+        for outline in &candidates {
+            let mut mesh = crate::artifact::Mesh::default();
+            let built: Result<(), String> = outline.iter().try_for_each(|poly| {
+                mesh.append(&shell(cells, &roof, label, members, poly, floor, p, roof_lines)?);
+                Ok(())
+            });
+            match built.and_then(|()| check_solid(&mesh).map(|_| ())) {
+                Ok(()) => return Ok(mesh),
+                Err(e) if roof_lines => last_error = e,
+                Err(_) => {}
+            }
         }
     }
     Err(format!("building-{label}: {last_error}"))
@@ -424,12 +429,14 @@ impl HasPosition for RoofVertex {
     }
 }
 
-/// One closed shell: the adaptive roof over `poly`, walls along its rings, a flat floor.
+/// One closed shell: the adaptive roof over `poly` (with the roof lines as edges when
+/// `roof_lines`), walls along its rings, a flat floor.
 ///
 /// spade 2.15 can panic ("Failed to locate position") on a triangulation whose constraint edges
 /// (nearly parallel roof lines a fraction of a cell apart) leave slivers its point location
 /// cannot walk; such a roof is built again without its lines, its ridges then kept only as far
 /// as the refinement's vertices keep them.
+#[allow(clippy::too_many_arguments)]
 fn shell(
     cells: &CellHeights,
     roof: &RoofFit,
@@ -438,20 +445,18 @@ fn shell(
     poly: &Polygon,
     floor: f64,
     p: &BuildingSolidsParams,
+    roof_lines: bool,
 ) -> Result<crate::artifact::Mesh, String> {
     let build = |lines: bool| {
         std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
             shell_with(cells, roof, label, members, poly, floor, p, lines)
         }))
     };
-    match build(true) {
+    let failed = || Err("the roof's triangulation failed inside spade".to_string());
+    match build(roof_lines) {
         Ok(made) => made,
-        Err(_) => build(false).unwrap_or_else(|_| {
-            Err(
-                "the roof's triangulation failed inside spade, with and without its roof lines"
-                    .into(),
-            )
-        }),
+        Err(_) if roof_lines => build(false).unwrap_or_else(|_| failed()),
+        Err(_) => failed(),
     }
 }
 
