@@ -153,6 +153,19 @@ fn tiling_mistakes_are_refused() {
     refused(&["--tile-m", "nan"], "finite");
     refused(&["--tile-m", "300", "--halo-m", "1e9"], "halo");
     let bad = |from: &str, to: &str| env.write("bad.ron", &TILED_CITY.replace(from, to));
+    // The graph file at `path`, tiled in 300 m tiles.
+    let refused_file = |path: &std::path::Path, says: &str| {
+        let r = env.cli(&[
+            "explain",
+            path.to_str().unwrap(),
+            "--cache",
+            "c",
+            "--tile-m",
+            "300",
+        ]);
+        assert_eq!(r.code, 2, "{}: {}", path.display(), r.stderr);
+        assert!(r.stderr.contains(says), "{}: {}", path.display(), r.stderr);
+    };
     for (from, to, says) in [
         (
             r#"merge: ["terrain2", "solids"]"#,
@@ -176,17 +189,7 @@ fn tiling_mistakes_are_refused() {
         ),
         ("max: (600.0, 600.0)", "max: (600.2, 600.0)", "cell lattice"),
     ] {
-        let b = bad(from, to);
-        let r = env.cli(&[
-            "explain",
-            b.to_str().unwrap(),
-            "--cache",
-            "c",
-            "--tile-m",
-            "300",
-        ]);
-        assert_eq!(r.code, 2, "{to}: {}", r.stderr);
-        assert!(r.stderr.contains(says), "{to}: {}", r.stderr);
+        refused_file(&bad(from, to), says);
     }
     // Metrics are not merged.
     let stats = TILED_CITY
@@ -198,40 +201,16 @@ fn tiling_mistakes_are_refused() {
             r#"merge: ["terrain2", "solids"]"#,
             r#"merge: ["terrain2", "solids", "pstats"]"#,
         );
-    let b = env.write("stats.ron", &stats);
-    let r = env.cli(&[
-        "explain",
-        b.to_str().unwrap(),
-        "--cache",
-        "c",
-        "--tile-m",
-        "300",
-    ]);
-    assert_eq!(r.code, 2, "{}", r.stderr);
-    assert!(
-        r.stderr.contains("only Scene, Raster, Points are merged"),
-        "{}",
-        r.stderr
+    refused_file(
+        &env.write("stats.ron", &stats),
+        "only Scene, Raster, Points are merged",
     );
     // A graph without a tiling block cannot be tiled from the command line.
-    let plain = env.write("plain.ron", &TILED_CITY.replace(
+    let plain = TILED_CITY.replace(
         r#"tiling: Tiling(area: (min: (0.0, 0.0), max: (600.0, 600.0)), merge: ["terrain2", "solids"]),"#,
         "",
-    ));
-    let r = env.cli(&[
-        "explain",
-        plain.to_str().unwrap(),
-        "--cache",
-        "c",
-        "--tile-m",
-        "300",
-    ]);
-    assert_eq!(r.code, 2, "{}", r.stderr);
-    assert!(
-        r.stderr.contains("need the graph's `tiling"),
-        "{}",
-        r.stderr
     );
+    refused_file(&env.write("plain.ron", &plain), "need the graph's `tiling");
     // --tile on an untiled run, and a tile past the last.
     let r = env.cli(&["run", g, "--cache", "c", "--tile", "0"]);
     assert_eq!(r.code, 2, "{}", r.stderr);

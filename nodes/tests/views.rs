@@ -463,7 +463,12 @@ fn a_window_renders_the_untiled_views_standing_in_it() {
         .zip(&all.set.views)
         .filter(|(v, _)| v.pose.position[0] < mid)
         .collect();
-    assert!(!want.is_empty() && want.len() < all.views.len(), "{} of {}", want.len(), all.views.len());
+    assert!(
+        !want.is_empty() && want.len() < all.views.len(),
+        "{} of {}",
+        want.len(),
+        all.views.len()
+    );
     assert_eq!(tile.views.len(), want.len());
     for ((got, head), (v, untiled_head)) in tile.views.iter().zip(&tile.set.views).zip(want) {
         assert_eq!(got.id, v.id);

@@ -293,14 +293,7 @@ fn in_topological_order(
                     *i = new_index[*i];
                 }
             }
-            n.deps = n
-                .inputs
-                .iter()
-                .flatten()
-                .copied()
-                .collect::<BTreeSet<_>>()
-                .into_iter()
-                .collect();
+            n.set_deps();
             n
         })
         .collect();

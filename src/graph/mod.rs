@@ -69,6 +69,20 @@ pub struct InputFile {
     pub path: PathBuf,
 }
 
+impl Node {
+    /// Sets `deps` from `inputs`: the distinct upstream nodes, ascending.
+    pub(crate) fn set_deps(&mut self) {
+        self.deps = self
+            .inputs
+            .iter()
+            .flatten()
+            .copied()
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
+    }
+}
+
 impl Graph {
     /// Index of the node called `id`.
     pub fn index(&self, id: &str) -> Option<usize> {

@@ -9,8 +9,6 @@
 //! nodes with the tiles as params. The engine runs the result as any graph; `--tile I` and
 //! `--phase K` pick one tile job's nodes for a cluster's job array.
 
-use std::collections::BTreeSet;
-
 use kodama_nodes::site::{MergeTilesParams, TileCore};
 use kodama_nodes::stages::tiles::{MERGED_TYPES, merge_kind};
 use kodama_nodes::{Site, Window};
@@ -405,14 +403,7 @@ fn rewrite(
     }
     debug_assert!(copies.iter().all(|c| c.is_empty() || c.len() == n_tiles));
     for n in &mut nodes {
-        n.deps = n
-            .inputs
-            .iter()
-            .flatten()
-            .copied()
-            .collect::<BTreeSet<_>>()
-            .into_iter()
-            .collect();
+        n.set_deps();
     }
     let outputs = graph
         .outputs

@@ -402,7 +402,9 @@ fn solid(
         for outline in &candidates {
             let mut mesh = crate::artifact::Mesh::default();
             let built: Result<(), String> = outline.iter().try_for_each(|poly| {
-                mesh.append(&shell(cells, &roof, label, members, poly, floor, p, roof_lines)?);
+                mesh.append(&shell(
+                    cells, &roof, label, members, poly, floor, p, roof_lines,
+                )?);
                 Ok(())
             });
             match built.and_then(|()| check_solid(&mesh).map(|_| ())) {
