@@ -779,6 +779,7 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
         common.push(slurm::quote(url).map_err(usage)?);
     }
     let is_sweep = kodama_dag::sweep::is_sweep_file(&a.file).map_err(usage)?;
+    let mut graph_tiles = None;
     let (plan, out_dir) = if is_sweep {
         if !a.targets.is_empty() {
             return Err(usage(
@@ -831,6 +832,7 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
             common.extend(["--halo-m".to_string(), m.to_string()]);
         }
         common.extend(["--json".to_string(), "--quiet".to_string()]);
+        graph_tiles = g.tiling.as_ref().map(|t| t.tiles.len());
         let plan = if g.tiling.is_some() {
             if !a.targets.is_empty() {
                 return Err(usage(
@@ -846,8 +848,18 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
     for n in &plan.notes {
         eprintln!("{n}");
     }
-    let records = kodama_dag::record::load_records(&cache.runs_dir(&plan.runs_key), RECORDS_SIZING);
+    // A tiled graph's records are mostly its tile tasks': enough of them to reach its prefix and
+    // merge jobs' too.
+    let tiles = graph_tiles.unwrap_or(0);
+    let sizing = RECORDS_SIZING
+        .max(2 * tiles + RECORDS_SIZING)
+        .min(MAX_RECORDS_SIZING);
+    let records = kodama_dag::record::load_records(&cache.runs_dir(&plan.runs_key), sizing);
     let res = slurm::resources(&records, cpus);
+    let mut plan = plan;
+    if graph_tiles.is_some() {
+        slurm::size_tile_jobs(&mut plan, &records, cpus);
+    }
     let exe = std::env::current_exe()
         .map_err(|e| Fail(1, format!("error: cannot find kodama-dag's own path: {e}")))?;
     let cwd = std::env::current_dir()
@@ -938,6 +950,8 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
 
 /// How many of a graph's latest run records size a job's memory and time.
 const RECORDS_SIZING: usize = 20;
+/// The most records read to size a tiled graph's jobs.
+const MAX_RECORDS_SIZING: usize = 2000;
 
 /// `explain`: what `run` would do for each node of the graph (or of `targets` and what they
 /// need) and why, as lines or as JSON.

@@ -40,6 +40,8 @@ pub struct Job {
     pub array: Option<Vec<usize>>,
     /// Jobs of the plan (indices) that must succeed before this one starts.
     pub after: Vec<usize>,
+    /// What this job asks for, where it differs from the plan's (a tile job against the merge).
+    pub resources: Option<Resources>,
 }
 
 /// A chain of jobs to submit.
@@ -116,6 +118,32 @@ pub fn resources(records: &[RunRecord], cpus: usize) -> Resources {
     }
 }
 
+/// Sizes a tiled plan's jobs apart: the tile jobs (`--tile`) from the runs that made only tile
+/// nodes, the others (prefix, gathers, merge) from the runs that made nodes made once. A class
+/// with no measured run keeps the plan's request.
+pub fn size_tile_jobs(plan: &mut Plan, records: &[RunRecord], cpus: usize) {
+    let tile_run = |r: &RunRecord| {
+        let mut ran = r
+            .nodes
+            .iter()
+            .filter(|n| n.status == crate::record::Status::Ran)
+            .peekable();
+        ran.peek().is_some() && ran.all(|n| n.id.contains('@'))
+    };
+    let (tiles, once): (Vec<RunRecord>, Vec<RunRecord>) =
+        records.iter().cloned().partition(|r| tile_run(r));
+    for job in &mut plan.jobs {
+        let class = if job.args.iter().any(|a| a == "--tile") {
+            &tiles
+        } else {
+            &once
+        };
+        if !class.is_empty() {
+            job.resources = Some(resources(class, cpus));
+        }
+    }
+}
+
 /// A word for a POSIX shell: single-quoted where it has to be (not `--mem=2G` or a plain path).
 pub fn quote(word: &str) -> Result<String, String> {
     let plain = |c: char| c.is_ascii_alphanumeric() || "_@%+=:,./-".contains(c);
@@ -185,6 +213,7 @@ pub fn script(
     let mut s = String::from("#!/bin/bash\n");
     let _ = writeln!(s, "# kodama-dag submit: {}", job.what);
     let _ = writeln!(s, "# for {}", plan.file.display());
+    let res = job.resources.as_ref().unwrap_or(res);
     let _ = writeln!(s, "# resources {}", res.basis);
     let _ = writeln!(s, "#SBATCH --job-name=kodama-{}-{}", plan.name, job.name);
     let _ = writeln!(
@@ -643,6 +672,7 @@ pub fn plan_sweep(
             args: base(&["--prefix"]),
             array: None,
             after: vec![],
+            resources: None,
         });
     }
     let cached = variants.len() - pending.len();
@@ -667,6 +697,7 @@ pub fn plan_sweep(
         args: base(&[]),
         array: None,
         after: (0..plan.jobs.len()).collect(),
+        resources: None,
     });
     Ok(plan)
 }
@@ -707,6 +738,7 @@ fn push_arrays(
             args: args(&task),
             array: Some(chunk.iter().map(|i| i - offset).collect()),
             after: after.to_vec(),
+            resources: None,
         });
     }
 }
@@ -738,6 +770,7 @@ pub fn plan_graph(graph: &crate::graph::Graph, args: &[String]) -> Result<Plan, 
             args: a,
             array: None,
             after: vec![],
+            resources: None,
         }],
         notes: vec![],
         runs_key: crate::exec::graph_key(graph),
@@ -817,6 +850,7 @@ pub fn plan_tiled(
                 args: base(&["--phase", &phase]),
                 array: None,
                 after: last.clone(),
+                resources: None,
             });
             last = vec![plan.jobs.len() - 1];
         }
@@ -863,6 +897,7 @@ pub fn plan_tiled(
         args: base(&[]),
         array: None,
         after: last,
+        resources: None,
     });
     Ok(plan)
 }
@@ -918,5 +953,68 @@ mod tests {
         let none = resources(&[], 2);
         assert_eq!((none.mem_mb, none.time_min), (None, None));
         assert!(none.basis.contains("default"), "{}", none.basis);
+    }
+
+    #[test]
+    fn tile_jobs_are_sized_from_tile_runs() {
+        use crate::record::{NodeRecord, Status};
+        let ran = |id: &str| NodeRecord {
+            id: id.into(),
+            kind: "K".into(),
+            status: Status::Ran,
+            reason: String::new(),
+            ms: 1.0,
+            digest: None,
+            error: None,
+            user_error: false,
+        };
+        let rec = |ids: &[&str], wall_s, peak| RunRecord {
+            graph: "g.ron".into(),
+            nodes: ids.iter().map(|id| ran(id)).collect(),
+            outputs: Default::default(),
+            output_errors: Default::default(),
+            wall_s,
+            peak_rss_mb: Some(peak),
+        };
+        let records = [
+            rec(&["city", "truth"], 1200.0, 2000.0),
+            rec(&["lidar@x0y0", "solids@x0y0"], 20.0, 4000.0),
+            rec(&["terrain2", "scene"], 30.0, 1000.0),
+        ];
+        let job = |name: &str, args: &[&str]| Job {
+            name: name.into(),
+            what: String::new(),
+            args: args.iter().map(|a| a.to_string()).collect(),
+            array: None,
+            after: vec![],
+            resources: None,
+        };
+        let mut plan = Plan {
+            file: "g.ron".into(),
+            name: "g".into(),
+            jobs: vec![
+                job("prefix", &["run", "g.ron", "--phase", "0"]),
+                job(
+                    "tiles",
+                    &["run", "g.ron", "--tile", "\"$SLURM_ARRAY_TASK_ID\""],
+                ),
+                job("merge", &["run", "g.ron"]),
+            ],
+            notes: vec![],
+            runs_key: String::new(),
+        };
+        size_tile_jobs(&mut plan, &records, 1);
+        let asked: Vec<(Option<u64>, Option<u64>)> = plan
+            .jobs
+            .iter()
+            .map(|j| {
+                let r = j.resources.as_ref().unwrap();
+                (r.mem_mb, r.time_min)
+            })
+            .collect();
+        // Tiles: 1.5 x 4000 MB, at least 10 min; the others: 1.5 x 2000 MB, 3 x 1200 s.
+        assert_eq!(asked[1], (Some(6000), Some(10)));
+        assert_eq!(asked[0], (Some(3000), Some(60)));
+        assert_eq!(asked[2], asked[0]);
     }
 }
