@@ -46,6 +46,24 @@ fn solids(glb: &std::path::Path) -> Vec<Solid> {
         .collect()
 }
 
+/// The terrain raster's cells by their centres (CRS metres, to the centimetre).
+fn terrain_cells(tif: &std::path::Path) -> std::collections::HashMap<(i64, i64), f64> {
+    let t = kodama_nodes::io::geotiff::read_geotiff(tif).unwrap();
+    let g = &t.pixels;
+    let mut out = std::collections::HashMap::new();
+    for row in 0..g.height {
+        for col in 0..g.width {
+            let v = t.sample((row * g.width + col) as usize, 0);
+            if v.is_finite() && t.nodata != Some(v) {
+                let x = g.west + (col as f64 + 0.5) * g.dx;
+                let y = g.north - (row as f64 + 0.5) * g.dy;
+                out.insert(((x * 100.0).round() as i64, (y * 100.0).round() as i64), v);
+            }
+        }
+    }
+    out
+}
+
 fn run_scene(env: &Env, graph: &std::path::Path, out: &str, extra: &[&str]) -> Vec<Solid> {
     let out_dir = env.path(out);
     let cache = env.cache();
@@ -67,7 +85,8 @@ fn run_scene(env: &Env, graph: &std::path::Path, out: &str, extra: &[&str]) -> V
 /// The paper's Sec. 4.1 buildings of a 600 m city in 2 x 2 tiles of 300 m against one untiled
 /// run: every untiled building is in the tiled scene once, at the same place, with the same
 /// bounds and volume (to the float noise of a raster read in another window), and nothing else
-/// is; each tiled building is named after the one tile that owns it.
+/// is; each tiled building is named after the one tile that owns it. The merged terrain raster
+/// has the untiled one's cells and heights.
 #[test]
 fn tiled_and_untiled_runs_give_the_same_buildings() {
     let env = Env::new();
@@ -124,6 +143,27 @@ fn tiled_and_untiled_runs_give_the_same_buildings() {
         worst.0,
         100.0 * worst.1
     );
+    // The merged terrain raster against the untiled one, cell by cell: continuous across the
+    // seams (one mosaic on the site's lattice) and the same ground.
+    let (t_untiled, t_tiled) = (
+        terrain_cells(&env.path("untiled").join("terrain.tif")),
+        terrain_cells(&env.path("tiled").join("terrain.tif")),
+    );
+    let dz: Vec<f64> = t_tiled
+        .iter()
+        .filter_map(|(k, z)| t_untiled.get(k).map(|u| (z - u).abs()))
+        .collect();
+    let worst_dz = dz.iter().copied().fold(0.0f64, f64::max);
+    let mean_dz = dz.iter().sum::<f64>() / dz.len().max(1) as f64;
+    println!(
+        "terrain: {} of {} merged cells where the untiled raster has one; height difference mean {mean_dz:.4} m, largest {worst_dz:.3} m",
+        dz.len(),
+        t_tiled.len()
+    );
+    assert!(
+        dz.len() * 10 >= t_tiled.len() * 9,
+        "the terrain rasters do not share their cells"
+    );
     assert!(unmatched.is_empty(), "unmatched: {unmatched:#?}");
     assert_eq!(
         untiled.len(),
@@ -178,7 +218,7 @@ fn tiling_mistakes_are_refused() {
             "is made once",
         ),
         (
-            r#"outputs: { "scene": "scene" },"#,
+            r#"outputs: { "scene": "scene", "terrain": "terrain2" },"#,
             r#"outputs: { "scene": "scene", "dsm": "dsm" },"#,
             "made per tile: add it to `merge`",
         ),
