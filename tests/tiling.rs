@@ -164,6 +164,23 @@ fn tiled_and_untiled_runs_give_the_same_buildings() {
         dz.len() * 10 >= t_tiled.len() * 9,
         "the terrain rasters do not share their cells"
     );
+    // The 3D Tiles of the merged scene: one leaf per run tile, beside the terrain's.
+    let tileset: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(env.path("tiled").join("scene.3dtiles/tileset.json")).unwrap(),
+    )
+    .unwrap();
+    let uris: Vec<&str> = tileset["root"]["children"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|c| c["content"]["uri"].as_str())
+        .collect();
+    for tile in ["x0y0", "x1y0", "x0y1", "x1y1"] {
+        assert!(
+            uris.contains(&format!("tiles/{tile}.glb").as_str()),
+            "{uris:?}"
+        );
+    }
     assert!(unmatched.is_empty(), "unmatched: {unmatched:#?}");
     assert_eq!(
         untiled.len(),
@@ -218,7 +235,7 @@ fn tiling_mistakes_are_refused() {
             "is made once",
         ),
         (
-            r#"outputs: { "scene": "scene", "terrain": "terrain2" },"#,
+            r#"outputs: { "scene": "scene", "terrain": "terrain2", "scene.3dtiles": "scene" },"#,
             r#"outputs: { "scene": "scene", "dsm": "dsm" },"#,
             "made per tile: add it to `merge`",
         ),

@@ -49,7 +49,7 @@ Graph(
         "solids":    BuildingSolids(labels: "parts", roofs: "roofs", terrain: "terrain2", points: "lidar"),
         "scene":     AssembleScene(terrain: "terrain2", objects: ["solids"]),
     },
-    outputs: { "scene": "scene", "terrain": "terrain2" },
+    outputs: { "scene": "scene", "terrain": "terrain2", "scene.3dtiles": "scene" },
 )
 "#;
 

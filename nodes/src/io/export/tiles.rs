@@ -15,34 +15,65 @@ use crate::io::crs::{Crs, ToSite};
 use crate::io::ecef::{enu_axes, to_ecef};
 use crate::site::Site;
 
-/// The tileset files: `tileset.json` first, then `tiles/<i>_<j>.glb`.
+/// Where an object's tile is: the square of `tile_m` holding its centroid, or, for an object a
+/// tiled run merged (its id prefixed with its run tile, `x2y1/building-7`), that run tile.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Leaf {
+    Square(i64, i64),
+    RunTile(String),
+}
+
+/// The run tile an id names (`x2y1` of `x2y1/building-7`), if it names one.
+fn run_tile(id: &str) -> Option<&str> {
+    let (tile, _) = id.split_once('/')?;
+    let (x, y) = tile.strip_prefix('x')?.split_once('y')?;
+    let digits = |s: &str| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit());
+    (digits(x) && digits(y)).then_some(tile)
+}
+
+/// The tileset files: `tileset.json` first, then `tiles/<i>_<j>.glb` (a square of `tile_m`) or
+/// `tiles/<run tile>.glb` (the objects one tile of a tiled run gave a merged scene: one leaf per
+/// run tile).
 pub fn write_tileset(
     scene: &Scene,
     site: &Site,
     tile_m: f64,
 ) -> Result<Vec<(String, Vec<u8>)>, String> {
     let wgs84 = ToSite::new(&Crs::from_epsg(4326)?, site)?;
-    // Group objects by the tile holding their centroid.
-    let mut tiles: std::collections::BTreeMap<(i64, i64), Vec<&SceneObject>> = Default::default();
+    // Group objects by the tile holding their centroid, or the run tile that made them.
+    let mut tiles: std::collections::BTreeMap<Leaf, Vec<&SceneObject>> = Default::default();
     for o in scene.objects.iter().filter(|o| !o.mesh.is_empty()) {
-        let n = o.mesh.positions.len() as f64;
-        let c = o.mesh.positions.iter().fold([0.0, 0.0], |a, p| {
-            [a[0] + p[0] as f64 / n, a[1] + p[1] as f64 / n]
-        });
-        tiles
-            .entry((
-                (c[0] / tile_m).floor() as i64,
-                (c[1] / tile_m).floor() as i64,
-            ))
-            .or_default()
-            .push(o);
+        let leaf = match run_tile(&o.id) {
+            Some(t) => Leaf::RunTile(t.to_owned()),
+            None => {
+                let c = centroid(o);
+                Leaf::Square(
+                    (c[0] / tile_m).floor() as i64,
+                    (c[1] / tile_m).floor() as i64,
+                )
+            }
+        };
+        tiles.entry(leaf).or_default().push(o);
     }
     let mut files = Vec::new();
     let mut children = Vec::new();
     let (mut west, mut south, mut east, mut north, mut hmin, mut hmax) =
         (f64::MAX, f64::MAX, f64::MIN, f64::MIN, f64::MAX, f64::MIN);
-    for ((i, j), objects) in &tiles {
-        let center = [(*i as f64 + 0.5) * tile_m, (*j as f64 + 0.5) * tile_m];
+    for (leaf, objects) in &tiles {
+        let (center, uri) = match leaf {
+            Leaf::Square(i, j) => (
+                [(*i as f64 + 0.5) * tile_m, (*j as f64 + 0.5) * tile_m],
+                format!("tiles/{i}_{j}.glb"),
+            ),
+            Leaf::RunTile(name) => {
+                let cs: Vec<[f64; 2]> = objects.iter().map(|o| centroid(o)).collect();
+                let n = cs.len() as f64;
+                let c = cs
+                    .iter()
+                    .fold([0.0, 0.0], |a, c| [a[0] + c[0] / n, a[1] + c[1] / n]);
+                (c, format!("tiles/{name}.glb"))
+            }
+        };
         let (clon, clat) = wgs84.inverse(center[0], center[1])?;
         let origin = to_ecef(clon, clat, 0.0);
         let axes = enu_axes(clon, clat);
@@ -79,7 +110,6 @@ pub fn write_tileset(
         if let Some(f) = failure {
             return Err(f);
         }
-        let uri = format!("tiles/{i}_{j}.glb");
         files.push((uri.clone(), write_glb_objects(objects, to_local)?));
         // Column-major ENU -> ECEF.
         let transform: Vec<f64> = [
@@ -127,4 +157,12 @@ pub fn write_tileset(
     )];
     out.extend(files);
     Ok(out)
+}
+
+/// The mean of an object's vertices, plan only.
+fn centroid(o: &SceneObject) -> [f64; 2] {
+    let n = o.mesh.positions.len() as f64;
+    o.mesh.positions.iter().fold([0.0, 0.0], |a, p| {
+        [a[0] + p[0] as f64 / n, a[1] + p[1] as f64 / n]
+    })
 }
