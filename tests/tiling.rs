@@ -245,6 +245,17 @@ fn tiling_mistakes_are_refused() {
             "made per tile: add it to `merge`",
         ),
         ("max: (600.0, 600.0)", "max: (600.2, 600.0)", "cell lattice"),
+        (
+            "max: (600.0, 600.0)",
+            "max: (1e15, 1e15)",
+            "more than the 10000",
+        ),
+        (
+            "max: (600.0, 600.0)",
+            "max: (0.0, 600.0)",
+            "south-west of `max`",
+        ),
+        ("merge:", "building_m: -1.0, merge:", "building_m"),
     ] {
         refused_file(&bad(from, to), says);
     }
