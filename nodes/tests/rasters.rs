@@ -62,6 +62,50 @@ fn gdal_float_dem_with_nodata_on_its_native_grid() {
     }
 }
 
+/// In a tiled run, a tile reads the cells of its window: the cells a `window` param of the same
+/// rectangle reads, and within a `window` param, the cells in both.
+#[test]
+fn a_tile_reads_the_cells_of_its_window() {
+    let site = Site {
+        crs: "EPSG:32618".into(),
+        origin: (583200.0, 4506600.0),
+        cell_m: 0.5,
+    };
+    let files = [fixture("gdal_dem_f32.tif")];
+    let tile = kodama_nodes::Window {
+        min: (9.0, 21.0),
+        max: (31.0, 41.0),
+    };
+    let in_tile = |p: &ReadRasterParams| {
+        ReadRaster::run(
+            p,
+            &Inputs::new(),
+            &Ctx::new(&site, &files).with_window(tile),
+        )
+        .unwrap()
+    };
+    let by_param = ReadRasterParams {
+        window: Some((9.0, 21.0, 31.0, 41.0)),
+        ..raster_params("x")
+    };
+    assert_eq!(
+        in_tile(&raster_params("x")),
+        read_raster(&by_param, files[0].clone(), &site)
+    );
+    let both = ReadRasterParams {
+        window: Some((0.0, 0.0, 20.0, 30.0)),
+        ..raster_params("x")
+    };
+    let overlap = ReadRasterParams {
+        window: Some((9.0, 21.0, 20.0, 30.0)),
+        ..raster_params("x")
+    };
+    assert_eq!(
+        in_tile(&both),
+        read_raster(&overlap, files[0].clone(), &site)
+    );
+}
+
 /// A window keeps the cells whose centres fall in it, with the values the whole file has there:
 /// on the file's own grid (a cut) and through a warp (a coarser grid, cut after covering).
 #[test]

@@ -79,8 +79,21 @@ impl Stage for ReadRaster {
         }]
     }
 
+    // A tile of a tiled run reads the cells in its window (and in `window`, when both are given).
+    const WINDOWED: bool = true;
+
     fn run(p: &Self::Params, _: &Inputs, ctx: &Ctx) -> Result<Raster, StageError> {
         let path = ctx.file(0)?;
+        let window = match (p.window, ctx.window) {
+            (w, None) => w,
+            (None, Some(t)) => Some((t.min.0, t.min.1, t.max.0, t.max.1)),
+            (Some(w), Some(t)) => Some((
+                w.0.max(t.min.0),
+                w.1.max(t.min.1),
+                w.2.min(t.max.0),
+                w.3.min(t.max.1),
+            )),
+        };
         let tif = if is_hgt(path) {
             read_hgt(path)?
         } else {
@@ -114,7 +127,7 @@ impl Stage for ReadRaster {
         ) {
             let full_width = grid.width as usize;
             let (grid, col0, row0) =
-                windowed(grid, p.window).map_err(|m| StageError::bad_input(path, "window", m))?;
+                windowed(grid, window).map_err(|m| StageError::bad_input(path, "window", m))?;
             let width = grid.width as usize;
             let data = (0..grid.len())
                 .into_par_iter()
@@ -132,7 +145,7 @@ impl Stage for ReadRaster {
             &tif,
             &to_site,
             p.cell_m.unwrap_or(ctx.site.cell_m),
-            p.window,
+            window,
             p.resample,
             value,
             ctx,
