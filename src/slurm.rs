@@ -799,12 +799,14 @@ pub fn plan_tiled(
     let ids = |nodes: &[usize]| -> Vec<String> {
         nodes.iter().map(|&i| graph.nodes[i].id.clone()).collect()
     };
-    let cached = |nodes: &[usize]| -> Result<bool, String> {
-        Ok(explain(graph, cache, &ids(nodes))
-            .map_err(|e| e.to_string())?
-            .iter()
-            .all(|e| e.plan == Step::Cached))
-    };
+    // One look at the cache for the whole graph: a node is cached only when all it needs is.
+    let held: std::collections::HashSet<String> = explain(graph, cache, &[])
+        .map_err(|e| e.to_string())?
+        .into_iter()
+        .filter(|e| e.plan == Step::Cached)
+        .map(|e| e.id)
+        .collect();
+    let cached = |nodes: &[usize]| nodes.iter().all(|&i| held.contains(&graph.nodes[i].id));
     let mut plan = Plan {
         file: std::path::absolute(&graph.path).unwrap_or_else(|_| graph.path.clone()),
         name: graph.name.clone(),
@@ -824,7 +826,7 @@ pub fn plan_tiled(
         // The nodes made once that phase k + 1's tiles read: the shared upstream (k = 0), or
         // the merges of phase k.
         let once = graph.tile_job(None, Some(k))?;
-        if k < tiling.phases && !once.is_empty() && !cached(&once)? {
+        if k < tiling.phases && !once.is_empty() && !cached(&once) {
             let (name, what) = if k == 0 {
                 (
                     "prefix".to_string(),
@@ -861,7 +863,7 @@ pub fn plan_tiled(
         let mut pending = Vec::new();
         for t in 0..tiling.tiles.len() {
             let nodes = graph.tile_job(Some(t), Some(k + 1))?;
-            if !nodes.is_empty() && !cached(&nodes)? {
+            if !nodes.is_empty() && !cached(&nodes) {
                 pending.push(t);
             }
         }

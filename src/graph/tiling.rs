@@ -505,11 +505,12 @@ impl Graph {
                 tiling.phases
             ));
         }
-        let consumers = self.consumers();
+        // Only a job of nodes made once asks who reads them.
+        let consumers = std::cell::OnceCell::new();
         let feeds_tiles = |i: usize, k: u32| {
-            consumers[i]
+            consumers.get_or_init(|| self.consumers())[i]
                 .iter()
-                .any(|&c| self.nodes[c].tile.is_some() && self.nodes[c].phase == k + 1)
+                .any(|&c: &usize| self.nodes[c].tile.is_some() && self.nodes[c].phase == k + 1)
         };
         let picked: Vec<usize> = (0..self.nodes.len())
             .filter(|&i| {

@@ -396,15 +396,30 @@ fn solid(
         );
     }
     candidates.push(polygons.to_vec());
+    // spade 2.15 can panic ("Failed to locate position") on a triangulation whose constraint
+    // edges (nearly parallel roof lines a fraction of a cell apart) leave slivers its point
+    // location cannot walk; such a roof is built again without its lines, its ridges then kept
+    // only as far as the refinement's vertices keep them.
+    let shell_of = |poly: &Polygon, roof_lines: bool| {
+        let build = |lines: bool| {
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                shell(cells, &roof, label, members, poly, floor, p, lines)
+            }))
+        };
+        let failed = || Err("the roof's triangulation failed inside spade".to_string());
+        match build(roof_lines) {
+            Ok(made) => made,
+            Err(_) if roof_lines => build(false).unwrap_or_else(|_| failed()),
+            Err(_) => failed(),
+        }
+    };
     // Each outline with the roof lines as edges, then (a roof whose lines cross into a surface
     // that intersects itself, seen in about one building in ten thousand) without them.
     for roof_lines in [true, false] {
         for outline in &candidates {
             let mut mesh = crate::artifact::Mesh::default();
             let built: Result<(), String> = outline.iter().try_for_each(|poly| {
-                mesh.append(&shell(
-                    cells, &roof, label, members, poly, floor, p, roof_lines,
-                )?);
+                mesh.append(&shell_of(poly, roof_lines)?);
                 Ok(())
             });
             match built.and_then(|()| check_solid(&mesh).map(|_| ())) {
@@ -433,38 +448,8 @@ impl HasPosition for RoofVertex {
 
 /// One closed shell: the adaptive roof over `poly` (with the roof lines as edges when
 /// `roof_lines`), walls along its rings, a flat floor.
-///
-/// spade 2.15 can panic ("Failed to locate position") on a triangulation whose constraint edges
-/// (nearly parallel roof lines a fraction of a cell apart) leave slivers its point location
-/// cannot walk; such a roof is built again without its lines, its ridges then kept only as far
-/// as the refinement's vertices keep them.
 #[allow(clippy::too_many_arguments)]
 fn shell(
-    cells: &CellHeights,
-    roof: &RoofFit,
-    label: u32,
-    members: &[u32],
-    poly: &Polygon,
-    floor: f64,
-    p: &BuildingSolidsParams,
-    roof_lines: bool,
-) -> Result<crate::artifact::Mesh, String> {
-    let build = |lines: bool| {
-        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            shell_with(cells, roof, label, members, poly, floor, p, lines)
-        }))
-    };
-    let failed = || Err("the roof's triangulation failed inside spade".to_string());
-    match build(roof_lines) {
-        Ok(made) => made,
-        Err(_) if roof_lines => build(false).unwrap_or_else(|_| failed()),
-        Err(_) => failed(),
-    }
-}
-
-/// [`shell`], with the roof lines as constraints when `roof_lines`.
-#[allow(clippy::too_many_arguments)]
-fn shell_with(
     cells: &CellHeights,
     roof: &RoofFit,
     label: u32,
