@@ -166,6 +166,16 @@ pub trait Progress: Sync {
     }
 }
 
+/// The first few of `ids`, for a warning: "a, b, c, d, e and 12 more".
+pub fn named_few(ids: &[&str]) -> String {
+    const FEW: usize = 5;
+    let shown = ids[..ids.len().min(FEW)].join(", ");
+    match ids.len().saturating_sub(FEW) {
+        0 => shown,
+        more => format!("{shown} and {more} more"),
+    }
+}
+
 /// A `Progress` that reports nowhere, for tests and library callers.
 pub struct NoProgress;
 impl Progress for NoProgress {
@@ -395,5 +405,18 @@ pub trait Stage: 'static {
             output: Self::run(params, inputs, ctx)?,
             reports: Vec::new(),
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::named_few;
+
+    #[test]
+    fn a_warning_names_five_and_counts_the_rest() {
+        assert_eq!(named_few(&["a", "b"]), "a, b");
+        let ids = ["a", "b", "c", "d", "e", "f", "g"];
+        assert_eq!(named_few(&ids), "a, b, c, d, e and 2 more");
+        assert_eq!(named_few(&[]), "");
     }
 }

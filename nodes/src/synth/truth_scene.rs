@@ -87,17 +87,43 @@ impl Stage for TruthScene {
         });
         ctx.progress.advance(1);
         // Each building's Booleans are its own: in parallel, collected in the city's order.
-        let meshes: Vec<Mesh> = city
+        let meshes: Vec<(Mesh, Relief)> = city
             .buildings
             .par_iter()
             .map(|b| {
                 let mesh =
-                    building_mesh(b).map_err(|m| StageError::Failed(format!("{}: {m}", b.id)));
+                    building_solid(b).map_err(|m| StageError::Failed(format!("{}: {m}", b.id)));
                 ctx.progress.advance(1);
                 mesh
             })
             .collect::<Result<_, _>>()?;
-        for (b, mesh) in city.buildings.iter().zip(meshes) {
+        for (kept, what) in [
+            (
+                Relief::PlainWalls,
+                "kept plain walls (their façade relief's Booleans failed the solid check)",
+            ),
+            (
+                Relief::PlainBody,
+                "kept their plain body (their roof parts' Booleans failed the solid check too)",
+            ),
+        ] {
+            let ids: Vec<&str> = city
+                .buildings
+                .iter()
+                .zip(&meshes)
+                .filter(|(_, (_, r))| *r == kept)
+                .map(|(b, _)| b.id.as_str())
+                .collect();
+            if !ids.is_empty() {
+                ctx.progress.warn(&format!(
+                    "{} of {} buildings {what}: {}",
+                    ids.len(),
+                    city.buildings.len(),
+                    crate::stage::named_few(&ids)
+                ));
+            }
+        }
+        for (b, (mesh, _)) in city.buildings.iter().zip(meshes) {
             scene.objects.push(SceneObject {
                 id: b.id.clone(),
                 class: ObjectClass::Building,
@@ -188,6 +214,22 @@ const EMBED: f64 = 0.05;
 /// real building has: a wave crossing a wall crosses one slab, and a flat façade has no edge
 /// where two parts happen to meet. Parts that touch overlap by [`EMBED`].
 pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
+    building_solid(b).map(|(mesh, _)| mesh)
+}
+
+/// What of a building's relief its solid kept.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Relief {
+    /// Everything: the façade relief and the roof parts.
+    Whole,
+    /// The roof parts but not the façade relief.
+    PlainWalls,
+    /// Neither: the plain body.
+    PlainBody,
+}
+
+/// [`building_mesh`], and what of the relief it kept.
+pub fn building_solid(b: &BuildingSpec) -> Result<(Mesh, Relief), String> {
     let eave = b.ground_z + b.eave_m;
     let mut parts: Vec<Mesh> = Vec::new();
     match &b.roof {
@@ -255,8 +297,17 @@ pub fn building_mesh(b: &BuildingSpec) -> Result<Mesh, String> {
     // solid check refuses; the truth then keeps that building's plain walls, and failing that
     // its plain body, rather than a bad solid.
     with_relief(true)
-        .or_else(|e| with_relief(false).map_err(|_| e))
-        .or_else(|e| check_solid(&body).map(|_| body.clone()).map_err(|_| e))
+        .map(|m| (m, Relief::Whole))
+        .or_else(|e| {
+            with_relief(false)
+                .map(|m| (m, Relief::PlainWalls))
+                .map_err(|_| e)
+        })
+        .or_else(|e| {
+            check_solid(&body)
+                .map(|_| (body.clone(), Relief::PlainBody))
+                .map_err(|_| e)
+        })
 }
 
 /// `body` less `recesses`, plus `parts`, by exact Booleans; `body` itself when there is nothing

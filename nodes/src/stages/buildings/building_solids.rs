@@ -155,22 +155,41 @@ impl Stage for BuildingSolids {
             data: PodVec(cells.label.iter().map(|&l| l as f32).collect()),
         });
         ctx.progress.set_total(outlines.len() as u64);
-        let objects: Vec<Result<SceneObject, String>> = outlines
+        let objects: Vec<Result<(SceneObject, Roof), String>> = outlines
             .into_par_iter()
             .map(|(label, polygons)| {
-                let solid = solid(&cells, label, &polygons, p).map(|mesh| SceneObject {
-                    id: format!("building-{label}"),
-                    class: ObjectClass::Building,
-                    mesh,
+                let solid = solid(&cells, label, &polygons, p).map(|(mesh, roof)| {
+                    let object = SceneObject {
+                        id: format!("building-{label}"),
+                        class: ObjectClass::Building,
+                        mesh,
+                    };
+                    (object, roof)
                 });
                 ctx.progress.advance(1);
                 solid
             })
             .collect();
-        let objects = objects
+        let (objects, roofs): (Vec<SceneObject>, Vec<Roof>) = objects
             .into_iter()
             .collect::<Result<Vec<_>, _>>()
-            .map_err(StageError::Failed)?;
+            .map_err(StageError::Failed)?
+            .into_iter()
+            .unzip();
+        let without: Vec<&str> = objects
+            .iter()
+            .zip(&roofs)
+            .filter(|(_, r)| **r == Roof::WithoutLines)
+            .map(|(o, _)| o.id.as_str())
+            .collect();
+        if !without.is_empty() {
+            ctx.progress.warn(&format!(
+                "{} of {} buildings have roofs built without their roof lines (the lines made the roof intersect itself or broke its triangulation; ridges kept only where the refinement's vertices keep them): {}",
+                without.len(),
+                objects.len(),
+                crate::stage::named_few(&without)
+            ));
+        }
         Ok(Scene { objects })
     }
 }
@@ -348,6 +367,15 @@ fn separate_corner_touches(
     Err("buildings keep touching at cell corners after 64 passes".into())
 }
 
+/// How a building's roof was built.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Roof {
+    /// With the roof lines as edges of its triangulation.
+    WithLines,
+    /// Without them: with them the roof intersected itself or its triangulation failed.
+    WithoutLines,
+}
+
 /// The solid of one building: one closed shell per polygon of its outline. Tries the simplified
 /// outline first and the exact cell outline if that fails the checks.
 fn solid(
@@ -355,7 +383,7 @@ fn solid(
     label: u32,
     polygons: &[Polygon],
     p: &BuildingSolidsParams,
-) -> Result<crate::artifact::Mesh, String> {
+) -> Result<(crate::artifact::Mesh, Roof), String> {
     let members = cells
         .members
         .get(&label)
@@ -400,6 +428,7 @@ fn solid(
     // edges (nearly parallel roof lines a fraction of a cell apart) leave slivers its point
     // location cannot walk; such a roof is built again without its lines, its ridges then kept
     // only as far as the refinement's vertices keep them.
+    let lines_dropped = std::cell::Cell::new(false);
     let shell_of = |poly: &Polygon, roof_lines: bool| {
         let build = |lines: bool| {
             std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -409,7 +438,10 @@ fn solid(
         let failed = || Err("the roof's triangulation failed inside spade".to_string());
         match build(roof_lines) {
             Ok(made) => made,
-            Err(_) if roof_lines => build(false).unwrap_or_else(|_| failed()),
+            Err(_) if roof_lines => {
+                lines_dropped.set(true);
+                build(false).unwrap_or_else(|_| failed())
+            }
             Err(_) => failed(),
         }
     };
@@ -418,12 +450,14 @@ fn solid(
     for roof_lines in [true, false] {
         for outline in &candidates {
             let mut mesh = crate::artifact::Mesh::default();
+            lines_dropped.set(!roof_lines);
             let built: Result<(), String> = outline.iter().try_for_each(|poly| {
                 mesh.append(&shell_of(poly, roof_lines)?);
                 Ok(())
             });
             match built.and_then(|()| check_solid(&mesh).map(|_| ())) {
-                Ok(()) => return Ok(mesh),
+                Ok(()) if lines_dropped.get() => return Ok((mesh, Roof::WithoutLines)),
+                Ok(()) => return Ok((mesh, Roof::WithLines)),
                 Err(e) if roof_lines => last_error = e,
                 Err(_) => {}
             }
