@@ -37,18 +37,7 @@ fn views_params(seed: u64, noisy: bool) -> SynthViewsParams {
         depth_offset_m: 1.0,
         ..Default::default()
     };
-    if noisy {
-        return p;
-    }
-    SynthViewsParams {
-        pose_noise_m: 0.0,
-        height_noise_m: 0.0,
-        heading_noise_deg: 0.0,
-        pitch_noise_deg: 0.0,
-        roll_noise_deg: 0.0,
-        focal_noise: 0.0,
-        ..p
-    }
+    if noisy { p } else { p.with_true_poses() }
 }
 
 fn heading(p: &Pose) -> f64 {

@@ -52,15 +52,7 @@ fn demo_views() -> SynthViewsParams {
 /// The demo's label noise (5 % of (view, object) pairs reported as a random class, 10 % of
 /// instances missed) with the views' true poses.
 fn label_noise() -> SynthViewsParams {
-    SynthViewsParams {
-        pose_noise_m: 0.0,
-        height_noise_m: 0.0,
-        heading_noise_deg: 0.0,
-        pitch_noise_deg: 0.0,
-        roll_noise_deg: 0.0,
-        focal_noise: 0.0,
-        ..demo_views()
-    }
+    demo_views().with_true_poses()
 }
 
 fn site(views: SynthViewsParams) -> Site {

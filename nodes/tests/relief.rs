@@ -191,15 +191,7 @@ fn demo_views() -> SynthViewsParams {
 
 /// `p` with the reported poses and focal lengths the true ones (every other error kept).
 fn true_poses(p: SynthViewsParams) -> SynthViewsParams {
-    SynthViewsParams {
-        pose_noise_m: 0.0,
-        height_noise_m: 0.0,
-        heading_noise_deg: 0.0,
-        pitch_noise_deg: 0.0,
-        roll_noise_deg: 0.0,
-        focal_noise: 0.0,
-        ..p
-    }
+    p.with_true_poses()
 }
 
 fn make_site(views: SynthViewsParams) -> Site {

@@ -140,6 +140,20 @@ impl Default for SynthViewsParams {
 }
 
 impl SynthViewsParams {
+    /// The same views with their true poses and focal lengths reported (every other sensor
+    /// error kept): where the views were taken, to judge a registration against.
+    pub fn with_true_poses(self) -> SynthViewsParams {
+        SynthViewsParams {
+            pose_noise_m: 0.0,
+            height_noise_m: 0.0,
+            heading_noise_deg: 0.0,
+            pitch_noise_deg: 0.0,
+            roll_noise_deg: 0.0,
+            focal_noise: 0.0,
+            ..self
+        }
+    }
+
     /// Views with every error off: exact depth, normals, masks, materials, poses and focal
     /// length (an oracle, for tests that isolate one stage's own error).
     pub fn exact() -> Self {
