@@ -170,16 +170,11 @@ impl SynthViewsParams {
             instance_spurious: 0.0,
             instance_merge: 0.0,
             class_confusion: 0.0,
-            pose_noise_m: 0.0,
-            height_noise_m: 0.0,
-            heading_noise_deg: 0.0,
-            pitch_noise_deg: 0.0,
-            roll_noise_deg: 0.0,
-            focal_noise: 0.0,
             material_error: 0.0,
             instance_miss: 0.0,
             ..Default::default()
         }
+        .with_true_poses()
     }
 }
 
