@@ -39,7 +39,7 @@ use crate::stage::{Progress, StageError};
 
 use consensus::{Consensus, OthersSay, Pool};
 use labels::{Sample, Seen, edges, samples, strides};
-use twin::{Turn, Twin, score, shown_by_triangle};
+use twin::{Turn, Twin, scores, shown_by_triangle};
 
 /// Knobs of the refinement.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -273,16 +273,16 @@ const MOVES: usize = 3;
 /// One candidate: (dx, dy, yaw radians, dz, pitch radians, relative focal change, roll radians).
 type Candidate = [f64; 7];
 
-/// The best of `candidates` by agreement, ties to the smallest move (then the first listed), so
-/// a flat score leaves the pose alone.
+/// The best of `candidates` by agreement (`agreements`, in the same order), ties to the
+/// smallest move (then the first listed), so a flat score leaves the pose alone.
 fn best_of(
     candidates: &[Candidate],
-    eval: &dyn Fn(Candidate) -> f64,
+    agreements: &[f64],
     p: &RegistrationParams,
 ) -> (Candidate, f64) {
     let mut best = (candidates[0], f64::NEG_INFINITY);
-    for &cand in candidates {
-        let s = eval(cand) - p.prior(&cand);
+    for (&cand, &a) in candidates.iter().zip(agreements) {
+        let s = a - p.prior(&cand);
         if !s.is_finite() {
             continue;
         }
@@ -431,25 +431,43 @@ struct ScoredPoses<'a> {
 impl ScoredPoses<'_> {
     /// The agreement of candidate `c` on lattice `lattice`.
     fn at(&self, lattice: usize, c: Candidate) -> f64 {
-        let key = (lattice, c.map(f64::to_bits));
-        if let Some(&s) = self.scored.borrow().get(&key) {
-            return s;
+        self.at_all(lattice, &[c])[0]
+    }
+
+    /// The agreements of `candidates` on lattice `lattice`, in order: those not scored before
+    /// are cast together (see [`scores`]).
+    fn at_all(&self, lattice: usize, candidates: &[Candidate]) -> Vec<f64> {
+        let key = |c: &Candidate| (lattice, c.map(f64::to_bits));
+        let mut fresh: Vec<Candidate> = Vec::new();
+        {
+            let scored = self.scored.borrow();
+            for c in candidates {
+                if !scored.contains_key(&key(c)) && !fresh.iter().any(|f| key(f) == key(c)) {
+                    fresh.push(*c);
+                }
+            }
         }
-        let view = self.view;
-        let pos = [
-            view.pose.position[0] + c[0],
-            view.pose.position[1] + c[1],
-            view.pose.position[2] + c[3],
-        ];
-        let s = score(
-            &self.lattices[lattice],
-            self.twin,
-            self.consensus,
-            pos,
-            Turn::of(&view.pose, c),
-        );
-        self.scored.borrow_mut().insert(key, s);
-        s
+        if !fresh.is_empty() {
+            let view = self.view;
+            let poses: Vec<([f64; 3], Turn)> = fresh
+                .iter()
+                .map(|c| {
+                    let pos = [
+                        view.pose.position[0] + c[0],
+                        view.pose.position[1] + c[1],
+                        view.pose.position[2] + c[3],
+                    ];
+                    (pos, Turn::of(&view.pose, *c))
+                })
+                .collect();
+            let s = scores(&self.lattices[lattice], self.twin, self.consensus, &poses);
+            let mut scored = self.scored.borrow_mut();
+            for (c, s) in fresh.iter().zip(s) {
+                scored.insert(key(c), s);
+            }
+        }
+        let scored = self.scored.borrow();
+        candidates.iter().map(|c| scored[&key(c)]).collect()
     }
 }
 
@@ -495,10 +513,12 @@ fn search_starts(
     match start {
         Some(c) => vec![(c, 2)],
         None => {
+            let agreements = poses.at_all(ON_COARSE, &grid);
             let mut ranked: Vec<(f64, usize)> = grid
                 .iter()
+                .zip(agreements)
                 .enumerate()
-                .map(|(k, c)| (poses.at(ON_COARSE, *c) - p.prior(c), k))
+                .map(|(k, (c, a))| (a - p.prior(c), k))
                 .filter(|(s, _)| s.is_finite())
                 .collect();
             ranked.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
@@ -547,7 +567,7 @@ fn pattern_search(
         for _ in 0..MOVES {
             let around = moves_around(here, sm, sr, axes, steps.search_rad, p);
             let lattice = (level as usize + 1).min(ON_FINEST);
-            let next = best_of(&around, &|c| poses.at(lattice, c), p).0;
+            let next = best_of(&around, &poses.at_all(lattice, &around), p).0;
             if next == here {
                 break;
             }

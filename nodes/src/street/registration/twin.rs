@@ -23,36 +23,64 @@ pub(super) struct Twin<'a> {
     pub(super) max_range: f32,
 }
 
-/// The agreement share (-1 to 1) with the camera at `position` turned by `turn`: the silhouettes (building, sky, ground) per sample, plus, for neighbouring
-/// samples that show a wall in the view and a building in the twin, whether both say the same
-/// about the two being one building or two (a party wall between row houses is where a flat
-/// street front tells where along it the camera stood).
-pub(super) fn score(
+/// The agreement shares (-1 to 1) of the camera at each of `poses` (a position and a turn of
+/// the reported camera): per pose, the silhouettes (building, sky, ground) per sample, plus,
+/// for neighbouring samples that show a wall in the view and a building in the twin, whether
+/// both say the same about the two being one building or two (a party wall between row houses
+/// is where a flat street front tells where along it the camera stood).
+///
+/// The poses are cast together, sample by sample: one pixel's rays under the poses a pattern
+/// search compares lie within centimetres and hundredths of a degree of each other, the most
+/// coherent packet there is, so the BVH's inner nodes are tested once for all of them. Each
+/// ray's hit is what it would be cast alone (`WideBvh::closest_packet`), so each pose's score
+/// is too.
+pub(super) fn scores(
     samples: &[Sample],
     twin: &Twin,
     consensus: Option<&OthersSay>,
-    position: [f64; 3],
-    turn: Turn,
-) -> f64 {
-    let origin = position.map(|v| v as f32);
-    let (mut total, mut counted) = (0i64, 0i64);
-    let rays: Vec<([f32; 3], [f32; 3])> = samples
-        .iter()
-        .map(|smp| (origin, turn.apply(smp.dir).map(|v| v as f32)))
-        .collect();
-    // A tile's samples are a packet: near an edge a tile holds a fraction of a packet, and a
-    // packet of several tiles spreads too wide to be cast as one.
+    poses: &[([f64; 3], Turn)],
+) -> Vec<f64> {
+    let m = poses.len();
+    let mut rays: Vec<([f32; 3], [f32; 3])> = Vec::with_capacity(samples.len() * m);
+    for smp in samples {
+        for (position, turn) in poses {
+            rays.push((
+                position.map(|v| v as f32),
+                turn.apply(smp.dir).map(|v| v as f32),
+            ));
+        }
+    }
+    // A tile's samples under every pose are a run: near an edge a tile holds a fraction of a
+    // packet, and a packet of several tiles spreads too wide to be cast as one.
     let runs: Vec<u32> = samples
         .chunk_by(|a, b| a.tile == b.tile)
-        .map(|run| run.len() as u32)
+        .map(|run| (run.len() * m) as u32)
         .collect();
     let hits = twin
         .rays
         .cast_runs_index(&rays, &runs, 1e-3, twin.max_range);
+    (0..m)
+        .map(|j| {
+            let pose_hits = (0..samples.len()).map(|i| (rays[i * m + j].1, hits[i * m + j]));
+            tally(samples, twin, consensus, poses[j].0, pose_hits)
+        })
+        .collect()
+}
+
+/// One pose's agreement share from its rays' directions and hits, in sample order (NaN when
+/// no sample counts).
+fn tally(
+    samples: &[Sample],
+    twin: &Twin,
+    consensus: Option<&OthersSay>,
+    position: [f64; 3],
+    hits: impl Iterator<Item = ([f32; 3], Option<(f32, u32)>)>,
+) -> f64 {
+    let (mut total, mut counted) = (0i64, 0i64);
     let shown: Vec<Shown> = samples
         .iter()
-        .zip(rays.iter().zip(hits))
-        .map(|(smp, (&(_, dir), hit))| {
+        .zip(hits)
+        .map(|(smp, (dir, hit))| {
             let sh = match hit {
                 None => Shown {
                     rendered: Rendered::Sky,
