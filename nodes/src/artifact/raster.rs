@@ -159,6 +159,21 @@ impl Raster {
         z.is_finite().then_some(z)
     }
 
+    /// The cells whose centres lie in `window` (x0, y0, x1, y1), on this raster's lattice; None
+    /// when there are none.
+    pub fn cropped(&self, window: (f64, f64, f64, f64)) -> Option<Raster> {
+        let (grid, col0, row0) = self.grid.crop(window)?;
+        let mut data = Vec::with_capacity(grid.len());
+        for row in row0..row0 + grid.height {
+            let start = row as usize * self.grid.width as usize + col0 as usize;
+            data.extend_from_slice(&self.data[start..start + grid.width as usize]);
+        }
+        Some(Raster {
+            grid,
+            data: PodVec(data),
+        })
+    }
+
     /// Rows as slices.
     pub fn rows(&self) -> std::slice::ChunksExact<'_, f32> {
         self.data.chunks_exact(self.grid.width.max(1) as usize)

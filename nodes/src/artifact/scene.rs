@@ -198,6 +198,52 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// The part of the scene whose horizontal bounds meet the box from `lo` to `hi` (x, y; the
+    /// east and north edges out, as a site window's), object by object in their order: an object for which `whole` says yes is kept whole when any of its
+    /// triangles meets the box (a building is not cut open), the others are cut to the
+    /// triangles that meet it (a city's terrain is one object).
+    pub fn near(
+        &self,
+        lo: (f64, f64),
+        hi: (f64, f64),
+        whole: impl Fn(&SceneObject) -> bool,
+    ) -> Scene {
+        let meets = |ps: &[[f32; 3]; 3]| {
+            let (mut a, mut b) = (
+                (f64::INFINITY, f64::INFINITY),
+                (f64::NEG_INFINITY, f64::NEG_INFINITY),
+            );
+            for p in ps {
+                a = (a.0.min(p[0] as f64), a.1.min(p[1] as f64));
+                b = (b.0.max(p[0] as f64), b.1.max(p[1] as f64));
+            }
+            a.0 < hi.0 && b.0 >= lo.0 && a.1 < hi.1 && b.1 >= lo.1
+        };
+        let corners = |m: &Mesh, t: &[u32; 3]| t.map(|i| m.positions[i as usize]);
+        Scene {
+            objects: self
+                .objects
+                .iter()
+                .filter_map(|o| {
+                    let mesh = if whole(o) {
+                        o.mesh
+                            .triangles
+                            .iter()
+                            .any(|t| meets(&corners(&o.mesh, t)))
+                            .then(|| o.mesh.clone())?
+                    } else {
+                        o.mesh.select_triangles(meets)
+                    };
+                    (!mesh.is_empty()).then(|| SceneObject {
+                        id: o.id.clone(),
+                        class: o.class,
+                        mesh,
+                    })
+                })
+                .collect(),
+        }
+    }
+
     /// [`Mesh::check`] for every object, the place naming the object.
     pub fn check(&self) -> Result<(), (String, String)> {
         for o in &self.objects {
@@ -206,5 +252,50 @@ impl Scene {
                 .map_err(|(place, m)| (format!("object {:?}, {place}", o.id), m))?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two triangles side by side along x, 0-10 m and 10-20 m (a quad each half).
+    fn strip(id: &str, class: ObjectClass, x0: f32) -> SceneObject {
+        SceneObject {
+            id: id.into(),
+            class,
+            mesh: Mesh {
+                positions: PodVec(vec![
+                    [x0, 0.0, 0.0],
+                    [x0 + 10.0, 0.0, 0.0],
+                    [x0 + 10.0, 10.0, 0.0],
+                    [x0 + 20.0, 10.0, 0.0],
+                ]),
+                triangles: PodVec(vec![[0, 1, 2], [1, 3, 2]]),
+                materials: PodVec(vec![0, 1]),
+            },
+        }
+    }
+
+    #[test]
+    fn near_keeps_whole_what_it_is_told_and_cuts_the_rest() {
+        let scene = Scene {
+            objects: vec![
+                strip("ground", ObjectClass::Terrain, 0.0),
+                strip("house", ObjectClass::Building, 0.0),
+                strip("far", ObjectClass::Building, 100.0),
+            ],
+        };
+        // A box over x 0-5: only the first triangle of each strip at 0 meets it.
+        let near = scene.near((0.0, 0.0), (5.0, 5.0), |o| o.class == ObjectClass::Building);
+        let ids: Vec<&str> = near.objects.iter().map(|o| o.id.as_str()).collect();
+        assert_eq!(ids, ["ground", "house"]);
+        assert_eq!(near.objects[0].mesh.triangles.len(), 1);
+        assert_eq!(near.objects[0].mesh.positions.len(), 3);
+        assert_eq!(near.objects[1].mesh, scene.objects[1].mesh);
+        // The east and north edges are out, as a window's: a box ending where a strip begins
+        // does not take it.
+        let before = scene.near((-10.0, 0.0), (0.0, 5.0), |_| true);
+        assert!(before.objects.is_empty());
     }
 }

@@ -32,11 +32,31 @@ impl MapPlane {
     /// The surface `height_m` above `terrain`, over `grid`: the terrain meshed at the grid's
     /// cell size and lifted.
     pub fn above_terrain(grid: Grid, terrain: &Raster, height_m: f64) -> Result<MapPlane, String> {
-        let mut mesh = crate::geom::terrain_mesh::terrain_mesh(
+        let mesh = crate::geom::terrain_mesh::terrain_mesh(
             terrain,
             grid.cell_m,
             crate::artifact::Material::MediumDryGround,
         )?;
+        Ok(MapPlane::lifted(grid, mesh, height_m))
+    }
+
+    /// [`MapPlane::above_terrain`] for a window of the map's lattice: the terrain meshed
+    /// under `grid` alone ([`crate::geom::terrain_mesh::terrain_mesh_over`]).
+    pub fn above_terrain_over(
+        grid: Grid,
+        terrain: &Raster,
+        height_m: f64,
+    ) -> Result<MapPlane, String> {
+        let mesh = crate::geom::terrain_mesh::terrain_mesh_over(
+            terrain,
+            grid,
+            crate::artifact::Material::MediumDryGround,
+        )?;
+        Ok(MapPlane::lifted(grid, mesh, height_m))
+    }
+
+    /// The surface of `mesh` lifted by `height_m`, its crossings binned on `grid`.
+    fn lifted(grid: Grid, mut mesh: crate::artifact::Mesh, height_m: f64) -> MapPlane {
         for p in mesh.positions.iter_mut() {
             p[2] += height_m as f32;
         }
@@ -47,11 +67,11 @@ impl MapPlane {
                 mesh,
             }],
         };
-        Ok(MapPlane {
+        MapPlane {
             grid,
             z: f64::NAN,
             lifted: Some(crate::geom::raycast::SceneRays::new(&scene)),
-        })
+        }
     }
 
     /// Each crossing of the surface by the segment `o + t d`, t in (EPS, t_end), in order.

@@ -12,10 +12,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::Material;
-use crate::artifact::{ArtifactType, ObjectClass, PointSet, Scene, SceneObject};
+use crate::artifact::{ArtifactType, ObjectClass, PointSet, Scene};
 use crate::geom::raycast::SceneRays;
 use crate::rng::{gaussian, mix, unit};
-use crate::site::Window;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`SynthLidar`].
@@ -245,7 +244,9 @@ pub fn survey(scene: &Scene, p: &SynthLidarParams, ctx: &Ctx) -> Result<PointSet
     let cropped;
     let scene = match window {
         Some(w) => {
-            cropped = objects_near(scene, w.grown(1.5 * half_swath + step));
+            let near = w.grown(1.5 * half_swath + step);
+            // Cut to the triangles: the pulses aimed into the window reach nothing cut away.
+            cropped = scene.near(near.min, near.max, |_| false);
             &cropped
         }
         None => scene,
@@ -311,34 +312,6 @@ pub fn survey(scene: &Scene, p: &SynthLidarParams, ctx: &Ctx) -> Result<PointSet
         }
     }
     Ok(ps)
-}
-
-/// The triangles of `scene` whose horizontal bounds meet `w`, object by object in their order
-/// (a city's terrain is one object: its BVH would be the city's, not the tile's).
-fn objects_near(scene: &Scene, w: Window) -> Scene {
-    let meets = |ps: &[[f32; 3]; 3]| {
-        let lo = ps.iter().fold((f64::INFINITY, f64::INFINITY), |m, p| {
-            (m.0.min(p[0] as f64), m.1.min(p[1] as f64))
-        });
-        let hi = ps
-            .iter()
-            .fold((f64::NEG_INFINITY, f64::NEG_INFINITY), |m, p| {
-                (m.0.max(p[0] as f64), m.1.max(p[1] as f64))
-            });
-        w.meets(lo, hi)
-    };
-    Scene {
-        objects: scene
-            .objects
-            .iter()
-            .map(|o| SceneObject {
-                id: o.id.clone(),
-                class: o.class,
-                mesh: o.mesh.select_triangles(meets),
-            })
-            .filter(|o| !o.mesh.is_empty())
-            .collect(),
-    }
 }
 
 fn trace_pulse(

@@ -3,7 +3,7 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Grid, Raster, Scene};
+use crate::artifact::{ArtifactType, Grid, ObjectClass, Raster, Scene};
 use crate::rf::antenna::Antenna;
 use crate::rf::gpu::{Device, map_unavailable, radio_map_on};
 use crate::rf::map_plane::{MapPlane, default_plane};
@@ -38,6 +38,16 @@ pub struct RadioMapParams {
     /// none: it is ITU-R P.527 soil there (`rf::materials`).
     #[serde(default)]
     pub extrapolate: bool,
+    /// How far the transmitter's work reaches, metres: when set, the map covers only the cells
+    /// within this distance of the transmitter along each axis (a square centred on it), and
+    /// the tracer sees only what meets that square (buildings and other objects whole, the
+    /// terrain cut to it). A city's transmitters then each trace a bounded part of it, in
+    /// memory and time independent of the city's size. A path that leaves the square before
+    /// reaching a cell in it (a reflection off a building beyond it) is not traced: choose the
+    /// reach where the signal no longer matters (past the noise floor, or the next cell's
+    /// edge). Default none: the whole scene and the whole terrain's extent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reach_m: Option<f64>,
     /// Where to trace: `cpu` (default) or `cuda` (an NVIDIA GPU, a build with feature `cuda`).
     /// Part of the cache key when not `cpu` (a GPU map may differ from the CPU's in the last
     /// bits); a `cpu` map keeps the key it had before the parameter existed.
@@ -178,6 +188,14 @@ impl Stage for RadioMap {
                 "expected a finite height in metres",
             ));
         }
+        if let Some(r) = p.reach_m
+            && !(r > 0.0 && r <= MAX_REACH_M)
+        {
+            return Err(ParamError::new(
+                "reach_m",
+                format!("expected a distance above 0 and at most {MAX_REACH_M} m, got {r}"),
+            ));
+        }
         crate::rf::antenna::check_antenna("antenna", &p.antenna)?;
         crate::params::check_cell(Some(p.cell_m))?;
         if !p.cell_m.is_finite() {
@@ -195,21 +213,23 @@ impl Stage for RadioMap {
         }
         let scene: &Scene = inputs.one("scene")?;
         let terrain: Option<&Raster> = inputs.optional("terrain")?;
-        let rf = RfScene::new(scene, p.freq_hz, p.extrapolate).map_err(StageError::Failed)?;
-        // The map's cells, from the extent it covers and cell_m, are checked before the map
-        // (and the tracer's per-cell accumulators) are allocated.
-        let (w, h) = match terrain {
-            Some(t) => (
-                (t.grid.width as f64 * t.grid.cell_m / p.cell_m).ceil(),
-                (t.grid.height as f64 * t.grid.cell_m / p.cell_m).ceil(),
-            ),
-            None => (
-                ((rf.bounds.1.x - rf.bounds.0.x) / p.cell_m).ceil().max(1.0),
-                ((rf.bounds.1.y - rf.bounds.0.y) / p.cell_m).ceil().max(1.0),
-            ),
+        // The square the transmitter's work is bounded to, if any.
+        let window = p
+            .reach_m
+            .map(|r| (p.tx.0 - r, p.tx.1 - r, p.tx.0 + r, p.tx.1 + r));
+        let near;
+        let scene = match window {
+            Some((x0, y0, x1, y1)) => {
+                near = scene.near((x0, y0), (x1, y1), |o| o.class != ObjectClass::Terrain);
+                &near
+            }
+            None => scene,
         };
-        // Path gain and hit counts per cell, as f64: 16 bytes each.
-        crate::params::check_cells(w, h, 16).map_err(|m| {
+        let rf = RfScene::new(scene, p.freq_hz, p.extrapolate).map_err(StageError::Failed)?;
+        let grid = map_grid(p, terrain, &rf, window)?;
+        // The map's cells are checked before the map (and the tracer's per-cell accumulators:
+        // path gain and hit counts, as f64, 16 bytes each) are allocated.
+        crate::params::check_cells(grid.width as f64, grid.height as f64, 16).map_err(|m| {
             StageError::Param(ParamError::new(
                 "cell_m",
                 format!("{m}; use a coarser cell"),
@@ -217,26 +237,23 @@ impl Stage for RadioMap {
         })?;
         let (plane, tx) = match terrain {
             Some(t) => {
-                let tg = t.grid;
-                let grid = Grid {
-                    cell_m: p.cell_m,
-                    width: (tg.width as f64 * tg.cell_m / p.cell_m).ceil() as u32,
-                    height: (tg.height as f64 * tg.cell_m / p.cell_m).ceil() as u32,
-                    ..tg
-                };
                 let ground = t.bilinear(p.tx.0, p.tx.1).ok_or_else(|| {
                     StageError::Failed(format!(
                         "the transmitter at ({}, {}) is off the terrain",
                         p.tx.0, p.tx.1
                     ))
                 })?;
+                let plane = match window {
+                    Some(_) => MapPlane::above_terrain_over(grid, t, p.height_m),
+                    None => MapPlane::above_terrain(grid, t, p.height_m),
+                };
                 (
-                    MapPlane::above_terrain(grid, t, p.height_m).map_err(StageError::Failed)?,
+                    plane.map_err(StageError::Failed)?,
                     DVec3::new(p.tx.0, p.tx.1, ground + p.tx.2),
                 )
             }
             None => (
-                default_plane(&rf, p.cell_m, p.height_m),
+                MapPlane::plane(grid, p.height_m),
                 DVec3::new(p.tx.0, p.tx.1, p.tx.2),
             ),
         };
@@ -244,6 +261,66 @@ impl Stage for RadioMap {
         let map = radio_map_on(p.device, &rf, tx, &p.antenna, &plane, &options, p.freq_hz)
             .map_err(|e| StageError::Param(ParamError::new("device", e)))?;
         Ok(crate::rf::radiomap::to_db(&map))
+    }
+}
+
+/// The most `reach_m` may be, metres: a transmitter's reach, not a country.
+const MAX_REACH_M: f64 = 100_000.0;
+
+/// The map's cells: the terrain's extent on a lattice of `cell_m` from its north-west corner
+/// (without a terrain, the scene's horizontal bounds, centred), cut to `window` when the
+/// transmitter's reach bounds it.
+fn map_grid(
+    p: &RadioMapParams,
+    terrain: Option<&Raster>,
+    rf: &RfScene,
+    window: Option<(f64, f64, f64, f64)>,
+) -> Result<Grid, StageError> {
+    let full = match terrain {
+        Some(t) => {
+            let tg = t.grid;
+            let (w, h) = (
+                (tg.width as f64 * tg.cell_m / p.cell_m).ceil(),
+                (tg.height as f64 * tg.cell_m / p.cell_m).ceil(),
+            );
+            crate::params::check_cells(w, h, 16).map_err(|m| {
+                StageError::Param(ParamError::new(
+                    "cell_m",
+                    format!("{m}; use a coarser cell"),
+                ))
+            })?;
+            Grid {
+                cell_m: p.cell_m,
+                width: w as u32,
+                height: h as u32,
+                ..tg
+            }
+        }
+        None => {
+            let (lo, hi) = rf.bounds;
+            let (w, h) = (
+                ((hi.x - lo.x) / p.cell_m).ceil().max(1.0),
+                ((hi.y - lo.y) / p.cell_m).ceil().max(1.0),
+            );
+            crate::params::check_cells(w, h, 16).map_err(|m| {
+                StageError::Param(ParamError::new(
+                    "cell_m",
+                    format!("{m}; use a coarser cell"),
+                ))
+            })?;
+            default_plane(rf, p.cell_m, p.height_m).grid
+        }
+    };
+    match window {
+        None => Ok(full),
+        Some(w) => full.crop(w).map(|(g, _, _)| g).ok_or_else(|| {
+            StageError::Failed(format!(
+                "no cell of the map lies within reach_m = {} m of the transmitter at ({}, {})",
+                p.reach_m.unwrap_or_default(),
+                p.tx.0,
+                p.tx.1
+            ))
+        }),
     }
 }
 
@@ -387,6 +464,7 @@ mod tests {
             options: MapOptions::default(),
             antenna: Antenna::default(),
             extrapolate: false,
+            reach_m: None,
             device: Device::Cpu,
         };
         let s = site();
@@ -399,5 +477,75 @@ mod tests {
             "{} vs {friis}",
             map.at(35, 20)
         );
+    }
+
+    /// The map of a transmitter whose reach bounds it: the cells within `reach_m` of it along
+    /// each axis, on the unbounded map's lattice, with the unbounded map's values where every
+    /// object lies within the reach (the bound cuts work, not physics it keeps).
+    #[test]
+    fn a_reach_bounds_the_map_to_the_cells_within_it() {
+        use crate::artifact::{Material, SceneObject};
+        use crate::geom::mesh_build::cuboid;
+        let building = |id: &str, c: [f64; 2]| SceneObject {
+            id: id.into(),
+            class: ObjectClass::Building,
+            mesh: cuboid(c, [12.0, 8.0, 15.0], 0.3, 12.0, Material::Concrete),
+        };
+        let scene = Scene {
+            objects: vec![building("a", [120.0, 110.0]), building("b", [80.0, 85.0])],
+        };
+        let inputs = Inputs::new()
+            .with("scene", Slot::One(Arc::new(Artifact::Scene(scene))))
+            .with(
+                "terrain",
+                Slot::Optional(Some(Arc::new(Artifact::Raster(flat(12.0))))),
+            );
+        let p = RadioMapParams {
+            tx: (101.0, 99.0, 30.0),
+            freq_hz: 3.5e9,
+            cell_m: 5.0,
+            height_m: 1.5,
+            options: MapOptions {
+                rays: 200_000,
+                ..MapOptions::default()
+            },
+            antenna: Antenna::default(),
+            extrapolate: false,
+            reach_m: None,
+            device: Device::Cpu,
+        };
+        let s = site();
+        let full = RadioMap::run(&p, &inputs, &Ctx::new(&s, &[])).unwrap();
+        let bounded = RadioMapParams {
+            reach_m: Some(48.0),
+            ..p.clone()
+        };
+        let near = RadioMap::run(&bounded, &inputs, &Ctx::new(&s, &[])).unwrap();
+        // Cells whose centres lie within 48 m of x = 101, y = 99 on the 5 m lattice from
+        // (0, 200): columns 11-29 (centres x 57.5-147.5), rows 11-29 (centres y 142.5-52.5).
+        let g = near.grid;
+        assert_eq!((g.cell_m, g.width, g.height), (5.0, 19, 19));
+        assert_eq!((g.x0, g.y0), (55.0, 145.0));
+        let mut compared = 0;
+        for row in 0..g.height {
+            for col in 0..g.width {
+                let (x, y) = g.center(col, row);
+                let (fc, fr) = full.grid.cell_of(x, y).unwrap();
+                let (a, b) = (near.at(col, row), full.at(fc, fr));
+                assert_eq!(a.is_nan(), b.is_nan(), "cell ({x}, {y}): {a} vs {b}");
+                if a.is_finite() {
+                    assert!((a - b).abs() < 0.01, "cell ({x}, {y}): {a} vs {b}");
+                    compared += 1;
+                }
+            }
+        }
+        assert!(compared > 300, "{compared} cells compared");
+        for bad in [0.0, -5.0, f64::NAN, f64::INFINITY, 2e5] {
+            let q = RadioMapParams {
+                reach_m: Some(bad),
+                ..p.clone()
+            };
+            assert_eq!(RadioMap::validate(&q).unwrap_err().field, "reach_m");
+        }
     }
 }
