@@ -122,7 +122,7 @@ impl Stage for Coverage {
         InputSpec::many(
             "maps",
             ArtifactType::Raster,
-            "path gain (dB, NaN where no ray arrived) of each transmitter, on one grid, in the order of `transmitters` (RadioMap)",
+            "path gain (dB, NaN where no ray arrived) of each transmitter, on one lattice (one grid, or each cut to its transmitter's reach), in the order of `transmitters` (RadioMap)",
         ),
         InputSpec::optional(
             "offsets",
@@ -248,6 +248,60 @@ fn mw(dbm: f64) -> f64 {
     10f64.powf(dbm / 10.0)
 }
 
+/// The grid covering every map of `maps` and each map's offset in it (columns, rows): the maps
+/// must lie on one lattice (the same cell size, corners whole cells apart), as the maps of one
+/// terrain are whether or not a reach bounds them. Maps on one grid give that grid.
+fn common_lattice(
+    p: &CoverageParams,
+    maps: &[&Raster],
+) -> Result<(Grid, Vec<(i64, i64)>), StageError> {
+    let first = maps[0].grid;
+    let c = first.cell_m;
+    let mut offsets = Vec::with_capacity(maps.len());
+    for (k, m) in maps.iter().enumerate() {
+        if m.data.len() != m.grid.len() {
+            return Err(StageError::Failed(format!(
+                "maps #{k} has {} values for {} cells",
+                m.data.len(),
+                m.grid.len()
+            )));
+        }
+        let g = m.grid;
+        let (dc, dr) = ((g.x0 - first.x0) / c, (first.y0 - g.y0) / c);
+        let whole = |v: f64| v.is_finite() && (v - v.round()).abs() < 1e-6;
+        if g.cell_m != c || !whole(dc) || !whole(dr) {
+            return Err(StageError::Failed(format!(
+                "maps #{k} ({}) is on grid {g:?}, maps #0 ({}) on {first:?}: every map must lie on one lattice (the same terrain or scene, cell_m and height; a reach may cut each to its own extent)",
+                p.transmitters[k].id, p.transmitters[0].id
+            )));
+        }
+        offsets.push((dc.round() as i64, dr.round() as i64));
+    }
+    let (c0, r0) = offsets
+        .iter()
+        .fold((i64::MAX, i64::MAX), |(a, b), &(c, r)| (a.min(c), b.min(r)));
+    let (c1, r1) = maps
+        .iter()
+        .zip(&offsets)
+        .fold((i64::MIN, i64::MIN), |(a, b), (m, &(c, r))| {
+            (
+                a.max(c + m.grid.width as i64),
+                b.max(r + m.grid.height as i64),
+            )
+        });
+    let (width, height) = ((c1 - c0) as f64, (r1 - r0) as f64);
+    crate::params::check_cells(width, height, 4).map_err(StageError::Failed)?;
+    let grid = Grid {
+        x0: first.x0 + c0 as f64 * c,
+        y0: first.y0 - r0 as f64 * c,
+        cell_m: c,
+        width: width as u32,
+        height: height as u32,
+    };
+    let offsets = offsets.iter().map(|&(c, r)| (c - c0, r - r0)).collect();
+    Ok((grid, offsets))
+}
+
 /// The layer `p` asks for over `maps` (one per transmitter, on one grid) and its stats.
 pub fn coverage(p: &CoverageParams, maps: &[&Raster]) -> Result<(Raster, Metrics), StageError> {
     let n = p.transmitters.len();
@@ -261,22 +315,22 @@ pub fn coverage(p: &CoverageParams, maps: &[&Raster]) -> Result<(Raster, Metrics
             ),
         )));
     }
-    let grid: Grid = maps[0].grid;
-    for (k, m) in maps.iter().enumerate().skip(1) {
-        if m.grid != grid {
-            return Err(StageError::Failed(format!(
-                "maps #{k} ({}) is on grid {:?}, maps #0 ({}) on {:?}: every map must share one grid (the same terrain or scene, cell_m and height)",
-                p.transmitters[k].id, m.grid, p.transmitters[0].id, grid
-            )));
+    let (grid, offsets) = common_lattice(p, maps)?;
+    // Map k's path gain in cell i of the union, NaN where the cell lies outside its extent (a
+    // transmitter bounded by its reach neither serves nor interferes beyond it).
+    let gain = |k: usize, i: usize| -> f64 {
+        let (col, row) = (
+            (i % grid.width as usize) as i64,
+            (i / grid.width as usize) as i64,
+        );
+        let (c, r) = (col - offsets[k].0, row - offsets[k].1);
+        let g = maps[k].grid;
+        if c < 0 || r < 0 || c >= g.width as i64 || r >= g.height as i64 {
+            f64::NAN
+        } else {
+            maps[k].at(c as u32, r as u32) as f64
         }
-        if m.data.len() != grid.len() {
-            return Err(StageError::Failed(format!(
-                "maps #{k} has {} values for {} cells",
-                m.data.len(),
-                grid.len()
-            )));
-        }
-    }
+    };
     let noise_mw = mw(p.noise());
     let rsrp_of = match &p.layer {
         CoverageLayer::Rsrp(id) => p.transmitters.iter().position(|t| &t.id == id),
@@ -291,7 +345,7 @@ pub fn coverage(p: &CoverageParams, maps: &[&Raster]) -> Result<(Raster, Metrics
         // RSRP_k = EIRP_k + G_k; the best server the largest (first on a tie).
         let mut best: Option<usize> = None;
         for (k, t) in p.transmitters.iter().enumerate() {
-            let g = maps[k].data[i] as f64;
+            let g = gain(k, i);
             rsrp[k] = if g.is_finite() {
                 t.eirp_dbm + g
             } else {
@@ -619,6 +673,58 @@ mod tests {
             panic!("stats is not Metrics")
         };
         assert_eq!(m.get("cells_covered"), Some(3.0));
+    }
+
+    /// Maps each cut to its transmitter's reach (RadioMap's `reach_m`) on one lattice: the
+    /// layer covers their union, and a transmitter neither serves nor interferes outside its
+    /// map, exactly as if its map were NaN there.
+    #[test]
+    fn maps_cut_to_their_reach_cover_their_union() {
+        let whole = maps();
+        let cut = |m: &Raster, from: u32, to: u32| Raster {
+            grid: Grid {
+                x0: from as f64 * 100.0,
+                width: to - from,
+                ..grid()
+            },
+            data: PodVec(m.data[from as usize..to as usize].to_vec()),
+        };
+        // A reaches cells 0-1, B cells 0-4, C cells 3-4; the whole maps NaN where they are cut.
+        let parts = [
+            cut(&whole[0], 0, 2),
+            cut(&whole[1], 0, 5),
+            cut(&whole[2], 3, 5),
+        ];
+        let mut blanked = maps();
+        for (m, range) in blanked.iter_mut().zip([2..5, 5..5, 0..3]) {
+            for v in &mut m.data[range] {
+                *v = NAN;
+            }
+        }
+        for layer in [
+            CoverageLayer::BestRsrp,
+            CoverageLayer::BestServer,
+            CoverageLayer::Sinr,
+        ] {
+            let p = params(layer);
+            let (got, _) = coverage(&p, &parts.iter().collect::<Vec<_>>()).unwrap();
+            let (want, _) = coverage(&p, &blanked.iter().collect::<Vec<_>>()).unwrap();
+            assert_eq!(got.grid, grid());
+            same(&got.data, &want.data);
+        }
+        // A map off the lattice by half a cell is refused.
+        let mut off = parts.clone();
+        off[2].grid.x0 += 50.0;
+        let e = coverage(
+            &params(CoverageLayer::BestRsrp),
+            &off.iter().collect::<Vec<_>>(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("maps #2 (C)") && e.contains("one lattice"),
+            "{e}"
+        );
     }
 
     #[test]
