@@ -68,6 +68,10 @@ enum Command {
         /// nodes made once that tiles of phase K+1 wait for (0: the shared upstream).
         #[arg(long, value_name = "K")]
         phase: Option<u32>,
+        /// Make only the I-th radio node (RadioMap or Trace, in graph order) and what it needs:
+        /// one task of a tiled run's radio job array.
+        #[arg(long, value_name = "I", conflicts_with_all = ["tile", "phase"])]
+        radio: Option<usize>,
         /// Worker threads (default: all cores; at most 4 per core).
         #[arg(long, short, value_parser = parse_jobs)]
         jobs: Option<usize>,
@@ -574,11 +578,16 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             mut targets,
             tile,
             phase,
+            radio,
             jobs,
             json,
             quiet,
         } => {
             let g = load_graph(&graph)?;
+            if let Some(i) = radio {
+                let node = g.radio_job(i).map_err(|m| Fail(2, format!("error: {m}")))?;
+                targets.push(g.nodes[node].id.clone());
+            }
             if tile.is_some() || phase.is_some() {
                 let job = g
                     .tile_job(tile, phase)

@@ -702,6 +702,68 @@ pub fn plan_sweep(
     Ok(plan)
 }
 
+/// A tiled graph's radio work, partitioned by transmitter, not by tile: when it has two radio
+/// nodes or more (`Graph::radio_nodes`: each RadioMap bounded by its transmitter's `reach_m`),
+/// a gather job makes what they read (the merged scene and terrain, once), then a job array
+/// makes one radio node per task (`--radio I`); the merge job after them finds them cached.
+fn push_radio(
+    plan: &mut Plan,
+    graph: &crate::graph::Graph,
+    held: &std::collections::HashSet<String>,
+    last: &mut Vec<usize>,
+    base: &dyn Fn(&[&str]) -> Vec<String>,
+) -> Result<(), String> {
+    let radio = graph.radio_nodes();
+    if radio.len() < 2 {
+        return Ok(());
+    }
+    let pending: Vec<usize> = (0..radio.len())
+        .filter(|&k| !held.contains(&graph.nodes[radio[k]].id))
+        .collect();
+    if pending.is_empty() {
+        plan.notes.push(format!(
+            "radio: all {} radio nodes are in the cache already: not submitted",
+            radio.len()
+        ));
+        return Ok(());
+    }
+    let mut inputs: Vec<usize> = pending
+        .iter()
+        .flat_map(|&k| graph.nodes[radio[k]].deps.iter().copied())
+        .filter(|&d| !held.contains(&graph.nodes[d].id))
+        .collect();
+    inputs.sort_unstable();
+    inputs.dedup();
+    if !inputs.is_empty() {
+        let ids: Vec<String> = inputs.iter().map(|&i| graph.nodes[i].id.clone()).collect();
+        let words: Vec<String> = ids.iter().map(|id| quote(id)).collect::<Result<_, _>>()?;
+        let targets: Vec<&str> = words
+            .iter()
+            .flat_map(|w| ["--target", w.as_str()])
+            .collect();
+        plan.jobs.push(Job {
+            name: "gather-radio".into(),
+            what: format!("what the radio tasks read, made once: {}", list(&ids)),
+            args: base(&targets),
+            array: None,
+            after: last.clone(),
+            resources: None,
+        });
+        *last = vec![plan.jobs.len() - 1];
+    }
+    let before = plan.jobs.len();
+    push_arrays(
+        plan,
+        "radio",
+        "one radio node per array task (radio node",
+        &pending,
+        last,
+        |task| base(&["--radio", task]),
+    );
+    *last = (before..plan.jobs.len()).collect();
+    Ok(())
+}
+
 /// Job arrays over `pending` task indices, [`ARRAY_CHUNK`] at most per array (`NAME`, or
 /// `NAME-0`, `NAME-1`, ... when there are several), each after the jobs `after`; `args` makes a
 /// task's kodama-dag arguments from the shell word of its index.
@@ -893,6 +955,7 @@ pub fn plan_tiled(
             last = (before..plan.jobs.len()).collect();
         }
     }
+    push_radio(&mut plan, graph, &held, &mut last, &base)?;
     plan.jobs.push(Job {
         name: "merge".into(),
         what: "the merges, what reads them and the outputs, every tile a cache hit by now".into(),

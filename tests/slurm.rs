@@ -302,6 +302,86 @@ fn a_tiled_graph_is_prefix_tiles_and_merge() {
     );
 }
 
+/// TILED_CITY with two transmitters, each map bounded by its reach, and their best-server
+/// layer over the merged scene.
+fn tiled_city_with_radio() -> String {
+    let radio = r#"
+        "map_a": RadioMap(scene: "scene", terrain: "terrain2", tx: (150.0, 150.0, 25.0), freq_hz: 3.5e9,
+                          cell_m: 10.0, reach_m: 200.0, options: (rays: 20000)),
+        "map_b": RadioMap(scene: "scene", terrain: "terrain2", tx: (450.0, 420.0, 25.0), freq_hz: 3.5e9,
+                          cell_m: 10.0, reach_m: 200.0, options: (rays: 20000)),
+        "best":  Coverage(maps: ["map_a", "map_b"], layer: BestServer,
+                          transmitters: [CoverageTx(id: "A", freq_hz: 3.5e9), CoverageTx(id: "B", freq_hz: 3.5e9)]),
+    },
+    outputs: { "best.tif": "best" },"#;
+    let (head, _) = TILED_CITY.split_once("\n    },\n    outputs:").unwrap();
+    format!("{head}{radio}\n)\n")
+}
+
+/// A tiled graph's radio work is partitioned by transmitter: after the tiles, a gather job
+/// makes the merged scene and terrain once, a job array makes one transmitter's map per task
+/// (`--radio I`, nothing else), and the merge job finds them cached and makes the best-server
+/// layer. The scripts run by hand give the local tiled run's layer byte for byte.
+#[test]
+fn a_tiled_graphs_radio_is_one_array_task_per_transmitter() {
+    let env = Env::new();
+    let graph = tiled_city_with_radio();
+    env.write("city.ron", &graph);
+    env.cli(&[
+        "submit",
+        "city.ron",
+        "--cache",
+        "cache",
+        "--out",
+        "out",
+        "--dry-run",
+        "--tile-m",
+        "300",
+    ])
+    .ok();
+    let dir = submission(&env, 1);
+    let submit = std::fs::read_to_string(dir.join("submit.sh")).unwrap();
+    assert!(submit.contains("--array=0-1 radio.sh"), "{submit}");
+    let gather = std::fs::read_to_string(dir.join("gather-radio.sh")).unwrap();
+    assert!(
+        gather.contains(" --target terrain2 --target scene "),
+        "{gather}"
+    );
+    run_script(&dir.join("prefix.sh"), None).ok();
+    for t in 0..4 {
+        run_script(&dir.join("tiles.sh"), Some(t)).ok();
+    }
+    let gathered = run_script(&dir.join("gather-radio.sh"), None).ok();
+    assert_eq!(
+        gathered.with_status("ran"),
+        ids(&["terrain2", "solids", "scene"])
+    );
+    for (t, map) in ["map_a", "map_b"].iter().enumerate() {
+        let task = run_script(&dir.join("radio.sh"), Some(t)).ok();
+        assert_eq!(task.with_status("ran"), ids(&[map]));
+    }
+    let merge = run_script(&dir.join("merge.sh"), None).ok();
+    assert_eq!(merge.with_status("ran"), ids(&["best"]));
+    let local = Env::new();
+    local.write("city.ron", &graph);
+    local
+        .cli(&[
+            "run", "city.ron", "--cache", "cache", "--out", "out", "--quiet", "--tile-m", "300",
+        ])
+        .ok();
+    let best = |e: &Env| std::fs::read(e.path("out").join("best.tif")).unwrap();
+    assert!(
+        best(&env) == best(&local),
+        "the scripts' layer differs from a local run's"
+    );
+    // --radio names a radio node by its place; one past the last is a usage error.
+    let r = env.cli(&[
+        "run", "city.ron", "--cache", "cache", "--tile-m", "300", "--radio", "2",
+    ]);
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(r.stderr.contains("from 0 to 1, found 2"), "{}", r.stderr);
+}
+
 /// Needs Slurm. A tiled graph submitted and waited for gives the local tiled run's scene; submitted
 /// again it queues only the merge job, every tile being cached.
 #[test]

@@ -480,7 +480,37 @@ fn parse_params(
     Ok(params)
 }
 
+/// The kinds whose nodes are radio work: one transmitter's map, or a trace of links.
+pub const RADIO_KINDS: &[&str] = &["RadioMap", "Trace"];
+
 impl Graph {
+    /// The radio nodes made once (kinds [`RADIO_KINDS`]), in graph order: in a tiled run each
+    /// is one task of the radio job array (`--radio I`), its work bounded by its transmitter's
+    /// reach, not by the tiles.
+    pub fn radio_nodes(&self) -> Vec<usize> {
+        (0..self.nodes.len())
+            .filter(|&i| {
+                let n = &self.nodes[i];
+                n.tile.is_none() && RADIO_KINDS.contains(&n.kind.name)
+            })
+            .collect()
+    }
+
+    /// The node `--radio I` makes: the `i`-th of [`Graph::radio_nodes`].
+    pub fn radio_job(&self, i: usize) -> Result<usize, String> {
+        let radio = self.radio_nodes();
+        match radio.get(i) {
+            Some(&n) => Ok(n),
+            None if radio.is_empty() => Err(format!(
+                "--radio {i}: the graph has no radio node (RadioMap or Trace)"
+            )),
+            None => Err(format!(
+                "--radio: expected a radio node from 0 to {}, found {i}",
+                radio.len() - 1
+            )),
+        }
+    }
+
     /// The nodes one job of a tiled run makes: with `tile`, that tile's nodes (of `phase` only,
     /// when given); without, the nodes made once that tile jobs of the next phase wait for (those
     /// of `phase`, 0 by default: the shared upstream). What they need comes along as with
