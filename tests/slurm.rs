@@ -235,6 +235,22 @@ fn a_submitted_graph_is_one_run_job() {
     assert_eq!(by_hand.digests(), want.digests());
 }
 
+/// `submit city.ron --dry-run` in 300 m tiles, into cache/ and out/.
+fn submit_tiled_dry(env: &Env) -> Run {
+    env.cli(&[
+        "submit",
+        "city.ron",
+        "--cache",
+        "cache",
+        "--out",
+        "out",
+        "--dry-run",
+        "--tile-m",
+        "300",
+    ])
+    .ok()
+}
+
 /// The scene a local tiled run of TILED_CITY in 300 m tiles exports, from a cache of its own.
 fn local_tiled_scene(env: &Env) -> Vec<u8> {
     env.cli(&[
@@ -260,19 +276,7 @@ fn local_tiled_scene(env: &Env) -> Vec<u8> {
 fn a_tiled_graph_is_prefix_tiles_and_merge() {
     let env = Env::new();
     env.write("city.ron", TILED_CITY);
-    let r = env
-        .cli(&[
-            "submit",
-            "city.ron",
-            "--cache",
-            "cache",
-            "--out",
-            "out",
-            "--dry-run",
-            "--tile-m",
-            "300",
-        ])
-        .ok();
+    let r = submit_tiled_dry(&env);
     assert!(r.stderr.contains("4 tiles of 300 m, halo"), "{}", r.stderr);
     let dir = submission(&env, 1);
     let submit = std::fs::read_to_string(dir.join("submit.sh")).unwrap();
@@ -327,18 +331,7 @@ fn a_tiled_graphs_radio_is_one_array_task_per_transmitter() {
     let env = Env::new();
     let graph = tiled_city_with_radio();
     env.write("city.ron", &graph);
-    env.cli(&[
-        "submit",
-        "city.ron",
-        "--cache",
-        "cache",
-        "--out",
-        "out",
-        "--dry-run",
-        "--tile-m",
-        "300",
-    ])
-    .ok();
+    submit_tiled_dry(&env);
     let dir = submission(&env, 1);
     let submit = std::fs::read_to_string(dir.join("submit.sh")).unwrap();
     assert!(submit.contains("--array=0-1 radio.sh"), "{submit}");
