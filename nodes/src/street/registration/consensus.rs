@@ -47,13 +47,7 @@ impl Hasher for CellHasher {
 
 impl Consensus {
     pub(super) fn key(cell_m: f64, at: [f64; 3]) -> [i64; 3] {
-        // floor without the libm call the baseline x86-64 target makes of `f64::floor` (a
-        // twentieth of the second pass): the same integer for every cell a site can hold.
-        at.map(|v| {
-            let q = v / cell_m;
-            let i = q as i64;
-            if (i as f64) > q { i - 1 } else { i }
-        })
+        at.map(|v| floor_div(v, cell_m))
     }
 
     pub(super) fn add(&mut self, pool: &Pool) {
@@ -63,6 +57,14 @@ impl Consensus {
             c[1] += v[1];
         }
     }
+}
+
+/// floor(v / d) as an integer, for every cell a site can hold; without the libm call the
+/// baseline x86-64 target makes of `f64::floor` (a twentieth of the second pass).
+fn floor_div(v: f64, d: f64) -> i64 {
+    let q = v / d;
+    let i = q as i64;
+    if (i as f64) > q { i - 1 } else { i }
 }
 
 /// The consensus as one view may use it: without what that view itself put in.
@@ -86,10 +88,13 @@ impl<'a> OthersSay<'a> {
         }
     }
 
-    /// The majority label of the other views in the cell at `at`, if any saw it and they did not
-    /// tie.
-    pub(super) fn label_at(&self, at: [f64; 3]) -> Option<Facade> {
-        let key = Consensus::key(self.all.cell_m, at);
+    /// The cell at `at`.
+    pub(super) fn cell(&self, at: [f64; 3]) -> [i64; 3] {
+        Consensus::key(self.all.cell_m, at)
+    }
+
+    /// The majority label of the other views in cell `key`, if any saw it and they did not tie.
+    pub(super) fn label(&self, key: [i64; 3]) -> Option<Facade> {
         if let Some(&label) = self.seen.borrow().get(&key) {
             return label;
         }

@@ -513,7 +513,17 @@ fn search_starts(
     match start {
         Some(c) => vec![(c, 2)],
         None => {
-            let agreements = poses.at_all(ON_COARSE, &grid);
+            // Scored a heading at a time: one pixel's rays from the 49 positions then point the
+            // same way and start within the window, a packet; across headings they spread too
+            // wide to be one.
+            let mut agreements = vec![f64::NAN; grid.len()];
+            for heading in 0..5 {
+                let of: Vec<usize> = (heading..grid.len()).step_by(5).collect();
+                let these: Vec<Candidate> = of.iter().map(|&k| grid[k]).collect();
+                for (&k, a) in of.iter().zip(poses.at_all(ON_COARSE, &these)) {
+                    agreements[k] = a;
+                }
+            }
             let mut ranked: Vec<(f64, usize)> = grid
                 .iter()
                 .zip(agreements)

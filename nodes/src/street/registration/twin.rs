@@ -59,10 +59,13 @@ pub(super) fn scores(
     let hits = twin
         .rays
         .cast_runs_index(&rays, &runs, 1e-3, twin.max_range);
+    // Per sample, the consensus cell its last candidate's ray met and what the others say
+    // there: one pixel's rays under the candidates of a step land in one 25 cm cell mostly.
+    let mut met = vec![None; samples.len()];
     (0..m)
         .map(|j| {
             let pose_hits = (0..samples.len()).map(|i| (rays[i * m + j].1, hits[i * m + j]));
-            tally(samples, twin, consensus, poses[j].0, pose_hits)
+            tally(samples, twin, consensus, poses[j].0, pose_hits, &mut met)
         })
         .collect()
 }
@@ -75,12 +78,14 @@ fn tally(
     consensus: Option<&OthersSay>,
     position: [f64; 3],
     hits: impl Iterator<Item = ([f32; 3], Option<(f32, u32)>)>,
+    met: &mut [Option<([i64; 3], Option<Facade>)>],
 ) -> f64 {
     let (mut total, mut counted) = (0i64, 0i64);
     let shown: Vec<Shown> = samples
         .iter()
         .zip(hits)
-        .map(|(smp, (dir, hit))| {
+        .zip(met.iter_mut())
+        .map(|((smp, (dir, hit)), met)| {
             let sh = match hit {
                 None => Shown {
                     rendered: Rendered::Sky,
@@ -96,7 +101,16 @@ fn tally(
                 && smp.facade != Facade::None
             {
                 let at = std::array::from_fn(|k| position[k] + dir[k] as f64 * t as f64);
-                if let Some(f) = cons.label_at(at) {
+                let cell = cons.cell(at);
+                let label = match *met {
+                    Some((c, label)) if c == cell => label,
+                    _ => {
+                        let label = cons.label(cell);
+                        *met = Some((cell, label));
+                        label
+                    }
+                };
+                if let Some(f) = label {
                     total += if f == smp.facade { 1 } else { -1 };
                     counted += 1;
                 }
