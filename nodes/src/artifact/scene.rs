@@ -129,14 +129,7 @@ impl Mesh {
             mx += v * (a[0] + b[0] + c[0]) / 4.0;
             my += v * (a[1] + b[1] + c[1]) / 4.0;
         }
-        let (mut lo, mut hi) = (
-            (f64::INFINITY, f64::INFINITY),
-            (f64::NEG_INFINITY, f64::NEG_INFINITY),
-        );
-        for p in self.positions.iter() {
-            lo = (lo.0.min(p[0] as f64), lo.1.min(p[1] as f64));
-            hi = (hi.0.max(p[0] as f64), hi.1.max(p[1] as f64));
-        }
+        let (lo, hi) = self.plan_bounds()?;
         let (x, y) = if vol > 1e-6 {
             (o[0] + mx / vol, o[1] + my / vol)
         } else {
@@ -148,6 +141,16 @@ impl Mesh {
         } else {
             Some(((lo.0 + hi.0) / 2.0, (lo.1 + hi.1) / 2.0))
         }
+    }
+
+    /// The horizontal bounds of the vertices, ((x, y) least, (x, y) most); None without any.
+    pub fn plan_bounds(&self) -> Option<((f64, f64), (f64, f64))> {
+        let first = self.positions.first()?;
+        let start = (first[0] as f64, first[1] as f64);
+        Some(self.positions.iter().fold((start, start), |(lo, hi), p| {
+            let (x, y) = (p[0] as f64, p[1] as f64);
+            ((lo.0.min(x), lo.1.min(y)), (hi.0.max(x), hi.1.max(y)))
+        }))
     }
 
     /// Signed volume (positive for a closed, outward-oriented solid), m³.
