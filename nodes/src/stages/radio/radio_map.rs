@@ -188,14 +188,7 @@ impl Stage for RadioMap {
                 "expected a finite height in metres",
             ));
         }
-        if let Some(r) = p.reach_m
-            && !(r > 0.0 && r <= MAX_REACH_M)
-        {
-            return Err(ParamError::new(
-                "reach_m",
-                format!("expected a distance above 0 and at most {MAX_REACH_M} m, got {r}"),
-            ));
-        }
+        super::check_reach(p.reach_m)?;
         crate::rf::antenna::check_antenna("antenna", &p.antenna)?;
         crate::params::check_cell(Some(p.cell_m))?;
         if !p.cell_m.is_finite() {
@@ -263,9 +256,6 @@ impl Stage for RadioMap {
         Ok(crate::rf::radiomap::to_db(&map))
     }
 }
-
-/// The most `reach_m` may be, metres: a transmitter's reach, not a country.
-const MAX_REACH_M: f64 = 100_000.0;
 
 /// The map's cells: the terrain's extent on a lattice of `cell_m` from its north-west corner
 /// (without a terrain, the scene's horizontal bounds, centred), cut to `window` when the

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Endpoint, Measurements, Raster, Scene};
+use crate::artifact::{ArtifactType, Endpoint, Measurements, ObjectClass, Raster, Scene};
 use crate::rf::antenna::Antenna;
 use crate::rf::path::TraceOptions;
 use crate::rf::paths::trace_links;
@@ -30,6 +30,14 @@ pub struct TraceParams {
     /// Use P.2040 laws outside their frequency ranges. Default false. Ground above 10 GHz needs
     /// none: it is ITU-R P.527 soil there (`rf::materials`).
     pub extrapolate: bool,
+    /// How far the links' work reaches, metres: when set, each group of links (one carrier and
+    /// transmitter bearing) is traced through only what meets the box around its ends grown by
+    /// this much (buildings and other objects whole, the terrain cut), so a drive test across a
+    /// city traces each transmitter through its own neighbourhood. A path that leaves the box is
+    /// not traced: choose the reach beyond which nothing matters (README, "Radio, by
+    /// transmitter"). Default none: the whole scene.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reach_m: Option<f64>,
 }
 
 /// `options` of [`TraceParams`]: which interactions the links follow, and how hard the trace
@@ -146,6 +154,7 @@ impl Stage for Trace {
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         crate::rf::antenna::check_antenna("tx_antenna", &p.tx_antenna)?;
         crate::rf::antenna::check_antenna("rx_antenna", &p.rx_antenna)?;
+        super::check_reach(p.reach_m)?;
         p.options
             .trace_options()
             .check()
@@ -182,7 +191,30 @@ impl Stage for Trace {
         let options = p.options.trace_options();
         for ((f_bits, az_bits), idx) in groups {
             let freq = f64::from_bits(f_bits);
-            let rf = RfScene::new(scene, freq, p.extrapolate).map_err(StageError::Failed)?;
+            let near;
+            let traced = match p.reach_m {
+                Some(r) => {
+                    let (lo, hi) = idx.iter().fold(
+                        (
+                            (f64::INFINITY, f64::INFINITY),
+                            (f64::NEG_INFINITY, f64::NEG_INFINITY),
+                        ),
+                        |(lo, hi), &i| {
+                            let (tx, rx) = ends[i];
+                            (
+                                (lo.0.min(tx[0]).min(rx[0]), lo.1.min(tx[1]).min(rx[1])),
+                                (hi.0.max(tx[0]).max(rx[0]), hi.1.max(tx[1]).max(rx[1])),
+                            )
+                        },
+                    );
+                    near = scene.near((lo.0 - r, lo.1 - r), (hi.0 + r, hi.1 + r), |o| {
+                        o.class != ObjectClass::Terrain
+                    });
+                    &near
+                }
+                None => scene,
+            };
+            let rf = RfScene::new(traced, freq, p.extrapolate).map_err(StageError::Failed)?;
             let mut tx_antenna = p.tx_antenna;
             let az = f64::from_bits(az_bits);
             if az.is_finite() {
@@ -313,5 +345,75 @@ mod tests {
             )
             .with("links", Slot::One(Arc::new(Artifact::Measurements(out))));
         assert!(Trace::run(&TraceParams::default(), &inputs, &Ctx::new(&s, &[])).is_err());
+    }
+
+    /// With `reach_m`, a group of links is traced through what meets the box around its ends
+    /// grown by the reach, exactly as through a scene holding only that; a building beyond it,
+    /// which does change the links when traced, is left out.
+    #[test]
+    fn a_reach_traces_the_links_through_what_meets_their_box() {
+        use crate::artifact::{Material, ObjectClass, SceneObject};
+        use crate::geom::mesh_build::cuboid;
+        let building = |id: &str, c: [f64; 2]| SceneObject {
+            id: id.into(),
+            class: ObjectClass::Building,
+            mesh: cuboid(c, [30.0, 8.0, 40.0], 0.0, 12.0, Material::Concrete),
+        };
+        let (near, far) = (
+            building("near", [100.0, 120.0]),
+            building("far", [100.0, 160.0]),
+        );
+        let end = |x: f64, h: f64| Endpoint {
+            id: String::new(),
+            x,
+            y: 100.0,
+            z: Height::AboveGround(h),
+            azimuth_deg: None,
+        };
+        let links = Measurements {
+            links: vec![Link {
+                tx: end(20.0, 30.0),
+                rx: end(170.0, 1.5),
+                freq_hz: 3.5e9,
+                path_loss_db: None,
+                rx_power_dbm: None,
+                tx_eirp_dbm: None,
+                los: None,
+            }],
+        };
+        let s = site();
+        let path_loss = |objects: Vec<SceneObject>, reach_m: Option<f64>| {
+            let inputs = Inputs::new()
+                .with(
+                    "scene",
+                    Slot::One(Arc::new(Artifact::Scene(Scene { objects }))),
+                )
+                .with(
+                    "links",
+                    Slot::One(Arc::new(Artifact::Measurements(links.clone()))),
+                )
+                .with(
+                    "terrain",
+                    Slot::Optional(Some(Arc::new(Artifact::Raster(flat(12.0))))),
+                );
+            let p = TraceParams {
+                reach_m,
+                ..Default::default()
+            };
+            Trace::run(&p, &inputs, &Ctx::new(&s, &[])).unwrap().links[0]
+                .path_loss_db
+                .unwrap()
+        };
+        // The links' box is y = 100 grown by 30 m: "near" (y 116-124) meets it, "far" (156-164)
+        // does not.
+        let bounded = path_loss(vec![near.clone(), far.clone()], Some(30.0));
+        assert_eq!(bounded, path_loss(vec![near.clone()], None));
+        let whole = path_loss(vec![near, far], None);
+        assert!((whole - bounded).abs() > 0.01, "{whole} vs {bounded}");
+        let bad = TraceParams {
+            reach_m: Some(f64::NAN),
+            ..Default::default()
+        };
+        assert_eq!(Trace::validate(&bad).unwrap_err().field, "reach_m");
     }
 }
