@@ -152,51 +152,37 @@ impl BuildingSpec {
     /// slack above float rounding keeps them in).
     /// The truth for scoring what views and fusion find on a façade.
     pub fn feature_at(&self, p: [f64; 3], slack_m: f64) -> Option<usize> {
-        // The views ask this of every building pixel: the outer layer's depth is a pass over the
-        // features, so it is found only for a point behind a shallow opening's back.
-        let layer_m = std::cell::OnceCell::new();
-        self.features.iter().position(|f| {
-            // Most features are on other storeys: the height test first, before the edge's
-            // frame (views ask this of every building pixel).
-            if !(p[2] >= f.z.0 - slack_m && p[2] <= f.z.1 + slack_m) {
-                return false;
-            }
-            let ring = if f.ring == 0 {
-                &self.footprint.exterior
-            } else {
-                match self.footprint.holes.get(f.ring - 1) {
-                    Some(h) => h,
-                    None => return false,
-                }
-            };
-            if ring.len() < 2 {
-                return false;
-            }
-            let (a, c) = (ring[f.edge % ring.len()], ring[(f.edge + 1) % ring.len()]);
-            let len = (c[0] - a[0]).hypot(c[1] - a[1]);
-            if len == 0.0 {
-                return false;
-            }
-            let t = [(c[0] - a[0]) / len, (c[1] - a[1]) / len];
-            // The solid is left of every ring edge: `inward` grows into the building.
-            let d = [p[0] - a[0], p[1] - a[1]];
-            let along = d[0] * t[0] + d[1] * t[1];
-            let inward = -d[0] * t[1] + d[1] * t[0];
-            let (lo, hi) = if f.depth_m < 0.0 {
-                let own = -f.depth_m;
-                if inward <= own + slack_m {
-                    (0.0, own)
+        self.facades().feature_at(p, slack_m)
+    }
+
+    /// The façade features ready for many [`Facades::feature_at`] queries: each feature's edge
+    /// frame and the walls' outer layer found once (a view asks of every building pixel).
+    pub fn facades(&self) -> Facades<'_> {
+        let frames = self
+            .features
+            .iter()
+            .map(|f| {
+                let ring = if f.ring == 0 {
+                    &self.footprint.exterior
                 } else {
-                    (0.0, own.max(*layer_m.get_or_init(|| self.recess_depth_m())))
+                    self.footprint.holes.get(f.ring - 1)?
+                };
+                if ring.len() < 2 {
+                    return None;
                 }
-            } else {
-                (-f.depth_m, 0.0)
-            };
-            along >= f.along.0 - slack_m
-                && along <= f.along.1 + slack_m
-                && inward >= lo - slack_m
-                && inward <= hi + slack_m
-        })
+                let (a, c) = (ring[f.edge % ring.len()], ring[(f.edge + 1) % ring.len()]);
+                let len = (c[0] - a[0]).hypot(c[1] - a[1]);
+                if len == 0.0 {
+                    return None;
+                }
+                Some((a, [(c[0] - a[0]) / len, (c[1] - a[1]) / len]))
+            })
+            .collect();
+        Facades {
+            spec: self,
+            frames,
+            layer_m: self.recess_depth_m(),
+        }
     }
 
     /// How deep the building's openings reach into its walls, metres: the deepest window or
@@ -218,6 +204,55 @@ impl BuildingSpec {
                 Roof::Stepped { upper_m, .. } => *upper_m,
                 Roof::Domed { height_m, .. } => *height_m,
             }
+    }
+}
+
+/// A building's façade features with what every point query needs found once
+/// ([`BuildingSpec::facades`]).
+pub struct Facades<'a> {
+    /// The building.
+    pub spec: &'a BuildingSpec,
+    /// Per feature, its edge's start and unit direction; None for an edge that is not one.
+    frames: Vec<Option<([f64; 2], [f64; 2])>>,
+    /// The walls' outer layer ([`BuildingSpec::recess_depth_m`]).
+    layer_m: f64,
+}
+
+impl Facades<'_> {
+    /// [`BuildingSpec::feature_at`]: the façade feature at `p`, every extent widened by
+    /// `slack_m`.
+    pub fn feature_at(&self, p: [f64; 3], slack_m: f64) -> Option<usize> {
+        self.spec
+            .features
+            .iter()
+            .zip(&self.frames)
+            .position(|(f, frame)| {
+                // Most features are on other storeys: the height test first.
+                if !(p[2] >= f.z.0 - slack_m && p[2] <= f.z.1 + slack_m) {
+                    return false;
+                }
+                let Some((a, t)) = frame else {
+                    return false;
+                };
+                // The solid is left of every ring edge: `inward` grows into the building.
+                let d = [p[0] - a[0], p[1] - a[1]];
+                let along = d[0] * t[0] + d[1] * t[1];
+                let inward = -d[0] * t[1] + d[1] * t[0];
+                let (lo, hi) = if f.depth_m < 0.0 {
+                    let own = -f.depth_m;
+                    if inward <= own + slack_m {
+                        (0.0, own)
+                    } else {
+                        (0.0, own.max(self.layer_m))
+                    }
+                } else {
+                    (-f.depth_m, 0.0)
+                };
+                along >= f.along.0 - slack_m
+                    && along <= f.along.1 + slack_m
+                    && inward >= lo - slack_m
+                    && inward <= hi + slack_m
+            })
     }
 }
 

@@ -23,8 +23,8 @@ use serde::{Deserialize, Serialize};
 pub use array::{PodVec, SparseLayer};
 pub use charts::{Chart, ChartFrame, ChartKind, ChartLayers, ChartSet, FusionStats, TexelLayers};
 pub use city::{
-    BuildingSpec, City, ClutterSpec, CrownShape, FacadeFeature, FeatureKind, Rect, Roof, RoofBox,
-    Street, TreeSpec,
+    BuildingSpec, City, ClutterSpec, CrownShape, FacadeFeature, Facades, FeatureKind, Rect, Roof,
+    RoofBox, Street, TreeSpec,
 };
 pub use footprints::{Footprint, Footprints, Polygon, point_in_ring, ring_area};
 pub use material::{Material, default_material};

@@ -11,8 +11,8 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::Material;
 use crate::artifact::height_at;
 use crate::artifact::{
-    ArtifactType, BuildingSpec, City, FeatureKind, Instances, Intrinsics, ObjectClass, PodVec,
-    Pose, RMSNET_CLASSES, Scene, View, ViewSet,
+    ArtifactType, City, Facades, FeatureKind, Instances, Intrinsics, ObjectClass, PodVec, Pose,
+    RMSNET_CLASSES, Scene, View, ViewSet,
 };
 use crate::geom::raycast::{Hit, SceneRays};
 use crate::io::export::material_color;
@@ -281,8 +281,11 @@ impl Stage for SynthViews {
             .collect();
         ctx.progress.set_total(poses.len() as u64);
         let material_classes: Vec<String> = RMSNET_CLASSES.iter().map(|s| s.to_string()).collect();
-        let buildings: HashMap<&str, &BuildingSpec> =
-            city.buildings.iter().map(|b| (b.id.as_str(), b)).collect();
+        let buildings: HashMap<&str, Facades> = city
+            .buildings
+            .iter()
+            .map(|b| (b.id.as_str(), b.facades()))
+            .collect();
         let n_classes = material_classes.len();
         // Each view is stored as soon as it is rendered: a few in memory at a time.
         let views = poses
@@ -419,8 +422,8 @@ fn rmsnet_index(name: &str) -> u8 {
 }
 
 /// The architectural class of a building hit: the façade feature there, else wall or roof.
-fn arch_class(b: Option<&BuildingSpec>, at: [f64; 3], roof: bool) -> (Option<usize>, &'static str) {
-    if let Some(f) = b.and_then(|b| b.feature_at(at, 0.01).map(|k| (k, b.features[k].kind))) {
+fn arch_class(b: Option<&Facades>, at: [f64; 3], roof: bool) -> (Option<usize>, &'static str) {
+    if let Some(f) = b.and_then(|b| b.feature_at(at, 0.01).map(|k| (k, b.spec.features[k].kind))) {
         let name = match f.1 {
             FeatureKind::Window => "window",
             FeatureKind::Door => "door",
@@ -437,7 +440,7 @@ fn arch_class(b: Option<&BuildingSpec>, at: [f64; 3], roof: bool) -> (Option<usi
 fn render(
     scene: &Scene,
     rays: &SceneRays,
-    buildings: &HashMap<&str, &BuildingSpec>,
+    buildings: &HashMap<&str, Facades>,
     p: &SynthViewsParams,
     k: usize,
     pose: Pose,
@@ -662,7 +665,7 @@ impl Frame {
 /// error knobs, the true pose and the view's seed.
 struct Painter<'a> {
     scene: &'a Scene,
-    buildings: &'a HashMap<&'a str, &'a BuildingSpec>,
+    buildings: &'a HashMap<&'a str, Facades<'a>>,
     p: &'a SynthViewsParams,
     pose: &'a Pose,
     seed: u64,
@@ -721,7 +724,7 @@ impl Painter<'_> {
         let roof = nrm[2] > 0.7;
         let t = hit.t as f64;
         let at = std::array::from_fn(|a| self.pose.position[a] + dir[a] * t);
-        let (feature, class) = arch_class(self.buildings.get(obj.id.as_str()).copied(), at, roof);
+        let (feature, class) = arch_class(self.buildings.get(obj.id.as_str()), at, roof);
         let next = frame.arch_of.len() as u16 + 1;
         let id = *frame
             .arch_of
