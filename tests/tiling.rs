@@ -287,3 +287,158 @@ fn tiling_mistakes_are_refused() {
     assert_eq!(r.code, 2, "{}", r.stderr);
     assert!(r.stderr.contains("from 0 to 3"), "{}", r.stderr);
 }
+
+/// A small city's street level: Sec. 4.1's buildings, registered street views, façade materials
+/// and relief, clutter and canopies, the finished twin merged from 2 x 1 tiles of 120 m.
+const STREET_TILES: &str = r#"Graph(
+    site: Site(crs: "EPSG:32618", origin: (583200.0, 4506600.0), cell_m: 0.5),
+    tiling: Tiling(area: (min: (0.0, 0.0), max: (240.0, 120.0)), merge: ["terrain2", "twin"]),
+    nodes: {
+        "city":       SynthCity(seed: 5, size_m: (240.0, 120.0), blocks: (2, 1)),
+        "truth":      TruthScene(city: "city"),
+        "lidar":      SynthLidar(scene: "truth", density_per_m2: 8.0, noise_m: 0.05, seed: 5),
+        "views":      SynthViews(scene: "truth", city: "city", size: (200, 150), spacing_m: 20.0, max_views: 200,
+                                 pose_noise_m: 0.5, heading_noise_deg: 1.0),
+        "dsm":        RasterizeSurface(points: "lidar", mode: Max, max_gap_m: 1.0),
+        "terrain1":   TerrainPass(surface: "dsm", coarse_m: 32.0, percentile: 5.0, n_min: 0.9, tau_m: 4.0, sigma_m: 2.0),
+        "terrain2":   TerrainPass(surface: "dsm", previous: "terrain1", coarse_m: 8.0, percentile: 10.0, n_min: 0.9, tau_m: 1.0, sigma_m: 1.0),
+        "above":      AboveGround(surface: "dsm", terrain: "terrain2"),
+        "buildings":  BuildingMask(above: "above", points: "lidar"),
+        "roofs":      RoofClean(labels: "buildings", above: "above", points: "lidar", terrain: "terrain2"),
+        "parts":      SplitBuildings(labels: "buildings", roofs: "roofs"),
+        "solids":     BuildingSolids(labels: "parts", roofs: "roofs", terrain: "terrain2", points: "lidar"),
+        "scene":      AssembleScene(terrain: "terrain2", objects: ["solids"]),
+        "registered": RegisterViews(views: "views", scene: "scene"),
+        "charts":     SurfaceCharts(scene: "scene"),
+        "materials":  FuseMaterials(views: "registered", scene: "scene", charts: "charts"),
+        "painted":    ApplyMaterials(scene: "scene", charts: "charts", materials: "materials"),
+        "relief":     Relief(views: "registered", scene: "scene", charts: "charts"),
+        "carved":     CarveRelief(scene: "painted", charts: "charts", relief: "relief"),
+        "unassigned": UnassignedAbove(above: "above", labels: "parts"),
+        "canopies":   Canopies(unassigned: "unassigned", terrain: "terrain2", points: "lidar"),
+        "clutter":    PlaceClutter(views: "registered", scene: "scene", terrain: "terrain2", canopies: "canopies", drop_vehicles_in_intersections: false),
+        "twin":       AssembleScene(terrain: "terrain2", objects: ["carved", "clutter", "canopies"]),
+    },
+    outputs: { "twin": "twin" },
+)"#;
+
+/// Per object of a twin's glb: its class (the node's `extras.class`) and horizontal bounds in
+/// the site frame, read from the glTF JSON (glTF is y-up: site (x, y) is (x, -z)).
+fn twin_objects(glb: &std::path::Path) -> Vec<(String, (f64, f64), (f64, f64))> {
+    let bytes = std::fs::read(glb).unwrap();
+    let len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let j: serde_json::Value = serde_json::from_slice(&bytes[20..20 + len]).unwrap();
+    let mut out = Vec::new();
+    for node in j["nodes"].as_array().unwrap() {
+        let class = node["extras"]["class"].as_str().unwrap_or("?").to_string();
+        let Some(mesh) = node["mesh"].as_u64() else {
+            continue;
+        };
+        let (mut lo, mut hi) = ((f64::MAX, f64::MAX), (f64::MIN, f64::MIN));
+        for prim in j["meshes"][mesh as usize]["primitives"].as_array().unwrap() {
+            let acc = &j["accessors"][prim["attributes"]["POSITION"].as_u64().unwrap() as usize];
+            let (min, max) = (&acc["min"], &acc["max"]);
+            let f = |v: &serde_json::Value, k: usize| v[k].as_f64().unwrap();
+            lo = (lo.0.min(f(min, 0)), lo.1.min(-f(max, 2)));
+            hi = (hi.0.max(f(max, 0)), hi.1.max(-f(min, 2)));
+        }
+        out.push((class, lo, hi));
+    }
+    out
+}
+
+/// The street level in tiles against one untiled run. The halo (the stages' reach, 140 m)
+/// covers this small city, so each tile registers every view and places every object as the
+/// untiled run does: the merged twin must be the untiled one object for object (buildings at
+/// their place and bounds within a metre, and every object of every class, clutter and trees
+/// included, once, its bounds within a centimetre) whatever the windows, phases and merges do.
+/// Objects two tiles place apart at a seam (their views registered apart, on a city larger than
+/// a tile's window) are MergeScenes' unit test.
+#[test]
+fn the_street_level_in_tiles_is_the_untiled_twin() {
+    let env = Env::new();
+    let graph = env.write("street.ron", STREET_TILES);
+    let run = |out: &str, tile_m: &str| {
+        let out_dir = env.path(out);
+        let (g, c, o) = (
+            graph.to_str().unwrap(),
+            env.cache(),
+            out_dir.to_str().unwrap().to_string(),
+        );
+        let r = env.cli(&[
+            "run",
+            g,
+            "--cache",
+            c.to_str().unwrap(),
+            "--out",
+            &o,
+            "--quiet",
+            "--tile-m",
+            tile_m,
+        ]);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        out_dir.join("twin.glb")
+    };
+    let (untiled, tiled) = (run("untiled", "1000"), run("tiled", "120"));
+    let (a, b) = (solids(&untiled), solids(&tiled));
+    assert!(!a.is_empty());
+    assert_eq!(
+        a.len(),
+        b.len(),
+        "buildings: untiled {} tiled {}",
+        a.len(),
+        b.len()
+    );
+    // Each untiled building's nearest tiled one (a part can stand inside another's bounds, its
+    // centroid close): within a metre, its bounds too, and no tiled building taken twice.
+    let mut taken = vec![false; b.len()];
+    for s in &a {
+        let gap = |t: &Solid| (t.at.0 - s.at.0).hypot(t.at.1 - s.at.1);
+        let k = (0..b.len())
+            .min_by(|&i, &j| gap(&b[i]).total_cmp(&gap(&b[j])))
+            .unwrap();
+        let t = &b[k];
+        let bounds = [
+            s.lo.0 - t.lo.0,
+            s.lo.1 - t.lo.1,
+            s.hi.0 - t.hi.0,
+            s.hi.1 - t.hi.1,
+        ];
+        assert!(
+            gap(t) < 1.0 && bounds.iter().all(|d| d.abs() < 1.0) && !taken[k],
+            "{} at {:?}: nearest tiled {} at {:?}",
+            s.name,
+            s.at,
+            t.name,
+            t.at
+        );
+        taken[k] = true;
+    }
+    // Every object of every class, by its bounds: the untiled twin's, each once.
+    let (oa, ob) = (twin_objects(&untiled), twin_objects(&tiled));
+    assert_eq!(
+        oa.len(),
+        ob.len(),
+        "objects: untiled {} tiled {}",
+        oa.len(),
+        ob.len()
+    );
+    let mut taken = vec![false; ob.len()];
+    for (class, lo, hi) in &oa {
+        let off = |o: &(String, (f64, f64), (f64, f64))| {
+            [lo.0 - o.1.0, lo.1 - o.1.1, hi.0 - o.2.0, hi.1 - o.2.1]
+                .iter()
+                .fold(0.0f64, |m, d| m.max(d.abs()))
+        };
+        let k = (0..ob.len())
+            .filter(|&k| ob[k].0 == *class && !taken[k])
+            .min_by(|&i, &j| off(&ob[i]).total_cmp(&off(&ob[j])));
+        let k = k.unwrap_or_else(|| panic!("{class} at {lo:?}: none left in the tiled twin"));
+        assert!(
+            off(&ob[k]) < 0.01,
+            "{class} at {lo:?}: nearest tiled {:?}",
+            ob[k]
+        );
+        taken[k] = true;
+    }
+}
