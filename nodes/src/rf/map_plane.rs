@@ -130,18 +130,19 @@ pub(super) struct Crossing {
 /// Sionna's default plane: the scene's horizontal extent in cells of `cell_m`, centred on it,
 /// at height `z`.
 pub fn default_plane(scene: &RfScene, cell_m: f64, z: f64) -> MapPlane {
-    let (lo, hi) = scene.bounds;
+    MapPlane::plane(default_grid(scene.bounds, cell_m), z)
+}
+
+/// [`default_plane`]'s cells for a scene of `bounds` (its triangles' corners, least and most).
+pub fn default_grid((lo, hi): (DVec3, DVec3), cell_m: f64) -> Grid {
     let (cx, cy) = ((lo.x + hi.x) / 2.0, (lo.y + hi.y) / 2.0);
     let nx = ((hi.x - lo.x) / cell_m).ceil().max(1.0) as u32;
     let ny = ((hi.y - lo.y) / cell_m).ceil().max(1.0) as u32;
-    MapPlane::plane(
-        Grid {
-            x0: cx - nx as f64 * cell_m / 2.0,
-            y0: cy + ny as f64 * cell_m / 2.0,
-            cell_m,
-            width: nx,
-            height: ny,
-        },
-        z,
-    )
+    Grid {
+        x0: cx - nx as f64 * cell_m / 2.0,
+        y0: cy + ny as f64 * cell_m / 2.0,
+        cell_m,
+        width: nx,
+        height: ny,
+    }
 }

@@ -49,6 +49,24 @@ pub struct RfScene {
     foliage: bool,
 }
 
+/// The least and most corner of `scene`'s triangles: [`RfScene::bounds`] without building the
+/// radio scene.
+pub fn scene_bounds(scene: &Scene) -> (DVec3, DVec3) {
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    for obj in &scene.objects {
+        let p = &obj.mesh.positions;
+        for t in obj.mesh.triangles.iter() {
+            for i in t {
+                let q = DVec3::from(p[*i as usize].map(f64::from));
+                lo = lo.min(q);
+                hi = hi.max(q);
+            }
+        }
+    }
+    (lo, hi)
+}
+
 impl RfScene {
     /// Prepares `scene` at `freq_hz`. A material outside its P.2040 frequency range is an error
     /// unless `extrapolate`.

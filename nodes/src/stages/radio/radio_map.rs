@@ -6,10 +6,10 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{ArtifactType, Grid, ObjectClass, Raster, Scene};
 use crate::rf::antenna::Antenna;
 use crate::rf::gpu::{Device, map_unavailable, radio_map_on};
-use crate::rf::map_plane::{MapPlane, default_plane};
+use crate::rf::map_plane::{MapPlane, default_grid};
 use crate::rf::path::TraceOptions;
 use crate::rf::scattering::ScatteringPattern;
-use crate::rf::scene::RfScene;
+use crate::rf::scene::{RfScene, scene_bounds};
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`RadioMap`].
@@ -204,7 +204,7 @@ impl Stage for RadioMap {
         if let Some(why) = map_unavailable(p.device) {
             return Err(StageError::Param(ParamError::new("device", why)));
         }
-        let scene: &Scene = inputs.one("scene")?;
+        let whole: &Scene = inputs.one("scene")?;
         let terrain: Option<&Raster> = inputs.optional("terrain")?;
         // The square the transmitter's work is bounded to, if any.
         let window = p
@@ -213,13 +213,19 @@ impl Stage for RadioMap {
         let near;
         let scene = match window {
             Some((x0, y0, x1, y1)) => {
-                near = scene.near((x0, y0), (x1, y1), |o| o.class != ObjectClass::Terrain);
+                near = whole.near((x0, y0), (x1, y1), |o| o.class != ObjectClass::Terrain);
                 &near
             }
-            None => scene,
+            None => whole,
         };
         let rf = RfScene::new(scene, p.freq_hz, p.extrapolate).map_err(StageError::Failed)?;
-        let grid = map_grid(p, terrain, &rf, window)?;
+        // Without a terrain the lattice is the whole scene's, so that maps cut to different
+        // reaches lie on one lattice (Coverage combines them).
+        let bounds = match window {
+            Some(_) => scene_bounds(whole),
+            None => rf.bounds,
+        };
+        let grid = map_grid(p, terrain, bounds, window)?;
         // The map's cells are checked before the map (and the tracer's per-cell accumulators:
         // path gain and hit counts, as f64, 16 bytes each) are allocated.
         crate::params::check_cells(grid.width as f64, grid.height as f64, 16).map_err(|m| {
@@ -258,12 +264,12 @@ impl Stage for RadioMap {
 }
 
 /// The map's cells: the terrain's extent on a lattice of `cell_m` from its north-west corner
-/// (without a terrain, the scene's horizontal bounds, centred), cut to `window` when the
+/// (without a terrain, the scene's horizontal `bounds`, centred), cut to `window` when the
 /// transmitter's reach bounds it.
 fn map_grid(
     p: &RadioMapParams,
     terrain: Option<&Raster>,
-    rf: &RfScene,
+    bounds: (DVec3, DVec3),
     window: Option<(f64, f64, f64, f64)>,
 ) -> Result<Grid, StageError> {
     let full = match terrain {
@@ -287,7 +293,7 @@ fn map_grid(
             }
         }
         None => {
-            let (lo, hi) = rf.bounds;
+            let (lo, hi) = bounds;
             let (w, h) = (
                 ((hi.x - lo.x) / p.cell_m).ceil().max(1.0),
                 ((hi.y - lo.y) / p.cell_m).ceil().max(1.0),
@@ -298,7 +304,7 @@ fn map_grid(
                     format!("{m}; use a coarser cell"),
                 ))
             })?;
-            default_plane(rf, p.cell_m, p.height_m).grid
+            default_grid(bounds, p.cell_m)
         }
     };
     match window {
@@ -484,12 +490,11 @@ mod tests {
         let scene = Scene {
             objects: vec![building("a", [120.0, 110.0]), building("b", [80.0, 85.0])],
         };
-        let inputs = Inputs::new()
-            .with("scene", Slot::One(Arc::new(Artifact::Scene(scene))))
-            .with(
-                "terrain",
-                Slot::Optional(Some(Arc::new(Artifact::Raster(flat(12.0))))),
-            );
+        let scene = Arc::new(Artifact::Scene(scene));
+        let inputs = Inputs::new().with("scene", Slot::One(scene.clone())).with(
+            "terrain",
+            Slot::Optional(Some(Arc::new(Artifact::Raster(flat(12.0))))),
+        );
         let p = RadioMapParams {
             tx: (101.0, 99.0, 30.0),
             freq_hz: 3.5e9,
@@ -530,6 +535,28 @@ mod tests {
             }
         }
         assert!(compared > 300, "{compared} cells compared");
+        // Without a terrain the bounded map lies on the lattice of the whole scene's map too
+        // (not one centred on what is left after the cut), with its values.
+        let no_terrain = Inputs::new().with("scene", Slot::One(scene));
+        let full = RadioMap::run(&p, &no_terrain, &Ctx::new(&s, &[])).unwrap();
+        let near = RadioMap::run(&bounded, &no_terrain, &Ctx::new(&s, &[])).unwrap();
+        let cols = (near.grid.x0 - full.grid.x0) / 5.0;
+        let rows = (full.grid.y0 - near.grid.y0) / 5.0;
+        assert!((cols - cols.round()).abs() < 1e-9 && (rows - rows.round()).abs() < 1e-9);
+        let g = near.grid;
+        for row in 0..g.height {
+            for col in 0..g.width {
+                let (x, y) = g.center(col, row);
+                let Some((fc, fr)) = full.grid.cell_of(x, y) else {
+                    continue;
+                };
+                let (a, b) = (near.at(col, row), full.at(fc, fr));
+                assert!(
+                    (a.is_nan() && b.is_nan()) || (a - b).abs() < 0.01,
+                    "no terrain, cell ({x}, {y}): {a} vs {b}"
+                );
+            }
+        }
         for bad in [0.0, -5.0, f64::NAN, f64::INFINITY, 2e5] {
             let q = RadioMapParams {
                 reach_m: Some(bad),

@@ -92,7 +92,7 @@ fn placed_from_views(class: ObjectClass) -> bool {
 /// more sides), the first listed on a tie. Neighbours are found through a grid of 16 m cells.
 fn placed_twice(objects: &[SceneObject], owners: &[usize], p: &MergeTilesParams) -> Vec<bool> {
     const CELL_M: f64 = 16.0;
-    let bounds: Vec<Option<((f64, f64), (f64, f64))>> = objects
+    let bounds: Vec<Option<PlanBox>> = objects
         .iter()
         .map(|o| {
             if placed_from_views(o.class) {
@@ -154,12 +154,15 @@ fn placed_twice(objects: &[SceneObject], owners: &[usize], p: &MergeTilesParams)
     twice
 }
 
-/// Intersection over union of two plan boxes ((x, y) least, most).
-fn iou(a: ((f64, f64), (f64, f64)), b: ((f64, f64), (f64, f64))) -> f64 {
+/// A plan box: (x, y) least, (x, y) most.
+type PlanBox = ((f64, f64), (f64, f64));
+
+/// Intersection over union of two plan boxes.
+fn iou(a: PlanBox, b: PlanBox) -> f64 {
     let w = (a.1.0.min(b.1.0) - a.0.0.max(b.0.0)).max(0.0);
     let h = (a.1.1.min(b.1.1) - a.0.1.max(b.0.1)).max(0.0);
     let inter = w * h;
-    let area = |r: ((f64, f64), (f64, f64))| (r.1.0 - r.0.0) * (r.1.1 - r.0.1);
+    let area = |r: PlanBox| (r.1.0 - r.0.0) * (r.1.1 - r.0.1);
     let union = area(a) + area(b) - inter;
     if union > 0.0 { inter / union } else { 0.0 }
 }
