@@ -301,8 +301,9 @@ mod tests {
         }
     }
 
-    #[test]
-    fn trace_predicts_friis_in_free_space_with_heights_above_ground() {
+    /// One 3.5 GHz link along y = 100: the transmitter 30 m above the ground at x = 20, the
+    /// receiver 1.5 m above it at x = 170.
+    fn one_link() -> Measurements {
         let end = |x: f64, h: f64| Endpoint {
             id: String::new(),
             x,
@@ -310,17 +311,23 @@ mod tests {
             z: Height::AboveGround(h),
             azimuth_deg: None,
         };
-        let links = Measurements {
+        Measurements {
             links: vec![Link {
                 tx: end(20.0, 30.0),
                 rx: end(170.0, 1.5),
                 freq_hz: 3.5e9,
-                path_loss_db: Some(99.0),
+                path_loss_db: None,
                 rx_power_dbm: None,
                 tx_eirp_dbm: None,
                 los: None,
             }],
-        };
+        }
+    }
+
+    #[test]
+    fn trace_predicts_friis_in_free_space_with_heights_above_ground() {
+        let mut links = one_link();
+        links.links[0].path_loss_db = Some(99.0);
         let inputs = Inputs::new()
             .with(
                 "scene",
@@ -363,24 +370,7 @@ mod tests {
             building("near", [100.0, 120.0]),
             building("far", [100.0, 160.0]),
         );
-        let end = |x: f64, h: f64| Endpoint {
-            id: String::new(),
-            x,
-            y: 100.0,
-            z: Height::AboveGround(h),
-            azimuth_deg: None,
-        };
-        let links = Measurements {
-            links: vec![Link {
-                tx: end(20.0, 30.0),
-                rx: end(170.0, 1.5),
-                freq_hz: 3.5e9,
-                path_loss_db: None,
-                rx_power_dbm: None,
-                tx_eirp_dbm: None,
-                los: None,
-            }],
-        };
+        let links = one_link();
         let s = site();
         let path_loss = |objects: Vec<SceneObject>, reach_m: Option<f64>| {
             let inputs = Inputs::new()
