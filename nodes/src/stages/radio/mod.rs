@@ -4,6 +4,7 @@ pub mod coverage;
 pub mod radio_map;
 pub mod trace;
 
+use crate::artifact::{ObjectClass, Scene};
 use crate::stage::ParamError;
 
 /// The most a transmitter's `reach_m` may be, metres: a transmitter's reach, not a country.
@@ -18,4 +19,11 @@ pub fn check_reach(reach_m: Option<f64>) -> Result<(), ParamError> {
         )),
         _ => Ok(()),
     }
+}
+
+/// What a transmitter bounded by its reach traces: the part of `scene` meeting the box from
+/// `lo` to `hi`, every object whole (a building cut open would let rays in without walls) but
+/// the terrain, which is one object city-wide and is cut to the triangles meeting the box.
+pub fn within_reach(scene: &Scene, lo: (f64, f64), hi: (f64, f64)) -> Scene {
+    scene.near(lo, hi, |o| o.class != ObjectClass::Terrain)
 }

@@ -3,7 +3,7 @@
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Grid, ObjectClass, Raster, Scene};
+use crate::artifact::{ArtifactType, Grid, Raster, Scene};
 use crate::rf::antenna::Antenna;
 use crate::rf::gpu::{Device, map_unavailable, radio_map_on};
 use crate::rf::map_plane::{MapPlane, default_grid};
@@ -213,7 +213,7 @@ impl Stage for RadioMap {
         let near;
         let scene = match window {
             Some((x0, y0, x1, y1)) => {
-                near = whole.near((x0, y0), (x1, y1), |o| o.class != ObjectClass::Terrain);
+                near = super::within_reach(whole, (x0, y0), (x1, y1));
                 &near
             }
             None => whole,
@@ -226,14 +226,6 @@ impl Stage for RadioMap {
             None => rf.bounds,
         };
         let grid = map_grid(p, terrain, bounds, window)?;
-        // The map's cells are checked before the map (and the tracer's per-cell accumulators:
-        // path gain and hit counts, as f64, 16 bytes each) are allocated.
-        crate::params::check_cells(grid.width as f64, grid.height as f64, 16).map_err(|m| {
-            StageError::Param(ParamError::new(
-                "cell_m",
-                format!("{m}; use a coarser cell"),
-            ))
-        })?;
         let (plane, tx) = match terrain {
             Some(t) => {
                 let ground = t.bilinear(p.tx.0, p.tx.1).ok_or_else(|| {
@@ -272,40 +264,33 @@ fn map_grid(
     bounds: (DVec3, DVec3),
     window: Option<(f64, f64, f64, f64)>,
 ) -> Result<Grid, StageError> {
+    // The cells along each axis, checked before the map (and the tracer's per-cell
+    // accumulators: path gain and hit counts, as f64, 16 bytes each) are allocated; a reach
+    // only cuts them down.
+    let (w, h) = match terrain {
+        Some(t) => (
+            (t.grid.width as f64 * t.grid.cell_m / p.cell_m).ceil(),
+            (t.grid.height as f64 * t.grid.cell_m / p.cell_m).ceil(),
+        ),
+        None => (
+            ((bounds.1.x - bounds.0.x) / p.cell_m).ceil().max(1.0),
+            ((bounds.1.y - bounds.0.y) / p.cell_m).ceil().max(1.0),
+        ),
+    };
+    crate::params::check_cells(w, h, 16).map_err(|m| {
+        StageError::Param(ParamError::new(
+            "cell_m",
+            format!("{m}; use a coarser cell"),
+        ))
+    })?;
     let full = match terrain {
-        Some(t) => {
-            let tg = t.grid;
-            let (w, h) = (
-                (tg.width as f64 * tg.cell_m / p.cell_m).ceil(),
-                (tg.height as f64 * tg.cell_m / p.cell_m).ceil(),
-            );
-            crate::params::check_cells(w, h, 16).map_err(|m| {
-                StageError::Param(ParamError::new(
-                    "cell_m",
-                    format!("{m}; use a coarser cell"),
-                ))
-            })?;
-            Grid {
-                cell_m: p.cell_m,
-                width: w as u32,
-                height: h as u32,
-                ..tg
-            }
-        }
-        None => {
-            let (lo, hi) = bounds;
-            let (w, h) = (
-                ((hi.x - lo.x) / p.cell_m).ceil().max(1.0),
-                ((hi.y - lo.y) / p.cell_m).ceil().max(1.0),
-            );
-            crate::params::check_cells(w, h, 16).map_err(|m| {
-                StageError::Param(ParamError::new(
-                    "cell_m",
-                    format!("{m}; use a coarser cell"),
-                ))
-            })?;
-            default_grid(bounds, p.cell_m)
-        }
+        Some(t) => Grid {
+            cell_m: p.cell_m,
+            width: w as u32,
+            height: h as u32,
+            ..t.grid
+        },
+        None => default_grid(bounds, p.cell_m),
     };
     match window {
         None => Ok(full),
@@ -480,7 +465,7 @@ mod tests {
     /// object lies within the reach (the bound cuts work, not physics it keeps).
     #[test]
     fn a_reach_bounds_the_map_to_the_cells_within_it() {
-        use crate::artifact::{Material, SceneObject};
+        use crate::artifact::{Material, ObjectClass, SceneObject};
         use crate::geom::mesh_build::cuboid;
         let building = |id: &str, c: [f64; 2]| SceneObject {
             id: id.into(),

@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::artifact::{ArtifactType, Endpoint, Measurements, ObjectClass, Raster, Scene};
+use crate::artifact::{ArtifactType, Endpoint, Measurements, Raster, Scene};
 use crate::rf::antenna::Antenna;
 use crate::rf::path::TraceOptions;
 use crate::rf::paths::trace_links;
@@ -194,22 +194,19 @@ impl Stage for Trace {
             let near;
             let traced = match p.reach_m {
                 Some(r) => {
-                    let (lo, hi) = idx.iter().fold(
+                    let (lo, hi) = idx.iter().flat_map(|&i| [ends[i].0, ends[i].1]).fold(
                         (
                             (f64::INFINITY, f64::INFINITY),
                             (f64::NEG_INFINITY, f64::NEG_INFINITY),
                         ),
-                        |(lo, hi), &i| {
-                            let (tx, rx) = ends[i];
+                        |(lo, hi), e| {
                             (
-                                (lo.0.min(tx[0]).min(rx[0]), lo.1.min(tx[1]).min(rx[1])),
-                                (hi.0.max(tx[0]).max(rx[0]), hi.1.max(tx[1]).max(rx[1])),
+                                (lo.0.min(e[0]), lo.1.min(e[1])),
+                                (hi.0.max(e[0]), hi.1.max(e[1])),
                             )
                         },
                     );
-                    near = scene.near((lo.0 - r, lo.1 - r), (hi.0 + r, hi.1 + r), |o| {
-                        o.class != ObjectClass::Terrain
-                    });
+                    near = super::within_reach(scene, (lo.0 - r, lo.1 - r), (hi.0 + r, hi.1 + r));
                     &near
                 }
                 None => scene,
