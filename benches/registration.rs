@@ -44,14 +44,21 @@ fn heading(p: &Pose) -> f64 {
     p.rotation[1][2].atan2(p.rotation[0][2])
 }
 
-/// (position error m, heading error degrees) of `a` against `b`.
-fn off(a: &Pose, b: &Pose) -> (f64, f64) {
+/// The camera's pitch, radians: its forward axis's elevation.
+fn pitch(p: &Pose) -> f64 {
+    p.rotation[2][2].clamp(-1.0, 1.0).asin()
+}
+
+/// How far `a` stands from `b`: plan position m, heading degrees, height m, pitch degrees.
+fn off(a: &Pose, b: &Pose) -> [f64; 4] {
     let d = (heading(a) - heading(b)).to_degrees();
     let d = (d + 180.0).rem_euclid(360.0) - 180.0;
-    (
+    [
         (a.position[0] - b.position[0]).hypot(a.position[1] - b.position[1]),
         d.abs(),
-    )
+        (a.position[2] - b.position[2]).abs(),
+        (pitch(a) - pitch(b)).to_degrees().abs(),
+    ]
 }
 
 fn quantile(v: &mut [f64], q: f64) -> f64 {
@@ -59,8 +66,9 @@ fn quantile(v: &mut [f64], q: f64) -> f64 {
     v[((v.len() - 1) as f64 * q).round() as usize]
 }
 
-/// Errors (before, after) of every view that shows a building, and the registration's seconds.
-fn site_errors(seed: u64, ctx: &Ctx) -> (Vec<(f64, f64, f64, f64)>, f64) {
+/// Errors before and after (see [`off`]) of every view that shows a building, and the
+/// registration's seconds.
+fn site_errors(seed: u64, ctx: &Ctx) -> (Vec<Errors>, f64) {
     let city = generate(&SynthCityParams {
         seed,
         size_m: (300.0, 200.0),
@@ -113,30 +121,41 @@ fn site_errors(seed: u64, ctx: &Ctx) -> (Vec<(f64, f64, f64, f64)>, f64) {
         })
         .map(|((n, r), t)| {
             assert_eq!(n.id, t.id, "the two renderings number their views alike");
-            let (b, yb) = off(&n.pose, &t.pose);
-            let (a, ya) = off(&r.pose, &t.pose);
-            (b, a, yb, ya)
+            Errors {
+                before: off(&n.pose, &t.pose),
+                after: off(&r.pose, &t.pose),
+            }
         })
         .collect();
     (errors, secs)
 }
 
-fn summary(label: &str, e: &[(f64, f64, f64, f64)], secs: f64) {
-    let col = |k: usize| -> Vec<f64> {
+/// One view's errors against where it was taken, from its metadata and after registration.
+struct Errors {
+    before: [f64; 4],
+    after: [f64; 4],
+}
+
+fn summary(label: &str, e: &[Errors], secs: f64) {
+    let col = |k: usize, after: bool| -> Vec<f64> {
         e.iter()
-            .map(|r| [r.0, r.1, r.2, r.3][k])
+            .map(|r| if after { r.after[k] } else { r.before[k] })
             .collect::<Vec<f64>>()
     };
-    let (mut b, mut a, mut yb, mut ya) = (col(0), col(1), col(2), col(3));
+    let q = |k: usize, after: bool, at: f64| quantile(&mut col(k, after), at);
     println!(
-        "{label:>8} {:>5} views  position median {:.3} -> {:.3} m, p90 {:.3} -> {:.3} m; heading median {:.2} -> {:.2} deg; {secs:.1} s",
+        "{label:>8} {:>5} views  position median {:.3} -> {:.3} m, p90 {:.3} -> {:.3} m; heading median {:.2} -> {:.2} deg; height median {:.3} -> {:.3} m; pitch median {:.2} -> {:.2} deg; {secs:.1} s",
         e.len(),
-        quantile(&mut b, 0.5),
-        quantile(&mut a, 0.5),
-        quantile(&mut b, 0.9),
-        quantile(&mut a, 0.9),
-        quantile(&mut yb, 0.5),
-        quantile(&mut ya, 0.5),
+        q(0, false, 0.5),
+        q(0, true, 0.5),
+        q(0, false, 0.9),
+        q(0, true, 0.9),
+        q(1, false, 0.5),
+        q(1, true, 0.5),
+        q(2, false, 0.5),
+        q(2, true, 0.5),
+        q(3, false, 0.5),
+        q(3, true, 0.5),
     );
 }
 

@@ -18,7 +18,9 @@ impl Stage for RegisterViews {
     // degrees of freedom).
     // 4: roll can be searched too (`search_roll_deg`, off by default).
     // 5: the views' pixels are parts (one per view), the set holds their heads.
-    const VERSION: u32 = 5;
+    // 6: on the finest lattice the search moves the camera in plan only (`PLAN_MOVES`), and
+    // tries the other moves once more at the end (`settle_the_rest`).
+    const VERSION: u32 = 6;
     const DOC: &'static str = "street views with position, height, heading, pitch and focal length (roll optionally) refined against the twin's building silhouettes (bounded search; a view is left alone when nothing beats its metadata)";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
