@@ -13,8 +13,8 @@
 //! then pattern searches from its best few poses on finer lattices kept near the label edges
 //! (the only pixels a small move changes; on the finest, moves in plan only), with the metadata
 //! as a weak prior. A second pass runs every view again with the window and door labels the
-//! placed views pooled (less its own) as a further cue, which places the views that face one wall from edge to edge. Camera height,
-//! pitch and the focal length are searched too (within `search_height_m`, `search_pitch_deg`,
+//! placed views pooled (less its own) as a further cue, which places the views that face one
+//! wall from edge to edge. Camera height, pitch and the focal length are searched too (within `search_height_m`, `search_pitch_deg`,
 //! `search_focal`: the first two move the silhouettes up and down the image, the focal length
 //! spreads them from its centre); roll can be (`search_roll_deg`, off by default: it tilts the
 //! silhouettes about the image centre, and searched with the rest it did more harm than good).
