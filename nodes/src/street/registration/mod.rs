@@ -14,10 +14,11 @@
 //! (the only pixels a small move changes; on the finest, moves in plan only), with the metadata
 //! as a weak prior. A second pass runs every view again with the window and door labels the
 //! placed views pooled (less its own) as a further cue, which places the views that face one
-//! wall from edge to edge. Camera height, pitch and the focal length are searched too (within `search_height_m`, `search_pitch_deg`,
-//! `search_focal`: the first two move the silhouettes up and down the image, the focal length
-//! spreads them from its centre); roll can be (`search_roll_deg`, off by default: it tilts the
-//! silhouettes about the image centre, and searched with the rest it did more harm than good).
+//! wall from edge to edge. Camera height, pitch and the focal length are searched too (within
+//! `search_height_m`, `search_pitch_deg`, `search_focal`: the first two move the silhouettes up
+//! and down the image, the focal length spreads them from its centre); roll can be
+//! (`search_roll_deg`, off by default: it tilts the silhouettes about the image centre, and
+//! searched with the rest it did more harm than good).
 //! A view stays where its metadata put it when the best pose does not beat the reported one by
 //! `min_gain`, lies on the edge of the search window, or agrees on less than `min_agreement`: a
 //! flat wall seen head-on cannot say where along it the camera stood, and a pose found in noise
