@@ -1,0 +1,37 @@
+"""kodama-dag from Python: run graphs in process and read their artifacts as NumPy arrays.
+
+    import kodama_dag
+    run = kodama_dag.run("graphs/demo.ron")
+    dsm = run.raster("dsm")            # xarray.DataArray when xarray is installed
+    table = run.metrics("evaluate")    # dict of floats
+
+The engine and the stages are the CLI's own (`kodama-dag run`), linked into this package: the same
+graph files, the same cache (so a graph run from the CLI is read here without running again), the
+same errors. See docs/python.md.
+"""
+
+from ._core import EngineError, UserError, __version__
+from .api import (
+    KindInfo,
+    NodeFailed,
+    NodeRecord,
+    PlanEntry,
+    Run,
+    explain,
+    kinds,
+    run,
+)
+
+__all__ = [
+    "EngineError",
+    "KindInfo",
+    "NodeFailed",
+    "NodeRecord",
+    "PlanEntry",
+    "Run",
+    "UserError",
+    "__version__",
+    "explain",
+    "kinds",
+    "run",
+]

@@ -1,0 +1,36 @@
+# Hand-written stub of the native module (python/src/lib.rs). The typed API is kodama_dag.api;
+# these are the plain values it is built from.
+from typing import Any
+
+__version__: str
+
+class UserError(Exception):
+    """What the CLI reports with exit code 2: a graph, parameter or input file that is not what
+    was expected. The message names the file, the place and what was expected."""
+
+class EngineError(Exception):
+    """What the CLI reports with exit code 1: the cache or the output folder failed."""
+
+def run(
+    graph: str,
+    sets: list[str],
+    cache: str,
+    out: str | None,
+    targets: list[str],
+    jobs: int | None,
+    data: str | None,
+    allow_outside: bool,
+    tile_m: float | None,
+    halo_m: float | None,
+    quiet: bool,
+) -> tuple[str, dict[str, Any]]: ...
+def explain(
+    graph: str,
+    sets: list[str],
+    cache: str,
+    targets: list[str],
+    data: str | None,
+    allow_outside: bool,
+) -> str: ...
+def kinds() -> list[dict[str, Any]]: ...
+def artifact(cache: str, digest: str) -> dict[str, Any]: ...

@@ -1,0 +1,224 @@
+"""The Python package against independent references: the point cloud re-rasterized in NumPy,
+the site's numbers, the file the same run exported, and the CLI's error messages."""
+
+import os
+import shutil
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import kodama_dag
+
+HERE = Path(__file__).parent
+SMALL = HERE / "small.ron"
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("cache")
+
+
+@pytest.fixture(scope="module")
+def small(cache, tmp_path_factory):
+    out = tmp_path_factory.mktemp("out")
+    return kodama_dag.run(SMALL, cache=cache, out=out, quiet=True), out
+
+
+def test_a_run_reports_every_node(small):
+    run, out = small
+    ids = [r.id for r in run.records]
+    assert ids == ["city", "truth", "footprints", "lidar", "dsm", "dsm_stats"]
+    assert all(r.status == "ran" for r in run.records)
+    assert all(r.digest is not None and len(r.digest) == 64 for r in run.records)
+    assert run.crs == "EPSG:32618" and run.origin == (583200.0, 4506600.0)
+    assert Path(run.outputs["dsm.tif"]).is_file()
+
+
+def test_a_second_run_is_all_cache_hits(small, cache):
+    first, _ = small
+    again = kodama_dag.run(SMALL, cache=cache, out=False, quiet=True)
+    assert all(r.status == "cached" for r in again.records)
+    assert [r.digest for r in again.records] == [r.digest for r in first.records]
+
+
+def test_the_dsm_is_the_point_clouds_highest_return_per_cell(small):
+    run, _ = small
+    data, transform = run.raster("dsm", xarray=False)
+    pts = run.points("lidar")
+    xyz = pts["xyz"].astype(np.float64)
+    assert xyz.shape[1] == 3 and xyz.shape[0] > 10_000
+    # The raster's cells in the site frame, from its geotransform in the CRS.
+    x0 = transform[0] - run.origin[0]
+    y0 = transform[3] - run.origin[1]
+    cell = transform[1]
+    col = np.floor((xyz[:, 0] - x0) / cell).astype(np.int64)
+    row = np.floor((y0 - xyz[:, 1]) / cell).astype(np.int64)
+    h, w = data.shape
+    inside = (col >= 0) & (col < w) & (row >= 0) & (row < h)
+    top = np.full((h, w), -np.inf)
+    np.maximum.at(top, (row[inside], col[inside]), xyz[inside, 2])
+    hit = np.isfinite(top)
+    assert hit.mean() > 0.5
+    assert np.allclose(data[hit], top[hit], atol=1e-3)
+
+
+def test_arrays_are_the_artifacts_own_buffers(small):
+    run, _ = small
+    data, _ = run.raster("dsm", xarray=False)
+    assert data.dtype == np.float32 and not data.flags.owndata
+    xyz = run.points("lidar")["xyz"]
+    assert xyz.dtype == np.float32 and not xyz.flags.owndata and xyz.flags.c_contiguous
+
+
+def test_the_metrics_agree_with_the_raster(small):
+    run, _ = small
+    stats = run.metrics("dsm_stats")
+    data, _ = run.raster("dsm", xarray=False)
+    finite = data[np.isfinite(data)]
+    assert stats, "RasterStats made no metrics"
+    for key, value in stats.items():
+        if key.endswith("max"):
+            assert value == pytest.approx(float(finite.max()), abs=1e-3)
+        if key.endswith("min"):
+            assert value == pytest.approx(float(finite.min()), abs=1e-3)
+
+
+def test_the_exported_geotiff_holds_the_same_numbers(small):
+    run, _ = small
+    data, transform = run.raster("dsm", xarray=False)
+    tif = Path(run.outputs["dsm.tif"])
+    try:
+        from PIL import Image
+    except ImportError:
+        if os.environ.get("CI") == "true":
+            raise
+        pytest.skip("Pillow is not installed: the GeoTIFF comparison needs it")
+    with Image.open(tif) as im:
+        read = np.array(im, dtype=np.float32)
+    assert read.shape == data.shape
+    assert np.array_equal(np.isnan(read), np.isnan(data))
+    assert np.array_equal(read[~np.isnan(read)], data[~np.isnan(data)])
+
+
+def test_footprints_lie_on_the_site_in_its_crs(small):
+    run, _ = small
+    fps = run.footprints("footprints")
+    if isinstance(fps, dict):
+        features = fps["features"]
+        coords = np.array(
+            [p for f in features for p in f["geometry"]["coordinates"][0]], dtype=np.float64
+        )
+    else:
+        features = list(fps.geometry)
+        coords = np.concatenate([np.asarray(g.exterior.coords) for g in fps.geometry])
+    assert len(features) >= 4
+    ox, oy = run.origin
+    assert (coords[:, 0] > ox).all() and (coords[:, 0] < ox + 120.0).all()
+    assert (coords[:, 1] > oy).all() and (coords[:, 1] < oy + 100.0).all()
+
+
+def test_a_scene_is_meshes_with_named_materials(small):
+    run, _ = small
+    objects = run.scene("truth")
+    classes = {o["class"] for o in objects}
+    assert "Terrain" in classes and "Building" in classes
+    for o in objects:
+        v, t, m = o["vertices"], o["triangles"], o["materials"]
+        assert v.shape[1] == 3 and t.shape[1] == 3 and m.shape == (t.shape[0],)
+        assert t.max() < v.shape[0]
+        assert all(int(k) in o["material_names"] for k in np.unique(m))
+    assert "concrete" in objects[0]["material_names"].values()
+
+
+def test_explain_after_a_run_says_cached(small, cache):
+    plan = kodama_dag.explain(SMALL, cache=cache)
+    assert [p.plan for p in plan] == ["cached"] * 6
+    changed = kodama_dag.explain(SMALL, cache=cache, set={"lidar.density_per_m2": 5.0})
+    by_id = {p.id: p.plan for p in changed}
+    assert by_id["city"] == "cached" and by_id["lidar"] == "run" and by_id["dsm"] != "cached"
+
+
+def test_kinds_name_their_inputs_and_outputs():
+    k = kodama_dag.kinds()
+    assert k["RasterizeSurface"].output == "Raster"
+    assert k["RasterizeSurface"].inputs[0][:3] == ("points", "Points", "one")
+    assert len(k) > 50
+
+
+def test_a_bad_graph_is_a_user_error_naming_file_and_place(tmp_path, cache):
+    bad = tmp_path / "bad.ron"
+    bad.write_text(SMALL.read_text().replace('"city": SynthCity', '"city": SynthCty', 1).replace('"city":       SynthCity', '"city":       SynthCty'))
+    with pytest.raises(kodama_dag.UserError) as e:
+        kodama_dag.run(bad, cache=cache, out=False, quiet=True)
+    msg = str(e.value)
+    assert "bad.ron" in msg and "SynthCty" in msg and "SynthCity" in msg
+
+
+@pytest.mark.parametrize(
+    "kwargs, says",
+    [
+        ({"set": {"lidar.density_per_m2": float("nan")}}, "finite"),
+        ({"set": {"lidar.no_such_param": 1}}, "no_such_param"),
+        ({"set": {"nodot": 1}}, "node.param"),
+        ({"targets": ["nowhere"]}, "nowhere"),
+        ({"tile_m": float("inf")}, "tile_m"),
+        ({"jobs": 0}, "jobs"),
+    ],
+)
+def test_bad_arguments_are_user_errors(kwargs, says, cache):
+    with pytest.raises(kodama_dag.UserError) as e:
+        kodama_dag.run(SMALL, cache=cache, out=False, quiet=True, **kwargs)
+    assert says in str(e.value)
+
+
+def test_a_folder_that_is_not_a_cache_is_refused_and_left_alone(tmp_path):
+    # As the CLI: a folder becomes a cache unless its cas/, ac/ or tmp/ hold what the engine
+    # did not write; such a folder is refused and not written to.
+    notes = tmp_path / "notes"
+    (notes / "cas").mkdir(parents=True)
+    (notes / "cas" / "thesis.txt").write_text("mine")
+    with pytest.raises(kodama_dag.UserError, match="not a cache|no FORMAT"):
+        kodama_dag.run(SMALL, cache=notes, out=False, quiet=True)
+    assert sorted(str(p.relative_to(notes)) for p in notes.rglob("*")) == ["cas", "cas/thesis.txt"]
+
+
+def test_reading_the_wrong_type_says_what_the_node_makes(small):
+    run, _ = small
+    with pytest.raises(TypeError, match="Points"):
+        run.raster("lidar")
+    with pytest.raises(KeyError, match="nowhere"):
+        run.raster("nowhere")
+
+
+def test_other_threads_run_while_a_graph_runs(cache, tmp_path):
+    # The GIL is released for the run: a Python thread counts meanwhile.
+    ticks = []
+    stop = threading.Event()
+
+    def count():
+        while not stop.is_set():
+            ticks.append(1)
+            stop.wait(0.001)
+
+    t = threading.Thread(target=count)
+    t.start()
+    try:
+        kodama_dag.run(SMALL, cache=tmp_path / "fresh", out=False, quiet=True)
+    finally:
+        stop.set()
+        t.join()
+    assert len(ticks) > 10
+
+
+def test_rasters_as_dataarrays_carry_crs_coordinates(small):
+    xr = pytest.importorskip("xarray") if os.environ.get("CI") != "true" else __import__("xarray")
+    run, _ = small
+    da = run.raster("dsm")
+    data, transform = run.raster("dsm", xarray=False)
+    assert isinstance(da, xr.DataArray) and da.dims == ("y", "x")
+    assert da.x.values[0] == pytest.approx(transform[0] + transform[1] / 2)
+    assert da.y.values[0] == pytest.approx(transform[3] + transform[5] / 2)
+    assert da.attrs["crs"] == "EPSG:32618"
+    assert np.shares_memory(da.values, data) or np.array_equal(da.values, data, equal_nan=True)
