@@ -579,14 +579,8 @@ fn pattern_search(
     axes: [[f64; 2]; 2],
     p: &RegistrationParams,
 ) -> Candidate {
-    let scale = (1u32 << from_level) as f64;
-    let (mut here, mut sm, mut sr) = (first, steps.step_m / scale, steps.step_rad / scale);
-    for level in from_level..8 {
-        if level >= 3 && sm <= FINEST_STEP_M {
-            break;
-        }
-        sm /= 2.0;
-        sr /= 2.0;
+    let mut here = first;
+    for (level, (sm, sr)) in levels(steps, from_level) {
         for _ in 0..MOVES {
             let lattice = (level as usize + 1).min(ON_FINEST);
             let moves = if lattice == ON_FINEST {
@@ -638,18 +632,29 @@ fn settle_the_rest(
     best
 }
 
-/// The steps (metres, radians) of the pattern search's last level: halved from the coarse
-/// grid's as `pattern_search` halves them.
-fn finest_steps(steps: Steps) -> (f64, f64) {
-    let (mut sm, mut sr) = (steps.step_m, steps.step_rad);
-    for level in 0..8 {
+/// The levels a pattern search from `from_level` goes through, each with its steps (metres,
+/// radians): half the coarse grid's at level 0, halved each level; at least three levels, more
+/// for a wide window, until the step is under `FINEST_STEP_M`.
+fn levels(steps: Steps, from_level: u32) -> Vec<(u32, (f64, f64))> {
+    let scale = (1u32 << from_level) as f64;
+    let (mut sm, mut sr) = (steps.step_m / scale, steps.step_rad / scale);
+    let mut out = Vec::new();
+    for level in from_level..8 {
         if level >= 3 && sm <= FINEST_STEP_M {
             break;
         }
         sm /= 2.0;
         sr /= 2.0;
+        out.push((level, (sm, sr)));
     }
-    (sm, sr)
+    out
+}
+
+/// The steps of the pattern search's last level.
+fn finest_steps(steps: Steps) -> (f64, f64) {
+    levels(steps, 0)
+        .last()
+        .map_or((steps.step_m, steps.step_rad), |l| l.1)
 }
 
 /// `here` and its neighbours by `moves` (some of `MOVES_AROUND`) at steps `sm` metres and `sr`
