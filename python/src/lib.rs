@@ -84,12 +84,17 @@ fn load_graph(
     load(Path::new(path), &opts).map_err(|e| user(e.to_string()))
 }
 
-/// Opens (creating if needed) the cache folder `dir`; a folder that is not a cache is the user's.
-fn open_cache(dir: &Path) -> PyResult<Cache> {
-    Cache::open(dir).map_err(|e| match NotACache::of(&e) {
+/// A cache that could not be opened: a folder that is not a cache is the user's.
+fn cache_error(dir: &Path, e: std::io::Error) -> PyErr {
+    match NotACache::of(&e) {
         Some(n) => user(n.to_string()),
         None => engine(format!("cannot open the cache at {}: {e}", dir.display())),
-    })
+    }
+}
+
+/// Opens (creating if needed) the cache folder `dir`.
+fn open_cache(dir: &Path) -> PyResult<Cache> {
+    Cache::open(dir).map_err(|e| cache_error(dir, e))
 }
 
 /// The site of a loaded graph, as a dict.
@@ -119,11 +124,9 @@ fn run<'py>(
     halo_m: Option<f64>,
     quiet: bool,
 ) -> PyResult<(String, Bound<'py, PyDict>)> {
-    if jobs == Some(0) || jobs.is_some_and(|j| j > 4096) {
-        return Err(user(format!(
-            "jobs: expected 1 to 4096 worker threads, got {}",
-            jobs.unwrap_or(0)
-        )));
+    // As the CLI's --jobs: 0 is refused; too many are clamped by the engine, with a warning.
+    if jobs == Some(0) {
+        return Err(user("jobs: expected at least 1 worker thread, got 0"));
     }
     let g = load_graph(graph, sets, data, allow_outside, tile_m, halo_m)?;
     let cache = open_cache(&cache)?;
@@ -342,10 +345,7 @@ fn measurements<'py>(py: Python<'py>, m: Measurements) -> PyResult<Bound<'py, Py
 fn artifact<'py>(py: Python<'py>, cache: PathBuf, digest: &str) -> PyResult<Bound<'py, PyDict>> {
     let d = Digest::from_hex(digest)
         .map_err(|_| user(format!("digest: expected 64 hex digits, got {digest:?}")))?;
-    let c = Cache::open_existing(&cache).map_err(|e| match NotACache::of(&e) {
-        Some(n) => user(n.to_string()),
-        None => engine(format!("cannot open the cache at {}: {e}", cache.display())),
-    })?;
+    let c = Cache::open_existing(&cache).map_err(|e| cache_error(&cache, e))?;
     let a = py.detach(|| -> Result<Artifact, String> {
         let bytes = c.get_blob(&d).map_err(|e| e.to_string())?;
         rmp_serde::from_slice::<Artifact>(&bytes).map_err(|e| format!("undecodable ({e})"))
