@@ -207,6 +207,7 @@ pub fn fuse_views_each<P: Send, R: Send>(
     let out = charts
         .charts
         .par_iter()
+        .with_max_len(1)
         .zip(per_chart)
         .enumerate()
         .map(|(ci, (c, d))| {

@@ -290,6 +290,7 @@ impl Stage for SynthViews {
         // Each view is stored as soon as it is rendered: a few in memory at a time.
         let views = poses
             .par_iter()
+            .with_max_len(1)
             .map(|(k, pose)| {
                 let (k, pose) = (*k, pose);
                 let mut v = render(scene, &rays, &buildings, p, k, *pose);

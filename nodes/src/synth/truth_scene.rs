@@ -90,6 +90,7 @@ impl Stage for TruthScene {
         let meshes: Vec<(Mesh, Relief)> = city
             .buildings
             .par_iter()
+            .with_max_len(1)
             .map(|b| {
                 let mesh =
                     building_solid(b).map_err(|m| StageError::Failed(format!("{}: {m}", b.id)));

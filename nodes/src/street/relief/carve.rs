@@ -403,6 +403,7 @@ pub fn carve_scene(
     };
     let done: Vec<Result<Option<Done>, String>> = per_object
         .par_iter()
+        .with_max_len(1)
         .enumerate()
         .map(|(oi, ks)| carve_building(&ctx, &scene.objects[oi], oi, ks))
         .collect();

@@ -297,6 +297,7 @@ pub fn mesh_delta(charts: &ChartSet, mesh: &Scene, search_m: f64) -> Vec<Vec<f32
     charts
         .charts
         .par_iter()
+        .with_max_len(1)
         .map(|c| {
             if c.kind != ChartKind::Wall {
                 return Vec::new();
