@@ -368,3 +368,46 @@ fn a_view_without_labels_is_left_alone_and_bad_knobs_are_refused() {
     }
     assert!(RegistrationParams::default().validate().is_ok());
 }
+
+#[test]
+fn the_rays_of_a_pose_are_the_same_bits_on_every_code_path() {
+    use super::labels::Sample;
+    use super::twin::{Turn, rays_of, rays_of_any};
+    let pose = Pose::from_angles([3.0, -2.0, 1.6], 37.0, 4.0, -1.5);
+    let samples: Vec<Sample> = (0..97)
+        .map(|k| {
+            let (a, b) = (k as f64 * 0.013 - 0.6, (k % 11) as f64 * 0.05 - 0.25);
+            let n = (1.0 + a * a + b * b).sqrt();
+            Sample {
+                dir: [a / n, 1.0 / n, b / n],
+                seen: Seen::Building,
+                wall: 0,
+                facade: Facade::None,
+                right: u32::MAX,
+                down: u32::MAX,
+                tile: k / 8,
+            }
+        })
+        .collect();
+    // Candidates that take every branch: no turn, each turn alone, all of them with a zoom.
+    let poses: Vec<([f64; 3], Turn)> = [
+        [0.0; 7],
+        [0.1, 0.0, 0.01, 0.0, 0.0, 0.0, 0.0],
+        [0.0, -0.2, 0.0, 0.05, 0.004, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -0.003],
+        [0.03, 0.02, -0.02, -0.01, 0.002, 0.0065, 0.001],
+    ]
+    .iter()
+    .map(|c| ([3.0 + c[0], -2.0 + c[1], 1.6 + c[3]], Turn::of(&pose, *c)))
+    .collect();
+    let (mut fast, mut plain) = (Vec::new(), Vec::new());
+    rays_of(&samples, &poses, &mut fast);
+    rays_of_any(&samples, &poses, &mut plain);
+    assert_eq!(fast.len(), samples.len() * poses.len());
+    let bits = |r: &[([f32; 3], [f32; 3])]| -> Vec<[u32; 6]> {
+        r.iter()
+            .map(|(o, d)| [o[0], o[1], o[2], d[0], d[1], d[2]].map(f32::to_bits))
+            .collect()
+    };
+    assert_eq!(bits(&fast), bits(&plain));
+}

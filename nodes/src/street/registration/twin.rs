@@ -55,14 +55,7 @@ pub(super) fn scores(
     let mut first = 0;
     for chunk in chunks_of_tiles(samples, CHUNK) {
         rays.clear();
-        for smp in chunk {
-            for (position, turn) in poses {
-                rays.push((
-                    position.map(|v| v as f32),
-                    turn.apply(smp.dir).map(|v| v as f32),
-                ));
-            }
-        }
+        rays_of(chunk, poses, &mut rays);
         // A tile's samples under every pose are a run: near an edge a tile holds a fraction of
         // a packet, and a packet of several tiles spreads too wide to be cast as one.
         let runs: Vec<u32> = chunk
@@ -101,6 +94,49 @@ pub(super) fn scores(
             }
         })
         .collect()
+}
+
+/// Each sample's ray under each pose, sample-major, appended to `rays`.
+pub(super) fn rays_of(
+    samples: &[Sample],
+    poses: &[([f64; 3], Turn)],
+    rays: &mut Vec<([f32; 3], [f32; 3])>,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2.
+        return unsafe { rays_of_avx2(samples, poses, rays) };
+    }
+    rays_of_any(samples, poses, rays)
+}
+
+/// [`rays_of`] compiled for AVX2: the same operations in the same order (Rust contracts no
+/// multiply-add), so the same bits, in half the instructions; a sixth of the registration's
+/// time was building these rays.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn rays_of_avx2(
+    samples: &[Sample],
+    poses: &[([f64; 3], Turn)],
+    rays: &mut Vec<([f32; 3], [f32; 3])>,
+) {
+    rays_of_any(samples, poses, rays)
+}
+
+#[inline(always)]
+pub(super) fn rays_of_any(
+    samples: &[Sample],
+    poses: &[([f64; 3], Turn)],
+    rays: &mut Vec<([f32; 3], [f32; 3])>,
+) {
+    for smp in samples {
+        for (position, turn) in poses {
+            rays.push((
+                position.map(|v| v as f32),
+                turn.apply(smp.dir).map(|v| v as f32),
+            ));
+        }
+    }
 }
 
 /// About how many samples [`scores`] casts at a time.
@@ -289,6 +325,7 @@ pub(super) struct Turn {
 
 /// `d` rotated about unit axis `k` by the angle of (sine, cosine) `(s, c)`, by Rodrigues'
 /// formula: d cos + (k x d) sin + k (k . d)(1 - cos). `d` itself where the angle is 0.
+#[inline(always)]
 fn rodrigues(d: [f64; 3], k: [f64; 3], (s, c): (f64, f64)) -> [f64; 3] {
     if s == 0.0 && c == 1.0 {
         return d;
@@ -320,11 +357,13 @@ impl Turn {
 
     /// Direction `d` (site frame, a pixel's ray from the reported pose) as the candidate sees
     /// that pixel: its focal length applied about the image centre, then pitched and turned.
+    #[inline(always)]
     pub(super) fn apply(&self, d: [f64; 3]) -> [f64; 3] {
         self.turn(self.zoomed(d))
     }
 
     /// Direction `d` with its camera-frame x and y scaled by `zoom`.
+    #[inline(always)]
     fn zoomed(&self, d: [f64; 3]) -> [f64; 3] {
         if self.zoom == 1.0 {
             return d;
@@ -338,6 +377,7 @@ impl Turn {
     }
 
     /// Direction `d` (site frame) rolled, pitched and turned (the camera's axes turn so).
+    #[inline(always)]
     pub(super) fn turn(&self, d: [f64; 3]) -> [f64; 3] {
         let d = rodrigues(d, self.forward, self.roll);
         let d = rodrigues(d, self.right, self.pitch);
