@@ -159,6 +159,17 @@ fn links_layout_in_site_and_geographic_coordinates_round_trips_through_export() 
     else {
         panic!("a file")
     };
+    // Beside the site frame, each end's WGS 84 position for a GIS: the transmitter's is the
+    // latitude and longitude it was read from.
+    let text = String::from_utf8(bytes.clone()).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let row: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
+    let col = |name: &str| -> f64 {
+        let k = header.iter().position(|h| *h == name).unwrap();
+        row[k].parse().unwrap()
+    };
+    assert!((col("tx_lat") - 35.9992).abs() < 1e-7, "{}", col("tx_lat"));
+    assert!((col("tx_lon") + 78.9398).abs() < 1e-7, "{}", col("tx_lon"));
     let again = dir.path().join("again.csv");
     std::fs::write(&again, bytes).unwrap();
     let back = read(Layout::Links, &[again], &site).unwrap();

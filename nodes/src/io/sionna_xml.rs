@@ -7,6 +7,7 @@ use std::path::Path;
 
 use crate::artifact::Material;
 use crate::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
+use crate::site::Site;
 use crate::stage::StageError;
 
 /// Sionna's default slab thickness, metres. Our scenes write each material's thickness from
@@ -525,6 +526,27 @@ pub fn write_scene(scene: &Scene) -> Result<Vec<(String, Vec<u8>)>, String> {
     Ok(files)
 }
 
+/// `site.json`, beside a Sionna RT export: where its frame lies. The scene is in the site frame
+/// (metres; x east, y north, z up), which Sionna RT cannot carry, so a user placing transmitters
+/// from a GIS needs the CRS and the origin to subtract; and `merge_shapes=False`, without which
+/// Sionna RT merges the buildings of one material into one shape.
+pub fn site_json(site: &Site) -> Result<Vec<u8>, String> {
+    use crate::io::crs::{Crs, ToSite};
+    let wgs84 = ToSite::new(&Crs::from_epsg(4326)?, site)?;
+    let (lon, lat) = wgs84.inverse(0.0, 0.0)?;
+    let doc = serde_json::json!({
+        "crs": site.crs,
+        "origin": [site.origin.0, site.origin.1],
+        "origin_lon_lat": [lon, lat],
+        "units": "metre",
+        "axes": "x east, y north, z up: easting = x + origin[0], northing = y + origin[1]; z as the input heights",
+        "load": "sionna.rt.load_scene(\"scene.xml\", merge_shapes=False) keeps one shape per building and material",
+    });
+    let mut text = serde_json::to_string_pretty(&doc).map_err(|e| e.to_string())?;
+    text.push('\n');
+    Ok(text.into_bytes())
+}
+
 /// Object ids as file names: letters, digits, `-` and `_` kept, anything else `_`.
 fn safe_name(id: &str) -> String {
     id.chars()
@@ -542,6 +564,30 @@ fn safe_name(id: &str) -> String {
 mod tests {
     use super::*;
     use crate::geom::mesh_build::cuboid;
+
+    #[test]
+    fn site_json_places_the_frame_on_the_earth() {
+        // lon -75, lat 40 lies on UTM 18N's central meridian: E 500000, N 4427757.22 m (the
+        // textbook point of crs.rs's tests).
+        let site = Site {
+            crs: "EPSG:32618".into(),
+            origin: (500_000.0, 4_427_757.22),
+            cell_m: 1.0,
+        };
+        let doc: serde_json::Value = serde_json::from_slice(&site_json(&site).unwrap()).unwrap();
+        assert_eq!(doc["crs"], "EPSG:32618");
+        assert_eq!(doc["origin"][0], 500_000.0);
+        assert_eq!(doc["origin"][1], 4_427_757.22);
+        let (lon, lat) = (
+            doc["origin_lon_lat"][0].as_f64().unwrap(),
+            doc["origin_lon_lat"][1].as_f64().unwrap(),
+        );
+        assert!(
+            (lon + 75.0).abs() < 1e-7 && (lat - 40.0).abs() < 1e-6,
+            "{lon} {lat}"
+        );
+        assert!(doc["load"].as_str().unwrap().contains("merge_shapes=False"));
+    }
 
     #[test]
     fn a_written_scene_reads_back_the_same() {

@@ -144,12 +144,14 @@ fn encode_unchecked(
         (Artifact::Scene(s), "glb") => file(write_glb(s)?),
         (Artifact::Scene(s), "3dtiles") => Ok(Encoded::Folder(write_tileset(s, site, 100.0)?)),
         (Artifact::Scene(s), "sionna") => {
-            Ok(Encoded::Folder(crate::io::sionna_xml::write_scene(s)?))
+            let mut files = crate::io::sionna_xml::write_scene(s)?;
+            files.push(("site.json".into(), crate::io::sionna_xml::site_json(site)?));
+            Ok(Encoded::Folder(files))
         }
         (Artifact::Footprints(f), "geojson") => {
             file(crate::io::geojson::write_footprints(f, site)?.into_bytes())
         }
-        (Artifact::Measurements(m), "csv") => file(measurements_csv(m).into_bytes()),
+        (Artifact::Measurements(m), "csv") => file(measurements_csv(m, site)?.into_bytes()),
         (Artifact::Metrics(m), "json") => {
             let mut s = serde_json::to_string_pretty(&m.values).map_err(|e| e.to_string())?;
             s.push('\n');
@@ -223,23 +225,30 @@ fn xyz_text(p: &crate::artifact::PointSet, site: &Site) -> String {
 }
 
 /// Measurements in the project's CSV layout, site-frame coordinates.
-fn measurements_csv(m: &crate::artifact::Measurements) -> String {
+/// Links as the `Links` layout of `ReadMeasurements` reads them: site-frame x/y (which a reader
+/// takes when a file has both) and, for a GIS, each end's WGS 84 longitude and latitude (degrees,
+/// 8 decimals: about a millimetre).
+fn measurements_csv(m: &crate::artifact::Measurements, site: &Site) -> Result<String, String> {
     use crate::artifact::Height;
+    use crate::io::crs::{Crs, ToSite};
     use std::fmt::Write;
+    let wgs84 = ToSite::new(&Crs::from_epsg(4326)?, site)?;
     let opt = |v: Option<f64>| v.map(|v| v.to_string()).unwrap_or_default();
     let z = |h: Height| match h {
         Height::Absolute(z) => (z.to_string(), String::new()),
         Height::AboveGround(h) => (String::new(), h.to_string()),
     };
     let mut s = String::from(
-        "tx_id,tx_x,tx_y,tx_z,tx_height_m,tx_azimuth_deg,rx_id,rx_x,rx_y,rx_z,rx_height_m,freq_hz,path_loss_db,rx_power_dbm,tx_eirp_dbm,los\n",
+        "tx_id,tx_x,tx_y,tx_z,tx_height_m,tx_azimuth_deg,rx_id,rx_x,rx_y,rx_z,rx_height_m,freq_hz,path_loss_db,rx_power_dbm,tx_eirp_dbm,los,tx_lon,tx_lat,rx_lon,rx_lat\n",
     );
     for l in &m.links {
         let ((tz, th), (rz, rh)) = (z(l.tx.z), z(l.rx.z));
         let los = l.los.map(|b| if b { "1" } else { "0" }).unwrap_or("");
+        let (tx_lon, tx_lat) = wgs84.inverse(l.tx.x, l.tx.y)?;
+        let (rx_lon, rx_lat) = wgs84.inverse(l.rx.x, l.rx.y)?;
         let _ = writeln!(
             s,
-            "{},{:.3},{:.3},{tz},{th},{},{},{:.3},{:.3},{rz},{rh},{},{},{},{},{los}",
+            "{},{:.3},{:.3},{tz},{th},{},{},{:.3},{:.3},{rz},{rh},{},{},{},{},{los},{tx_lon:.8},{tx_lat:.8},{rx_lon:.8},{rx_lat:.8}",
             l.tx.id,
             l.tx.x,
             l.tx.y,
@@ -253,8 +262,9 @@ fn measurements_csv(m: &crate::artifact::Measurements) -> String {
             opt(l.tx_eirp_dbm)
         );
     }
-    s
+    Ok(s)
 }
+
 /// The texel layers' atlas (`atlas`) and, when the layers carry their charts' frames,
 /// `charts.glb`: every chart as a textured quad in its world position (`chart_glb`).
 fn texel_atlas(t: &TexelLayers) -> Result<Vec<(String, Vec<u8>)>, String> {

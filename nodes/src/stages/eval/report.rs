@@ -20,6 +20,7 @@ use crate::io::export::figures::{Figure, render};
 use crate::io::export::report_html::{LinkPoint, Page, TableRow, number, report_html};
 use crate::rf::em::fspl_db;
 use crate::rf::pathloss_fit::{fit_close_in, fit_power_distance};
+use crate::site::Site;
 use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`Report`].
@@ -291,7 +292,9 @@ impl Stage for Report {
         files.push(("table.csv".to_string(), csv.into_bytes()));
         files.push((
             "links.csv".to_string(),
-            links_csv(&p.models, meas, &preds, &evals, ctx.site.origin).into_bytes(),
+            links_csv(&p.models, meas, &preds, &evals, &ctx.site)
+                .map_err(StageError::Failed)?
+                .into_bytes(),
         ));
         files.push(("metrics.json".to_string(), metrics_json(p, &evals)?));
         let plot_notes: Vec<(&str, String)> = power_note
@@ -838,7 +841,8 @@ fn tables(p: &ReportParams, evals: &[&Metrics]) -> (String, String) {
 /// empty without a split), and per model the prediction (at most the floor), the offset taken
 /// out of its transmitter's measurements, and the error against the measurement with it taken
 /// out; empty where a model was not scored there or fitted no offset for that transmitter.
-/// `origin` is the site's: the split's blocks are in its CRS.
+/// Beside the site frame, each end's WGS 84 longitude and latitude (degrees, 8 decimals), for a
+/// GIS. The split's blocks are in the site's CRS.
 ///
 /// Links left out by Evaluate's `windows` or `exclude_footprints` are not marked (its metrics
 /// only count them): their half is where the block rule puts them.
@@ -847,8 +851,11 @@ fn links_csv(
     meas: &Measurements,
     preds: &[&Measurements],
     evals: &[&Metrics],
-    origin: (f64, f64),
-) -> String {
+    site: &Site,
+) -> Result<String, String> {
+    use crate::io::crs::{Crs, ToSite};
+    let wgs84 = ToSite::new(&Crs::from_epsg(4326)?, site)?;
+    let origin = site.origin;
     let mut header: Vec<String> = [
         "tx_id",
         "rx_id",
@@ -856,6 +863,10 @@ fn links_csv(
         "tx_y",
         "rx_x",
         "rx_y",
+        "tx_lon",
+        "tx_lat",
+        "rx_lon",
+        "rx_lat",
         "distance_m",
         "freq_hz",
         "los",
@@ -876,6 +887,8 @@ fn links_csv(
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.3}"));
     for (k, m) in meas.links.iter().enumerate() {
         let measured = measured_loss(m);
+        let (tx_lon, tx_lat) = wgs84.inverse(m.tx.x, m.tx.y)?;
+        let (rx_lon, rx_lat) = wgs84.inverse(m.rx.x, m.rx.y)?;
         let mut row = vec![
             m.tx.id.clone(),
             m.rx.id.clone(),
@@ -883,6 +896,10 @@ fn links_csv(
             format!("{:.3}", m.tx.y),
             format!("{:.3}", m.rx.x),
             format!("{:.3}", m.rx.y),
+            format!("{tx_lon:.8}"),
+            format!("{tx_lat:.8}"),
+            format!("{rx_lon:.8}"),
+            format!("{rx_lat:.8}"),
             format!("{:.3}", link_distance(m, None)),
             format!("{}", m.freq_hz),
             m.los.map_or(String::new(), |l| u8::from(l).to_string()),
@@ -905,7 +922,7 @@ fn links_csv(
         out += &csv_text::row(&row);
         out.push('\n');
     }
-    out
+    Ok(out)
 }
 
 /// A prediction as Evaluate scores it: beyond the floor (or no path) it is the floor; without a
@@ -1335,7 +1352,19 @@ mod tests {
         ] {
             ev.set(k, v);
         }
-        let csv = links_csv(&["M".into()], &meas, &[&pred], &[&ev], (1000.0, -200.0));
+        let utm = |origin| Site {
+            crs: "EPSG:32618".into(),
+            origin,
+            cell_m: 1.0,
+        };
+        let csv = links_csv(
+            &["M".into()],
+            &meas,
+            &[&pred],
+            &[&ev],
+            &utm((1000.0, -200.0)),
+        )
+        .unwrap();
         let lines: Vec<&str> = csv.lines().collect();
         assert!(
             lines[0].ends_with("los,half,measured_db,M predicted_db,M error_db,M offset_db"),
@@ -1358,8 +1387,17 @@ mod tests {
             &meas,
             &[&pred],
             &[&Metrics::default()],
-            (0.0, 0.0),
-        );
+            &utm((500_000.0, 4_427_757.22)),
+        )
+        .unwrap();
+        // The transmitter at the frame's (-1000, 0) from an origin on UTM 18N's central meridian
+        // at 40° N: 1 km west is 0.0117151° of longitude to first order (1000 m / (k0 N cos 40°),
+        // k0 = 0.9996, N = 6386976 m the WGS 84 prime vertical radius there), the latitude
+        // within a micro-degree.
+        let row: Vec<&str> = csv.lines().nth(1).unwrap().split(',').collect();
+        let (lon, lat): (f64, f64) = (row[6].parse().unwrap(), row[7].parse().unwrap());
+        assert!((lon - (-75.0 - 0.0117151)).abs() < 1e-6, "{lon}");
+        assert!((lat - 40.0).abs() < 1e-5, "{lat}");
         assert!(
             csv.lines()
                 .nth(1)

@@ -6,7 +6,8 @@
 //!   `path_loss_db`, or `rx_power_dbm` with optional `tx_eirp_dbm`; optional `tx_id`, `rx_id`,
 //!   `tx_azimuth_deg`, `los` (0/1). The azimuth is a compass bearing: true north beside
 //!   `tx_lat, tx_lon` (turned to grid north here), grid north beside `tx_x, tx_y` (as Export
-//!   writes it).
+//!   writes it). A file with both (Export writes `tx_lon, tx_lat` too, for a GIS) is read by
+//!   its site-frame columns.
 //! - `DukeCbrs`: the Duke CBRS drive test (`PCI, latitude, longitude, device, rsrp`) with its cells
 //!   file (`{"cells": [{"pci", "lat", "lon", "azimuth_deg", "freq_hz"}]}`): RSRP as received power,
 //!   EIRP unknown, transmitter and receiver heights from the params (not published). The cells'
