@@ -3,7 +3,7 @@
 the poses the readers must find, computed here independently (numpy for the rotations, pyproj for
 the projection and its meridian convergence).
 
-    pip install numpy pyproj pillow && python3 scripts/make_mapillary_fixtures.py
+    pip install numpy pyproj pillow  # Pillow with WebP && python3 scripts/make_mapillary_fixtures.py
 
 Writes nodes/tests/fixtures/mapillary/:
 - per_image/<id>.json + <id>.jpg, one API v4 image entity per file:
@@ -13,7 +13,7 @@ Writes nodes/tests/fixtures/mapillary/:
   1005 a computed_rotation 30 degrees off its computed_compass_angle (must be dropped),
   1006 no computed_rotation (pose from computed_compass_angle, level);
 - jsonl/metadata.jsonl as mapillary-downloader writes it: 2001 at 2024-05-01/seqB/2001.jpg,
-  2002 found by id at other/deep/2002.jpg, 2001 again (a duplicate, dropped) and the closing
+  2002 found by id at other/deep/2002.webp (lossy WebP, as Mapillary serves), 2001 again (a duplicate, dropped) and the closing
   {"__complete__": true}; with the downloader's progress.json (not an entity, skipped);
 - expected.json: per view id, the site-frame position (with trust_altitude, and on the terrain
   plane below plus 2.5 m), the camera-to-site rotation (rows; columns right, down, forward),
@@ -256,7 +256,7 @@ def mapillary():
     (jl / "metadata.jsonl").write_text("".join(json.dumps(e) + "\n" for e in (e1, e2, e1, {"__complete__": True})))
     (jl / "progress.json").write_text(json.dumps({"original": ["2001", "2002"]}) + "\n")
     save(blocks(24, 16), jl / "2024-05-01" / "seqB" / "2001.jpg")
-    save(blocks(24, 16, fill=(90, 90, 90)), jl / "other" / "deep" / "2002.jpg")
+    blocks(24, 16, fill=(90, 90, 90)).save(jl / "other" / "deep" / "2002.webp", quality=90)
     (out / "expected.json").write_text(dump(expected))
 
 

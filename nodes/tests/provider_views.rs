@@ -409,7 +409,8 @@ fn mapillary_downloader_layout_with_metadata_jsonl() {
         (got.dropped[0].id.as_str(), &got.dropped[0].reason),
         ("2001", &DropReason::Duplicate)
     );
-    // 2002 lies in a darker image elsewhere under the folder: found by id.
+    // 2002 lies in a darker image elsewhere under the folder, a lossy WebP (as Mapillary serves
+    // its thumbnails; written by Pillow): found by id and decoded.
     assert_colour(&got.views[1].view, (3, 3), [90, 90, 90]);
 }
 

@@ -62,7 +62,7 @@ pub fn extension(p: &Path) -> String {
         .unwrap_or_default()
 }
 
-/// The images (jpg, jpeg, png) under a folder, by file stem.
+/// The images (jpg, jpeg, png, webp) under a folder, by file stem.
 pub struct ImageIndex(BTreeMap<String, Vec<PathBuf>>);
 
 impl ImageIndex {
@@ -70,7 +70,7 @@ impl ImageIndex {
     pub fn new(files: &[PathBuf]) -> ImageIndex {
         let mut m: BTreeMap<String, Vec<PathBuf>> = BTreeMap::new();
         for f in files {
-            if ["jpg", "jpeg", "png"].contains(&extension(f).as_str())
+            if ["jpg", "jpeg", "png", "webp"].contains(&extension(f).as_str())
                 && let Some(stem) = f.file_stem()
             {
                 m.entry(stem.to_string_lossy().into_owned())
@@ -100,7 +100,11 @@ impl ImageIndex {
 /// Decodes an image as RGB, refusing empty images and sides over [`MAX_IMAGE_SIDE`].
 pub fn load_image(path: &Path) -> Result<RgbImage, StageError> {
     let bad = |e: String| {
-        StageError::bad_input(path, "image", format!("expected a readable JPEG/PNG: {e}"))
+        StageError::bad_input(
+            path,
+            "image",
+            format!("expected a readable JPEG/PNG/WebP: {e}"),
+        )
     };
     let mut reader = image::ImageReader::open(path)
         .map_err(|e| bad(e.to_string()))?

@@ -11,7 +11,7 @@
 //! - a saved API response `{"data": [entity, ...]}` (or a bare array of entities).
 //!
 //! Other JSON objects (mapillary-downloader's `progress.json`) and the downloader's closing
-//! `{"__complete__": true}` line are skipped. An image is `<id>.jpg` (`.jpeg`, `.png`) beside its
+//! `{"__complete__": true}` line are skipped. An image is `<id>.jpg` (`.jpeg`, `.png`, `.webp`) beside its
 //! JSON, else anywhere under the folder (one in a folder named after the entity's `sequence`
 //! first). Files are read in sorted path order; an id seen twice keeps its first entity.
 //!

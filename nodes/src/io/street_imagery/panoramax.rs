@@ -12,7 +12,7 @@
 //! `camera_manufacturer` and `camera_model` are not used; `properties.datetime` (ISO 8601).
 //! JSON files that are neither an Item nor an ItemCollection (a STAC Collection) are skipped.
 //! The image is the asset `hd`, else `sd`: its `href` relative to the item's file (it may not
-//! leave the folder), or for a URL the file `<id>.jpg` (`.jpeg`, `.png`) anywhere under the
+//! leave the folder), or for a URL the file `<id>.jpg` (`.jpeg`, `.png`, `.webp`) anywhere under the
 //! folder.
 //!
 //! # Pose
