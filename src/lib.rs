@@ -7,6 +7,7 @@
 #![deny(missing_docs)]
 
 pub mod cache;
+pub mod cli;
 pub mod diag;
 pub mod exec;
 pub mod explain;

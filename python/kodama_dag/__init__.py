@@ -17,9 +17,11 @@ from .api import (
     NodeRecord,
     PlanEntry,
     Run,
+    SweepResult,
     explain,
     kinds,
     run,
+    sweep,
 )
 
 __all__ = [
@@ -29,9 +31,11 @@ __all__ = [
     "NodeRecord",
     "PlanEntry",
     "Run",
+    "SweepResult",
     "UserError",
     "__version__",
     "explain",
     "kinds",
     "run",
+    "sweep",
 ]

@@ -311,6 +311,91 @@ def run(
     return result
 
 
+class SweepResult:
+    """A finished sweep: the table of its variants' metrics and each variant's run."""
+
+    def __init__(self, d: dict, cache: str):
+        self.name: str = d["name"]
+        #: The axes, in the sweep file's order.
+        self.axes: list[str] = list(d["axes"])
+        #: The metrics asked for, `NODE.KEY`.
+        self.metric_names: list[str] = list(d["metrics"])
+        #: Where the table (table.md, table.csv) and the variants' outputs went.
+        self.out = Path(d["out"])
+        variants = d["variants"]
+        #: Each variant's name (`axis=label,...`, as in the table), in run order.
+        self.variants: list[str] = [
+            ",".join(f"{a}={l}" for a, l in v["labels"]) for v in variants
+        ]
+        self._labels = [dict(v["labels"]) for v in variants]
+        self._metrics = [list(v["metrics"]) for v in variants]
+        self._runs = [Run(json.loads(v["record"]), d["site"], cache) for v in variants]
+
+    def __repr__(self) -> str:
+        return f"SweepResult({self.name!r}: {len(self.variants)} variants, {len(self.metric_names)} metrics)"
+
+    def run(self, variant: "str | int") -> Run:
+        """One variant's run (by name or position), to read its artifacts."""
+        if isinstance(variant, int):
+            return self._runs[variant]
+        try:
+            return self._runs[self.variants.index(variant)]
+        except ValueError:
+            raise KeyError(
+                f"no variant {variant!r}; the sweep has {', '.join(self.variants)}"
+            ) from None
+
+    def table(self, *, pandas: bool | None = None):
+        """The sweep's table: a row per variant (index: its name), a column per axis (the
+        variant's label on it) and per metric (NaN where the variant's graph does not make it).
+        A pandas DataFrame when pandas is installed (or `pandas=True`), else a dict of columns."""
+        cols: dict[str, list] = {"variant": list(self.variants)}
+        for a in self.axes:
+            cols[a] = [lab[a] for lab in self._labels]
+        for k, m in enumerate(self.metric_names):
+            cols[m] = [row[k] for row in self._metrics]
+        if pandas is False:
+            return cols
+        try:
+            import pandas as pd
+        except ImportError:
+            if pandas:
+                raise
+            return cols
+        return pd.DataFrame(cols).set_index("variant")
+
+
+def sweep(
+    file: "str | os.PathLike[str]",
+    *,
+    set: Mapping[str, object] | None = None,
+    cache: "str | os.PathLike[str] | None" = None,
+    out: "str | os.PathLike[str] | None" = None,
+    jobs: int | None = None,
+    data: "str | os.PathLike[str] | None" = None,
+    allow_outside: bool = False,
+    quiet: bool = False,
+) -> SweepResult:
+    """Runs the sweep file `file` as `kodama-dag sweep` does, in this process: every variant
+    through one cache (a node shared by variants runs once), the table written to `out`
+    (default `out/<sweep stem>`). `set` applies to every variant, before its own overrides.
+
+    Raises `UserError` for a bad sweep or base graph (exit code 2 in the CLI), `EngineError`
+    when a variant's node failed or the cache did (exit code 1); finished variants stay cached,
+    so running it again resumes. The GIL is released while it runs."""
+    d = _core.sweep(
+        os.fspath(file),
+        _set_args(set or {}),
+        _cache_dir(cache),
+        None if out is None else os.fspath(out),
+        jobs,
+        _data_dir(data),
+        allow_outside,
+        quiet,
+    )
+    return SweepResult(d, _cache_dir(cache))
+
+
 @dataclass(frozen=True)
 class PlanEntry:
     """What `run` would do for one node, and why (`kodama-dag explain`)."""

@@ -149,6 +149,86 @@ fn run<'py>(
     Ok((json, site_dict(py, &g)?))
 }
 
+/// Runs a sweep file as `kodama-dag sweep` does (every variant through one cache, the table
+/// written in `out`); returns its name, axes, metric names, output folder, and per variant its
+/// (axis, label) pairs, metrics (NaN where missing) and run record as JSON.
+#[pyfunction]
+#[pyo3(signature = (file, sets, cache, out, jobs, data, allow_outside, quiet))]
+#[allow(clippy::too_many_arguments)]
+fn sweep<'py>(
+    py: Python<'py>,
+    file: PathBuf,
+    sets: Vec<String>,
+    cache: PathBuf,
+    out: Option<PathBuf>,
+    jobs: Option<usize>,
+    data: Option<PathBuf>,
+    allow_outside: bool,
+    quiet: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    use kodama_dag::sweep::{SweepError, SweepOptions, load_sweep, run_sweep};
+    if jobs == Some(0) {
+        return Err(user("jobs: expected at least 1 worker thread, got 0"));
+    }
+    if let Some(d) = &data
+        && !d.is_dir()
+    {
+        return Err(user(format!("data {}: not a directory", d.display())));
+    }
+    let sw = load_sweep(&file, allow_outside).map_err(user)?;
+    // The base graph's site: a variant's overrides set params, never the site.
+    let base = load_graph(
+        &sw.graph.to_string_lossy(),
+        sets.clone(),
+        data.clone(),
+        allow_outside,
+        None,
+        None,
+    )?;
+    let cache = open_cache(&cache)?;
+    let out_dir = out.unwrap_or_else(|| Path::new("out").join(&sw.name));
+    let opts = SweepOptions {
+        data_dir: data,
+        sets,
+        out_dir: out_dir.clone(),
+        jobs,
+        allow_outside,
+    };
+    let results = py.detach(|| {
+        let reporter = Reporter::new(Mode::detect(quiet), 0);
+        run_sweep(&sw, &cache, &opts, &reporter, |i, n, v| {
+            if !quiet {
+                eprintln!("variant {}/{n}: {}", i + 1, v.name());
+            }
+        })
+    });
+    let results = results.map_err(|e| match e {
+        SweepError::Graph(m) => user(m),
+        SweepError::Run(e) => run_error(e),
+        SweepError::Failed(m) => engine(m),
+    })?;
+    let d = PyDict::new(py);
+    d.set_item("name", &sw.name)?;
+    d.set_item(
+        "axes",
+        sw.axes.iter().map(|(a, _)| a.as_str()).collect::<Vec<_>>(),
+    )?;
+    d.set_item("metrics", &sw.metrics)?;
+    d.set_item("out", &out_dir)?;
+    d.set_item("site", site_dict(py, &base)?)?;
+    let variants = PyList::empty(py);
+    for r in &results {
+        let v = PyDict::new(py);
+        v.set_item("labels", &r.variant.labels)?;
+        v.set_item("metrics", &r.metrics)?;
+        let json = serde_json::to_string(&r.record).map_err(|e| engine(e.to_string()))?;
+        v.set_item("record", json)?;
+        variants.append(v)?;
+    }
+    d.set_item("variants", variants)?;
+    Ok(d)
+}
+
 /// What `run` would do for each node and why, as JSON (`kodama-dag explain --json`'s nodes).
 #[pyfunction]
 #[pyo3(signature = (graph, sets, cache, targets, data, allow_outside))]
@@ -377,6 +457,13 @@ fn artifact<'py>(py: Python<'py>, cache: PathBuf, digest: &str) -> PyResult<Boun
     }
 }
 
+/// The `kodama-dag` command line, run in this process: `argv` as the binary's (its name first);
+/// returns the exit code. The GIL is released while it runs.
+#[pyfunction]
+fn cli(py: Python<'_>, argv: Vec<String>) -> u8 {
+    py.detach(|| kodama_dag::cli::main(argv))
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
@@ -386,5 +473,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(explain, m)?)?;
     m.add_function(wrap_pyfunction!(kinds, m)?)?;
     m.add_function(wrap_pyfunction!(artifact, m)?)?;
+    m.add_function(wrap_pyfunction!(cli, m)?)?;
+    m.add_function(wrap_pyfunction!(sweep, m)?)?;
     Ok(())
 }

@@ -222,3 +222,58 @@ def test_rasters_as_dataarrays_carry_crs_coordinates(small):
     assert da.y.values[0] == pytest.approx(transform[3] + transform[5] / 2)
     assert da.attrs["crs"] == "EPSG:32618"
     assert np.shares_memory(da.values, data) or np.array_equal(da.values, data, equal_nan=True)
+
+
+SWEEP = HERE / "small_sweep.ron"
+
+
+@pytest.fixture(scope="module")
+def swept(cache, tmp_path_factory):
+    out = tmp_path_factory.mktemp("sweep")
+    return kodama_dag.sweep(SWEEP, cache=cache, out=out, quiet=True), out
+
+
+def test_a_sweeps_table_is_the_csv_the_engine_wrote(swept):
+    import csv
+
+    result, out = swept
+    table = result.table(pandas=False)
+    assert result.variants == [
+        "density=4.0,rule=max",
+        "density=4.0,rule=min",
+        "density=2.0,rule=max",
+        "density=2.0,rule=min",
+    ]
+    assert table["density"] == ["4.0", "4.0", "2.0", "2.0"]
+    with open(out / "table.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 4
+    for k, row in enumerate(rows):
+        for m in ["dsm_stats.max", "dsm_stats.mean"]:
+            assert table[m][k] == pytest.approx(float(row[m]), rel=1e-6)
+    assert list(table) == ["variant", "density", "rule", "dsm_stats.max", "dsm_stats.mean"]
+
+
+def test_each_variant_reads_as_a_run(swept):
+    result, _ = swept
+    mx = result.run("density=2.0,rule=max").metrics("dsm_stats")
+    mn = result.run("density=2.0,rule=min").metrics("dsm_stats")
+    # The lowest return per cell is never above the highest.
+    assert mn["mean"] < mx["mean"]
+    data, _ = result.run(0).raster("dsm", xarray=False)
+    assert float(np.nanmax(data)) == pytest.approx(result.table(pandas=False)["dsm_stats.max"][0], abs=1e-3)
+    with pytest.raises(KeyError, match="no variant"):
+        result.run("density=3.0,rule=max")
+
+
+def test_a_second_sweep_is_all_cache_hits(swept, cache, tmp_path):
+    again = kodama_dag.sweep(SWEEP, cache=cache, out=tmp_path, quiet=True)
+    for k in range(len(again.variants)):
+        assert all(r.status == "cached" for r in again.run(k).records)
+
+
+def test_a_bad_sweep_is_a_user_error(tmp_path, cache):
+    bad = tmp_path / "bad_sweep.ron"
+    bad.write_text('Sweep(graph: "nowhere.ron", axes: {}, metrics: [])')
+    with pytest.raises(kodama_dag.UserError, match="bad_sweep.ron|nowhere.ron"):
+        kodama_dag.sweep(bad, cache=cache, out=tmp_path / "o", allow_outside=True)

@@ -1,21 +1,24 @@
 //! The `kodama-dag` command line. Exit codes: 0 success, 1 a node (or the cache) failed,
-//! 2 bad usage or an invalid graph or input.
+//! 2 bad usage or an invalid graph or input. The binary (`src/main.rs`) and the Python
+//! package's `kodama-dag` script (`python -m kodama_dag`) both call [`main`].
+//!
+//! The top of the crate: nothing in the engine imports it. Its `rf_commands` wrap the radio of
+//! `kodama_nodes::rf` for `trace` and `radiomap`; the engine's modules stay free of radio.
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
 mod rf_commands;
 
-use kodama_dag::cache::{Cache, gc};
-use kodama_dag::exec::{RunError, RunOptions, run};
-use kodama_dag::explain::{Plan, explain};
-use kodama_dag::graph::{Graph, LoadOptions, load, to_dot, to_mermaid};
-use kodama_dag::progress::{Mode, Reporter};
-use kodama_dag::record::Status;
-use kodama_dag::registry;
+use crate::cache::{Cache, gc};
+use crate::exec::{RunError, RunOptions, run};
+use crate::explain::{Plan, explain};
+use crate::graph::{Graph, LoadOptions, load, to_dot, to_mermaid};
+use crate::progress::{Mode, Reporter};
+use crate::record::Status;
+use crate::registry;
 use kodama_nodes::stage::Arity;
 
 #[derive(Parser)]
@@ -34,11 +37,12 @@ struct Cli {
     remote_cache: Option<String>,
 }
 
-/// The remote cache's URL for this process, from `--remote-cache` or the environment.
-static REMOTE_CACHE: std::sync::OnceLock<Option<String>> = std::sync::OnceLock::new();
+/// The remote cache's URL for the command running, from `--remote-cache` or the environment.
+/// Set by each [`main`] call (a Python process may make several).
+static REMOTE_CACHE: std::sync::RwLock<Option<String>> = std::sync::RwLock::new(None);
 
-fn remote_cache_url() -> Option<&'static str> {
-    REMOTE_CACHE.get().and_then(|u| u.as_deref())
+fn remote_cache_url() -> Option<String> {
+    REMOTE_CACHE.read().map_or(None, |u| u.clone())
 }
 
 #[derive(Subcommand)]
@@ -366,7 +370,7 @@ fn load_graph(args: &GraphArgs) -> Result<Graph, Fail> {
         data_dir: args.data.clone(),
         sets: args.sets.clone(),
         allow_outside: args.allow_outside,
-        tiles: kodama_dag::graph::TileOverrides {
+        tiles: crate::graph::TileOverrides {
             tile_m: args.tile_m,
             halo_m: args.halo_m,
         },
@@ -389,7 +393,7 @@ fn cache_dir(dir: Option<PathBuf>) -> PathBuf {
 
 /// A cache error as the CLI reports it: a folder that is not a cache is the user's (exit 2).
 fn cache_fail(dir: &std::path::Path, e: std::io::Error) -> Fail {
-    match kodama_dag::cache::NotACache::of(&e) {
+    match crate::cache::NotACache::of(&e) {
         Some(n) => Fail(2, format!("error: {n}")),
         None => Fail(
             1,
@@ -407,7 +411,7 @@ fn open_cache(dir: Option<PathBuf>) -> Result<Cache, Fail> {
         None => Ok(cache),
         Some(url) => {
             let remote =
-                kodama_dag::cache::Remote::open(url).map_err(|m| Fail(2, format!("error: {m}")))?;
+                crate::cache::Remote::open(&url).map_err(|m| Fail(2, format!("error: {m}")))?;
             Ok(cache.with_remote(remote))
         }
     }
@@ -424,7 +428,7 @@ fn run_once(
     quiet: bool,
 ) -> Result<u8, Fail> {
     let total = g
-        .needed(&kodama_dag::exec::target_indices(g, &targets)?)
+        .needed(&crate::exec::target_indices(g, &targets)?)
         .iter()
         .filter(|x| **x)
         .count();
@@ -511,7 +515,7 @@ fn watch_loop(
             ignore.push(o);
         }
         // Watch before running, so an edit made during the run is not missed.
-        let mut paths = kodama_dag::watch::watched_paths(&args.graph, loaded.as_ref().ok());
+        let mut paths = crate::watch::watched_paths(&args.graph, loaded.as_ref().ok());
         if loaded.is_ok() {
             inputs = paths.clone();
         } else {
@@ -519,7 +523,7 @@ fn watch_loop(
             paths.sort();
             paths.dedup();
         }
-        let (_watcher, rx) = kodama_dag::watch::watcher(&paths).map_err(|e| {
+        let (_watcher, rx) = crate::watch::watcher(&paths).map_err(|e| {
             Fail(
                 1,
                 format!("error: cannot watch {}: {e}", args.graph.display()),
@@ -533,7 +537,7 @@ fn watch_loop(
             Err(Fail(_, msg)) => eprintln!("{msg}"),
         }
         eprintln!("watching {} paths (Ctrl-C to stop)", paths.len());
-        if !kodama_dag::watch::wait_for_change(
+        if !crate::watch::wait_for_change(
             &rx,
             &paths,
             &ignore,
@@ -545,25 +549,44 @@ fn watch_loop(
     }
 }
 
-fn main() -> ExitCode {
-    tracing_subscriber::fmt()
+/// Runs the command line `args` (the program's name first, as `std::env::args_os` gives it) and
+/// returns its exit code; messages go to stderr, results to stdout, as the binary's.
+pub fn main<I, T>(args: I) -> u8
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    // A second call in one process (Python) keeps the first's subscriber.
+    let _ = tracing_subscriber::fmt()
         .with_env_filter(tracing_subscriber::EnvFilter::from_env("KODAMA_DAG_LOG"))
         .with_writer(std::io::stderr)
-        .init();
-    let cli = Cli::parse();
+        .try_init();
+    let cli = match Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        // Help and --version print and exit 0; a usage error prints and exits 2, as clap's own.
+        Err(e) => {
+            let _ = e.print();
+            return e.exit_code().clamp(0, 255) as u8;
+        }
+    };
     let remote = cli.remote_cache.or_else(|| {
         std::env::var("KODAMA_DAG_REMOTE_CACHE")
             .ok()
             .filter(|u| !u.is_empty())
     });
-    REMOTE_CACHE.set(remote).expect("set once");
-    match dispatch(cli.command) {
-        Ok(code) => ExitCode::from(code),
+    if let Ok(mut url) = REMOTE_CACHE.write() {
+        *url = remote;
+    }
+    let code = match dispatch(cli.command) {
+        Ok(code) => code,
         Err(Fail(code, msg)) => {
             eprintln!("{msg}");
-            ExitCode::from(code)
+            code
         }
-    }
+    };
+    use std::io::Write;
+    let _ = std::io::stdout().flush();
+    code
 }
 
 /// Runs the command the user gave; its exit code.
@@ -634,7 +657,7 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             Ok(0)
         }
         Command::Serve { dir, port } => {
-            kodama_dag::serve::serve(&dir, port).map_err(|m| Fail(2, format!("error: {m}")))?;
+            crate::serve::serve(&dir, port).map_err(|m| Fail(2, format!("error: {m}")))?;
             Ok(0)
         }
         Command::Kinds => {
@@ -660,17 +683,17 @@ fn sweep_command(a: SweepArgs) -> Result<u8, Fail> {
         variant,
         prefix,
     } = a;
-    let sw = kodama_dag::sweep::load_sweep(&sweep, allow_outside)
+    let sw = crate::sweep::load_sweep(&sweep, allow_outside)
         .map_err(|e| Fail(2, format!("error: {e}")))?;
     if dry_run {
-        let opts = kodama_dag::sweep::SweepOptions {
+        let opts = crate::sweep::SweepOptions {
             data_dir: data,
             sets,
             allow_outside,
             ..Default::default()
         };
-        let variants = kodama_dag::sweep::check_variants(&sw, &opts)
-            .map_err(|e| Fail(2, format!("error: {e}")))?;
+        let variants =
+            crate::sweep::check_variants(&sw, &opts).map_err(|e| Fail(2, format!("error: {e}")))?;
         for v in variants {
             println!("{}", v.name());
         }
@@ -678,7 +701,7 @@ fn sweep_command(a: SweepArgs) -> Result<u8, Fail> {
     }
     let cache = open_cache(cache)?;
     let out_dir = out.unwrap_or_else(|| Path::new("out").join(&sw.name));
-    let opts = kodama_dag::sweep::SweepOptions {
+    let opts = crate::sweep::SweepOptions {
         data_dir: data,
         sets,
         out_dir: out_dir.clone(),
@@ -687,8 +710,8 @@ fn sweep_command(a: SweepArgs) -> Result<u8, Fail> {
     };
     let reporter = Reporter::new(Mode::detect(quiet), 0);
     if let Some(i) = variant {
-        let r = kodama_dag::sweep::run_one_variant(&sw, &cache, &opts, &reporter, i)
-            .map_err(sweep_fail)?;
+        let r =
+            crate::sweep::run_one_variant(&sw, &cache, &opts, &reporter, i).map_err(sweep_fail)?;
         let ran = r
             .record
             .nodes
@@ -699,8 +722,7 @@ fn sweep_command(a: SweepArgs) -> Result<u8, Fail> {
         return Ok(0);
     }
     if prefix {
-        let ids =
-            kodama_dag::sweep::run_prefix(&sw, &cache, &opts, &reporter).map_err(sweep_fail)?;
+        let ids = crate::sweep::run_prefix(&sw, &cache, &opts, &reporter).map_err(sweep_fail)?;
         if ids.is_empty() {
             eprintln!("no node is shared by every variant: nothing to run");
         } else {
@@ -708,7 +730,7 @@ fn sweep_command(a: SweepArgs) -> Result<u8, Fail> {
         }
         return Ok(0);
     }
-    let results = kodama_dag::sweep::run_sweep(&sw, &cache, &opts, &reporter, |i, n, v| {
+    let results = crate::sweep::run_sweep(&sw, &cache, &opts, &reporter, |i, n, v| {
         if !quiet {
             eprintln!("variant {}/{n}: {}", i + 1, v.name());
         }
@@ -737,11 +759,11 @@ fn sweep_command(a: SweepArgs) -> Result<u8, Fail> {
 }
 
 /// A sweep's failure as the CLI reports it.
-fn sweep_fail(e: kodama_dag::sweep::SweepError) -> Fail {
+fn sweep_fail(e: crate::sweep::SweepError) -> Fail {
     match e {
-        kodama_dag::sweep::SweepError::Graph(m) => Fail(2, format!("error: {m}")),
-        kodama_dag::sweep::SweepError::Failed(m) => Fail(1, format!("error: {m}")),
-        kodama_dag::sweep::SweepError::Run(e) => Fail::from(e),
+        crate::sweep::SweepError::Graph(m) => Fail(2, format!("error: {m}")),
+        crate::sweep::SweepError::Failed(m) => Fail(1, format!("error: {m}")),
+        crate::sweep::SweepError::Run(e) => Fail::from(e),
     }
 }
 
@@ -749,7 +771,7 @@ fn sweep_fail(e: kodama_dag::sweep::SweepError) -> Fail {
 /// job scripts written to `<out>/slurm/<n>/`, then submitted with sbatch unless `--dry-run`;
 /// with `--wait`, squeue polled until the jobs end, exiting as a local run would.
 fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
-    use kodama_dag::slurm;
+    use crate::slurm;
     let Engine::Slurm = a.engine;
     let usage = |m: String| Fail(2, format!("error: {m}"));
     let user_sbatch = match &a.sbatch {
@@ -785,9 +807,9 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
     }
     if let Some(url) = remote_cache_url() {
         common.push("--remote-cache".into());
-        common.push(slurm::quote(url).map_err(usage)?);
+        common.push(slurm::quote(&url).map_err(usage)?);
     }
-    let is_sweep = kodama_dag::sweep::is_sweep_file(&a.file).map_err(usage)?;
+    let is_sweep = crate::sweep::is_sweep_file(&a.file).map_err(usage)?;
     let mut graph_tiles = None;
     let (plan, out_dir) = if is_sweep {
         if !a.targets.is_empty() {
@@ -795,12 +817,12 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
                 "--target is for graphs; a sweep runs what its metrics and outputs need".into(),
             ));
         }
-        let sw = kodama_dag::sweep::load_sweep(&a.file, a.allow_outside).map_err(usage)?;
+        let sw = crate::sweep::load_sweep(&a.file, a.allow_outside).map_err(usage)?;
         let out_dir = a
             .out
             .clone()
             .unwrap_or_else(|| Path::new("out").join(&sw.name));
-        let opts = kodama_dag::sweep::SweepOptions {
+        let opts = crate::sweep::SweepOptions {
             data_dir: a.data.clone(),
             sets: a.sets.clone(),
             out_dir: out_dir.clone(),
@@ -823,7 +845,7 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
             tile_m: a.tile_m,
             halo_m: a.halo_m,
         })?;
-        kodama_dag::exec::target_indices(&g, &a.targets)?;
+        crate::exec::target_indices(&g, &a.targets)?;
         let out_dir = a
             .out
             .clone()
@@ -863,7 +885,7 @@ fn submit_command(a: SubmitArgs) -> Result<u8, Fail> {
     let sizing = RECORDS_SIZING
         .max(2 * tiles + RECORDS_SIZING)
         .min(MAX_RECORDS_SIZING);
-    let records = kodama_dag::record::load_records(&cache.runs_dir(&plan.runs_key), sizing);
+    let records = crate::record::load_records(&cache.runs_dir(&plan.runs_key), sizing);
     let res = slurm::resources(&records, cpus);
     let mut plan = plan;
     if graph_tiles.is_some() {
@@ -1037,7 +1059,7 @@ fn gc_command(a: GcArgs) -> Result<u8, Fail> {
             tile_m: None,
             halo_m: None,
         })?;
-        pinned.extend(kodama_dag::exec::last_run_digests(&graph, &cache));
+        pinned.extend(crate::exec::last_run_digests(&graph, &cache));
     }
     let report = gc(&cache, max_bytes, &pinned, || {
         eprintln!("waiting for running jobs to release the cache...")

@@ -19,7 +19,7 @@ use kodama_nodes::rf::paths::trace_links;
 use kodama_nodes::rf::scene::RfScene;
 use kodama_nodes::{Artifact, Site, StageError};
 
-use kodama_dag::progress::{Mode, Task};
+use crate::progress::{Mode, Task};
 
 /// Interaction switches shared by both commands.
 #[derive(Args, Debug)]
@@ -206,7 +206,7 @@ fn regular_file(flag: &str, path: &Path) -> Result<(), Fail> {
     let what = if meta.is_dir() {
         "a folder"
     } else {
-        kodama_dag::cache::describe_file_type(&meta.file_type())
+        crate::cache::describe_file_type(&meta.file_type())
     };
     Err((
         2,
