@@ -292,7 +292,7 @@ impl Stage for Report {
         files.push(("table.csv".to_string(), csv.into_bytes()));
         files.push((
             "links.csv".to_string(),
-            links_csv(&p.models, meas, &preds, &evals, &ctx.site)
+            links_csv(&p.models, meas, &preds, &evals, ctx.site)
                 .map_err(StageError::Failed)?
                 .into_bytes(),
         ));
