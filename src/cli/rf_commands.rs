@@ -10,7 +10,7 @@ use glam::DVec3;
 
 use kodama_nodes::io::export::{Encoded, encode};
 use kodama_nodes::io::sionna_xml::read_scene_with_thickness;
-use kodama_nodes::rf::antenna::{Antenna, Pattern};
+use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::gpu::{Device, map_unavailable, radio_map_on};
 use kodama_nodes::rf::links_csv::{read_links, write_results};
 use kodama_nodes::rf::map_plane::default_plane;
@@ -109,7 +109,7 @@ pub struct TraceArgs {
     /// Transmit antenna: `iso`, `dipole` or `tr38901:BEARING_DEG:TILT_DEG` (the TR 38.901 sector,
     /// boresight at a compass bearing clockwise from the scene's +y, downtilt below the horizon).
     /// The receivers stay isotropic.
-    #[arg(long, value_parser = parse_antenna, default_value = "iso")]
+    #[arg(long, value_parser = Antenna::parse, default_value = "iso")]
     tx_antenna: Antenna,
     /// Where to write the links with path_gain_db (CSV).
     #[arg(long)]
@@ -139,7 +139,7 @@ pub struct RadiomapArgs {
     height_m: f64,
     /// Transmit antenna: `iso`, `dipole` or `tr38901:BEARING_DEG:TILT_DEG` (the TR 38.901 sector,
     /// boresight at a compass bearing clockwise from the scene's +y, downtilt below the horizon).
-    #[arg(long, value_parser = parse_antenna, default_value = "iso")]
+    #[arg(long, value_parser = Antenna::parse, default_value = "iso")]
     tx_antenna: Antenna,
     /// The map: .tif (GeoTIFF, scene frame), .exr or .png (with a colour bar); path gain in dB.
     #[arg(long)]
@@ -160,33 +160,6 @@ fn parse_point(s: &str) -> Result<[f64; 3], String> {
         })
         .collect::<Result<_, _>>()?;
     <[f64; 3]>::try_from(v).map_err(|_| "expected X,Y,Z".to_string())
-}
-
-/// `iso`, `dipole` or `tr38901:BEARING_DEG:TILT_DEG`, vertically polarised.
-fn parse_antenna(s: &str) -> Result<Antenna, String> {
-    let expected = "expected iso, dipole or tr38901:BEARING_DEG:TILT_DEG";
-    let pattern = |pattern| Antenna {
-        pattern,
-        ..Antenna::default()
-    };
-    let parts: Vec<&str> = s.split(':').map(str::trim).collect();
-    match parts.as_slice() {
-        ["iso"] => Ok(pattern(Pattern::Isotropic)),
-        ["dipole"] => Ok(pattern(Pattern::Dipole)),
-        ["tr38901", bearing, tilt] => {
-            let num = |name: &str, v: &str| match v.parse::<f64>() {
-                Ok(x) if x.is_finite() => Ok(x),
-                _ => Err(format!("{name} {v:?} is not a finite number of degrees")),
-            };
-            Ok(Antenna {
-                azimuth_deg: num("bearing", bearing)?,
-                tilt_deg: num("tilt", tilt)?,
-                ..pattern(Pattern::Tr38901)
-            })
-        }
-        ["tr38901", ..] => Err(format!("{expected}: the sector needs a bearing and a tilt")),
-        _ => Err(format!("{expected}, found {s:?}")),
-    }
 }
 
 type Fail = (u8, String);

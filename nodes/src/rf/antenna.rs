@@ -71,6 +71,35 @@ pub fn gain(pattern: Pattern, theta: f64, phi: f64) -> f64 {
 }
 
 impl Antenna {
+    /// An antenna as the command line and the Python package name it: `iso`, `dipole` or
+    /// `tr38901:BEARING_DEG:TILT_DEG` (the TR 38.901 sector, boresight at a compass bearing
+    /// clockwise from the frame's +y, downtilt below the horizon), vertically polarised.
+    pub fn parse(s: &str) -> Result<Antenna, String> {
+        let expected = "expected iso, dipole or tr38901:BEARING_DEG:TILT_DEG";
+        let pattern = |pattern| Antenna {
+            pattern,
+            ..Antenna::default()
+        };
+        let parts: Vec<&str> = s.split(':').map(str::trim).collect();
+        match parts.as_slice() {
+            ["iso"] => Ok(pattern(Pattern::Isotropic)),
+            ["dipole"] => Ok(pattern(Pattern::Dipole)),
+            ["tr38901", bearing, tilt] => {
+                let num = |name: &str, v: &str| match v.parse::<f64>() {
+                    Ok(x) if x.is_finite() => Ok(x),
+                    _ => Err(format!("{name} {v:?} is not a finite number of degrees")),
+                };
+                Ok(Antenna {
+                    azimuth_deg: num("bearing", bearing)?,
+                    tilt_deg: num("tilt", tilt)?,
+                    ..pattern(Pattern::Tr38901)
+                })
+            }
+            ["tr38901", ..] => Err(format!("{expected}: the sector needs a bearing and a tilt")),
+            _ => Err(format!("{expected}, found {s:?}")),
+        }
+    }
+
     /// The transmitted field direction and amplitude for the unit direction `k` (site frame, away
     /// from the antenna): √G times θ̂ or φ̂ of the site frame (the polarisation stays vertical or
     /// horizontal in the site frame; the pattern is evaluated in the antenna's rotated frame).
