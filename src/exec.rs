@@ -1161,6 +1161,20 @@ fn stamp(rel: String, path: &Path, bytes: &[u8]) -> std::io::Result<FileStamp> {
     })
 }
 
+/// Writes `encoded` as `file_name` in `dir` as a run writes its declared outputs (never half a
+/// file or folder; an existing one of that name replaced); the paths written, relative to
+/// `dir`. For writers outside a run: the Python package's `Run.export`.
+pub fn write_encoded(
+    dir: &Path,
+    file_name: &str,
+    encoded: Encoded,
+) -> std::io::Result<Vec<String>> {
+    Ok(write_output(dir, file_name, encoded)?
+        .into_iter()
+        .map(|s| s.path)
+        .collect())
+}
+
 /// Writes an encoded output as `file_name` in `dir` so that it never exists half-written: a file
 /// through a temp file and rename; a folder assembled under a hidden temp name, then renamed over
 /// the old one. Returns the stamps of the files written.

@@ -4,6 +4,7 @@
     run = kodama_dag.run("graphs/demo.ron")
     dsm = run.raster("dsm")            # xarray.DataArray when xarray is installed
     table = run.metrics("evaluate")    # dict of floats
+    paths = kodama_dag.trace((run, "scene"), links, 3.5e9)   # Sionna RT-shaped a, tau, ...
 
 The engine and the stages are the CLI's own (`kodama-dag run`), linked into this package: the same
 graph files, the same cache (so a graph run from the CLI is read here without running again), the
@@ -23,19 +24,24 @@ from .api import (
     run,
     sweep,
 )
+from .radio import Paths, RadioMap, radio_map, trace
 
 __all__ = [
     "EngineError",
     "KindInfo",
     "NodeFailed",
     "NodeRecord",
+    "Paths",
     "PlanEntry",
+    "RadioMap",
     "Run",
     "SweepResult",
     "UserError",
     "__version__",
     "explain",
     "kinds",
+    "radio_map",
     "run",
     "sweep",
+    "trace",
 ]

@@ -45,3 +45,24 @@ def sweep(
     allow_outside: bool,
     quiet: bool,
 ) -> dict[str, Any]: ...
+def trace(
+    scene: str | tuple[str, str],
+    links: Any,
+    freq_hz: float,
+    physics: dict[str, Any],
+) -> dict[str, Any]: ...
+def radio_map_at(
+    scene: str | tuple[str, str],
+    tx: tuple[float, float, float],
+    freq_hz: float,
+    cell_m: float,
+    height_m: float,
+    physics: dict[str, Any],
+) -> dict[str, Any]: ...
+def export(
+    cache: str,
+    digest: str,
+    site: tuple[str, tuple[float, float], float],
+    dest: str,
+    overwrite: bool,
+) -> list[str]: ...

@@ -114,6 +114,8 @@ class Run:
         """The site's projected CRS (`EPSG:<code>`)."""
         self.origin: tuple[float, float] = tuple(site["origin"])  # type: ignore[assignment]
         """The site frame's origin in the CRS (easting, northing), metres."""
+        self.cell_m: float = float(site["cell_m"])
+        """The site's default raster cell, metres."""
         self.cache: str = cache
 
     def __repr__(self) -> str:
@@ -241,6 +243,21 @@ class Run:
         except ImportError:
             return a
         return pd.DataFrame(a)
+
+    def export(
+        self, node: str, dest: "str | os.PathLike[str]", *, overwrite: bool = False
+    ) -> Path:
+        """Writes `node`'s artifact to `dest` in the format its name's extension gives, as a
+        graph output of that name would be written (`dsm.tif`, `twin.glb`, `twin.sionna` (a
+        Sionna RT folder with `site.json`), `twin.3dtiles`, `links.csv`, ...), never half-written.
+        An existing `dest` is refused (with `overwrite`, an existing file is replaced; a folder
+        never is). Returns `dest`."""
+        r = self.node(node)
+        if r.digest is None:
+            raise KeyError(f"node {node!r} has no output in this run ({r.status}: {r.reason})")
+        site = (self.crs, (float(self.origin[0]), float(self.origin[1])), self.cell_m)
+        _core.export(self.cache, r.digest, site, os.fspath(dest), overwrite)
+        return Path(dest)
 
     def metrics(self, node: str) -> dict[str, float]:
         """A metrics artifact: name -> value."""

@@ -10,19 +10,22 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use kodama_dag::cache::{Cache, Digest, NotACache};
+use kodama_dag::cache::{Blob, Cache, Digest, NotACache};
 use kodama_dag::exec::{RunError, RunOptions, run as run_graph};
 use kodama_dag::graph::{Graph, LoadOptions, TileOverrides, load};
 use kodama_dag::progress::{Mode, Reporter};
 use kodama_dag::registry;
-use kodama_nodes::Artifact;
 use kodama_nodes::artifact::{Footprints, Measurements, PointSet, Raster, Scene};
 use kodama_nodes::stage::Arity;
+use kodama_nodes::{Artifact, Site};
 use numpy::{IntoPyArray, PyArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+
+mod raster_view;
+mod rf;
 
 create_exception!(
     _core,
@@ -418,26 +421,47 @@ fn measurements<'py>(py: Python<'py>, m: Measurements) -> PyResult<Bound<'py, Py
     Ok(d)
 }
 
+/// The blob stored under `digest` (hex) in the cache at `cache`, mapped and verified (without
+/// the GIL).
+fn blob_of(py: Python<'_>, cache: &Path, digest: &str) -> PyResult<Blob> {
+    let d = Digest::from_hex(digest)
+        .map_err(|_| user(format!("digest: expected 64 hex digits, got {digest:?}")))?;
+    let c = Cache::open_existing(cache).map_err(|e| cache_error(cache, e))?;
+    py.detach(|| c.get_blob(&d))
+        .map_err(|e| unreadable(cache, digest, e.to_string()))
+}
+
+/// The artifact in `blob`, decoded (without the GIL).
+fn decode(py: Python<'_>, blob: Blob, cache: &Path, digest: &str) -> PyResult<Artifact> {
+    py.detach(|| rmp_serde::from_slice::<Artifact>(&blob))
+        .map_err(|e| unreadable(cache, digest, format!("undecodable ({e})")))
+}
+
+fn unreadable(cache: &Path, digest: &str, why: String) -> PyErr {
+    engine(format!(
+        "the artifact {} in {}: {why}; run the graph again to rebuild it",
+        &digest[..12.min(digest.len())],
+        cache.display()
+    ))
+}
+
+/// The artifact stored under `digest` (hex) in the cache at `cache`, decoded.
+fn artifact_of(py: Python<'_>, cache: &Path, digest: &str) -> PyResult<Artifact> {
+    let blob = blob_of(py, cache, digest)?;
+    decode(py, blob, cache, digest)
+}
+
 /// The artifact stored under `digest` (hex) in the cache at `cache`, as a dict whose `type` names
 /// it. Rasters, point sets, scenes, footprints, measurements and metrics are read; the other
 /// types say what they are and how to get at them.
 #[pyfunction]
 fn artifact<'py>(py: Python<'py>, cache: PathBuf, digest: &str) -> PyResult<Bound<'py, PyDict>> {
-    let d = Digest::from_hex(digest)
-        .map_err(|_| user(format!("digest: expected 64 hex digits, got {digest:?}")))?;
-    let c = Cache::open_existing(&cache).map_err(|e| cache_error(&cache, e))?;
-    let a = py.detach(|| -> Result<Artifact, String> {
-        let bytes = c.get_blob(&d).map_err(|e| e.to_string())?;
-        rmp_serde::from_slice::<Artifact>(&bytes).map_err(|e| format!("undecodable ({e})"))
-    });
-    let a = a.map_err(|e| {
-        engine(format!(
-            "the artifact {} in {}: {e}; run the graph again to rebuild it",
-            &digest[..12.min(digest.len())],
-            cache.display()
-        ))
-    })?;
-    match a {
+    // A raster's cells are viewed in the mapped file; anything else is decoded.
+    let blob = match raster_view::raster_view(py, blob_of(py, &cache, digest)?)? {
+        Ok(raster) => return Ok(raster),
+        Err(blob) => blob,
+    };
+    match decode(py, blob, &cache, digest)? {
         Artifact::Raster(r) => raster(py, r),
         Artifact::Points(p) => points(py, p),
         Artifact::Scene(s) => scene(py, s),
@@ -455,6 +479,65 @@ fn artifact<'py>(py: Python<'py>, cache: PathBuf, digest: &str) -> PyResult<Boun
             Ok(d)
         }
     }
+}
+
+/// Writes the artifact `digest` to `dest` in the format its name's extension gives, as a
+/// graph's output of that name would be written (`x.tif`, `scene.glb`, `twin.sionna`,
+/// `tiles.3dtiles`, ...; `site` is the run's (crs, origin, cell_m)); returns the files written,
+/// relative to `dest`'s folder. An existing `dest` is refused unless `overwrite` and it is a
+/// file: a folder is never removed from here.
+#[pyfunction]
+#[pyo3(signature = (cache, digest, site, dest, overwrite))]
+fn export(
+    py: Python<'_>,
+    cache: PathBuf,
+    digest: &str,
+    site: (String, (f64, f64), f64),
+    dest: PathBuf,
+    overwrite: bool,
+) -> PyResult<Vec<String>> {
+    use kodama_nodes::io::export::{encode, output_file};
+    let name = dest
+        .file_name()
+        .and_then(|n| n.to_str())
+        .ok_or_else(|| {
+            user(format!(
+                "dest {}: expected a file or folder name",
+                dest.display()
+            ))
+        })?
+        .to_string();
+    if let Ok(meta) = std::fs::symlink_metadata(&dest)
+        && !(overwrite && meta.is_file())
+    {
+        return Err(user(format!(
+            "dest {}: already exists{}; remove it or choose another name",
+            dest.display(),
+            if meta.is_file() {
+                " (overwrite=True replaces a file)"
+            } else {
+                ""
+            }
+        )));
+    }
+    let a = artifact_of(py, &cache, digest)?;
+    let (_, format) = output_file(&name, a.ty()).map_err(|m| user(format!("dest {name}: {m}")))?;
+    let site = Site {
+        crs: site.0,
+        origin: site.1,
+        cell_m: site.2,
+    };
+    let encoded = py
+        .detach(|| encode(&a, &site, format))
+        .map_err(|m| user(format!("dest {name}: {m}")))?;
+    let dir = match dest.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| engine(format!("cannot create {}: {e}", dir.display())))?;
+    kodama_dag::exec::write_encoded(&dir, &name, encoded)
+        .map_err(|e| engine(format!("cannot write {}: {e}", dest.display())))
 }
 
 /// The `kodama-dag` command line, run in this process: `argv` as the binary's (its name first);
@@ -475,5 +558,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(artifact, m)?)?;
     m.add_function(wrap_pyfunction!(cli, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
+    m.add_function(wrap_pyfunction!(export, m)?)?;
+    m.add_function(wrap_pyfunction!(rf::trace, m)?)?;
+    m.add_function(wrap_pyfunction!(rf::radio_map_at, m)?)?;
     Ok(())
 }

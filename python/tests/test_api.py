@@ -277,3 +277,21 @@ def test_a_bad_sweep_is_a_user_error(tmp_path, cache):
     bad.write_text('Sweep(graph: "nowhere.ron", axes: {}, metrics: [])')
     with pytest.raises(kodama_dag.UserError, match="bad_sweep.ron|nowhere.ron"):
         kodama_dag.sweep(bad, cache=cache, out=tmp_path / "o", allow_outside=True)
+
+
+@pytest.mark.parametrize("node, shape", [
+    ("one", (1, 1)), ("small", (3, 5)), ("medium", (100, 100)), ("large", (300, 300)),
+])
+def test_raster_cells_are_read_in_place_whatever_their_header(cache, node, shape):
+    run = kodama_dag.run(HERE / "rasters.ron", cache=cache, out=False, quiet=True)
+    data, _ = run.raster(node, xarray=False)
+    assert data.shape == shape and data.dtype == np.float32
+    # A view of the cache's file: not NumPy's memory, and not writable (the mapping is not).
+    assert not data.flags.owndata and not data.flags.writeable
+    with pytest.raises(ValueError, match="read-only"):
+        data[0, 0] = 0.0
+    # The engine's statistics of the same raster: an offset by a byte would scramble them.
+    stats = run.metrics(f"{node}_stats")
+    assert float(data.min()) == pytest.approx(stats["min"], abs=1e-4)
+    assert float(data.max()) == pytest.approx(stats["max"], abs=1e-4)
+    assert float(data.mean(dtype=np.float64)) == pytest.approx(stats["mean"], abs=1e-4)
