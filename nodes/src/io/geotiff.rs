@@ -1,5 +1,5 @@
 //! GeoTIFF: reading rasters with their georeferencing (as GDAL writes them), and writing float32
-//! and RGB rasters that GDAL, QGIS and rasterio read.
+//! rasters (Cloud-Optimized, `cog.rs`) and RGB ones that GDAL, QGIS and rasterio read.
 
 use std::io::{Seek, Write};
 use std::path::Path;
@@ -14,10 +14,10 @@ use crate::io::crs::{Crs, parse_geokeys};
 use crate::site::Site;
 use crate::stage::StageError;
 
-const MODEL_PIXEL_SCALE: u16 = 33550;
-const MODEL_TIEPOINT: u16 = 33922;
-const GEO_KEY_DIRECTORY: u16 = 34735;
-const GDAL_NODATA: u16 = 42113;
+pub(crate) const MODEL_PIXEL_SCALE: u16 = 33550;
+pub(crate) const MODEL_TIEPOINT: u16 = 33922;
+pub(crate) const GEO_KEY_DIRECTORY: u16 = 34735;
+pub(crate) const GDAL_NODATA: u16 = 42113;
 const MODEL_TRANSFORMATION: u16 = 34264;
 const GEO_DOUBLE_PARAMS: u16 = 34736;
 const GEO_ASCII_PARAMS: u16 = 34737;
@@ -336,25 +336,28 @@ fn decoded_len(samples: &DecodingResult) -> usize {
 }
 
 /// Writes `r` as a single-band float32 GeoTIFF in the site CRS (absolute coordinates), NaN as
-/// no-data. GeoKeys: projected model, pixel-is-area, `ProjectedCSTypeGeoKey` = the site's EPSG code.
+/// no-data, Cloud-Optimized (tiled, deflate, overviews: [`crate::io::cog`]). GeoKeys: projected
+/// model, pixel-is-area, `ProjectedCSTypeGeoKey` = the site's EPSG code.
 pub fn write_geotiff<W: Write + Seek>(r: &Raster, site: &Site, w: &mut W) -> Result<(), String> {
-    let g = r.grid;
-    let err = |e: tiff::TiffError| format!("GeoTIFF encoding failed: {e}");
-    let mut enc = TiffEncoder::new(w).map_err(err)?;
-    let mut img = enc
-        .new_image::<colortype::Gray32Float>(g.width, g.height)
-        .map_err(err)?;
-    let epsg = if site.crs.is_empty() {
-        None
-    } else {
-        Some(site.epsg()?)
-    };
-    write_georef(img.encoder(), &g, site, epsg).map_err(err)?;
-    img.encoder()
-        .write_tag(Tag::Unknown(GDAL_NODATA), "nan")
-        .map_err(err)?;
-    img.write_data(&r.data).map_err(err)?;
-    Ok(())
+    let bytes = crate::io::cog::write_cog(r, site)?;
+    w.write_all(&bytes)
+        .map_err(|e| format!("GeoTIFF writing failed: {e}"))
+}
+
+/// The GeoKeyDirectory: header (version 1.1.0, key count), then (key, location, count, value):
+/// a projected model, pixel-is-area, and the EPSG code when there is one (without, a local
+/// frame such as a Sionna scene's, the CRS is left unknown).
+pub(crate) fn geo_keys(epsg: Option<u16>) -> Vec<u16> {
+    let mut keys: Vec<u16> = vec![
+        1, 1, 0, 2, //
+        1024, 0, 1, 1, // GTModelTypeGeoKey = ModelTypeProjected
+        1025, 0, 1, 1, // GTRasterTypeGeoKey = RasterPixelIsArea
+    ];
+    if let Some(code) = epsg {
+        keys[3] = 3;
+        keys.extend([3072, 0, 1, code]); // ProjectedCSTypeGeoKey
+    }
+    keys
 }
 
 /// Writes the GeoTIFF georeferencing tags of `g` (site frame) in the site CRS.
@@ -379,18 +382,7 @@ fn write_georef<W: Write + Seek, K: tiff::encoder::TiffKind>(
             0.0,
         ][..],
     )?;
-    // GeoKeyDirectory: header (version 1.1.0, key count), then (key, location, count, value).
-    // Without an EPSG code (a local frame, e.g. a Sionna scene) the CRS is left unknown.
-    let mut keys: Vec<u16> = vec![
-        1, 1, 0, 2, //
-        1024, 0, 1, 1, // GTModelTypeGeoKey = ModelTypeProjected
-        1025, 0, 1, 1, // GTRasterTypeGeoKey = RasterPixelIsArea
-    ];
-    if let Some(code) = epsg {
-        keys[3] = 3;
-        keys.extend([3072, 0, 1, code]); // ProjectedCSTypeGeoKey
-    }
-    e.write_tag(Tag::Unknown(GEO_KEY_DIRECTORY), &keys[..])
+    e.write_tag(Tag::Unknown(GEO_KEY_DIRECTORY), &geo_keys(epsg)[..])
 }
 
 /// Writes an RGB u8 image on `g` as a GeoTIFF in the site CRS.

@@ -2,6 +2,7 @@
 //! the street-view folder layout, street imagery from Mapillary and Panoramax, Sionna's Mitsuba XML + PLY, and every `export` format), coordinate
 //! reference systems, ECEF/ENU, and resampling into the site frame. Never imports a stage.
 
+pub mod cog;
 pub mod crs;
 pub mod csv_text;
 pub mod ecef;
