@@ -13,7 +13,7 @@ use std::io::Write;
 
 use crate::artifact::Raster;
 use crate::io::geotiff::{
-    GDAL_NODATA, GEO_KEY_DIRECTORY, MODEL_PIXEL_SCALE, MODEL_TIEPOINT, geo_keys,
+    GDAL_NODATA, GEO_KEY_DIRECTORY, MODEL_PIXEL_SCALE, MODEL_TIEPOINT, geo_keys, scale_and_tiepoint,
 };
 use crate::site::Site;
 
@@ -248,20 +248,8 @@ pub fn write_cog(r: &Raster, site: &Site) -> Result<Vec<u8>, String> {
         levels.push(next);
     }
     let tiled: Vec<Vec<Vec<u8>>> = levels.iter().map(tiles).collect::<Result<_, _>>()?;
-    let georef = || {
-        [
-            doubles(&[g.cell_m, g.cell_m, 0.0]),
-            doubles(&[
-                0.0,
-                0.0,
-                0.0,
-                site.origin.0 + g.x0,
-                site.origin.1 + g.y0,
-                0.0,
-            ]),
-            shorts(&geo_keys(epsg)),
-        ]
-    };
+    let (scale, tiepoint) = scale_and_tiepoint(&g, site);
+    let georef = || [doubles(&scale), doubles(&tiepoint), shorts(&geo_keys(epsg))];
     // The directories' sizes do not depend on the offsets' values: lay them out with zeros,
     // then place the tiles after them, the smallest level's first.
     let dirs = |offsets: &[Vec<u32>]| -> Vec<Ifd> {

@@ -344,6 +344,22 @@ pub fn write_geotiff<W: Write + Seek>(r: &Raster, site: &Site, w: &mut W) -> Res
         .map_err(|e| format!("GeoTIFF writing failed: {e}"))
 }
 
+/// `ModelPixelScale` and `ModelTiepoint` of `g` (site frame) in the site CRS: square cells,
+/// the north-west corner of pixel (0, 0) at its absolute coordinates.
+pub(crate) fn scale_and_tiepoint(g: &Grid, site: &Site) -> ([f64; 3], [f64; 6]) {
+    (
+        [g.cell_m, g.cell_m, 0.0],
+        [
+            0.0,
+            0.0,
+            0.0,
+            site.origin.0 + g.x0,
+            site.origin.1 + g.y0,
+            0.0,
+        ],
+    )
+}
+
 /// The GeoKeyDirectory: header (version 1.1.0, key count), then (key, location, count, value):
 /// a projected model, pixel-is-area, and the EPSG code when there is one (without, a local
 /// frame such as a Sionna scene's, the CRS is left unknown).
@@ -367,21 +383,9 @@ fn write_georef<W: Write + Seek, K: tiff::encoder::TiffKind>(
     site: &Site,
     epsg: Option<u16>,
 ) -> Result<(), tiff::TiffError> {
-    e.write_tag(
-        Tag::Unknown(MODEL_PIXEL_SCALE),
-        &[g.cell_m, g.cell_m, 0.0][..],
-    )?;
-    e.write_tag(
-        Tag::Unknown(MODEL_TIEPOINT),
-        &[
-            0.0,
-            0.0,
-            0.0,
-            site.origin.0 + g.x0,
-            site.origin.1 + g.y0,
-            0.0,
-        ][..],
-    )?;
+    let (scale, tiepoint) = scale_and_tiepoint(g, site);
+    e.write_tag(Tag::Unknown(MODEL_PIXEL_SCALE), &scale[..])?;
+    e.write_tag(Tag::Unknown(MODEL_TIEPOINT), &tiepoint[..])?;
     e.write_tag(Tag::Unknown(GEO_KEY_DIRECTORY), &geo_keys(epsg)[..])
 }
 
