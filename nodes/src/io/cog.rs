@@ -6,13 +6,13 @@
 //! one fits a tile; every image file directory (IFD) at the front, the full resolution's first;
 //! then the tiles, the smallest overview's first and the full resolution's last, each level row
 //! by row. A reader fetches the directories with one request and any window or zoom level with
-//! few more. No-data is NaN (`GDAL_NODATA`); the GeoKeys are `geotiff::geo_keys`.
+//! few more. No-data is NaN (`GDAL_NODATA`); the GeoKeys are `geokeys::geo_keys`.
 //! Written by hand: the `tiff` crate's encoder writes strips, data before directories.
 
 use std::io::Write;
 
 use crate::artifact::Raster;
-use crate::io::geotiff::{
+use crate::io::geokeys::{
     GDAL_NODATA, GEO_KEY_DIRECTORY, MODEL_PIXEL_SCALE, MODEL_TIEPOINT, geo_keys, scale_and_tiepoint,
 };
 use crate::site::Site;

@@ -11,16 +11,12 @@ use tiff::tags::{PlanarConfiguration, Tag};
 
 use crate::artifact::{Grid, Raster};
 use crate::io::crs::{Crs, parse_geokeys};
+use crate::io::geokeys::{
+    GDAL_NODATA, GEO_ASCII_PARAMS, GEO_DOUBLE_PARAMS, GEO_KEY_DIRECTORY, MODEL_PIXEL_SCALE,
+    MODEL_TIEPOINT, MODEL_TRANSFORMATION, geo_keys, scale_and_tiepoint,
+};
 use crate::site::Site;
 use crate::stage::StageError;
-
-pub(crate) const MODEL_PIXEL_SCALE: u16 = 33550;
-pub(crate) const MODEL_TIEPOINT: u16 = 33922;
-pub(crate) const GEO_KEY_DIRECTORY: u16 = 34735;
-pub(crate) const GDAL_NODATA: u16 = 42113;
-const MODEL_TRANSFORMATION: u16 = 34264;
-const GEO_DOUBLE_PARAMS: u16 = 34736;
-const GEO_ASCII_PARAMS: u16 = 34737;
 
 /// Where the pixels of an image are: the CRS coordinates of its north-west corner and the pixel
 /// size, north-up, without rotation.
@@ -342,38 +338,6 @@ pub fn write_geotiff<W: Write + Seek>(r: &Raster, site: &Site, w: &mut W) -> Res
     let bytes = crate::io::cog::write_cog(r, site)?;
     w.write_all(&bytes)
         .map_err(|e| format!("GeoTIFF writing failed: {e}"))
-}
-
-/// `ModelPixelScale` and `ModelTiepoint` of `g` (site frame) in the site CRS: square cells,
-/// the north-west corner of pixel (0, 0) at its absolute coordinates.
-pub(crate) fn scale_and_tiepoint(g: &Grid, site: &Site) -> ([f64; 3], [f64; 6]) {
-    (
-        [g.cell_m, g.cell_m, 0.0],
-        [
-            0.0,
-            0.0,
-            0.0,
-            site.origin.0 + g.x0,
-            site.origin.1 + g.y0,
-            0.0,
-        ],
-    )
-}
-
-/// The GeoKeyDirectory: header (version 1.1.0, key count), then (key, location, count, value):
-/// a projected model, pixel-is-area, and the EPSG code when there is one (without, a local
-/// frame such as a Sionna scene's, the CRS is left unknown).
-pub(crate) fn geo_keys(epsg: Option<u16>) -> Vec<u16> {
-    let mut keys: Vec<u16> = vec![
-        1, 1, 0, 2, //
-        1024, 0, 1, 1, // GTModelTypeGeoKey = ModelTypeProjected
-        1025, 0, 1, 1, // GTRasterTypeGeoKey = RasterPixelIsArea
-    ];
-    if let Some(code) = epsg {
-        keys[3] = 3;
-        keys.extend([3072, 0, 1, code]); // ProjectedCSTypeGeoKey
-    }
-    keys
 }
 
 /// Writes the GeoTIFF georeferencing tags of `g` (site frame) in the site CRS.

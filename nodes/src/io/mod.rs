@@ -9,6 +9,7 @@ pub mod ecef;
 pub mod export;
 pub mod exr_io;
 pub mod geojson;
+pub mod geokeys;
 pub mod geotiff;
 pub mod hgt;
 /// ONNX models run on view images (feature `onnx`): the runtime found through `ORT_DYLIB_PATH`.
