@@ -66,3 +66,6 @@ def export(
     dest: str,
     overwrite: bool,
 ) -> list[str]: ...
+def lon_lat(
+    crs: str, origin: tuple[float, float], xs: list[float], ys: list[float]
+) -> tuple[Any, Any]: ...

@@ -231,18 +231,29 @@ class Run:
 
     def links(self, node: str):
         """Measured or predicted links as columns (`tx_id`, `tx_x`, `tx_y`, `rx_...`, `freq_hz`,
-        `path_loss_db`, `rx_power_dbm`, `tx_eirp_dbm`, `los`; x/y in the site frame): a
-        `pandas.DataFrame` when pandas is installed, else a dict of columns."""
+        `path_loss_db`, `rx_power_dbm`, `tx_eirp_dbm`, `los`; x/y in the site frame, and each
+        end's WGS 84 `tx_lon`, `tx_lat`, `rx_lon`, `rx_lat` in degrees): a `pandas.DataFrame`
+        when pandas is installed, else a dict of columns."""
         a = self._typed(node, "Measurements")
         a.pop("type")
         heights = a.pop("heights")
         a["tx_height"] = [h[0] for h in heights]
         a["rx_height"] = [h[1] for h in heights]
+        for end in ("tx", "rx"):
+            a[f"{end}_lon"], a[f"{end}_lat"] = self.lon_lat(a[f"{end}_x"], a[f"{end}_y"])
         try:
             import pandas as pd
         except ImportError:
             return a
         return pd.DataFrame(a)
+
+    def lon_lat(self, x, y) -> tuple[np.ndarray, np.ndarray]:
+        """WGS 84 longitudes and latitudes (degrees) of site-frame points `x`, `y` (metres),
+        as the exported CSVs give them; NaN where a coordinate is not finite."""
+        xs = np.asarray(x, dtype=np.float64).ravel()
+        ys = np.asarray(y, dtype=np.float64).ravel()
+        return _core.lon_lat(self.crs, (float(self.origin[0]), float(self.origin[1])),
+                             xs.tolist(), ys.tolist())
 
     def export(
         self, node: str, dest: "str | os.PathLike[str]", *, overwrite: bool = False

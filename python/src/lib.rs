@@ -18,7 +18,7 @@ use kodama_dag::registry;
 use kodama_nodes::artifact::{Footprints, Measurements, PointSet, Raster, Scene};
 use kodama_nodes::stage::Arity;
 use kodama_nodes::{Artifact, Site};
-use numpy::{IntoPyArray, PyArrayMethods};
+use numpy::{IntoPyArray, PyArray1, PyArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
@@ -540,6 +540,46 @@ fn export(
         .map_err(|e| engine(format!("cannot write {}: {e}", dest.display())))
 }
 
+/// WGS 84 longitudes and latitudes (degrees) of site-frame points (`xs`, `ys`, metres) of the
+/// site `(crs, origin)`: the reprojection the exported CSVs use.
+#[pyfunction]
+fn lon_lat<'py>(
+    py: Python<'py>,
+    crs: String,
+    origin: (f64, f64),
+    xs: Vec<f64>,
+    ys: Vec<f64>,
+) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+    use kodama_nodes::io::crs::{Crs, ToSite};
+    if xs.len() != ys.len() {
+        return Err(user(format!(
+            "lon_lat: {} x values against {} y values",
+            xs.len(),
+            ys.len()
+        )));
+    }
+    let site = Site {
+        crs,
+        origin,
+        cell_m: 1.0,
+    };
+    let wgs84 = Crs::from_epsg(4326)
+        .and_then(|c| ToSite::new(&c, &site))
+        .map_err(user)?;
+    let mut lon = Vec::with_capacity(xs.len());
+    let mut lat = Vec::with_capacity(xs.len());
+    for (&x, &y) in xs.iter().zip(&ys) {
+        let (a, b) = if x.is_finite() && y.is_finite() {
+            wgs84.inverse(x, y).map_err(user)?
+        } else {
+            (f64::NAN, f64::NAN)
+        };
+        lon.push(a);
+        lat.push(b);
+    }
+    Ok((lon.into_pyarray(py), lat.into_pyarray(py)))
+}
+
 /// The `kodama-dag` command line, run in this process: `argv` as the binary's (its name first);
 /// returns the exit code. The GIL is released while it runs.
 #[pyfunction]
@@ -559,6 +599,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(cli, m)?)?;
     m.add_function(wrap_pyfunction!(sweep, m)?)?;
     m.add_function(wrap_pyfunction!(export, m)?)?;
+    m.add_function(wrap_pyfunction!(lon_lat, m)?)?;
     m.add_function(wrap_pyfunction!(rf::trace, m)?)?;
     m.add_function(wrap_pyfunction!(rf::radio_map_at, m)?)?;
     Ok(())

@@ -295,3 +295,22 @@ def test_raster_cells_are_read_in_place_whatever_their_header(cache, node, shape
     assert float(data.min()) == pytest.approx(stats["min"], abs=1e-4)
     assert float(data.max()) == pytest.approx(stats["max"], abs=1e-4)
     assert float(data.mean(dtype=np.float64)) == pytest.approx(stats["mean"], abs=1e-4)
+
+
+def test_links_carry_wgs84_ends_as_the_exported_csv_does(tmp_path):
+    import csv
+
+    run = kodama_dag.run(HERE / "quickstart.ron", cache=tmp_path / "c", out=False, quiet=True,
+                         targets=["drive_test"])
+    # The UTM 18N textbook point: lon -75, lat 40 is E 500000, N 4427757.22 m.
+    lon, lat = run.lon_lat([500_000.0 - run.origin[0]], [4_427_757.22 - run.origin[1]])
+    assert lon[0] == pytest.approx(-75.0, abs=1e-7) and lat[0] == pytest.approx(40.0, abs=1e-6)
+    links = run.links("drive_test")
+    csv_path = run.export("drive_test", tmp_path / "drive.csv")
+    with open(csv_path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(links["rx_lat"]) > 10
+    for k in (0, len(rows) - 1):
+        for col in ("tx_lon", "tx_lat", "rx_lon", "rx_lat"):
+            assert float(rows[k][col]) == pytest.approx(float(links[col][k]), abs=1e-8)
+    assert 40.6 < float(links["rx_lat"][0]) < 40.8 and -74.1 < float(links["rx_lon"][0]) < -73.9
