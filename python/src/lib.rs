@@ -540,6 +540,9 @@ fn export(
         .map_err(|e| engine(format!("cannot write {}: {e}", dest.display())))
 }
 
+/// Two NumPy columns of the same length.
+type Columns<'py> = (Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>);
+
 /// WGS 84 longitudes and latitudes (degrees) of site-frame points (`xs`, `ys`, metres) of the
 /// site `(crs, origin)`: the reprojection the exported CSVs use.
 #[pyfunction]
@@ -549,7 +552,7 @@ fn lon_lat<'py>(
     origin: (f64, f64),
     xs: Vec<f64>,
     ys: Vec<f64>,
-) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>)> {
+) -> PyResult<Columns<'py>> {
     use kodama_nodes::io::crs::{Crs, ToSite};
     if xs.len() != ys.len() {
         return Err(user(format!(
