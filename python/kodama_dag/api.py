@@ -411,17 +411,18 @@ def sweep(
     Raises `UserError` for a bad sweep or base graph (exit code 2 in the CLI), `EngineError`
     when a variant's node failed or the cache did (exit code 1); finished variants stay cached,
     so running it again resumes. The GIL is released while it runs."""
+    cache_dir = _cache_dir(cache)
     d = _core.sweep(
         os.fspath(file),
         _set_args(set or {}),
-        _cache_dir(cache),
+        cache_dir,
         None if out is None else os.fspath(out),
         jobs,
         _data_dir(data),
         allow_outside,
         quiet,
     )
-    return SweepResult(d, _cache_dir(cache))
+    return SweepResult(d, cache_dir)
 
 
 @dataclass(frozen=True)

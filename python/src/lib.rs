@@ -55,6 +55,15 @@ fn run_error(e: RunError) -> PyErr {
     }
 }
 
+/// Worker threads as the CLI's `--jobs` takes them: 0 is refused; too many are clamped by the
+/// engine, with a warning.
+fn check_jobs(jobs: Option<usize>) -> PyResult<()> {
+    if jobs == Some(0) {
+        return Err(user("jobs: expected at least 1 worker thread, got 0"));
+    }
+    Ok(())
+}
+
 /// Loads the graph file `path` as `kodama-dag run` does (`sets` as `--set NODE.KEY=VALUE`).
 fn load_graph(
     path: &str,
@@ -127,10 +136,7 @@ fn run<'py>(
     halo_m: Option<f64>,
     quiet: bool,
 ) -> PyResult<(String, Bound<'py, PyDict>)> {
-    // As the CLI's --jobs: 0 is refused; too many are clamped by the engine, with a warning.
-    if jobs == Some(0) {
-        return Err(user("jobs: expected at least 1 worker thread, got 0"));
-    }
+    check_jobs(jobs)?;
     let g = load_graph(graph, sets, data, allow_outside, tile_m, halo_m)?;
     let cache = open_cache(&cache)?;
     let total = g
@@ -170,14 +176,7 @@ fn sweep<'py>(
     quiet: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     use kodama_dag::sweep::{SweepError, SweepOptions, load_sweep, run_sweep};
-    if jobs == Some(0) {
-        return Err(user("jobs: expected at least 1 worker thread, got 0"));
-    }
-    if let Some(d) = &data
-        && !d.is_dir()
-    {
-        return Err(user(format!("data {}: not a directory", d.display())));
-    }
+    check_jobs(jobs)?;
     let sw = load_sweep(&file, allow_outside).map_err(user)?;
     // The base graph's site: a variant's overrides set params, never the site.
     let base = load_graph(

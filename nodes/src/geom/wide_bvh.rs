@@ -442,7 +442,8 @@ fn with_stack<E: Copy, R>(need: usize, f: impl FnOnce(&mut [MaybeUninit<E>]) -> 
     }
 }
 
-fn simd_available() -> bool {
+/// Whether this CPU runs the AVX2 code paths (x86-64 with AVX2).
+pub(crate) fn simd_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::is_x86_feature_detected!("avx2")

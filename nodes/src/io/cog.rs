@@ -135,11 +135,9 @@ fn ascii(s: &str) -> Value {
     }
 }
 
-/// A directory: its entries by tag, and the tags whose values are filled in once the tiles'
-/// offsets are known.
+/// A directory: its entries, by tag.
 struct Ifd {
     entries: Vec<(u16, Value)>,
-    tiles: usize,
 }
 
 impl Ifd {
@@ -218,10 +216,7 @@ fn ifd(
     }
     e.push((GDAL_NODATA, ascii("nan")));
     e.sort_by_key(|(t, _)| *t);
-    Ifd {
-        entries: e,
-        tiles: offsets.len(),
-    }
+    Ifd { entries: e }
 }
 
 /// `r` as a Cloud-Optimized GeoTIFF in the site CRS (module docs). Classic TIFF: an error past
@@ -294,7 +289,6 @@ pub fn write_cog(r: &Raster, site: &Site) -> Result<Vec<u8>, String> {
         };
         d.write(pos, next, &mut out);
         pos += d.size();
-        debug_assert_eq!(d.tiles, tiled[k].len());
     }
     for t in tiled.iter().rev() {
         for tile in t {

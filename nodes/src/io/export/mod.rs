@@ -15,7 +15,7 @@ pub mod report_html;
 mod tiles;
 
 use crate::artifact::{Artifact, ArtifactType, TexelLayers};
-use crate::io::geotiff::{write_geotiff, write_geotiff_rgb};
+use crate::io::geotiff::write_geotiff_rgb;
 use crate::io::safe_name::{check_file_name, check_folder};
 use crate::site::Site;
 
@@ -122,11 +122,7 @@ fn encode_unchecked(
 ) -> Result<Encoded, String> {
     let file = |bytes: Vec<u8>| Ok(Encoded::File(bytes));
     match (a, format) {
-        (Artifact::Raster(r), "tif") => {
-            let mut buf = std::io::Cursor::new(Vec::new());
-            write_geotiff(r, site, &mut buf)?;
-            file(buf.into_inner())
-        }
+        (Artifact::Raster(r), "tif") => file(crate::io::cog::write_cog(r, site)?),
         (Artifact::Raster(r), "exr") => file(crate::io::exr_io::write_exr(
             r.grid.width as usize,
             r.grid.height as usize,

@@ -103,7 +103,7 @@ pub(super) fn rays_of(
     rays: &mut Vec<([f32; 3], [f32; 3])>,
 ) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
+    if crate::geom::wide_bvh::simd_available() {
         // SAFETY: the CPU has AVX2.
         return unsafe { rays_of_avx2(samples, poses, rays) };
     }
