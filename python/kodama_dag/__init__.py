@@ -25,6 +25,7 @@ from .api import (
     sweep,
 )
 from .radio import Paths, RadioMap, radio_map, trace
+from .sionna_scene import to_sionna
 
 __all__ = [
     "EngineError",
@@ -43,5 +44,6 @@ __all__ = [
     "radio_map",
     "run",
     "sweep",
+    "to_sionna",
     "trace",
 ]

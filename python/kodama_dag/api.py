@@ -200,11 +200,13 @@ class Run:
     def scene(self, node: str) -> list[dict[str, Any]]:
         """A scene's objects, each a dict: `id`, `class` ("Terrain", "Building", ...),
         `vertices` (V, 3) float32 in the site frame, `triangles` (T, 3) uint32, `materials` (T,)
-        uint8, `material_names` (code -> ITU-R P.2040 name, as Sionna RT's `itu_type`)."""
+        uint8, `material_names` (code -> ITU-R P.2040 name, as Sionna RT's `itu_type`),
+        `material_thickness_m` (code -> the slab thickness transmission uses)."""
         a = self._typed(node, "Scene")
-        names = a["material_names"]
+        names, thickness = a["material_names"], a["material_thickness_m"]
         for o in a["objects"]:
             o["material_names"] = names
+            o["material_thickness_m"] = thickness
         return a["objects"]
 
     def footprints(self, node: str):

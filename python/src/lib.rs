@@ -343,6 +343,12 @@ fn scene<'py>(py: Python<'py>, s: Scene) -> PyResult<Bound<'py, PyDict>> {
         names.set_item(m as u8, m.itu_type().unwrap_or("foliage"))?;
     }
     d.set_item("material_names", names)?;
+    // The slab thickness the tracer (and the Sionna export) gives each class's transmission.
+    let thickness = PyDict::new(py);
+    for m in kodama_nodes::artifact::Material::ALL {
+        thickness.set_item(m as u8, m.slab_thickness_m())?;
+    }
+    d.set_item("material_thickness_m", thickness)?;
     Ok(d)
 }
 
