@@ -21,6 +21,45 @@ fn check_all(glb: &Path) -> usize {
     meshes.len()
 }
 
+/// The same scene as CityJSON passes the official validator (cjval: the schema and the checks
+/// it cannot express), with a Solid (or solid parts) for every building the glb holds.
+fn check_cityjson(path: &Path, solids: usize) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let v = cjval::CJValidator::from_str(&text);
+    let errors: Vec<String> = v
+        .validate()
+        .iter()
+        .filter(|(_, s)| s.has_errors())
+        .map(|(check, s)| format!("{check}: {s}"))
+        .collect();
+    assert!(errors.is_empty(), "{}: {errors:#?}", path.display());
+    let doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let buildings = doc["CityObjects"]
+        .as_object()
+        .unwrap()
+        .values()
+        .filter(|o| o["type"] == "Building")
+        .count();
+    let solids_written = doc["CityObjects"]
+        .as_object()
+        .unwrap()
+        .values()
+        .filter(|o| o["geometry"][0]["type"] == "Solid")
+        .count();
+    println!(
+        "{}: valid CityJSON, {buildings} buildings, {solids_written} solids",
+        path.display()
+    );
+    assert_eq!(
+        buildings, solids,
+        "one Building per building mesh of the glb"
+    );
+    assert!(
+        solids_written >= solids,
+        "every building closed: {solids_written}"
+    );
+}
+
 #[test]
 fn demo_scenes_hold_only_valid_building_solids() {
     let env = Env::new();
@@ -294,6 +333,7 @@ fn delft_tile_footprints_and_solids() {
     )
     .ok();
     let solids = check_all(&env.out().join("scene.glb"));
+    check_cityjson(&env.out().join("scene.city.json"), solids);
     let score: serde_json::Value =
         serde_json::from_slice(&std::fs::read(env.out().join("footprint_score.json")).unwrap())
             .unwrap();

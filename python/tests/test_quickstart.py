@@ -36,3 +36,17 @@ def test_the_quickstart_runs_as_a_script(tmp_path):
     if os.environ.get("CI") == "true" or "Sionna RT scene in memory" in r.stdout:
         assert "Sionna RT scene in memory" in r.stdout, r.stderr
         assert r.stdout.count("Sionna RT") >= 5
+
+
+def test_the_notebook_is_the_script_and_a_valid_notebook():
+    r = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "quickstart_notebook.py"), "--check"],
+        capture_output=True, text=True,
+    )
+    assert r.returncode == 0, r.stderr
+    import nbformat  # .ci/run installs it
+
+    nb = nbformat.read(ROOT / "examples" / "quickstart.ipynb", as_version=4)
+    nbformat.validate(nb)
+    code = "".join(c.source + "\n" for c in nb.cells if c.cell_type == "code")
+    assert "kodama_dag.to_sionna(scene)" in code

@@ -3,6 +3,7 @@
 
 mod atlas;
 mod chart_glb;
+mod cityjson;
 pub mod colormap;
 pub mod figures;
 mod glb;
@@ -38,7 +39,7 @@ pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
         ArtifactType::Raster => &["tif", "exr", "png"],
         ArtifactType::Ortho => &["tif"],
         ArtifactType::City | ArtifactType::Metrics => &["json"],
-        ArtifactType::Scene => &["glb", "3dtiles", "sionna"],
+        ArtifactType::Scene => &["glb", "3dtiles", "sionna", "city.json"],
         ArtifactType::Footprints => &["geojson"],
         ArtifactType::Measurements => &["csv"],
         ArtifactType::Points => &["las", "laz", "xyz"],
@@ -52,22 +53,28 @@ pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
 }
 
 /// The file name and format of output `name` of type `ty`: a name ending in one of the type's
-/// formats (`truth.3dtiles`) picks it; otherwise the default format's extension is appended.
+/// formats (`truth.3dtiles`, `twin.city.json`) picks it; otherwise the default format's extension
+/// is appended.
 pub fn output_file(name: &str, ty: ArtifactType) -> Result<(String, &'static str), String> {
     let fmts = formats(ty);
+    let ends_in = |f: &str| {
+        name.len() > f.len() + 1
+            && name.ends_with(f)
+            && name.as_bytes()[name.len() - f.len() - 1] == b'.'
+    };
+    if let Some(f) = fmts.iter().find(|f| ends_in(f)) {
+        return Ok((name.to_owned(), f));
+    }
     match name.rsplit_once('.') {
-        Some((_, ext)) => match fmts.iter().find(|f| **f == ext) {
-            Some(f) => Ok((name.to_owned(), f)),
-            None => {
-                let list = match fmts.split_last() {
-                    Some((last, rest)) if !rest.is_empty() => {
-                        format!("{} or {last}", rest.join(", "))
-                    }
-                    _ => fmts.join(""),
-                };
-                Err(format!("{ty} outputs are written as {list}, not .{ext}"))
-            }
-        },
+        Some((_, ext)) => {
+            let list = match fmts.split_last() {
+                Some((last, rest)) if !rest.is_empty() => {
+                    format!("{} or {last}", rest.join(", "))
+                }
+                _ => fmts.join(""),
+            };
+            Err(format!("{ty} outputs are written as {list}, not .{ext}"))
+        }
         // A report is a folder named as the output.
         None if matches!(
             ty,
@@ -138,6 +145,7 @@ fn encode_unchecked(
             file(serde_json::to_vec_pretty(c).map_err(|e| e.to_string())?)
         }
         (Artifact::Scene(s), "glb") => file(write_glb(s)?),
+        (Artifact::Scene(s), "city.json") => file(cityjson::write_cityjson(s, site)?),
         (Artifact::Scene(s), "3dtiles") => Ok(Encoded::Folder(write_tileset(s, site, 100.0)?)),
         (Artifact::Scene(s), "sionna") => {
             let mut files = crate::io::sionna_xml::write_scene(s)?;
