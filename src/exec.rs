@@ -17,7 +17,8 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
-use kodama_nodes::io::export::{Encoded, check_names, encode_with_parts, output_file};
+use kodama_nodes::io::cog::Band;
+use kodama_nodes::io::export::{Encoded, check_names, encode_with_band, output_file};
 use kodama_nodes::stage::{Arity, Slot};
 use kodama_nodes::{Artifact, Ctx, Inputs, StageError};
 use rayon::prelude::*;
@@ -434,6 +435,7 @@ impl<'a> Exec<'a> {
             digest: digest.map(|d| d.to_hex().to_string()),
             error: None,
             user_error: false,
+            unit: self.graph.raster_unit(i).map(str::to_owned),
         }
     }
 
@@ -951,7 +953,12 @@ impl<'a> Exec<'a> {
             .map_err(|e| OutputError::io(e.to_string()))?;
         check_names(&art).map_err(OutputError::user)?;
         let (file_name, format) = output_file(name, art.ty()).map_err(OutputError::io)?;
-        let encoded = encode_with_parts(&art, &self.graph.site, format, self.cache)
+        let node = &self.graph.nodes[i];
+        let band = Band {
+            unit: self.graph.raster_unit(i).map(str::to_owned),
+            description: Some(format!("{} ({})", node.id, node.kind.name)),
+        };
+        let encoded = encode_with_band(&art, &self.graph.site, format, self.cache, &band)
             .map_err(OutputError::io)?;
         let path = dir.join(&file_name);
         let stamps = write_output(dir, &file_name, encoded)

@@ -3,8 +3,8 @@
 //! stdout is reserved for `--json`.
 
 use std::io::IsTerminal;
-use std::sync::OnceLock;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -35,12 +35,17 @@ impl Mode {
     }
 }
 
+/// Where a reporter's lines go instead of stderr (the Python package hands them to
+/// `sys.stderr`, which a notebook shows under the cell).
+pub type Sink = Arc<dyn Fn(&str) + Send + Sync>;
+
 /// The run's reporter.
 pub struct Reporter {
     mode: Mode,
     multi: MultiProgress,
     overall: Option<ProgressBar>,
     done: AtomicUsize,
+    sink: Option<Sink>,
 }
 
 impl Reporter {
@@ -65,14 +70,27 @@ impl Reporter {
             multi,
             overall,
             done: AtomicUsize::new(0),
+            sink: None,
+        }
+    }
+
+    /// A reporter in lines (or, with `quiet`, warnings only) that hands each line to `sink`; a
+    /// running stage that says how much work it has also gets a line at every tenth of it.
+    pub fn with_sink(quiet: bool, total: usize, sink: Sink) -> Reporter {
+        let mode = if quiet { Mode::Quiet } else { Mode::Lines };
+        Reporter {
+            sink: Some(sink),
+            ..Reporter::new(mode, total)
         }
     }
 
     fn line(&self, text: &str) {
-        if self.mode == Mode::Bars {
-            let _ = self.multi.println(text);
-        } else {
-            eprintln!("{text}");
+        match &self.sink {
+            Some(sink) => sink(text),
+            None if self.mode == Mode::Bars => {
+                let _ = self.multi.println(text);
+            }
+            None => eprintln!("{text}"),
         }
     }
 
@@ -84,12 +102,13 @@ impl Reporter {
     /// A node's stage starts running; the handle is its progress.
     pub fn started(&self, id: &str, kind: &str) -> NodeProgress<'_> {
         if self.mode == Mode::Lines {
-            eprintln!("running  {id} ({kind})");
+            self.line(&format!("running  {id} ({kind})"));
         }
         NodeProgress {
             reporter: self,
             label: format!("{id} ({kind})"),
             bar: OnceLock::new(),
+            tenths: Tenths::default(),
         }
     }
 
@@ -131,7 +150,7 @@ impl Reporter {
             return;
         }
         let count = |s: Status| records.iter().filter(|r| r.status == s).count();
-        eprintln!(
+        self.line(&format!(
             "{} nodes: {} ran, {} cached, {} cut off, {} failed, {} skipped in {seconds:.2} s",
             // The records, not `total`: a sweep's one reporter serves variants of any size.
             records.len(),
@@ -140,8 +159,22 @@ impl Reporter {
             count(Status::Cutoff),
             count(Status::Failed),
             count(Status::Skipped)
-        );
+        ));
     }
+
+    /// A line of a sweep or other command around runs: shown unless quiet.
+    pub fn say(&self, text: &str) {
+        if self.mode != Mode::Quiet {
+            self.line(text);
+        }
+    }
+}
+
+/// A stage's work counted for a sink's tenth-by-tenth lines.
+#[derive(Default)]
+struct Tenths {
+    total: AtomicU64,
+    done: AtomicU64,
 }
 
 /// One running node's progress; a bar appears when the stage says how much work there is.
@@ -149,10 +182,15 @@ pub struct NodeProgress<'a> {
     reporter: &'a Reporter,
     label: String,
     bar: OnceLock<ProgressBar>,
+    tenths: Tenths,
 }
 
 impl kodama_nodes::Progress for NodeProgress<'_> {
     fn set_total(&self, total: u64) {
+        if self.reporter.sink.is_some() {
+            self.tenths.total.store(total, Ordering::Relaxed);
+            self.tenths.done.store(0, Ordering::Relaxed);
+        }
         if self.reporter.mode != Mode::Bars {
             return;
         }
@@ -173,6 +211,15 @@ impl kodama_nodes::Progress for NodeProgress<'_> {
     fn advance(&self, n: u64) {
         if let Some(bar) = self.bar.get() {
             bar.inc(n);
+        }
+        let total = self.tenths.total.load(Ordering::Relaxed);
+        if self.reporter.sink.is_some() && self.reporter.mode == Mode::Lines && total > 0 {
+            let before = self.tenths.done.fetch_add(n, Ordering::Relaxed);
+            let (was, now) = (before * 10 / total, (before + n).min(total) * 10 / total);
+            if now > was {
+                self.reporter
+                    .line(&format!("         {} {}%", self.label, now * 10));
+            }
         }
     }
     fn warn(&self, message: &str) {

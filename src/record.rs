@@ -46,6 +46,9 @@ pub struct NodeRecord {
     /// True when the failure is the user's input (data or params): the CLI exits 2, not 1.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub user_error: bool,
+    /// What a raster output's values measure (`Graph::raster_unit`), for its GeoTIFF band.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub unit: Option<String>,
 }
 
 /// The record of one run, as `--json` prints it.

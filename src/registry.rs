@@ -6,7 +6,7 @@ use std::marker::PhantomData;
 use std::sync::LazyLock;
 
 use kodama_nodes::artifact::Typed;
-use kodama_nodes::stage::{FileRef, InputSpec, Inputs, ParamError, ReportSpec};
+use kodama_nodes::stage::{FileRef, InputSpec, Inputs, ParamError, ReportSpec, Unit};
 use kodama_nodes::{Artifact, ArtifactType, Ctx, Stage, StageError};
 
 use crate::syntax::{Ast, DeError, from_ast};
@@ -26,6 +26,8 @@ pub trait Params: Send + Sync {
     fn run(&self, inputs: &Inputs, ctx: &Ctx) -> Result<Ran, StageError>;
     /// How far the output reaches into input away from it (`Stage::reach_m`), metres.
     fn reach_m(&self) -> f64;
+    /// What a raster output's values measure (`Stage::unit`).
+    fn unit(&self) -> Unit;
     /// The same params, for a copy of the node (one per tile of a tiled run).
     fn clone_box(&self) -> Box<dyn Params>;
 }
@@ -69,6 +71,9 @@ impl<S: Stage> Params for Erased<S> {
     fn reach_m(&self) -> f64 {
         S::reach_m(&self.0)
     }
+    fn unit(&self) -> Unit {
+        S::unit(&self.0)
+    }
     fn clone_box(&self) -> Box<dyn Params> {
         Box::new(Erased::<S>(self.0.clone(), PhantomData))
     }
@@ -97,6 +102,9 @@ impl Params for ReportOf {
     }
     fn reach_m(&self) -> f64 {
         0.0
+    }
+    fn unit(&self) -> Unit {
+        Unit::None
     }
     fn clone_box(&self) -> Box<dyn Params> {
         Box::new(ReportOf)

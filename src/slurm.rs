@@ -1032,6 +1032,7 @@ mod tests {
             digest: None,
             error: None,
             user_error: false,
+            unit: None,
         };
         let rec = |ids: &[&str], wall_s, peak| RunRecord {
             graph: "g.ron".into(),

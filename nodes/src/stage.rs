@@ -351,6 +351,17 @@ pub struct Reported<T> {
     pub reports: Vec<(&'static str, Artifact)>,
 }
 
+/// What the values of a raster output measure, for its GeoTIFF band (GDAL's unit type).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Unit {
+    /// Labels, counts, flags, or not known: no unit.
+    None,
+    /// A unit as GDAL writes it: `"m"`, `"dB"`, `"dBm"`.
+    Is(&'static str),
+    /// The unit of the raster on the input of this name (a blur's, a mosaic's).
+    SameAs(&'static str),
+}
+
 /// A node kind: what a graph file names, what it takes and what it makes.
 pub trait Stage: 'static {
     /// The kind name as written in graph files, e.g. `"GaussianBlur"`.
@@ -388,6 +399,11 @@ pub trait Stage: 'static {
     /// point or object by object. A tiled run's default halo sums these along its chains.
     fn reach_m(_params: &Self::Params) -> f64 {
         0.0
+    }
+
+    /// What the values of a raster output measure (none by default; not asked of other types).
+    fn unit(_params: &Self::Params) -> Unit {
+        Unit::None
     }
 
     /// The reports the stage makes beside its output, each made by the same run (none by

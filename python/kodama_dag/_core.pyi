@@ -1,6 +1,6 @@
 # Hand-written stub of the native module (python/src/lib.rs). The typed API is kodama_dag.api;
 # these are the plain values it is built from.
-from typing import Any
+from typing import Any, Callable
 
 __version__: str
 
@@ -23,6 +23,7 @@ def run(
     tile_m: float | None,
     halo_m: float | None,
     quiet: bool,
+    progress: Callable[[str], object] | None = None,
 ) -> tuple[str, dict[str, Any]]: ...
 def explain(
     graph: str,
@@ -44,6 +45,7 @@ def sweep(
     data: str | None,
     allow_outside: bool,
     quiet: bool,
+    progress: Callable[[str], object] | None = None,
 ) -> dict[str, Any]: ...
 def trace(
     scene: str | tuple[str, str],
@@ -65,6 +67,7 @@ def export(
     site: tuple[str, tuple[float, float], float],
     dest: str,
     overwrite: bool,
+    band: tuple[str | None, str | None] = (None, None),
 ) -> list[str]: ...
 def lon_lat(
     crs: str, origin: tuple[float, float], xs: list[float], ys: list[float]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -41,6 +42,8 @@ class NodeRecord:
     """blake3 of the node's output artifact (hex), if it has one."""
     error: str | None = None
     user_error: bool = False
+    unit: str | None = None
+    """What a raster output's values measure ("m", "dB", ...), written in its GeoTIFF's band."""
 
 
 def _set_args(set: Mapping[str, object]) -> list[str]:
@@ -75,6 +78,21 @@ def _ron(v: object) -> str:
     )
 
 
+def _progress_sink():
+    """Where a run's progress lines go: `sys.stderr.write` (a notebook shows them under the
+    cell, pytest captures them), or None when `sys.stderr` is the process's own terminal and
+    the CLI's bars are drawn there."""
+    err = sys.stderr
+    if err is None:
+        return None
+    try:
+        if err.isatty() and err.fileno() == 2:
+            return None
+    except (AttributeError, OSError, ValueError):
+        pass
+    return err.write
+
+
 def _cache_dir(cache: "str | os.PathLike[str] | None") -> str:
     if cache is not None:
         return os.fspath(cache)
@@ -100,6 +118,7 @@ class Run:
                 digest=n.get("digest"),
                 error=n.get("error"),
                 user_error=n.get("user_error", False),
+                unit=n.get("unit"),
             )
             for n in record["nodes"]
         ]
@@ -269,7 +288,8 @@ class Run:
         if r.digest is None:
             raise KeyError(f"node {node!r} has no output in this run ({r.status}: {r.reason})")
         site = (self.crs, (float(self.origin[0]), float(self.origin[1])), self.cell_m)
-        _core.export(self.cache, r.digest, site, os.fspath(dest), overwrite)
+        band = (r.unit, f"{r.id} ({r.kind})")
+        _core.export(self.cache, r.digest, site, os.fspath(dest), overwrite, band)
         return Path(dest)
 
     def metrics(self, node: str) -> dict[str, float]:
@@ -301,7 +321,9 @@ def run(
     - `jobs`: worker threads (default all cores).
     - `data`, `allow_outside`, `tile_m`, `halo_m`: the CLI's `--data`, `--allow-outside`,
       `--tile-m`, `--halo-m`.
-    - `quiet`: warnings and errors only on stderr (else one line per node, or bars on a terminal).
+    - `quiet`: warnings and errors only (else one line per node and, for long stages, per tenth
+      of their work; bars when `sys.stderr` is the process's terminal). Lines go through
+      `sys.stderr`, so a notebook shows them under the cell.
     - `check`: raise `NodeFailed` when a node failed (else return the run with its failures).
 
     Raises `UserError` for what the CLI answers with exit code 2 (a bad graph, parameter or
@@ -330,6 +352,7 @@ def run(
         tile_m,
         halo_m,
         quiet,
+        _progress_sink(),
     )
     result = Run(json.loads(record), site, cache_dir)
     failed = [r for r in result.records if r.status == "failed"]
@@ -423,6 +446,7 @@ def sweep(
         _data_dir(data),
         allow_outside,
         quiet,
+        _progress_sink(),
     )
     return SweepResult(d, cache_dir)
 

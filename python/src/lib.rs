@@ -118,9 +118,28 @@ fn site_dict<'py>(py: Python<'py>, g: &Graph) -> PyResult<Bound<'py, PyDict>> {
     Ok(d)
 }
 
+/// The reporter of a run from Python: with `progress` (a callable taking one line), every line
+/// goes through it, so a notebook shows them under the cell (the package passes
+/// `sys.stderr.write` there); without, the CLI's (bars on a terminal, lines elsewhere).
+fn reporter(quiet: bool, total: usize, progress: Option<Py<PyAny>>) -> Reporter {
+    match progress {
+        None => Reporter::new(Mode::detect(quiet), total),
+        Some(callback) => Reporter::with_sink(
+            quiet,
+            total,
+            std::sync::Arc::new(move |text: &str| {
+                Python::attach(|py| {
+                    // A failing callback must not stop the run: its lines are lost, no more.
+                    let _ = callback.call1(py, (format!("{text}\n"),));
+                });
+            }),
+        ),
+    }
+}
+
 /// Runs a graph; returns (the run record as JSON, the graph's site, its output names by node).
 #[pyfunction]
-#[pyo3(signature = (graph, sets, cache, out, targets, jobs, data, allow_outside, tile_m, halo_m, quiet))]
+#[pyo3(signature = (graph, sets, cache, out, targets, jobs, data, allow_outside, tile_m, halo_m, quiet, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn run<'py>(
     py: Python<'py>,
@@ -135,6 +154,7 @@ fn run<'py>(
     tile_m: Option<f64>,
     halo_m: Option<f64>,
     quiet: bool,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<(String, Bound<'py, PyDict>)> {
     check_jobs(jobs)?;
     let g = load_graph(graph, sets, data, allow_outside, tile_m, halo_m)?;
@@ -150,7 +170,7 @@ fn run<'py>(
         out_dir: out,
     };
     let record = py.detach(|| {
-        let reporter = Reporter::new(Mode::detect(quiet), total);
+        let reporter = reporter(quiet, total, progress);
         run_graph(&g, &cache, &opts, &reporter)
     });
     let record = record.map_err(run_error)?;
@@ -162,7 +182,7 @@ fn run<'py>(
 /// written in `out`); returns its name, axes, metric names, output folder, and per variant its
 /// (axis, label) pairs, metrics (NaN where missing) and run record as JSON.
 #[pyfunction]
-#[pyo3(signature = (file, sets, cache, out, jobs, data, allow_outside, quiet))]
+#[pyo3(signature = (file, sets, cache, out, jobs, data, allow_outside, quiet, progress=None))]
 #[allow(clippy::too_many_arguments)]
 fn sweep<'py>(
     py: Python<'py>,
@@ -174,6 +194,7 @@ fn sweep<'py>(
     data: Option<PathBuf>,
     allow_outside: bool,
     quiet: bool,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     use kodama_dag::sweep::{SweepError, SweepOptions, load_sweep, run_sweep};
     check_jobs(jobs)?;
@@ -197,11 +218,9 @@ fn sweep<'py>(
         allow_outside,
     };
     let results = py.detach(|| {
-        let reporter = Reporter::new(Mode::detect(quiet), 0);
+        let reporter = reporter(quiet, 0, progress);
         run_sweep(&sw, &cache, &opts, &reporter, |i, n, v| {
-            if !quiet {
-                eprintln!("variant {}/{n}: {}", i + 1, v.name());
-            }
+            reporter.say(&format!("variant {}/{n}: {}", i + 1, v.name()));
         })
     });
     let results = results.map_err(|e| match e {
@@ -492,7 +511,7 @@ fn artifact<'py>(py: Python<'py>, cache: PathBuf, digest: &str) -> PyResult<Boun
 /// relative to `dest`'s folder. An existing `dest` is refused unless `overwrite` and it is a
 /// file: a folder is never removed from here.
 #[pyfunction]
-#[pyo3(signature = (cache, digest, site, dest, overwrite))]
+#[pyo3(signature = (cache, digest, site, dest, overwrite, band=(None, None)))]
 fn export(
     py: Python<'_>,
     cache: PathBuf,
@@ -500,8 +519,10 @@ fn export(
     site: (String, (f64, f64), f64),
     dest: PathBuf,
     overwrite: bool,
+    band: (Option<String>, Option<String>),
 ) -> PyResult<Vec<String>> {
-    use kodama_nodes::io::export::{encode, output_file};
+    use kodama_nodes::io::cog::Band;
+    use kodama_nodes::io::export::{encode_with_band, output_file};
     let name = dest
         .file_name()
         .and_then(|n| n.to_str())
@@ -532,8 +553,13 @@ fn export(
         origin: site.1,
         cell_m: site.2,
     };
+    let band = Band {
+        unit: band.0,
+        description: band.1,
+    };
+    let parts = kodama_nodes::stage::process_parts();
     let encoded = py
-        .detach(|| encode(&a, &site, format))
+        .detach(|| encode_with_band(&a, &site, format, parts, &band))
         .map_err(|m| user(format!("dest {name}: {m}")))?;
     let dir = match dest.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),

@@ -314,3 +314,21 @@ def test_links_carry_wgs84_ends_as_the_exported_csv_does(tmp_path):
         for col in ("tx_lon", "tx_lat", "rx_lon", "rx_lat"):
             assert float(rows[k][col]) == pytest.approx(float(links[col][k]), abs=1e-8)
     assert 40.6 < float(links["rx_lat"][0]) < 40.8 and -74.1 < float(links["rx_lon"][0]) < -73.9
+
+
+def test_progress_goes_through_sys_stderr_where_a_notebook_shows_it(tmp_path, capsys):
+    """Jupyter shows what is written to `sys.stderr` under the cell, not the process's fd 2: a
+    run's lines go through it (capsys sees only Python-level writes)."""
+    kodama_dag.run(HERE / "small.ron", cache=tmp_path / "c", out=False)
+    err = capsys.readouterr().err
+    assert "running  city (SynthCity)" in err, err
+    assert "ran      dsm (RasterizeSurface)" in err, err
+    assert "nodes: 6 ran, 0 cached" in err, err
+    # A stage that counts its work has a line per tenth of it, in order.
+    tenths = [line for line in err.splitlines() if line.rstrip().endswith("%")]
+    for stage in {line.split(")")[0] for line in tenths}:
+        pcts = [int(l.rsplit(" ", 1)[1][:-1]) for l in tenths if l.startswith(stage + ")")]
+        assert pcts == sorted(pcts) and pcts[-1] == 100, (stage, pcts)
+
+    kodama_dag.run(HERE / "small.ron", cache=tmp_path / "c", out=False, quiet=True)
+    assert capsys.readouterr().err == ""

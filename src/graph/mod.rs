@@ -7,6 +7,7 @@ mod tiling;
 
 use std::path::PathBuf;
 
+use kodama_nodes::stage::Unit;
 use kodama_nodes::{Site, Window};
 
 use crate::registry::{Kind, Params};
@@ -87,6 +88,25 @@ impl Graph {
     /// Index of the node called `id`.
     pub fn index(&self, id: &str) -> Option<usize> {
         self.nodes.iter().position(|n| n.id == id)
+    }
+
+    /// What node `i`'s raster values measure: its stage's unit, followed up the inputs a stage
+    /// takes it from (a blur of a terrain is in metres). None for labels, counts and the unknown.
+    pub fn raster_unit(&self, i: usize) -> Option<&'static str> {
+        let mut at = i;
+        // Each step goes upstream; a graph has no cycles, so the nodes bound the walk.
+        for _ in 0..=self.nodes.len() {
+            let node = self.nodes.get(at)?;
+            match node.params.unit() {
+                Unit::None => return None,
+                Unit::Is(u) => return Some(u),
+                Unit::SameAs(input) => {
+                    let k = node.kind.inputs.iter().position(|s| s.name == input)?;
+                    at = *node.inputs.get(k)?.first()?;
+                }
+            }
+        }
+        None
     }
 
     /// The nodes needed for `targets` (themselves and their ancestors), or all nodes if empty.

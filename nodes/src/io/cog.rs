@@ -6,16 +6,55 @@
 //! one fits a tile; every image file directory (IFD) at the front, the full resolution's first;
 //! then the tiles, the smallest overview's first and the full resolution's last, each level row
 //! by row. A reader fetches the directories with one request and any window or zoom level with
-//! few more. No-data is NaN (`GDAL_NODATA`); the GeoKeys are `geokeys::geo_keys`.
+//! few more. No-data is NaN (`GDAL_NODATA`); the GeoKeys are `geokeys::geo_keys`; the band's unit
+//! and description, when known, are GDAL's metadata items (`GDAL_METADATA`: what `gdalinfo`
+//! prints and rasterio reads as `units` and `descriptions`).
 //! Written by hand: the `tiff` crate's encoder writes strips, data before directories.
 
 use std::io::Write;
 
 use crate::artifact::Raster;
 use crate::io::geokeys::{
-    GDAL_NODATA, GEO_KEY_DIRECTORY, MODEL_PIXEL_SCALE, MODEL_TIEPOINT, geo_keys, scale_and_tiepoint,
+    GDAL_METADATA, GDAL_NODATA, GEO_KEY_DIRECTORY, MODEL_PIXEL_SCALE, MODEL_TIEPOINT, geo_keys,
+    scale_and_tiepoint,
 };
 use crate::site::Site;
+
+/// What a raster's one band holds, for its GeoTIFF: the unit of its values as GDAL names units
+/// ("m", "dB", "dBm"; none for labels and counts) and a description (the node that made it).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Band {
+    /// The values' unit.
+    pub unit: Option<String>,
+    /// What the band is.
+    pub description: Option<String>,
+}
+
+impl Band {
+    /// GDAL's metadata XML for the band's items, or none when there is nothing to say.
+    fn gdal_metadata(&self) -> Option<String> {
+        let escape = |s: &str| {
+            s.replace('&', "&amp;")
+                .replace('<', "&lt;")
+                .replace('>', "&gt;")
+                .replace('"', "&quot;")
+        };
+        let mut items = String::new();
+        if let Some(d) = &self.description {
+            items.push_str(&format!(
+                "<Item name=\"DESCRIPTION\" sample=\"0\" role=\"description\">{}</Item>",
+                escape(d)
+            ));
+        }
+        if let Some(u) = &self.unit {
+            items.push_str(&format!(
+                "<Item name=\"UNITTYPE\" sample=\"0\" role=\"unittype\">{}</Item>",
+                escape(u)
+            ));
+        }
+        (!items.is_empty()).then(|| format!("<GDALMetadata>{items}</GDALMetadata>"))
+    }
+}
 
 /// Tile side, pixels (GDAL's COG default).
 pub const TILE: u32 = 512;
@@ -193,6 +232,7 @@ fn ifd(
     overview: bool,
     (offsets, counts): (&[u32], &[u32]),
     georef: Option<[Value; 3]>,
+    metadata: Option<&str>,
 ) -> Ifd {
     let mut e: Vec<(u16, Value)> = vec![
         (254, longs(&[overview as u32])),
@@ -214,14 +254,24 @@ fn ifd(
         e.push((MODEL_TIEPOINT, tie));
         e.push((GEO_KEY_DIRECTORY, keys));
     }
+    if let Some(m) = metadata {
+        e.push((GDAL_METADATA, ascii(m)));
+    }
     e.push((GDAL_NODATA, ascii("nan")));
     e.sort_by_key(|(t, _)| *t);
     Ifd { entries: e }
 }
 
-/// `r` as a Cloud-Optimized GeoTIFF in the site CRS (module docs). Classic TIFF: an error past
-/// 4 GiB of compressed tiles.
+/// `r` as a Cloud-Optimized GeoTIFF in the site CRS (module docs), saying nothing of its band.
 pub fn write_cog(r: &Raster, site: &Site) -> Result<Vec<u8>, String> {
+    write_cog_band(r, site, &Band::default())
+}
+
+/// `r` as a Cloud-Optimized GeoTIFF in the site CRS (module docs), its band described by `band`
+/// (in the full resolution's directory, where GDAL reads it). Classic TIFF: an error past 4 GiB
+/// of compressed tiles.
+pub fn write_cog_band(r: &Raster, site: &Site, band: &Band) -> Result<Vec<u8>, String> {
+    let metadata = band.gdal_metadata();
     let g = r.grid;
     if g.width == 0 || g.height == 0 {
         return Err("an empty raster has no GeoTIFF".into());
@@ -259,6 +309,7 @@ pub fn write_cog(r: &Raster, site: &Site) -> Result<Vec<u8>, String> {
                     k > 0,
                     (off, &counts),
                     (k == 0).then(georef),
+                    metadata.as_deref().filter(|_| k == 0),
                 )
             })
             .collect()

@@ -209,6 +209,7 @@ pub fn write_footprints(f: &Footprints, site: &Site) -> Result<String, String> {
     serde_json::to_string_pretty(&doc).map_err(|e| e.to_string())
 }
 
-fn round_mm(v: f64) -> f64 {
+/// `v` rounded to the millimetre, as the vector exports write coordinates.
+pub(crate) fn round_mm(v: f64) -> f64 {
     (v * 1000.0).round() / 1000.0
 }

@@ -7,6 +7,7 @@ use crate::site::Site;
 pub(crate) const MODEL_PIXEL_SCALE: u16 = 33550;
 pub(crate) const MODEL_TIEPOINT: u16 = 33922;
 pub(crate) const GEO_KEY_DIRECTORY: u16 = 34735;
+pub(crate) const GDAL_METADATA: u16 = 42112;
 pub(crate) const GDAL_NODATA: u16 = 42113;
 pub(crate) const MODEL_TRANSFORMATION: u16 = 34264;
 pub(crate) const GEO_DOUBLE_PARAMS: u16 = 34736;

@@ -3,7 +3,7 @@
 use rayon::prelude::*;
 
 use crate::artifact::{Grid, PodVec, Raster, TerrainModel, height_at};
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// A seeded terrain height field: the ground truth that synthetic sensors sample.
 pub struct SynthTerrain;
@@ -15,6 +15,10 @@ impl Stage for SynthTerrain {
     const INPUTS: &'static [InputSpec] = &[];
     type Params = TerrainModel;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::Is("m")
+    }
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         if !(p.size_m.0 > 0.0 && p.size_m.1 > 0.0) {

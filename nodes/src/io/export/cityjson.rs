@@ -18,6 +18,7 @@ use std::collections::{BTreeMap, HashMap};
 use glam::DVec3;
 use serde_json::{Value, json};
 
+use super::object_properties::{material_area_shares, z_range};
 use crate::artifact::{Material, ObjectClass, Scene, SceneObject};
 use crate::site::Site;
 
@@ -137,20 +138,10 @@ fn city_objects(
     origin: (f64, f64),
 ) -> Result<Vec<(String, Value)>, String> {
     let mesh = &obj.mesh;
-    let foot_z = mesh
-        .positions
-        .iter()
-        .map(|p| p[2] as f64)
-        .fold(f64::INFINITY, f64::min);
-    let top_z = mesh
-        .positions
-        .iter()
-        .map(|p| p[2] as f64)
-        .fold(f64::NEG_INFINITY, f64::max);
+    let (foot_z, top_z) = z_range(mesh);
     let mut tris: Vec<[u32; 3]> = Vec::with_capacity(mesh.triangles.len());
     let mut kinds: Vec<usize> = Vec::with_capacity(mesh.triangles.len());
     let mut surfaces: Vec<(&'static str, &'static str)> = Vec::new();
-    let mut area_by_material: BTreeMap<&'static str, f64> = BTreeMap::new();
     for (k, t) in mesh.triangles.iter().enumerate() {
         let corners = t.map(|i| mesh.positions[i as usize]);
         let q = [
@@ -167,7 +158,6 @@ fn city_objects(
         let material = Material::from_u8(code)
             .ok_or_else(|| format!("{}: unknown material id {code}", obj.id))?;
         let name = material.itu_type().unwrap_or("foliage");
-        *area_by_material.entry(name).or_default() += 0.5 * n.length();
         let kind = match obj.class {
             ObjectClass::Building => building_surface(n, a.z.max(b.z).max(c.z), foot_z),
             _ => "",
@@ -190,14 +180,7 @@ fn city_objects(
         .iter()
         .map(|&(kind, material)| json!({ "type": kind, "itu_material": material }))
         .collect();
-    let total: f64 = area_by_material.values().sum();
-    let shares: serde_json::Map<String, Value> = area_by_material
-        .iter()
-        .map(|(m, a)| {
-            let share = if total > 0.0 { a / total } else { 0.0 };
-            (m.to_string(), json!((share * 1000.0).round() / 1000.0))
-        })
-        .collect();
+    let shares = material_area_shares(mesh).map_err(|e| format!("{}: {e}", obj.id))?;
     let mut attributes = json!({ "itu_material_area_share": shares });
     let mut out = Vec::new();
     if obj.class != ObjectClass::Building {

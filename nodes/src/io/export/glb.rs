@@ -39,13 +39,17 @@ fn material_name(m: Material) -> String {
 /// Encodes `scene` as a GLB file, z-up site coordinates written y-up.
 pub fn write_glb(scene: &Scene) -> Result<Vec<u8>, String> {
     let objects: Vec<&SceneObject> = scene.objects.iter().collect();
-    write_glb_objects(&objects, |p| [p[0], p[2], -p[1]])
+    write_glb_objects(&objects, |p| [p[0], p[2], -p[1]], false)
 }
 
-/// Encodes `objects` as a GLB file, each vertex mapped by `to_gltf` into glTF's y-up space.
+/// Encodes `objects` as a GLB file, each vertex mapped by `to_gltf` into glTF's y-up space. With
+/// `features`, each object is a feature: its vertices carry its row (`_FEATURE_ID_0`,
+/// `EXT_mesh_features`) in a property table of the objects' properties (`EXT_structural_metadata`,
+/// [`super::object_properties::property_table`]), as 3D Tiles 1.1 viewers read them.
 pub fn write_glb_objects(
     objects: &[&SceneObject],
     to_gltf: impl Fn([f32; 3]) -> [f32; 3],
+    features: bool,
 ) -> Result<Vec<u8>, String> {
     let mut bin: Vec<u8> = Vec::new();
     let (mut accessors, mut views, mut meshes, mut nodes) =
@@ -64,19 +68,27 @@ pub fn write_glb_objects(
             Ok(json!({"name": material_name(mat), "pbrMetallicRoughness": {"baseColorFactor": [c[0], c[1], c[2], 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.9}}))
         })
         .collect::<Result<_, String>>()?;
-    let mut push_view = |bin: &mut Vec<u8>, bytes: &[u8], target: u32| {
-        while !bin.len().is_multiple_of(4) {
+    // Vertex data starts on 4 bytes (glTF); property-table columns (no target) on 8.
+    let mut push_view = |bin: &mut Vec<u8>, bytes: &[u8], target: Option<u32>| {
+        let align = if target.is_some() { 4 } else { 8 };
+        while !bin.len().is_multiple_of(align) {
             bin.push(0);
         }
-        views.push(json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len(), "target": target}));
+        let mut view = json!({"buffer": 0, "byteOffset": bin.len(), "byteLength": bytes.len()});
+        if let Some(t) = target {
+            view["target"] = json!(t);
+        }
+        views.push(view);
         bin.extend_from_slice(bytes);
         views.len() - 1
     };
-    for obj in objects {
+    let kept: Vec<&SceneObject> = objects
+        .iter()
+        .copied()
+        .filter(|o| !o.mesh.is_empty())
+        .collect();
+    for (row, obj) in kept.iter().enumerate() {
         let m = &obj.mesh;
-        if m.is_empty() {
-            continue;
-        }
         let pos: Vec<[f32; 3]> = m.positions.iter().map(|p| to_gltf(*p)).collect();
         let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
         for p in &pos {
@@ -85,9 +97,18 @@ pub fn write_glb_objects(
                 hi[k] = hi[k].max(p[k]);
             }
         }
-        let v = push_view(&mut bin, bytemuck::cast_slice(&pos), 34962);
+        let v = push_view(&mut bin, bytemuck::cast_slice(&pos), Some(34962));
         accessors.push(json!({"bufferView": v, "componentType": 5126, "count": pos.len(), "type": "VEC3", "min": lo, "max": hi}));
-        let pos_acc = accessors.len() - 1;
+        let mut attributes = json!({"POSITION": accessors.len() - 1});
+        let mut extensions = json!({});
+        if features {
+            // Float feature IDs: exact below 2^24 rows, and 4-byte aligned as vertex data must be.
+            let ids = vec![row as f32; pos.len()];
+            let v = push_view(&mut bin, bytemuck::cast_slice(&ids), Some(34962));
+            accessors.push(json!({"bufferView": v, "componentType": 5126, "count": ids.len(), "type": "SCALAR"}));
+            attributes["_FEATURE_ID_0"] = json!(accessors.len() - 1);
+            extensions = json!({"EXT_mesh_features": {"featureIds": [{"featureCount": 1, "attribute": 0, "propertyTable": 0}]}});
+        }
         let mut primitives = Vec::new();
         for (&mat, &mi) in &material_index {
             let idx: Vec<u32> = m
@@ -100,17 +121,30 @@ pub fn write_glb_objects(
             if idx.is_empty() {
                 continue;
             }
-            let v = push_view(&mut bin, bytemuck::cast_slice(&idx), 34963);
+            let v = push_view(&mut bin, bytemuck::cast_slice(&idx), Some(34963));
             accessors.push(json!({"bufferView": v, "componentType": 5125, "count": idx.len(), "type": "SCALAR"}));
-            primitives.push(json!({"attributes": {"POSITION": pos_acc}, "indices": accessors.len() - 1, "material": mi}));
+            let mut primitive =
+                json!({"attributes": attributes, "indices": accessors.len() - 1, "material": mi});
+            if features {
+                primitive["extensions"] = extensions.clone();
+            }
+            primitives.push(primitive);
         }
         meshes.push(json!({"name": obj.id, "primitives": primitives}));
         nodes.push(json!({"name": obj.id, "mesh": meshes.len() - 1, "extras": {"class": format!("{:?}", obj.class)}}));
     }
+    let metadata = if features {
+        Some(super::object_properties::property_table(
+            &kept,
+            &mut |bytes| push_view(&mut bin, bytes, None),
+        )?)
+    } else {
+        None
+    };
     while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
-    let doc = json!({
+    let mut doc = json!({
         "asset": {"version": "2.0", "generator": concat!("kodama-dag ", env!("CARGO_PKG_VERSION"))},
         "scene": 0,
         "scenes": [{"nodes": (0..nodes.len()).collect::<Vec<_>>()}],
@@ -121,6 +155,10 @@ pub fn write_glb_objects(
         "bufferViews": views,
         "buffers": [{"byteLength": bin.len()}],
     });
+    if let Some(m) = metadata {
+        doc["extensionsUsed"] = json!(["EXT_mesh_features", "EXT_structural_metadata"]);
+        doc["extensions"] = json!({"EXT_structural_metadata": m});
+    }
     glb_container(&doc, bin)
 }
 

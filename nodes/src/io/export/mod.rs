@@ -7,8 +7,10 @@ mod cityjson;
 pub mod colormap;
 pub mod figures;
 mod glb;
+mod gpkg;
 mod las;
 mod material_atlas;
+pub mod object_properties;
 mod pixel_font;
 mod relief_atlas;
 mod relief_json;
@@ -16,6 +18,7 @@ pub mod report_html;
 mod tiles;
 
 use crate::artifact::{Artifact, ArtifactType, TexelLayers};
+use crate::io::cog::Band;
 use crate::io::geotiff::write_geotiff_rgb;
 use crate::io::safe_name::{check_file_name, check_folder};
 use crate::site::Site;
@@ -40,7 +43,7 @@ pub fn formats(ty: ArtifactType) -> &'static [&'static str] {
         ArtifactType::Ortho => &["tif"],
         ArtifactType::City | ArtifactType::Metrics => &["json"],
         ArtifactType::Scene => &["glb", "3dtiles", "sionna", "city.json"],
-        ArtifactType::Footprints => &["geojson"],
+        ArtifactType::Footprints => &["geojson", "gpkg"],
         ArtifactType::Measurements => &["csv"],
         ArtifactType::Points => &["las", "laz", "xyz"],
         ArtifactType::Views => &["views"],
@@ -112,8 +115,20 @@ pub fn encode_with_parts(
     format: &str,
     parts: &dyn crate::stage::PartStore,
 ) -> Result<Encoded, String> {
+    encode_with_band(a, site, format, parts, &Band::default())
+}
+
+/// [`encode_with_parts`], a raster's band described by `band` (its unit and what made it) in the
+/// formats that carry one (GeoTIFF).
+pub fn encode_with_band(
+    a: &Artifact,
+    site: &Site,
+    format: &str,
+    parts: &dyn crate::stage::PartStore,
+    band: &Band,
+) -> Result<Encoded, String> {
     check_names(a)?;
-    let encoded = encode_unchecked(a, site, format, parts)?;
+    let encoded = encode_unchecked(a, site, format, parts, band)?;
     if let Encoded::Folder(files) = &encoded {
         check_folder(files.iter().map(|(rel, _)| rel.as_str()))
             .map_err(|e| format!("{} as {format}: {e}", a.ty()))?;
@@ -126,10 +141,11 @@ fn encode_unchecked(
     site: &Site,
     format: &str,
     parts: &dyn crate::stage::PartStore,
+    band: &Band,
 ) -> Result<Encoded, String> {
     let file = |bytes: Vec<u8>| Ok(Encoded::File(bytes));
     match (a, format) {
-        (Artifact::Raster(r), "tif") => file(crate::io::cog::write_cog(r, site)?),
+        (Artifact::Raster(r), "tif") => file(crate::io::cog::write_cog_band(r, site, band)?),
         (Artifact::Raster(r), "exr") => file(crate::io::exr_io::write_exr(
             r.grid.width as usize,
             r.grid.height as usize,
@@ -155,6 +171,7 @@ fn encode_unchecked(
         (Artifact::Footprints(f), "geojson") => {
             file(crate::io::geojson::write_footprints(f, site)?.into_bytes())
         }
+        (Artifact::Footprints(f), "gpkg") => file(gpkg::write_gpkg(f, site)?),
         (Artifact::Measurements(m), "csv") => file(measurements_csv(m, site)?.into_bytes()),
         (Artifact::Metrics(m), "json") => {
             let mut s = serde_json::to_string_pretty(&m.values).map_err(|e| e.to_string())?;

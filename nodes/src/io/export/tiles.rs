@@ -110,7 +110,7 @@ pub fn write_tileset(
         if let Some(f) = failure {
             return Err(f);
         }
-        files.push((uri.clone(), write_glb_objects(objects, to_local)?));
+        files.push((uri.clone(), write_glb_objects(objects, to_local, true)?));
         // Column-major ENU -> ECEF.
         let transform: Vec<f64> = [
             axes[0].to_vec(),

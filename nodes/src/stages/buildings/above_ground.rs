@@ -4,7 +4,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, PodVec, Raster};
-use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError, Unit};
 
 /// [`AboveGround`] has no parameters.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -24,6 +24,10 @@ impl Stage for AboveGround {
     ];
     type Params = AboveGroundParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::Is("m")
+    }
 
     fn run(_: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Raster, StageError> {
         let h: &Raster = inputs.one("surface")?;

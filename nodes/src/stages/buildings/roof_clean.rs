@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{ArtifactType, PodVec, PointSet, Raster};
 use crate::raster::label::label_ids;
 use crate::raster::label::label_regions;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// ASPRS class of building returns.
 const BUILDING_CLASS: u8 = 6;
@@ -81,6 +81,10 @@ impl Stage for RoofClean {
     ];
     type Params = RoofCleanParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::Is("m")
+    }
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         for (name, v) in [

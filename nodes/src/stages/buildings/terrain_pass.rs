@@ -8,7 +8,7 @@ use crate::artifact::{ArtifactType, Grid, PodVec, Raster};
 use crate::raster::blur::gaussian_blur;
 use crate::raster::gap_fill::fill_gaps;
 use crate::raster::normal::normal_z;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// Params of [`TerrainPass`] (the symbols of eq. (1)).
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -52,6 +52,10 @@ impl Stage for TerrainPass {
     ];
     type Params = TerrainPassParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::Is("m")
+    }
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         if !(p.coarse_m > 0.0) {

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{ArtifactType, PodVec, Raster};
 use crate::raster::label::label_ids;
 use crate::raster::morph::dilate;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// Params of [`UnassignedAbove`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -46,6 +46,10 @@ impl Stage for UnassignedAbove {
     ];
     type Params = UnassignedAboveParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::SameAs("above")
+    }
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         for (name, v) in [

@@ -4,7 +4,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, PodVec, Raster};
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// Params of [`Clamp`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -33,6 +33,10 @@ impl Stage for Clamp {
     )];
     type Params = ClampParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::SameAs("raster")
+    }
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         if let (Some(lo), Some(hi)) = (p.min, p.max)

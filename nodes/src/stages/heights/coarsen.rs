@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Grid, PodVec, Raster};
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// How the fine cells of one coarse cell combine.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -48,6 +48,10 @@ impl Stage for Coarsen {
     )];
     type Params = CoarsenParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::SameAs("raster")
+    }
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         crate::params::check_cell(Some(p.cell_m))

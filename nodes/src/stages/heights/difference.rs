@@ -4,7 +4,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, PodVec, Raster};
-use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, Stage, StageError, Unit};
 
 /// [`Difference`] has no parameters.
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -29,6 +29,10 @@ impl Stage for Difference {
     ];
     type Params = DifferenceParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::SameAs("a")
+    }
 
     fn run(_: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Raster, StageError> {
         let a: &Raster = inputs.one("a")?;

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{Grid, PodVec, Raster};
 use crate::io::crs::LonLatBox;
 use crate::params::check_window;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// Params of [`FlatGround`]: the extent as `window` (site metres) or `lonlat` (degrees), one of
 /// the two.
@@ -43,6 +43,10 @@ impl Stage for FlatGround {
     const INPUTS: &'static [InputSpec] = &[];
     type Params = FlatGroundParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::Is("m")
+    }
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         check_window(p.window)?;

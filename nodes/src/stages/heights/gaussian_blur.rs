@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Raster};
 use crate::raster::blur::gaussian_blur_with_progress;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// Params of [`GaussianBlur`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -31,6 +31,10 @@ impl Stage for GaussianBlur {
     )];
     type Params = GaussianBlurParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::SameAs("raster")
+    }
 
     /// The kernel's 3 sigma.
     fn reach_m(p: &Self::Params) -> f64 {

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{ArtifactType, ObjectClass, PodVec, Raster, Scene};
 use crate::geom::from_above::{BAND_ROWS, down_rows, scene_grid, top_z};
 use crate::geom::raycast::SceneRays;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// Params of [`RasterizeScene`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -31,6 +31,10 @@ impl Stage for RasterizeScene {
         &[InputSpec::one("scene", ArtifactType::Scene, "the scene")];
     type Params = RasterizeSceneParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::Is("m")
+    }
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         crate::params::check_cell(p.cell_m)?;

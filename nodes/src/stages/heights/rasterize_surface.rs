@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Grid, PodVec, PointSet, Raster};
 use crate::raster::gap_fill::fill_gaps;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// How the points falling into one cell become its value.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -61,6 +61,14 @@ impl Stage for RasterizeSurface {
     )];
     type Params = RasterizeSurfaceParams;
     type Output = Raster;
+
+    fn unit(p: &Self::Params) -> Unit {
+        if p.mode == CellMode::Count {
+            Unit::None
+        } else {
+            Unit::Is("m")
+        }
+    }
 
     /// The widest gap filled from its rim.
     fn reach_m(p: &Self::Params) -> f64 {

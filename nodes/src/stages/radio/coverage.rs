@@ -33,7 +33,9 @@
 use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Grid, Metrics, PodVec, Raster, Typed};
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, ReportSpec, Reported, Stage, StageError};
+use crate::stage::{
+    Ctx, InputSpec, Inputs, ParamError, ReportSpec, Reported, Stage, StageError, Unit,
+};
 
 /// The most transmitters one Coverage node takes.
 pub const MAX_TRANSMITTERS: usize = 256;
@@ -132,6 +134,14 @@ impl Stage for Coverage {
     ];
     type Params = CoverageParams;
     type Output = Raster;
+
+    fn unit(p: &Self::Params) -> Unit {
+        match p.layer {
+            CoverageLayer::BestRsrp | CoverageLayer::Rsrp(_) => Unit::Is("dBm"),
+            CoverageLayer::Sinr => Unit::Is("dB"),
+            CoverageLayer::BestServer | CoverageLayer::Covered(_) => Unit::None,
+        }
+    }
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         validate(p)

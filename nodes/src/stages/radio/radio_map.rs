@@ -10,7 +10,7 @@ use crate::rf::map_plane::{MapPlane, default_grid};
 use crate::rf::path::TraceOptions;
 use crate::rf::scattering::ScatteringPattern;
 use crate::rf::scene::{RfScene, scene_bounds};
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// Params of [`RadioMap`].
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -164,6 +164,10 @@ impl Stage for RadioMap {
     ];
     type Params = RadioMapParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::Is("dB")
+    }
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         p.options

@@ -2,7 +2,7 @@
 
 use crate::artifact::{ArtifactType, Grid, PodVec, Raster};
 use crate::site::MergeTilesParams;
-use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError};
+use crate::stage::{Ctx, InputSpec, Inputs, ParamError, Stage, StageError, Unit};
 
 /// The mosaic over the union of the tiles' cores, on the tiles' cell lattice; a cell no tile
 /// covers is no-data.
@@ -19,6 +19,10 @@ impl Stage for MergeRasters {
     )];
     type Params = MergeTilesParams;
     type Output = Raster;
+
+    fn unit(_p: &Self::Params) -> Unit {
+        Unit::SameAs("tiles")
+    }
 
     fn validate(p: &Self::Params) -> Result<(), ParamError> {
         p.validate().map_err(|(f, m)| ParamError::new(f, m))
