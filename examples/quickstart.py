@@ -69,7 +69,9 @@ try:
     im = ax.imshow(gain_db, extent=(x0, x0 + w * cell, y0 - h * cell, y0), cmap="viridis",
                    vmin=np.percentile(finite, 2), vmax=np.percentile(finite, 98))
     fig.colorbar(im, label="path gain (dB)")
-    ax.set(xlabel="x (m, site frame)", ylabel="y (m)", title="the twin's radio map")
+    ax.ticklabel_format(useOffset=False, style="plain")
+    ax.set(xlabel=f"easting (m, {run.crs})", ylabel="northing (m)",
+           title="the twin's radio map")
     OUT.mkdir(parents=True, exist_ok=True)
     fig.savefig(OUT / "radio_map_quickstart.png", dpi=120, bbox_inches="tight")
     print(f"figure: {OUT / 'radio_map_quickstart.png'}")
@@ -84,11 +86,25 @@ except ImportError:
 
 # %%
 scene = (run, "twin")
-# A transmitter 25 m up at the radio map's centre, receivers 1.5 m up along a line through it.
+# The raster transforms are in the CRS; the scene is in the site frame (CRS minus `run.origin`).
+terrain, t_transform = run.raster("terrain2", xarray=False)
+
+
+def ground(x, y):
+    """The terrain height under site-frame (x, y): the cell's value."""
+    tx0, tcell, _, ty0, _, _ = t_transform
+    col = int((x + run.origin[0] - tx0) // tcell)
+    row = int((ty0 - (y + run.origin[1])) // tcell)
+    return float(terrain[row, col])
+
+
+# A transmitter 25 m above the ground at the radio map's centre, receivers 1.5 m above it along
+# a line through it.
 x0, cell, _, y0, _, _ = transform
-cx, cy = x0 + gain_db.shape[1] * cell / 2, y0 - gain_db.shape[0] * cell / 2
-tx = np.array([cx, cy, 25.0])
-rx = np.array([[cx + dx, cy, 1.5] for dx in (-60.0, -30.0, 30.0, 60.0)])
+cx = x0 - run.origin[0] + gain_db.shape[1] * cell / 2
+cy = y0 - run.origin[1] - gain_db.shape[0] * cell / 2
+tx = np.array([cx, cy, ground(cx, cy) + 25.0])
+rx = np.array([[cx + dx, cy, ground(cx + dx, cy) + 1.5] for dx in (-60.0, -30.0, 30.0, 60.0)])
 links = np.column_stack([np.tile(tx, (len(rx), 1)), rx])
 paths = kodama_dag.trace(scene, links, 3.5e9)
 for (x, _, _), g, n in zip(rx, paths.gain_db, paths.valid.sum(axis=1)):

@@ -13,6 +13,7 @@ use kodama_nodes::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
 use kodama_nodes::geom::mesh_build::cuboid;
 use kodama_nodes::rf::antenna::{Antenna, Pattern, Polarization};
 use kodama_nodes::rf::em::{fspl_db, permittivity, slab};
+use kodama_nodes::rf::foliage::FoliageLaw;
 use kodama_nodes::rf::path::{InteractionKind, LinkEnds, LinkPaths, TraceOptions};
 use kodama_nodes::rf::paths::trace_links;
 use kodama_nodes::rf::scene::RfScene;
@@ -476,6 +477,20 @@ fn a_link_through_overlapping_canopies_loses_their_union_once() {
             r.gain_db
         );
     }
+    // ITU-R P.833's saturating law on the same 16 m: A_m (1 - exp(-α d / A_m)), 7.98 dB with
+    // A_m = 10 dB where the linear law gives 16.
+    let opt = TraceOptions {
+        foliage_db_per_m: Some(1.0),
+        foliage_law: FoliageLaw::P833Max(10.0),
+        ..options(3)
+    };
+    let r = &trace_one(&scene, &links, &opt);
+    let expected = -fspl_db(100.0, F) - 10.0 * (1.0 - (-1.6f64).exp());
+    assert!(
+        (r.gain_db - expected).abs() < 1e-6,
+        "P.833: {} vs {expected}",
+        r.gain_db
+    );
 }
 
 /// A radio-map cell below two overlapping horizontal canopies loses α × the thickness of their
@@ -501,14 +516,30 @@ fn a_radio_map_cell_behind_overlapping_canopies_loses_their_union_once() {
         foliage_db_per_m: Some(1.0),
         ..Default::default()
     };
-    let map = |scene: &Scene| {
+    let map = |opt: &TraceOptions, scene: &Scene| {
         let rf = RfScene::new(scene, F, false).unwrap();
-        radio_map(&rf, tx, &Antenna::default(), &plane, &opt, F)
+        radio_map(&rf, tx, &Antenna::default(), &plane, opt, F)
     };
-    let (free, canopies) = (map(&Scene::default()), map(&overlapping_canopies(true)));
+    let (free, canopies) = (
+        map(&opt, &Scene::default()),
+        map(&opt, &overlapping_canopies(true)),
+    );
     let loss_db = 10.0 * (free.at(2, 2) as f64 / canopies.at(2, 2) as f64).log10();
     // Rays into the centre cell lean at most 1.6° off vertical: 15 m / cos θ ≤ 15.006 m.
     assert!((loss_db - 15.0).abs() < 0.02, "{loss_db} dB");
+    // P.833's saturating law over the same union, met segment by segment (the rays cross four
+    // boundaries on the way): 10 (1 - exp(-1.5)) = 7.77 dB with A_m = 10 dB.
+    let p833 = TraceOptions {
+        foliage_law: FoliageLaw::P833Max(10.0),
+        ..opt.clone()
+    };
+    let saturated = map(&p833, &overlapping_canopies(true));
+    let loss_db = 10.0 * (free.at(2, 2) as f64 / saturated.at(2, 2) as f64).log10();
+    let expected = 10.0 * (1.0 - (-1.5f64).exp());
+    assert!(
+        (loss_db - expected).abs() < 0.02,
+        "{loss_db} vs {expected} dB"
+    );
 }
 
 /// A corner diffracts the same whichever of its two faces the mesh lists first: the UTD labels

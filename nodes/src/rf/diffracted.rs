@@ -10,7 +10,7 @@ use glam::{DMat3, DVec3};
 use super::diffraction::{diffracted_field, diffraction_point};
 use super::diffraction_search::DiffractionSequence;
 use super::field::{self, CVec};
-use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
+use super::foliage::{FoliageDepth, foliage_length};
 use super::image_method::{image_points, images_of, mirrored};
 use super::path::{Interaction, InteractionKind, Path, Tracer};
 use super::path_field::specular;
@@ -172,7 +172,7 @@ fn diffracted_path(
     let rx_pattern = DVec3::from(t.rx_antenna.field((-k_last).to_array()));
     let a = field::dot(&e, rx_pattern)
         * (scene.wavelength / (4.0 * std::f64::consts::PI))
-        * loss_amplitude(t.foliage_db_per_m, foliage_m);
+        * t.foliage.amplitude(foliage_m);
     if a.norm_sqr() == 0.0 {
         return None;
     }
@@ -232,7 +232,7 @@ mod tests {
             tx_antenna: &antenna,
             rx_antenna: &antenna,
             opt: &opt,
-            foliage_db_per_m: 0.0,
+            foliage: crate::rf::foliage::FoliageLaw::Linear.at(3.5e9, 0.0),
         };
         let at_tx = FoliageDepth::at(&scene, tx);
         let bits = |p: &Path| (p.delay_s.to_bits(), p.a.map(f64::to_bits));

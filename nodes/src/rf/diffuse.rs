@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use super::antenna::spherical_basis;
 use super::fibonacci::fibonacci_sphere;
 use super::field;
-use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
+use super::foliage::{FoliageDepth, foliage_length};
 use super::path::Tracer;
 use super::scattering::pattern;
 use super::scene::EPS;
@@ -32,18 +32,21 @@ pub(super) fn diffuse_power(t: &Tracer, tx: DVec3, at_tx: FoliageDepth, rxs: &[D
             let mut acc = vec![0.0; rxs.len()];
             for d0 in dirs {
                 let e0 = field::real(DVec3::from(t.tx_antenna.field(d0.to_array())));
-                let mut stack = vec![(tx, d0, e0, 0u32, at_tx)];
-                while let Some((o, d, mut e, depth, mut foliage)) = stack.pop() {
+                // Each branch: where it starts, its field, depth, foliage depth and the metres of
+                // foliage it has run through (P.833's law saturates on the whole path's).
+                let mut stack = vec![(tx, d0, e0, 0u32, at_tx, 0.0f64)];
+                while let Some((o, d, mut e, depth, mut foliage, mut in_foliage)) = stack.pop() {
                     let Some(h) = scene.cast(o, d, EPS, f64::INFINITY) else {
                         continue;
                     };
                     if foliage.inside() {
-                        let a = loss_amplitude(t.foliage_db_per_m, h.t);
+                        let a = t.foliage.step_amplitude(in_foliage, h.t);
                         e = e.map(|c| c * a);
+                        in_foliage += h.t;
                     }
                     let q = o + d * h.t;
                     if foliage.cross(scene, h.triangle, d) {
-                        stack.push((q, d, e, depth, foliage));
+                        stack.push((q, d, e, depth, foliage, in_foliage));
                         continue;
                     }
                     if depth + 1 > opt.max_depth {
@@ -75,7 +78,7 @@ pub(super) fn diffuse_power(t: &Tracer, tx: DVec3, at_tx: FoliageDepth, rxs: &[D
                         let (th_o, ph_o) = spherical_basis(ks.to_array());
                         let scale = s * gamma * (f * omega).sqrt() / r_s
                             * amp
-                            * loss_amplitude(t.foliage_db_per_m, foliage_m);
+                            * t.foliage.step_amplitude(in_foliage, foliage_m);
                         let rx_pattern = DVec3::from(t.rx_antenna.field((-ks).to_array()));
                         let a = (e_th * DVec3::from(th_o).dot(rx_pattern)
                             + e_ph * DVec3::from(ph_o).dot(rx_pattern))
@@ -84,11 +87,11 @@ pub(super) fn diffuse_power(t: &Tracer, tx: DVec3, at_tx: FoliageDepth, rxs: &[D
                     }
                     if opt.reflection {
                         let e_r = e_spec.map(|c| c * specular_factor);
-                        stack.push((q, k_spec, e_r, depth + 1, foliage));
+                        stack.push((q, k_spec, e_r, depth + 1, foliage, in_foliage));
                     }
                     if opt.transmission {
                         let e_t = field::transmit(&e, d, n, tr);
-                        stack.push((q, d, e_t, depth + 1, foliage));
+                        stack.push((q, d, e_t, depth + 1, foliage, in_foliage));
                     }
                 }
             }

@@ -5,6 +5,7 @@
 //! default specific attenuation (ITU-R P.833).
 
 use glam::DVec3;
+use serde::{Deserialize, Serialize};
 
 use super::scene::{EPS, RfScene, SurfaceHit};
 
@@ -33,6 +34,97 @@ pub fn specific_attenuation_db_per_m(freq_hz: f64) -> f64 {
 /// The amplitude factor of `length_m` metres of foliage at `db_per_m`: 10^(−γ d / 20).
 pub fn loss_amplitude(db_per_m: f64, length_m: f64) -> f64 {
     10f64.powf(-db_per_m * length_m / 20.0)
+}
+
+/// How the loss grows with the depth of foliage a path runs through.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub enum FoliageLaw {
+    /// γ d: the same loss for every metre, the cumulative loss the paper writes (Sec. 4.2.4).
+    #[default]
+    Linear,
+    /// ITU-R P.833 (§2.1, one terminal in woodland): A_m (1 − exp(−γ d / A_m)), the loss of the
+    /// first metres γ each, saturating at A_m, with A_m = A1 f^α (f in MHz) from the
+    /// recommendation's Mulhouse campaign, A1 = 1.15, α = 0.43 ([`p833_max_attenuation_db`]).
+    P833,
+    /// P.833's law with this maximum A_m, dB (> 0).
+    P833Max(f64),
+}
+
+impl FoliageLaw {
+    /// The first setting out of its range, as a message.
+    pub fn check(self) -> Result<(), &'static str> {
+        match self {
+            FoliageLaw::P833Max(m) if !(m > 0.0 && m.is_finite()) => {
+                Err("expected P833Max with a positive, finite maximum in dB")
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// The law at `freq_hz` with specific attenuation `db_per_m`.
+    pub fn at(self, freq_hz: f64, db_per_m: f64) -> FoliageLoss {
+        FoliageLoss {
+            db_per_m,
+            max_db: match self {
+                FoliageLaw::Linear => None,
+                FoliageLaw::P833 => Some(p833_max_attenuation_db(freq_hz)),
+                FoliageLaw::P833Max(m) => Some(m),
+            },
+        }
+    }
+}
+
+/// Whether `law` is the default linear law (for params that leave their default out of their
+/// encoding).
+pub fn is_linear(law: &FoliageLaw) -> bool {
+    *law == FoliageLaw::Linear
+}
+
+/// ITU-R P.833's maximum attenuation of one terminal in woodland, A_m = A1 f^α dB (f in MHz),
+/// with the Mulhouse campaign's A1 = 1.15, α = 0.43: 21.9 dB at 949 MHz, 29.2 dB at 1.85 GHz,
+/// 38.4 dB at 3.5 GHz (the recommendation's table, from other campaigns, gives 26.5, 29.0, -).
+pub fn p833_max_attenuation_db(freq_hz: f64) -> f64 {
+    1.15 * (freq_hz / 1e6).powf(0.43)
+}
+
+/// The foliage loss one trace applies: γ dB/m, saturating at `max_db` when set.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FoliageLoss {
+    /// γ, dB per metre.
+    pub db_per_m: f64,
+    /// P.833's A_m, dB; `None`: the linear law.
+    pub max_db: Option<f64>,
+}
+
+impl FoliageLoss {
+    /// The loss of `length_m` metres of foliage, dB: γ d, or P.833's A_m (1 − exp(−γ d / A_m)).
+    pub fn loss_db(&self, length_m: f64) -> f64 {
+        let linear = self.db_per_m * length_m;
+        match self.max_db {
+            None => linear,
+            Some(m) => m * -(-linear / m).exp_m1(),
+        }
+    }
+
+    /// The amplitude factor of a path's `length_m` metres of foliage in all.
+    pub fn amplitude(&self, length_m: f64) -> f64 {
+        match self.max_db {
+            None => loss_amplitude(self.db_per_m, length_m),
+            Some(_) => 10f64.powf(-self.loss_db(length_m) / 20.0),
+        }
+    }
+
+    /// The amplitude factor of `length_m` more metres for a ray that has run `before_m` metres in
+    /// foliage already: what the segment adds to the path's loss.
+    pub fn step_amplitude(&self, before_m: f64, length_m: f64) -> f64 {
+        match self.max_db {
+            None => loss_amplitude(self.db_per_m, length_m),
+            Some(_) => {
+                let added = self.loss_db(before_m + length_m) - self.loss_db(before_m);
+                10f64.powf(-added / 20.0)
+            }
+        }
+    }
 }
 
 /// How many foliage volumes a point moving along a ray is inside: each crossing of a foliage
@@ -140,6 +232,66 @@ mod tests {
 
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() < 1e-9 * b.abs().max(1.0)
+    }
+
+    /// P.833's one-terminal law at the recommendation's table values (γ, A_m): the worked
+    /// values of shared/reference/compute_checks.out, to the hundredth of a dB they are given to.
+    #[test]
+    fn the_p833_law_gives_the_recommendations_worked_values() {
+        for (gamma, am, want) in [
+            (0.04, 9.4, [0.39, 1.80, 5.39]),
+            (0.12, 18.0, [1.16, 5.10, 13.26]),
+            (0.17, 26.5, [1.65, 7.27, 19.15]),
+            (0.30, 29.0, [2.85, 11.71, 25.34]),
+            (0.34, 34.1, [3.24, 13.39, 29.46]),
+        ] {
+            let law = FoliageLaw::P833Max(am).at(1e9, gamma);
+            for (d, w) in [10.0, 50.0, 200.0].into_iter().zip(want) {
+                let got = law.loss_db(d);
+                assert!(
+                    (got - w).abs() <= 0.005,
+                    "γ {gamma} A_m {am} d {d}: {got} vs {w}"
+                );
+            }
+            // Saturation: never past A_m, and the first metre costs γ.
+            assert!(law.loss_db(1e6) <= am && law.loss_db(1e6) > am - 1e-9);
+            assert!((law.loss_db(1e-3) / 1e-3 - gamma).abs() < 1e-4);
+        }
+        // A_m = 1.15 f^0.43 at the table's frequencies, against the table's own A_m: the law
+        // and the table come from different campaigns (4.6 dB apart at most over 0.9-2.1 GHz).
+        for (f_mhz, am) in [(949.0, 26.5), (1852.2, 29.0), (2117.5, 34.1)] {
+            let m = p833_max_attenuation_db(f_mhz * 1e6);
+            assert!((m - am).abs() < 4.7, "{f_mhz} MHz: {m} vs {am}");
+        }
+        assert!((p833_max_attenuation_db(3.5e9) - 38.4).abs() < 0.05);
+    }
+
+    /// Segment by segment, a ray's steps multiply to the loss of the whole length, for either
+    /// law; the linear law's step is the old per-metre factor to the bit.
+    #[test]
+    fn steps_add_up_to_the_whole_path() {
+        for law in [
+            FoliageLaw::Linear,
+            FoliageLaw::P833,
+            FoliageLaw::P833Max(12.0),
+        ] {
+            let l = law.at(28e9, specific_attenuation_db_per_m(28e9));
+            let segments = [0.7, 3.0, 0.25, 6.0];
+            let (mut before, mut amp) = (0.0, 1.0);
+            for s in segments {
+                amp *= l.step_amplitude(before, s);
+                before += s;
+            }
+            let whole = l.amplitude(segments.iter().sum());
+            assert!((amp / whole - 1.0).abs() < 1e-12, "{law:?}");
+        }
+        let l = FoliageLaw::Linear.at(3.5e9, 0.7);
+        assert_eq!(l.step_amplitude(5.0, 2.0), loss_amplitude(0.7, 2.0));
+        // 10 m of crown at 28 GHz (5.6 dB/m): 56 dB linear, 42.2 dB by P.833's law (A_m 93.9).
+        let p = FoliageLaw::P833.at(28e9, specific_attenuation_db_per_m(28e9));
+        assert!((p.loss_db(10.0) - 42.2).abs() < 0.05, "{}", p.loss_db(10.0));
+        assert!(FoliageLaw::P833Max(f64::NAN).check().is_err());
+        assert!(FoliageLaw::P833Max(0.0).check().is_err());
     }
 
     #[test]

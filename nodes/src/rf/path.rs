@@ -7,7 +7,7 @@ use num_complex::Complex64 as C64;
 use serde::{Deserialize, Serialize};
 
 use super::antenna::Antenna;
-use super::foliage::specific_attenuation_db_per_m;
+use super::foliage::{FoliageLaw, FoliageLoss, specific_attenuation_db_per_m};
 use super::scattering::ScatteringPattern;
 use super::scene::RfScene;
 
@@ -44,6 +44,9 @@ pub struct TraceOptions {
     /// Loss inside foliage volumes, dB per metre; `None`: ITU-R P.833 at the carrier
     /// ([`specific_attenuation_db_per_m`]).
     pub foliage_db_per_m: Option<f64>,
+    /// How foliage loss grows with depth: linear (the paper's cumulative loss, default) or
+    /// ITU-R P.833's saturating law ([`FoliageLaw`]).
+    pub foliage_law: FoliageLaw,
     /// Diffraction only at edges where the faces' normals turn by at least this much, degrees
     /// in [0, 90]: a faceted terrain or dome bends by fractions of a degree between facets, and
     /// a wedge there is an artefact of the mesh, not an edge. Default 0 (every convex edge).
@@ -71,6 +74,7 @@ impl Default for TraceOptions {
             scattering_pattern: ScatteringPattern::Lambertian,
             rays: 1_000_000,
             foliage_db_per_m: None,
+            foliage_law: FoliageLaw::Linear,
             min_wedge_deg: 0.0,
             wedges_across_objects: true,
             finite_faces: true,
@@ -103,7 +107,16 @@ impl TraceOptions {
         {
             return Err(("foliage_db_per_m", "expected a non-negative loss in dB/m"));
         }
+        if let Err(m) = self.foliage_law.check() {
+            return Err(("foliage_law", m));
+        }
         Ok(())
+    }
+
+    /// The foliage loss a trace at `freq_hz` applies: the specific attenuation and the law.
+    pub fn foliage_loss(&self, freq_hz: f64) -> FoliageLoss {
+        self.foliage_law
+            .at(freq_hz, self.foliage_loss_db_per_m(freq_hz))
     }
 
     /// The foliage loss at `freq_hz`, dB/m: the one set, or P.833's.
@@ -188,6 +201,6 @@ pub(super) struct Tracer<'a> {
     pub tx_antenna: &'a Antenna,
     pub rx_antenna: &'a Antenna,
     pub opt: &'a TraceOptions,
-    /// The foliage loss in force, dB/m.
-    pub foliage_db_per_m: f64,
+    /// The foliage loss in force.
+    pub foliage: FoliageLoss,
 }

@@ -7,7 +7,7 @@
 use glam::DVec3;
 
 use super::field::{self, CVec};
-use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
+use super::foliage::{FoliageDepth, foliage_length};
 use super::path::{Interaction, InteractionKind, Path, Tracer};
 use super::scene::EPS;
 
@@ -68,8 +68,8 @@ pub(super) fn evaluate(
     }
     let k_last = (points[points.len() - 1] - points[points.len() - 2]).normalize();
     let rx_pattern = DVec3::from(t.rx_antenna.field((-k_last).to_array()));
-    let amplitude = scene.wavelength / (4.0 * std::f64::consts::PI * length)
-        * loss_amplitude(t.foliage_db_per_m, foliage_m);
+    let amplitude =
+        scene.wavelength / (4.0 * std::f64::consts::PI * length) * t.foliage.amplitude(foliage_m);
     let a = field::dot(&e, rx_pattern) * amplitude;
     if a.norm_sqr() == 0.0 {
         return None; // e.g. specular reflection with S = 1: nothing travels this way

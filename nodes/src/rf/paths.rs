@@ -39,7 +39,7 @@ pub fn trace_links(
         tx_antenna,
         rx_antenna,
         opt,
-        foliage_db_per_m: opt.foliage_loss_db_per_m(freq_hz),
+        foliage: opt.foliage_loss(freq_hz),
     };
     let mut txs: Vec<[u64; 3]> = links.iter().map(|l| l.0.map(f64::to_bits)).collect();
     txs.sort_unstable();

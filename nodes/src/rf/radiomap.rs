@@ -17,7 +17,7 @@ use super::antenna::spherical_basis;
 use super::diffraction::wedges_for;
 use super::fibonacci::{PATCH, fibonacci_run, patch_order};
 use super::field::{self, CVec};
-use super::foliage::{FoliageDepth, loss_amplitude};
+use super::foliage::{FoliageDepth, FoliageLoss};
 use super::map_plane::{Crossing, MapPlane};
 use super::path::TraceOptions;
 use super::radiomap_diffraction::{EdgeSampler, lit_wedges};
@@ -42,7 +42,7 @@ pub fn radio_map(
     let omega = 4.0 * std::f64::consts::PI / opt.rays.max(1) as f64;
     let foliage = Foliage {
         at_tx: FoliageDepth::at(scene, tx),
-        db_per_m: opt.foliage_loss_db_per_m(freq_hz),
+        loss: opt.foliage_loss(freq_hz),
     };
     let shooter = Shooter {
         scene,
@@ -104,7 +104,7 @@ pub fn radio_map(
             tx,
             antenna,
             plane,
-            foliage: (shooter.foliage.at_tx, shooter.foliage.db_per_m),
+            foliage: (shooter.foliage.at_tx, shooter.foliage.loss),
         };
         for (cell, v) in sampler.contributions(&wedges, opt.rays) {
             acc[cell as usize] += v;
@@ -128,7 +128,7 @@ fn chunk_len(rays: u32) -> u32 {
 /// The foliage a map's rays start in, and its loss.
 struct Foliage {
     at_tx: FoliageDepth,
-    db_per_m: f64,
+    loss: FoliageLoss,
 }
 
 /// A crossing's cell and the power it adds there.
@@ -165,6 +165,8 @@ struct Flight {
     /// Interactions so far.
     depth: u32,
     foliage: FoliageDepth,
+    /// Metres run in foliage so far (P.833's law saturates on the whole path's).
+    in_foliage: f64,
 }
 
 impl Shooter<'_> {
@@ -178,6 +180,7 @@ impl Shooter<'_> {
             index,
             depth: 0,
             foliage: self.foliage.at_tx,
+            in_foliage: 0.0,
         }
     }
 
@@ -250,9 +253,10 @@ impl Shooter<'_> {
         let (o, d) = (f.o, f.d);
         let t_end = hit.map_or(f64::INFINITY, |h| h.t);
         let inside = f.foliage.inside();
+        let before = f.in_foliage;
         let foliage_amp = |len: f64| {
             if inside {
-                loss_amplitude(foliage.db_per_m, len)
+                foliage.loss.step_amplitude(before, len)
             } else {
                 1.0
             }
@@ -270,6 +274,9 @@ impl Shooter<'_> {
         let Some(h) = hit else { return false };
         let a = foliage_amp(h.t);
         f.e = f.e.map(|c| c * a);
+        if inside {
+            f.in_foliage += h.t;
+        }
         let p = o + d * h.t;
         f.o = p;
         if f.foliage.cross(scene, h.triangle, d) {
@@ -396,7 +403,7 @@ mod tests {
             omega: 4.0 * std::f64::consts::PI / opt.rays as f64,
             foliage: Foliage {
                 at_tx: FoliageDepth::at(&scene, tx),
-                db_per_m: opt.foliage_loss_db_per_m(3.5e9),
+                loss: opt.foliage_loss(3.5e9),
             },
             slabs: SlabTable::new(&scene),
         };

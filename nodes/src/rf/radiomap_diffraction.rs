@@ -20,7 +20,7 @@ use crate::rng::{mix, unit};
 use super::antenna::Antenna;
 use super::diffraction::{Wedge, Wedges, diffracted_field, keller_cone};
 use super::field;
-use super::foliage::{FoliageDepth, foliage_length, loss_amplitude};
+use super::foliage::{FoliageDepth, FoliageLoss, foliage_length};
 use super::map_plane::{Crossing, MapPlane};
 use super::scene::RfScene;
 
@@ -39,8 +39,8 @@ pub(super) struct EdgeSampler<'a> {
     pub tx: DVec3,
     pub antenna: &'a Antenna,
     pub plane: &'a MapPlane,
-    /// Foliage depth at the transmitter, and the loss inside foliage, dB/m.
-    pub foliage: (FoliageDepth, f64),
+    /// Foliage depth at the transmitter, and the loss inside foliage.
+    pub foliage: (FoliageDepth, FoliageLoss),
 }
 
 /// The wedges of `all` that can diffract the wave from `tx`, whose rays first land on the sorted
@@ -114,7 +114,7 @@ impl EdgeSampler<'_> {
             tx,
             antenna,
             plane,
-            foliage: (at_tx, db_per_m),
+            foliage: (at_tx, loss),
         } = *self;
         let ell = u_edge * w.length;
         let q = w.a + w.e * ell;
@@ -160,7 +160,7 @@ impl EdgeSampler<'_> {
                 } else {
                     0.0
                 };
-            let a = loss_amplitude(db_per_m, foliage_m);
+            let a = loss.amplitude(foliage_m);
             let area = area_per_length_angle(w, tx, ell, ko, p, c.normal);
             out.push((
                 c.cell,

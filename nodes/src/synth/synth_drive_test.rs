@@ -8,6 +8,7 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::height_at;
 use crate::artifact::{ArtifactType, City, Endpoint, Height, Link, Measurements, Scene};
 use crate::rf::antenna::Antenna;
+use crate::rf::foliage::{FoliageLaw, is_linear};
 use crate::rf::path::TraceOptions;
 use crate::rf::paths::trace_links;
 use crate::rf::scattering::ScatteringPattern;
@@ -66,6 +67,11 @@ pub struct TruthOptions {
     pub rays: u32,
     /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at `freq_hz`.
     pub foliage_db_per_m: Option<f64>,
+    /// How foliage loss grows with depth: `Linear` (γ d, the paper's; default), `P833` (ITU-R
+    /// P.833's saturating law, A_m from the recommendation's A1 f^α) or `P833Max(A_m dB)`.
+    /// Left out of the params' encoding at its default, so earlier cache entries stay valid.
+    #[serde(skip_serializing_if = "is_linear")]
+    pub foliage_law: FoliageLaw,
     /// Diffract only where faces turn by at least this many degrees, in [0, 90]. Default 0.
     pub min_wedge_deg: f64,
     /// A wedge diffracts no more than an edge of its length and faces of their width can
@@ -83,6 +89,7 @@ impl Default for TruthOptions {
             scattering_pattern: ScatteringPattern::Lambertian,
             rays: 200_000,
             foliage_db_per_m: None,
+            foliage_law: FoliageLaw::Linear,
             min_wedge_deg: 0.0,
             finite_faces: true,
         }
@@ -103,6 +110,7 @@ impl TruthOptions {
             scattering_pattern: self.scattering_pattern,
             rays: self.rays,
             foliage_db_per_m: self.foliage_db_per_m,
+            foliage_law: self.foliage_law,
             min_wedge_deg: self.min_wedge_deg,
             wedges_across_objects: true,
             finite_faces: self.finite_faces,

@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::artifact::{ArtifactType, Grid, Raster, Scene};
 use crate::rf::antenna::Antenna;
+use crate::rf::foliage::{FoliageLaw, is_linear};
 use crate::rf::gpu::{Device, map_unavailable, radio_map_on};
 use crate::rf::map_plane::{MapPlane, default_grid};
 use crate::rf::path::TraceOptions;
@@ -87,6 +88,11 @@ pub struct MapOptions {
     pub rays: u32,
     /// Loss inside foliage, dB/m (≥ 0). Default: ITU-R P.833 at `freq_hz`.
     pub foliage_db_per_m: Option<f64>,
+    /// How foliage loss grows with depth: `Linear` (γ d, the paper's; default), `P833` (ITU-R
+    /// P.833's saturating law, A_m from the recommendation's A1 f^α) or `P833Max(A_m dB)`.
+    /// Left out of the params' encoding at its default, so earlier cache entries stay valid.
+    #[serde(skip_serializing_if = "is_linear")]
+    pub foliage_law: FoliageLaw,
 }
 
 impl Default for MapOptions {
@@ -105,6 +111,7 @@ impl Default for MapOptions {
             scattering_pattern: o.scattering_pattern,
             rays: o.rays,
             foliage_db_per_m: o.foliage_db_per_m,
+            foliage_law: o.foliage_law,
         }
     }
 }
@@ -123,6 +130,7 @@ impl MapOptions {
             scattering_pattern: self.scattering_pattern,
             rays: self.rays,
             foliage_db_per_m: self.foliage_db_per_m,
+            foliage_law: self.foliage_law,
             min_wedge_deg: self.min_wedge_deg,
             wedges_across_objects: true,
             finite_faces: self.finite_faces,
