@@ -474,3 +474,87 @@ fn radio_map_diffraction_over_one_box_against_sionna_rt() {
         assert!(p90 <= max_p90, "{name}: 90th percentile {p90}");
     }
 }
+
+/// Specular and diffuse reflection in radio maps, against Sionna RT 2.2's RadioMapSolver on its
+/// street canyon: tests/fixtures/sionna_diffuse_map.csv (scripts/sionna_diffuse_map_fixture.py),
+/// every surface with S = 0.5 (Lambertian), line of sight, specular and diffuse reflection to
+/// depth 2, 2 m cells at 1.5 m. Both are Monte Carlo estimates of the same sum (Sionna's event
+/// probabilities: specular r (1 - S²), diffuse r S²).
+#[test]
+fn radio_map_with_diffuse_reflection_against_sionna_rt() {
+    use kodama_nodes::artifact::Grid;
+    use kodama_nodes::rf::map_plane::MapPlane;
+    use kodama_nodes::rf::radiomap::radio_map;
+    let mut r = csv::Reader::from_path(fixture("sionna_diffuse_map.csv")).unwrap();
+    let cells: Vec<(u32, u32, f64)> = r
+        .records()
+        .map(|rec| {
+            let rec = rec.unwrap();
+            (
+                rec[0].parse().unwrap(),
+                rec[1].parse().unwrap(),
+                rec[4].parse().unwrap(),
+            )
+        })
+        .collect();
+    let xml = shared("sionna-scenes/simple_street_canyon/simple_street_canyon.xml");
+    let rf = RfScene::new(&read_scene(&xml).unwrap(), 3.5e9, false)
+        .unwrap()
+        .with_uniform_thickness(kodama_nodes::rf::scene::SLAB_THICKNESS_M);
+    let plane = MapPlane::plane(
+        Grid {
+            x0: -50.0,
+            y0: 30.0,
+            cell_m: 2.0,
+            width: 50,
+            height: 30,
+        },
+        1.5,
+    );
+    let opt = TraceOptions {
+        max_depth: 2,
+        los: true,
+        reflection: true,
+        transmission: false,
+        diffuse: true,
+        scattering_coefficient: 0.5,
+        rays: 4_000_000,
+        ..Default::default()
+    };
+    let tx = glam::DVec3::new(-33.0, 0.0, 32.0);
+    let map = radio_map(&rf, tx, &Antenna::default(), &plane, &opt, 3.5e9);
+    let (mut diffs, mut signed, mut one_side) = (Vec::new(), Vec::new(), 0);
+    for &(c, row, sionna) in &cells {
+        let ours = map.at(c, row) as f64;
+        match (sionna.is_finite(), ours > 0.0) {
+            (true, true) => {
+                let d = 10.0 * ours.log10() - sionna;
+                signed.push(d);
+                diffs.push(d.abs());
+            }
+            (false, false) => {}
+            _ => one_side += 1,
+        }
+    }
+    let n = diffs.len();
+    let median = percentile(&mut diffs, 0.5);
+    let p90 = percentile(&mut diffs, 0.9);
+    let bias = percentile(&mut signed, 0.5);
+    println!(
+        "street canyon map, specular + diffuse (S 0.5, depth 2): {n} cells compared, {one_side} \
+         reached by one side only; ours - Sionna median {bias:+.3} dB, |difference| median \
+         {median:.3} dB, 90th percentile {p90:.3} dB"
+    );
+    assert!(n >= 800, "{n} cells");
+    assert!(one_side <= 20, "{one_side} cells reached by one side only");
+    assert!(bias.abs() < 0.5, "bias {bias}");
+    assert!(median < MAP_DIFFUSE_MEDIAN_DB, "median {median}");
+    assert!(p90 < MAP_DIFFUSE_P90_DB, "p90 {p90}");
+}
+
+/// Bounds of the diffuse map's agreement with Sionna's, above what was measured (4 x 10^6 rays
+/// against Sionna's 10^7 samples: 857 cells, 6 one-sided, median difference -0.007 dB,
+/// |difference| median 0.074 dB, 90th percentile 1.455 dB; the spread is the two estimators'
+/// Monte Carlo noise in the weakest cells).
+const MAP_DIFFUSE_MEDIAN_DB: f64 = 0.25;
+const MAP_DIFFUSE_P90_DB: f64 = 2.5;
