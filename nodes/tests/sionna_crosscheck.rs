@@ -558,3 +558,77 @@ fn radio_map_with_diffuse_reflection_against_sionna_rt() {
 /// Monte Carlo noise in the weakest cells).
 const MAP_DIFFUSE_MEDIAN_DB: f64 = 0.25;
 const MAP_DIFFUSE_P90_DB: f64 = 2.5;
+
+/// Radio maps at the paper's settings against Sionna RT 2.2 on munich: 12 interactions, LOS,
+/// specular and diffuse reflection (S = 0.3), refraction and diffraction (Sionna's edges, its
+/// unbounded faces), 5 m cells at 1.5 m over Sionna's default plane.
+/// tests/fixtures/sionna_munich_map_d12.csv (scripts/sionna_munich_map_fixture.py) holds the
+/// cells where Sionna's 10^7- and 10^8-sample maps agree within 1 dB. A map this deep is a Monte
+/// Carlo estimate whose far cells few rare paths reach: each tracer against itself, 10^7 against
+/// 10^8 rays, differs over all cells by a median 2.8-2.9 dB and a 90th percentile of 15-16 dB,
+/// which is also what ours against Sionna's gives there. So the comparison is over the cells
+/// where both have converged: the fixture's, where our own 10^7- and 10^8-ray maps agree within
+/// 1 dB too.
+#[test]
+fn radio_map_at_depth_twelve_against_sionna_rt() {
+    use kodama_nodes::rf::map_plane::default_plane;
+    use kodama_nodes::rf::radiomap::radio_map;
+    let mut r = csv::Reader::from_path(fixture("sionna_munich_map_d12.csv")).unwrap();
+    let cells: Vec<(u32, u32, f64)> = r
+        .records()
+        .map(|rec| {
+            let rec = rec.unwrap();
+            (
+                rec[0].parse().unwrap(),
+                rec[1].parse().unwrap(),
+                rec[4].parse().unwrap(),
+            )
+        })
+        .collect();
+    let xml = shared("sionna-scenes/munich/munich.xml");
+    let rf = RfScene::new(&read_scene(&xml).unwrap(), 3.5e9, false)
+        .unwrap()
+        .with_uniform_thickness(kodama_nodes::rf::scene::SLAB_THICKNESS_M);
+    let plane = default_plane(&rf, 5.0, 1.5);
+    assert_eq!((plane.grid.width, plane.grid.height), (296, 242));
+    let opt = |rays: u32| TraceOptions {
+        max_depth: 12,
+        los: true,
+        reflection: true,
+        transmission: true,
+        diffraction: true,
+        diffuse: true,
+        scattering_coefficient: 0.3,
+        rays,
+        wedges_across_objects: false,
+        finite_faces: false,
+        ..Default::default()
+    };
+    let tx = glam::DVec3::new(8.5, 21.0, 27.0);
+    let map = |rays| radio_map(&rf, tx, &Antenna::default(), &plane, &opt(rays), 3.5e9);
+    let (coarse, fine) = (map(10_000_000), map(100_000_000));
+    let db = |m: &kodama_nodes::artifact::Raster, c, r| 10.0 * (m.at(c, r) as f64).log10();
+    let (mut diffs, mut signed) = (Vec::new(), Vec::new());
+    for &(c, row, sionna) in &cells {
+        let (a, b) = (db(&coarse, c, row), db(&fine, c, row));
+        if a.is_finite() && b.is_finite() && (a - b).abs() < 1.0 {
+            signed.push(b - sionna);
+            diffs.push((b - sionna).abs());
+        }
+    }
+    let n = diffs.len();
+    let median = percentile(&mut diffs, 0.5);
+    let p90 = percentile(&mut diffs, 0.9);
+    let bias = percentile(&mut signed, 0.5);
+    println!(
+        "munich map at depth 12 (LOS, specular + diffuse S 0.3, refraction, diffraction): {n} of \
+         {} converged Sionna cells converged here too; ours - Sionna median {bias:+.3} dB, \
+         |difference| median {median:.3} dB, 90th percentile {p90:.3} dB",
+        cells.len()
+    );
+    // Issue 54's target: median |difference| <= 0.5 dB, 90th percentile <= 3 dB.
+    assert!(n >= 3000, "{n} cells");
+    assert!(bias.abs() < 0.25, "bias {bias}");
+    assert!(median <= 0.5, "median {median}");
+    assert!(p90 <= 3.0, "p90 {p90}");
+}
