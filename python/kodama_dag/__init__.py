@@ -25,7 +25,7 @@ from .api import (
     sweep,
 )
 from .radio import Paths, RadioMap, radio_map, trace
-from .sionna_scene import to_sionna
+from .sionna_scene import sionna_foliage_loss_db, to_sionna, with_foliage
 
 __all__ = [
     "EngineError",
@@ -43,7 +43,9 @@ __all__ = [
     "kinds",
     "radio_map",
     "run",
+    "sionna_foliage_loss_db",
     "sweep",
     "to_sionna",
     "trace",
+    "with_foliage",
 ]

@@ -72,3 +72,10 @@ def export(
 def lon_lat(
     crs: str, origin: tuple[float, float], xs: list[float], ys: list[float]
 ) -> tuple[Any, Any]: ...
+def foliage_lengths(plys: list[str], points: Any, counts: list[int]) -> Any: ...
+def foliage_loss_db(
+    lengths: list[float],
+    freq_hz: float,
+    db_per_m: float | None = None,
+    max_db: float | str | None = None,
+) -> Any: ...

@@ -112,3 +112,61 @@ def to_sionna(scene: SceneLike) -> "sionna.rt.Scene":
     if shapes:
         out.edit(add=shapes)
     return out
+
+
+def sionna_foliage_loss_db(
+    folder: "str | os.PathLike[str]",
+    paths: Any,
+    freq_hz: float,
+    *,
+    db_per_m: float | None = None,
+    max_db: "float | str | None" = None,
+) -> np.ndarray:
+    """The foliage loss of each of Sionna RT's `paths`, dB, shaped as `paths.valid`
+    ([num_rx, num_tx, num_paths]; 0 where a path is not valid): the metres each path runs inside
+    the foliage volumes of a `.sionna` export (`foliage.json`, `foliage/*.ply`; none: all 0),
+    measured as our tracer measures its own, times `db_per_m` (default ITU-R P.833 Figure 2 at
+    `freq_hz`), or, with `max_db` (`"p833"` or A_m in dB), ITU-R P.833's saturating law. Sionna
+    RT has no foliage material, so the paper applies this loss after tracing (Sec. 4.2.4, 5):
+    multiply each path's `a` by `10 ** (-loss / 20)`, as `with_foliage` does."""
+    folder = os.fspath(folder)
+    meta = os.path.join(folder, "foliage.json")
+    valid = np.asarray(paths.valid, dtype=bool)
+    if valid.ndim != 3:
+        raise _core.UserError(
+            f"paths: expected Sionna RT Paths of single-antenna (synthetic) arrays, valid of shape "
+            f"(num_rx, num_tx, num_paths); got {valid.shape}"
+        )
+    loss = np.zeros(valid.shape)
+    if not os.path.isfile(meta):
+        return loss
+    import json
+
+    with open(meta) as f:
+        volumes = [os.path.join(folder, v) for v in json.load(f)["volumes"]]
+    sources = np.asarray(paths.sources, dtype=np.float64).T  # (num_tx, 3)
+    targets = np.asarray(paths.targets, dtype=np.float64).T  # (num_rx, 3)
+    vertices = np.asarray(paths.vertices, dtype=np.float64)  # (depth, rx, tx, path, 3)
+    interactions = np.asarray(paths.interactions)  # (depth, rx, tx, path)
+    points, counts, where = [], [], []
+    for r, t, k in zip(*np.nonzero(valid)):
+        used = interactions[:, r, t, k] != 0
+        chain = [sources[t], *vertices[used, r, t, k], targets[r]]
+        points.extend(chain)
+        counts.append(len(chain))
+        where.append((r, t, k))
+    if not counts:
+        return loss
+    lengths = _core.foliage_lengths(volumes, np.asarray(points, dtype=np.float64), counts)
+    db = _core.foliage_loss_db(list(lengths), float(freq_hz), db_per_m, max_db)
+    for (r, t, k), v in zip(where, db):
+        loss[r, t, k] = v
+    return loss
+
+
+def with_foliage(paths: Any, loss_db: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sionna RT's `paths.a` (real, imaginary) as NumPy arrays with `loss_db`
+    (`sionna_foliage_loss_db`) applied to each path."""
+    re, im = (np.asarray(v) for v in paths.a)  # (rx, rx_ant, tx, tx_ant, path)
+    amp = 10.0 ** (-loss_db / 20.0)[:, None, :, None, :]
+    return re * amp, im * amp

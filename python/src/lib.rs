@@ -636,5 +636,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(lon_lat, m)?)?;
     m.add_function(wrap_pyfunction!(rf::trace, m)?)?;
     m.add_function(wrap_pyfunction!(rf::radio_map_at, m)?)?;
+    m.add_function(wrap_pyfunction!(rf::foliage_lengths, m)?)?;
+    m.add_function(wrap_pyfunction!(rf::foliage_loss_db, m)?)?;
     Ok(())
 }

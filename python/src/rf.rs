@@ -304,3 +304,137 @@ pub(crate) fn radio_map_at<'py>(
     )?;
     Ok(d)
 }
+
+/// The most path vertices one `foliage_lengths` call takes.
+const MAX_VERTICES: usize = 100_000_000;
+
+/// The metres each path runs inside the foliage volumes of `plys` (closed meshes in the scene's
+/// frame, as a Sionna export's `foliage/` holds them), measured as the tracer measures its own
+/// paths' (`rf::foliage::foliage_length`; overlapping volumes counted once). The paths are
+/// `points` (M, 3), taken `counts[i]` at a time (each at least 2: its ends and the interactions
+/// between them).
+#[pyfunction]
+pub fn foliage_lengths<'py>(
+    py: Python<'py>,
+    plys: Vec<PathBuf>,
+    points: PyReadonlyArray2<'py, f64>,
+    counts: Vec<usize>,
+) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
+    use kodama_nodes::artifact::{Material, ObjectClass, PodVec, SceneObject};
+    use kodama_nodes::io::sionna_xml::read_ply;
+    use kodama_nodes::rf::foliage::{FoliageDepth, foliage_length};
+    use kodama_nodes::rf::scene::EPS;
+    let pts = points.as_array();
+    if pts.ncols() != 3 || pts.nrows() > MAX_VERTICES {
+        return Err(user(format!(
+            "points: expected shape (M, 3) with M at most {MAX_VERTICES}, got {:?}",
+            pts.shape()
+        )));
+    }
+    if counts.iter().any(|&c| c < 2) || counts.iter().sum::<usize>() != pts.nrows() {
+        return Err(user(
+            "counts: expected at least 2 points a path, summing to the rows of points".to_string(),
+        ));
+    }
+    if !pts.iter().all(|v| v.is_finite()) {
+        return Err(user("points: expected finite coordinates".to_string()));
+    }
+    let mut objects = Vec::new();
+    for (k, ply) in plys.iter().enumerate() {
+        let mut mesh = read_ply(ply).map_err(|e| user(e.to_string()))?;
+        // A volume's faces must face out (entering is crossing against the normal), whichever
+        // way the file winds them: Sionna's loader and ours read PLY files wound either way.
+        if mesh.volume() < 0.0 {
+            for t in mesh.triangles.iter_mut() {
+                t.swap(1, 2);
+            }
+        }
+        let n = mesh.triangles.len();
+        objects.push(SceneObject {
+            id: format!("foliage-{k}"),
+            class: ObjectClass::Vegetation,
+            mesh: kodama_nodes::artifact::Mesh {
+                materials: PodVec(vec![Material::Foliage as u8; n]),
+                ..mesh
+            },
+        });
+    }
+    let scene = RfScene::new(&Scene { objects }, 3.5e9, false).map_err(|e| user(e.to_string()))?;
+    let paths: Vec<Vec<DVec3>> = {
+        let mut at = 0;
+        counts
+            .iter()
+            .map(|&c| {
+                let p = (at..at + c)
+                    .map(|r| DVec3::new(pts[[r, 0]], pts[[r, 1]], pts[[r, 2]]))
+                    .collect();
+                at += c;
+                p
+            })
+            .collect()
+    };
+    let lengths: Vec<f64> = py.detach(|| {
+        use rayon::prelude::*;
+        paths
+            .par_iter()
+            .map(|p| {
+                let mut depth = FoliageDepth::at(&scene, p[0]);
+                let mut inside = 0.0;
+                for w in p.windows(2) {
+                    if (w[1] - w[0]).length() == 0.0 {
+                        continue;
+                    }
+                    let hits = scene.hits_between(w[0], w[1], EPS);
+                    let (len, at_b) = foliage_length(&scene, w[0], w[1], &hits, depth);
+                    inside += len;
+                    depth = at_b;
+                }
+                inside
+            })
+            .collect()
+    });
+    Ok(lengths.into_pyarray(py))
+}
+
+/// The foliage loss, dB, of each of `lengths` metres at `freq_hz`: `db_per_m` (default ITU-R
+/// P.833 Figure 2 at the carrier) times the metres, or with `max_db` (`"p833"`: P.833's A_m at
+/// the carrier; a number: that A_m) P.833's saturating law (`rf::foliage::FoliageLaw`).
+#[pyfunction]
+#[pyo3(signature = (lengths, freq_hz, db_per_m=None, max_db=None))]
+pub fn foliage_loss_db<'py>(
+    py: Python<'py>,
+    lengths: Vec<f64>,
+    freq_hz: f64,
+    db_per_m: Option<f64>,
+    max_db: Option<Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
+    use kodama_nodes::rf::foliage::{FoliageLaw, specific_attenuation_db_per_m};
+    if !(freq_hz > 0.0 && freq_hz.is_finite()) {
+        return Err(user(format!(
+            "freq_hz: expected a positive frequency, got {freq_hz}"
+        )));
+    }
+    let gamma = db_per_m.unwrap_or_else(|| specific_attenuation_db_per_m(freq_hz));
+    if !(gamma >= 0.0 && gamma.is_finite()) {
+        return Err(user(format!(
+            "db_per_m: expected a non-negative loss, got {gamma}"
+        )));
+    }
+    let law = match max_db {
+        None => FoliageLaw::Linear,
+        Some(v) if v.extract::<String>().is_ok_and(|s| s == "p833") => FoliageLaw::P833,
+        Some(v) => FoliageLaw::P833Max(v.extract::<f64>().map_err(|_| {
+            user("max_db: expected \"p833\" or a maximum attenuation in dB".to_string())
+        })?),
+    };
+    law.check().map_err(|m| user(format!("max_db: {m}")))?;
+    if lengths.iter().any(|l| !(*l >= 0.0 && l.is_finite())) {
+        return Err(user("lengths: expected non-negative metres".to_string()));
+    }
+    let loss = law.at(freq_hz, gamma);
+    Ok(lengths
+        .iter()
+        .map(|&l| loss.loss_db(l))
+        .collect::<Vec<_>>()
+        .into_pyarray(py))
+}

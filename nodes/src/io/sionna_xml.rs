@@ -464,12 +464,15 @@ pub fn write_ply(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Vec<u8> {
 /// The files of a Sionna scene folder: `scene.xml` and `meshes/<object>-<material>.ply`, one
 /// shape per object (one per building) and material, named by the object, so a user can edit one
 /// building in Sionna; one `itu-radio-material` per class used, with the slab thickness the
-/// tracer uses for it ([`Material::slab_thickness_m`]). Foliage has no P.2040 class and is left out (our tracer applies
-/// it as a volume loss; Sionna has no such material).
+/// tracer uses for it ([`Material::slab_thickness_m`]). Foliage has no P.2040 class and no place
+/// in Sionna's scene (our tracer applies it as a volume loss): its volumes go beside it, as
+/// `foliage/<object>.ply` listed in `foliage.json`, for the loss to be applied to Sionna's paths
+/// after tracing, as the paper does (Sec. 4.2.4, Sec. 5; `kodama_dag.sionna_foliage_loss_db`).
 pub fn write_scene(scene: &Scene) -> Result<Vec<(String, Vec<u8>)>, String> {
     let mut files = Vec::new();
     let mut used: std::collections::BTreeSet<Material> = Default::default();
     let mut shapes = String::new();
+    let mut foliage: Vec<String> = Vec::new();
     for obj in &scene.objects {
         let by_material: BTreeMap<u8, Vec<usize>> =
             obj.mesh
@@ -483,10 +486,6 @@ pub fn write_scene(scene: &Scene) -> Result<Vec<(String, Vec<u8>)>, String> {
         for (mat, tris) in by_material {
             let material = Material::from_u8(mat)
                 .ok_or_else(|| format!("{}: unknown material id {mat}", obj.id))?;
-            let Some(itu) = material.itu_type() else {
-                continue;
-            };
-            used.insert(material);
             // Only the vertices these triangles use, renumbered.
             let mut remap: BTreeMap<u32, u32> = BTreeMap::new();
             let mut positions = Vec::new();
@@ -501,6 +500,13 @@ pub fn write_scene(scene: &Scene) -> Result<Vec<(String, Vec<u8>)>, String> {
                     })
                 })
                 .collect();
+            let Some(itu) = material.itu_type() else {
+                let file = format!("foliage/{}.ply", safe_name(&obj.id));
+                files.push((file.clone(), write_ply(&positions, &triangles)));
+                foliage.push(file);
+                continue;
+            };
+            used.insert(material);
             let name = format!("{}-itu_{itu}", safe_name(&obj.id));
             files.push((
                 format!("meshes/{name}.ply"),
@@ -523,7 +529,29 @@ pub fn write_scene(scene: &Scene) -> Result<Vec<(String, Vec<u8>)>, String> {
     xml.push_str(&shapes);
     xml.push_str("</scene>\n");
     files.insert(0, ("scene.xml".to_string(), xml.into_bytes()));
+    if !foliage.is_empty() {
+        files.push(("foliage.json".into(), foliage_json(&foliage)?));
+    }
     Ok(files)
+}
+
+/// `foliage.json`: the foliage volumes of a Sionna export and how their loss is applied.
+fn foliage_json(volumes: &[String]) -> Result<Vec<u8>, String> {
+    let doc = serde_json::json!({
+        "about": "Foliage volumes (closed meshes in the scene's frame) that Sionna RT cannot \
+                  represent: apply them to its paths after tracing, a loss for the metres each \
+                  path runs inside them, as the KODAMA paper does. \
+                  kodama_dag.sionna_foliage_loss_db(folder, paths, freq_hz) computes it.",
+        "volumes": volumes,
+        "specific_attenuation": "ITU-R P.833 Figure 2 (woodland), log-log between these points \
+                                 (Hz, dB/m); held above the last",
+        "p833_figure_2": crate::rf::foliage::P833_FIGURE_2,
+        "law": "linear (dB/m x metres) by default; ITU-R P.833's A_m (1 - exp(-gamma d / A_m)) \
+                on request",
+    });
+    let mut text = serde_json::to_string_pretty(&doc).map_err(|e| e.to_string())?;
+    text.push('\n');
+    Ok(text.into_bytes())
 }
 
 /// `site.json`, beside a Sionna RT export: where its frame lies. The scene is in the site frame

@@ -11,7 +11,7 @@ use super::scene::{EPS, RfScene, SurfaceHit};
 
 /// Digitised points of ITU-R P.833 Figure 2 (woodland, vertical polarisation): frequency in Hz,
 /// specific attenuation in dB/m.
-const P833_FIGURE_2: [(f64, f64); 3] = [(30e6, 0.02), (1e9, 0.2), (30e9, 6.0)];
+pub const P833_FIGURE_2: [(f64, f64); 3] = [(30e6, 0.02), (1e9, 0.2), (30e9, 6.0)];
 
 /// The default specific attenuation of foliage at `freq_hz` (> 0), dB/m: ITU-R P.833 Figure 2
 /// (woodland), interpolated log-log through its digitised points (0.02 dB/m at 30 MHz, 0.2 at
