@@ -181,9 +181,7 @@ pub fn load_sweep(path: &Path, allow_outside: bool) -> Result<Sweep, String> {
     check_base_graph(&graph, base, allow_outside).map_err(|m| err(path, graph_ast, m))?;
     Ok(Sweep {
         path: path.to_path_buf(),
-        name: path
-            .file_stem()
-            .map_or("sweep".into(), |s| s.to_string_lossy().into_owned()),
+        name: crate::graph::folder_name(path, "sweep"),
         graph,
         axes,
         metrics,

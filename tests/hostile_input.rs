@@ -710,3 +710,21 @@ fn watch_follows_an_input_that_is_deleted_and_recreated() {
     child.kill().unwrap();
     child.wait().unwrap();
 }
+
+/// A graph file whose stem names no file of its own (`...ron`: the stem `..`) writes its outputs
+/// to `out/graph`, not to the folder above `out`.
+#[test]
+fn a_graph_named_dot_dot_writes_inside_out() {
+    let env = Env::new();
+    env.write(
+        "...ron",
+        &graph(
+            r#""terrain": SynthTerrain(seed: 1, size_m: (40.0, 40.0), relief_m: 1.0),"#,
+            r#""terrain.tif": "terrain","#,
+        ),
+    );
+    let r = env.cli(&["run", "...ron", "--cache", "cache", "--quiet"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(env.path("out/graph/terrain.tif").is_file(), "{}", r.stderr);
+    assert!(!env.path("terrain.tif").exists() && !env.path("out/terrain.tif").exists());
+}

@@ -337,3 +337,34 @@ fn radiomap_device_cuda_without_a_gpu_is_a_clear_error() {
     );
     assert!(!out.exists());
 }
+
+/// Flags are checked as a graph's params are: a non-finite transmitter and a cell that would
+/// make more cells than a graph's RadioMap may (16 bytes each) are user errors, exit 2, before any
+/// map is allocated or file written.
+#[test]
+fn radiomap_refuses_a_non_finite_transmitter_and_a_cell_too_fine() {
+    let env = Env::new();
+    let out = env.path("map.tif");
+    for (tx, cell, says) in [
+        ("NaN,0,10", "10", "expected finite coordinates"),
+        ("0,inf,10", "10", "expected finite coordinates"),
+        ("0,0,10", "1e-6", "use a coarser cell"),
+    ] {
+        let r = env.cli(&[
+            "radiomap",
+            "--scene",
+            canyon().to_str().unwrap(),
+            "--tx",
+            tx,
+            "--freq-hz",
+            "3.5e9",
+            "--cell-m",
+            cell,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(r.code, 2, "{tx} {cell}: {}", r.stderr);
+        assert!(r.stderr.contains(says), "{tx} {cell}: {}", r.stderr);
+        assert!(!out.exists());
+    }
+}

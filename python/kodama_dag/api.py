@@ -336,7 +336,9 @@ def run(
             raise _core.UserError("out: expected a folder, None (out/<graph stem>) or False (none)")
         out_dir = None
     elif out is None:
-        out_dir = os.path.join("out", Path(graph).stem)
+        stem = Path(graph).stem
+        # As the CLI names it: a stem that names no file of its own (`...ron`: `..`) is "graph".
+        out_dir = os.path.join("out", stem if stem not in ("", ".", "..") else "graph")
     else:
         out_dir = os.fspath(out)
     cache_dir = _cache_dir(cache)

@@ -508,7 +508,9 @@ fn watch_loop(
         let out_dir = match (&out, &loaded) {
             (Some(o), _) => o.clone(),
             (None, Ok(g)) => Path::new("out").join(&g.name),
-            (None, Err(_)) => Path::new("out").join(args.graph.file_stem().unwrap_or_default()),
+            (None, Err(_)) => {
+                Path::new("out").join(crate::graph::folder_name(&args.graph, "graph"))
+            }
         };
         std::fs::create_dir_all(&out_dir).ok();
         if let Ok(o) = std::fs::canonicalize(&out_dir) {

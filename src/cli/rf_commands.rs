@@ -159,7 +159,11 @@ fn parse_point(s: &str) -> Result<[f64; 3], String> {
                 .map_err(|_| format!("{c:?} is not a number"))
         })
         .collect::<Result<_, _>>()?;
-    <[f64; 3]>::try_from(v).map_err(|_| "expected X,Y,Z".to_string())
+    let p = <[f64; 3]>::try_from(v).map_err(|_| "expected X,Y,Z".to_string())?;
+    if !p.iter().all(|c| c.is_finite()) {
+        return Err("expected finite coordinates in metres".to_string());
+    }
+    Ok(p)
 }
 
 type Fail = (u8, String);
@@ -360,6 +364,12 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
             format!("error: --cell-m {} is not a positive size", a.cell_m),
         ));
     }
+    if !a.height_m.is_finite() {
+        return Err((
+            2,
+            format!("error: --height-m {} is not a finite height", a.height_m),
+        ));
+    }
     // Before the scene is read: a GPU that cannot be had is the user's to fix (exit 2).
     if let Some(why) = map_unavailable(a.device) {
         return Err((2, format!("error: {why}")));
@@ -368,6 +378,16 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
     let scene = load(&a.scene, &a.interactions)?;
     note_unmodelled(&a.interactions);
     let plane = default_plane(&scene, a.cell_m, a.height_m);
+    // The map's cells are as many as the scene's extent over the cell size: bounded as a
+    // graph's RadioMap bounds them (its accumulators take 16 bytes a cell), before anything is
+    // allocated.
+    let (w, h) = (plane.grid.width as f64, plane.grid.height as f64);
+    kodama_nodes::params::check_cells(w, h, 16).map_err(|m| {
+        (
+            2,
+            format!("error: --cell-m {}: {m}; use a coarser cell", a.cell_m),
+        )
+    })?;
     task.step(&format!(
         "radio map: {} rays over {} x {} cells",
         a.interactions.rays, plane.grid.width, plane.grid.height

@@ -156,10 +156,7 @@ fn check(
     let order = topo_order(&nodes, &raw, diags)?;
     let site = site?;
     let (nodes, outputs) = in_topological_order(nodes, &order, outputs);
-    let name = path
-        .file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "graph".into());
+    let name = folder_name(path, "graph");
     let graph = Graph {
         path: path.to_path_buf(),
         name,
@@ -1250,4 +1247,14 @@ fn topo_order(nodes: &[Node], raw: &[RawNode], diags: &mut Vec<Diagnostic>) -> O
         format!("cycle: {}", text.join(" -> ")),
     ));
     None
+}
+
+/// The name a file gives the folder its outputs go to by default (`out/<name>`): its stem, or
+/// `fallback` where the stem names no file of its own (`...ron` has the stem `..`, which would
+/// put the outputs in the working folder's parent).
+pub fn folder_name(path: &std::path::Path, fallback: &str) -> String {
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .filter(|s| kodama_nodes::io::safe_name::check_file_name(s).is_ok())
+        .unwrap_or_else(|| fallback.into())
 }

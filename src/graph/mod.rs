@@ -12,7 +12,7 @@ use kodama_nodes::{Site, Window};
 
 use crate::registry::{Kind, Params};
 
-pub use load::{LoadOptions, MAX_GRAPH_BYTES, load, read_graph_text};
+pub use load::{LoadOptions, MAX_GRAPH_BYTES, folder_name, load, read_graph_text};
 pub use render::{to_dot, to_mermaid};
 pub use tiling::{MAX_TILES, Tile, TileOverrides, Tiling};
 
