@@ -48,6 +48,20 @@ fn unknown_field_suggests_the_nearest() {
     );
 }
 
+/// Inside a nested struct (an antenna of a radio map) and through `--set` into one, a typo is
+/// the same error, where it once loaded and changed nothing.
+#[test]
+fn unknown_nested_field_suggests_the_nearest() {
+    let nodes = r#"        "t": SynthTerrain(size_m: (50.0, 40.0)),
+        "scene": AssembleScene(terrain: "t", objects: []),
+        "map": RadioMap(scene: "scene", tx: (0.0, 0.0, 10.0), freq_hz: 3.5e9, antenna: (pattern: Isotropic, polarization: V, azimuth_deg: 0.0, tilt_deg: 0.0, downtilt_deg: 10.0)),"#;
+    let e = fails(nodes, &[]);
+    has(&e, "unknown field `downtilt_deg`; did you mean `tilt_deg`?");
+    let ok = nodes.replace(", downtilt_deg: 10.0", "");
+    let e = fails(&ok, &["--set", "map.antenna.downtilt_deg=10"]);
+    has(&e, "unknown field `downtilt_deg`");
+}
+
 #[test]
 fn missing_input() {
     let e = fails(r#"        "b": GaussianBlur(sigma_m: 1.0),"#, &[]);

@@ -207,7 +207,7 @@ impl<'de> de::Deserializer<'de> for &Ast {
     fn deserialize_struct<V: Visitor<'de>>(
         self,
         name: &'static str,
-        _fields: &'static [&'static str],
+        known: &'static [&'static str],
         v: V,
     ) -> Result<V::Value, DeError> {
         match &self.v {
@@ -215,9 +215,11 @@ impl<'de> de::Deserializer<'de> for &Ast {
                 message: format!("expected `{name}(...)`, found `{}(...)`", n.name),
                 span: Some(n.span),
             }),
-            Value::Struct { fields, .. } => v
-                .visit_map(struct_pairs(fields))
-                .map_err(|e| e.at(self.span)),
+            Value::Struct { fields, .. } => {
+                only_known_fields(fields, known)?;
+                v.visit_map(struct_pairs(fields))
+                    .map_err(|e| e.at(self.span))
+            }
             Value::Unit => v.visit_map(struct_pairs(&[])).map_err(|e| e.at(self.span)),
             _ => Err(invalid(self, &format!("`{name}(field: value, ...)`"))),
         }
@@ -285,6 +287,26 @@ impl<'de, 'a> SeqAccess<'de> for Seq<'a> {
 enum Key<'a> {
     Value(&'a Ast),
     Field(&'a Name),
+}
+
+/// Every field of a struct value must be one its type declares. serde's derive skips unknown
+/// fields unless a type says `deny_unknown_fields`, so a typo inside a nested struct
+/// (`antenna: (downtilt: 10.0)`) or a `--set` into one would load and change nothing: checked
+/// here for every struct and struct variant, whatever its type says.
+fn only_known_fields(
+    fields: &[(Name, Ast)],
+    known: &'static [&'static str],
+) -> Result<(), DeError> {
+    match fields
+        .iter()
+        .find(|(k, _)| !known.contains(&k.name.as_str()))
+    {
+        Some((k, _)) => Err(DeError {
+            message: suggest(&k.name, known, "field"),
+            span: Some(k.span),
+        }),
+        None => Ok(()),
+    }
 }
 
 /// Entries of a map or fields of a struct, as serde map access.
@@ -385,11 +407,14 @@ impl<'de, 'a> VariantAccess<'de> for Variant<'a> {
     }
     fn struct_variant<V: Visitor<'de>>(
         self,
-        _fields: &'static [&'static str],
+        known: &'static [&'static str],
         v: V,
     ) -> Result<V::Value, DeError> {
         match self.body.map(|b| (b, &b.v)) {
-            Some((_, Value::Struct { fields, .. })) => v.visit_map(struct_pairs(fields)),
+            Some((_, Value::Struct { fields, .. })) => {
+                only_known_fields(fields, known)?;
+                v.visit_map(struct_pairs(fields))
+            }
             Some((b, _)) => Err(invalid(
                 b,
                 &format!("`{}(field: value, ...)`", self.name.name),
@@ -449,6 +474,41 @@ mod tests {
                 .unwrap()
                 .cap,
             Some(4)
+        );
+    }
+
+    /// A type without `deny_unknown_fields`, nested in one with it, and as an enum's struct
+    /// variant: an unknown field in either is an error, where serde alone would skip it.
+    #[derive(Debug, Deserialize, PartialEq)]
+    struct Loose {
+        tilt: f64,
+    }
+
+    #[derive(Debug, Deserialize, PartialEq)]
+    enum Layout {
+        Cells { path: String },
+    }
+
+    #[derive(Debug, Deserialize, PartialEq)]
+    #[serde(deny_unknown_fields)]
+    struct Outer {
+        inner: Loose,
+        layout: Layout,
+    }
+
+    #[test]
+    fn unknown_fields_of_nested_structs_and_variants_are_errors() {
+        let de = |s: &str| from_ast::<Outer>(&parse(s, 0, 1, 1).unwrap());
+        let ok = de("(inner: (tilt: 1.0), layout: Cells(path: \"a\"))").unwrap();
+        assert_eq!(ok.inner.tilt, 1.0);
+        let e = de("(inner: (tilt: 1.0, tlt: 2.0), layout: Cells(path: \"a\"))").unwrap_err();
+        assert_eq!(e.message, "unknown field `tlt`; did you mean `tilt`?");
+        assert_eq!(e.span.map(|s| s.col), Some(21));
+        let e = de("(inner: (tilt: 1.0), layout: Cells(path: \"a\", cells: 3))").unwrap_err();
+        assert!(
+            e.message.starts_with("unknown field `cells`"),
+            "{}",
+            e.message
         );
     }
 
