@@ -435,23 +435,13 @@ fn radio_map_diffraction_over_one_box_against_sionna_rt() {
     for (name, cells) in &groups {
         let rf = fixture_box(name);
         let map = radio_map(&rf, tx, &Antenna::default(), &plane, &opt, 3.5e9);
-        let (mut diffs, mut signed, mut one_side) = (Vec::new(), Vec::new(), 0);
-        for &(c, row, sionna) in cells {
-            let ours = map.at(c, row) as f64;
-            match (sionna.is_finite(), ours > 0.0) {
-                (true, true) => {
-                    let d = 10.0 * ours.log10() - sionna;
-                    signed.push(d);
-                    diffs.push(d.abs());
-                }
-                (false, false) => {}
-                _ => one_side += 1,
-            }
-        }
-        let n = diffs.len();
-        let median = percentile(&mut diffs, 0.5);
-        let p90 = percentile(&mut diffs, 0.9);
-        let bias = percentile(&mut signed, 0.5);
+        let Agreement {
+            n,
+            one_side,
+            median,
+            p90,
+            bias,
+        } = agreement(cells, |c, row| reached_db(&map, c, row));
         println!(
             "box map, {name}: {n} cells compared, {one_side} reached by one side only; ours - \
              Sionna median {bias:+.3} dB, |difference| median {median:.3} dB, 90th percentile \
@@ -485,22 +475,8 @@ fn radio_map_with_diffuse_reflection_against_sionna_rt() {
     use kodama_nodes::artifact::Grid;
     use kodama_nodes::rf::map_plane::MapPlane;
     use kodama_nodes::rf::radiomap::radio_map;
-    let mut r = csv::Reader::from_path(fixture("sionna_diffuse_map.csv")).unwrap();
-    let cells: Vec<(u32, u32, f64)> = r
-        .records()
-        .map(|rec| {
-            let rec = rec.unwrap();
-            (
-                rec[0].parse().unwrap(),
-                rec[1].parse().unwrap(),
-                rec[4].parse().unwrap(),
-            )
-        })
-        .collect();
-    let xml = shared("sionna-scenes/simple_street_canyon/simple_street_canyon.xml");
-    let rf = RfScene::new(&read_scene(&xml).unwrap(), 3.5e9, false)
-        .unwrap()
-        .with_uniform_thickness(kodama_nodes::rf::scene::SLAB_THICKNESS_M);
+    let cells = map_cells("sionna_diffuse_map.csv");
+    let rf = sionna_scene("simple_street_canyon");
     let plane = MapPlane::plane(
         Grid {
             x0: -50.0,
@@ -523,23 +499,13 @@ fn radio_map_with_diffuse_reflection_against_sionna_rt() {
     };
     let tx = glam::DVec3::new(-33.0, 0.0, 32.0);
     let map = radio_map(&rf, tx, &Antenna::default(), &plane, &opt, 3.5e9);
-    let (mut diffs, mut signed, mut one_side) = (Vec::new(), Vec::new(), 0);
-    for &(c, row, sionna) in &cells {
-        let ours = map.at(c, row) as f64;
-        match (sionna.is_finite(), ours > 0.0) {
-            (true, true) => {
-                let d = 10.0 * ours.log10() - sionna;
-                signed.push(d);
-                diffs.push(d.abs());
-            }
-            (false, false) => {}
-            _ => one_side += 1,
-        }
-    }
-    let n = diffs.len();
-    let median = percentile(&mut diffs, 0.5);
-    let p90 = percentile(&mut diffs, 0.9);
-    let bias = percentile(&mut signed, 0.5);
+    let Agreement {
+        n,
+        one_side,
+        median,
+        p90,
+        bias,
+    } = agreement(&cells, |c, row| reached_db(&map, c, row));
     println!(
         "street canyon map, specular + diffuse (S 0.5, depth 2): {n} cells compared, {one_side} \
          reached by one side only; ours - Sionna median {bias:+.3} dB, |difference| median \
@@ -573,22 +539,8 @@ const MAP_DIFFUSE_P90_DB: f64 = 2.5;
 fn radio_map_at_depth_twelve_against_sionna_rt() {
     use kodama_nodes::rf::map_plane::default_plane;
     use kodama_nodes::rf::radiomap::radio_map;
-    let mut r = csv::Reader::from_path(fixture("sionna_munich_map_d12.csv")).unwrap();
-    let cells: Vec<(u32, u32, f64)> = r
-        .records()
-        .map(|rec| {
-            let rec = rec.unwrap();
-            (
-                rec[0].parse().unwrap(),
-                rec[1].parse().unwrap(),
-                rec[4].parse().unwrap(),
-            )
-        })
-        .collect();
-    let xml = shared("sionna-scenes/munich/munich.xml");
-    let rf = RfScene::new(&read_scene(&xml).unwrap(), 3.5e9, false)
-        .unwrap()
-        .with_uniform_thickness(kodama_nodes::rf::scene::SLAB_THICKNESS_M);
+    let cells = map_cells("sionna_munich_map_d12.csv");
+    let rf = sionna_scene("munich");
     let plane = default_plane(&rf, 5.0, 1.5);
     assert_eq!((plane.grid.width, plane.grid.height), (296, 242));
     let opt = |rays: u32| TraceOptions {
@@ -607,19 +559,19 @@ fn radio_map_at_depth_twelve_against_sionna_rt() {
     let tx = glam::DVec3::new(8.5, 21.0, 27.0);
     let map = |rays| radio_map(&rf, tx, &Antenna::default(), &plane, &opt(rays), 3.5e9);
     let (coarse, fine) = (map(10_000_000), map(100_000_000));
-    let db = |m: &kodama_nodes::artifact::Raster, c, r| 10.0 * (m.at(c, r) as f64).log10();
-    let (mut diffs, mut signed) = (Vec::new(), Vec::new());
-    for &(c, row, sionna) in &cells {
-        let (a, b) = (db(&coarse, c, row), db(&fine, c, row));
-        if a.is_finite() && b.is_finite() && (a - b).abs() < 1.0 {
-            signed.push(b - sionna);
-            diffs.push((b - sionna).abs());
-        }
-    }
-    let n = diffs.len();
-    let median = percentile(&mut diffs, 0.5);
-    let p90 = percentile(&mut diffs, 0.9);
-    let bias = percentile(&mut signed, 0.5);
+    // Our value where our own two maps agree within 1 dB; a cell where they do not counts as
+    // one we have not reached.
+    let converged = |c, row| {
+        let (a, b) = (reached_db(&coarse, c, row)?, reached_db(&fine, c, row)?);
+        ((a - b).abs() < 1.0).then_some(b)
+    };
+    let Agreement {
+        n,
+        median,
+        p90,
+        bias,
+        ..
+    } = agreement(&cells, converged);
     println!(
         "munich map at depth 12 (LOS, specular + diffuse S 0.3, refraction, diffraction): {n} of \
          {} converged Sionna cells converged here too; ours - Sionna median {bias:+.3} dB, \
@@ -631,4 +583,70 @@ fn radio_map_at_depth_twelve_against_sionna_rt() {
     assert!(bias.abs() < 0.25, "bias {bias}");
     assert!(median <= 0.5, "median {median}");
     assert!(p90 <= 3.0, "p90 {p90}");
+}
+
+/// A map fixture's cells: column, row (row 0 at the north edge) and Sionna's path gain in dB
+/// (-inf where no sample landed), from the columns `col, row, x, y, path_gain_db`.
+fn map_cells(file: &str) -> Vec<(u32, u32, f64)> {
+    let mut r = csv::Reader::from_path(fixture(file)).unwrap();
+    r.records()
+        .map(|rec| {
+            let rec = rec.unwrap();
+            (
+                rec[0].parse().unwrap(),
+                rec[1].parse().unwrap(),
+                rec[4].parse().unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// One of Sionna's own scenes at 3.5 GHz, every material at Sionna's default 0.1 m slab (what
+/// its scene files give).
+fn sionna_scene(name: &str) -> RfScene {
+    let xml = shared(&format!("sionna-scenes/{name}/{name}.xml"));
+    RfScene::new(&read_scene(&xml).unwrap(), 3.5e9, false)
+        .unwrap()
+        .with_uniform_thickness(kodama_nodes::rf::scene::SLAB_THICKNESS_M)
+}
+
+/// A map's path gain in dB at a cell, `None` where no ray arrived.
+fn reached_db(map: &kodama_nodes::artifact::Raster, col: u32, row: u32) -> Option<f64> {
+    let v = map.at(col, row) as f64;
+    (v > 0.0).then(|| 10.0 * v.log10())
+}
+
+/// How a map agrees with Sionna's cells.
+struct Agreement {
+    /// Cells both reach.
+    n: usize,
+    /// Cells one side reaches and the other does not.
+    one_side: usize,
+    /// |ours - Sionna|: median and 90th percentile, dB.
+    median: f64,
+    p90: f64,
+    /// Median of ours - Sionna, dB.
+    bias: f64,
+}
+
+/// `ours` (dB at a cell, `None` where not reached) against Sionna's `cells`.
+fn agreement(cells: &[(u32, u32, f64)], ours: impl Fn(u32, u32) -> Option<f64>) -> Agreement {
+    let (mut diffs, mut signed, mut one_side) = (Vec::new(), Vec::new(), 0);
+    for &(c, row, sionna) in cells {
+        match (sionna.is_finite(), ours(c, row)) {
+            (true, Some(o)) => {
+                signed.push(o - sionna);
+                diffs.push((o - sionna).abs());
+            }
+            (false, None) => {}
+            _ => one_side += 1,
+        }
+    }
+    Agreement {
+        n: diffs.len(),
+        one_side,
+        median: percentile(&mut diffs, 0.5),
+        p90: percentile(&mut diffs, 0.9),
+        bias: percentile(&mut signed, 0.5),
+    }
 }

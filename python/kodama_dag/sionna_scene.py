@@ -14,6 +14,7 @@ themselves would lose centimetres in Sionna's float32 geometry.
 
 from __future__ import annotations
 
+import json
 import os
 import re
 from typing import TYPE_CHECKING, Any
@@ -140,8 +141,6 @@ def sionna_foliage_loss_db(
     loss = np.zeros(valid.shape)
     if not os.path.isfile(meta):
         return loss
-    import json
-
     with open(meta) as f:
         volumes = [os.path.join(folder, v) for v in json.load(f)["volumes"]]
     sources = np.asarray(paths.sources, dtype=np.float64).T  # (num_tx, 3)
