@@ -212,8 +212,11 @@ impl kodama_nodes::Progress for NodeProgress<'_> {
         if let Some(bar) = self.bar.get() {
             bar.inc(n);
         }
+        if self.reporter.sink.is_none() || self.reporter.mode != Mode::Lines {
+            return;
+        }
         let total = self.tenths.total.load(Ordering::Relaxed);
-        if self.reporter.sink.is_some() && self.reporter.mode == Mode::Lines && total > 0 {
+        if total > 0 {
             let before = self.tenths.done.fetch_add(n, Ordering::Relaxed);
             let (was, now) = (before * 10 / total, (before + n).min(total) * 10 / total);
             if now > was {
