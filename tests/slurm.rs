@@ -20,30 +20,55 @@ const SWEEP: &str = r#"Sweep(
 )"#;
 
 /// Whether a Slurm cluster answers here. Without one the test skips with a line saying so, and
-/// fails under CI=true.
+/// fails under CI=true. A loaded machine can leave slurmd unanswering for a while (`idle*`), so
+/// its node gets a minute to come back before the cluster counts as absent.
 fn slurm_up(test: &str) -> bool {
-    let idle = Command::new("sinfo")
-        .args(["-h", "-o", "%T"])
-        .output()
-        .map(|o| {
-            let s = String::from_utf8_lossy(&o.stdout);
-            o.status.success()
-                && s.lines()
-                    .any(|l| ["idle", "mixed", "allocated"].contains(&l.trim()))
-        })
-        .unwrap_or(false);
-    if !idle {
+    let state = || {
+        Command::new("sinfo")
+            .args(["-h", "-o", "%T"])
+            .output()
+            .map(|o| {
+                let s = String::from_utf8_lossy(&o.stdout).trim().to_string();
+                if o.status.success() {
+                    s
+                } else {
+                    format!(
+                        "sinfo failed: {}",
+                        String::from_utf8_lossy(&o.stderr).trim()
+                    )
+                }
+            })
+            .unwrap_or_else(|e| format!("sinfo did not run: {e}"))
+    };
+    let usable = |s: &str| {
+        s.lines()
+            .any(|l| ["idle", "mixed", "allocated"].contains(&l.trim()))
+    };
+    let mut seen = state();
+    // Not at all (no sinfo, no configuration) is absent at once; a node that does not answer
+    // yet is waited for.
+    if !seen.starts_with("sinfo") {
+        for _ in 0..60 {
+            if usable(&seen) {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_secs(1));
+            seen = state();
+        }
+    }
+    let up = usable(&seen);
+    if !up {
         assert!(
             std::env::var("CI").as_deref() != Ok("true"),
-            "{test}: no Slurm cluster answers `sinfo` (.ci/run starts one with \
-             scripts/slurm_local.sh; see its output for why it did not)"
+            "{test}: no Slurm cluster answers `sinfo` (last seen: {seen:?}; .ci/run starts one \
+             with scripts/slurm_local.sh; see its output for why it did not)"
         );
         eprintln!(
-            "{test}: skipped: no Slurm cluster answers `sinfo` (start one with \
-             `scripts/slurm_local.sh start DIR` and export SLURM_CONF)"
+            "{test}: skipped: no Slurm cluster answers `sinfo` (last seen: {seen:?}; start one \
+             with `scripts/slurm_local.sh start DIR` and export SLURM_CONF)"
         );
     }
-    idle
+    up
 }
 
 /// The folder of submission `n` under `out`.
