@@ -229,7 +229,8 @@ fn special_files_are_refused_at_load_without_blocking() {
     assert_eq!(r.code, 2, "{}", r.stderr);
 }
 
-/// A graph file that is endless or huge is read up to a bound, not into all of memory.
+/// A graph file that is endless or huge is refused, not read into all of memory: a device is
+/// not a graph file, and a regular file is read up to a bound.
 #[test]
 fn an_endless_graph_file_is_refused() {
     let env = Env::new();
@@ -238,7 +239,81 @@ fn an_endless_graph_file_is_refused() {
         Duration::from_secs(60),
     );
     assert_eq!(r.code, 2, "{}", r.stderr);
+    has(
+        &r.stderr,
+        "expected a regular file, found a character device",
+    );
+    let huge = env.path("huge.ron");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(65 << 20)
+        .unwrap();
+    let r = run_bounded(
+        command(&env, &["explain", huge.to_str().unwrap()]),
+        Duration::from_secs(60),
+    );
+    assert_eq!(r.code, 2, "{}", r.stderr);
     has(&r.stderr, "larger than 64 MiB");
+}
+
+/// A FIFO given where a file is read, or named inside one, is refused at once (exit 2, saying
+/// what it found) rather than waited on: the graph of `run`, a sweep, `gc --keep`, and a mesh a
+/// scene file names under `radiomap`.
+#[test]
+fn a_fifo_anywhere_a_file_is_read_is_refused_without_blocking() {
+    let env = Env::new();
+    let fifo = env.path("pipe.ron");
+    mkfifo(&fifo);
+    let f = fifo.to_str().unwrap();
+    let cache = env.path("cache");
+    let cache = cache.to_str().unwrap();
+    for args in [
+        vec!["run", f],
+        vec!["sweep", f],
+        vec!["explain", f],
+        vec!["gc", "--cache", cache, "--max-bytes", "0", "--keep", f],
+    ] {
+        if args[0] == "gc" {
+            // gc refuses a folder that is no cache before it reads --keep: make one.
+            let g = env.write("g.ron", &graph("", ""));
+            let r = run_bounded(env.run_cmd(&g, &[]), Duration::from_secs(60));
+            assert_eq!(r.code, 0, "{}", r.stderr);
+        }
+        let r = run_bounded(command(&env, &args), Duration::from_secs(60));
+        assert_eq!(r.code, 2, "{args:?}: {}", r.stderr);
+        has(&r.stderr, "found a FIFO");
+    }
+    std::fs::create_dir_all(env.path("scene/meshes")).unwrap();
+    mkfifo(&env.path("scene/meshes/a.ply"));
+    let xml = env.write(
+        "scene/scene.xml",
+        r#"<scene version="2.1.0">
+<bsdf type="itu-radio-material" id="itu_metal"><string name="type" value="metal"/></bsdf>
+<shape type="ply" id="mesh-a"><string name="filename" value="meshes/a.ply"/><ref id="itu_metal" name="bsdf"/></shape>
+</scene>"#,
+    );
+    let out = env.path("map.tif");
+    let r = run_bounded(
+        command(
+            &env,
+            &[
+                "radiomap",
+                "--scene",
+                xml.to_str().unwrap(),
+                "--tx",
+                "0,0,10",
+                "--freq-hz",
+                "3.5e9",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+        ),
+        Duration::from_secs(60),
+    );
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    has(&r.stderr, "a.ply");
+    has(&r.stderr, "found a FIFO");
+    assert!(!out.exists());
 }
 
 #[test]

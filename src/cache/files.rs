@@ -258,23 +258,7 @@ impl Cache {
     }
 }
 
-/// What a file that is neither a regular file nor a folder is, for messages.
-pub fn describe_file_type(t: &fs::FileType) -> &'static str {
-    use std::os::unix::fs::FileTypeExt;
-    if t.is_fifo() {
-        "a FIFO (named pipe)"
-    } else if t.is_socket() {
-        "a socket"
-    } else if t.is_char_device() {
-        "a character device"
-    } else if t.is_block_device() {
-        "a block device"
-    } else if t.is_symlink() {
-        "a symlink"
-    } else {
-        "a special file"
-    }
-}
+pub use kodama_nodes::io::open::describe_file_type;
 
 /// Checks that every entry below folder `root` is a regular file or a folder (symlinks followed),
 /// reached once: no FIFO, socket or device, no symlink loop. With `contained`, no symlink may

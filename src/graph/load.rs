@@ -39,10 +39,8 @@ pub const MAX_GRAPH_BYTES: u64 = 64 << 20;
 /// Reads a graph or sweep file as text, refusing one larger than [`MAX_GRAPH_BYTES`].
 pub fn read_graph_text(path: &Path) -> Result<String, String> {
     use std::io::Read;
-    let f = std::fs::File::open(path).map_err(|e| e.to_string())?;
-    if f.metadata().is_ok_and(|m| m.is_dir()) {
-        return Err("it is a folder, not a file".into());
-    }
+    // Regular files only, opened without blocking: a FIFO given as the graph would wait forever.
+    let f = kodama_nodes::io::open::open_regular(path).map_err(|e| e.to_string())?;
     let mut bytes = Vec::new();
     f.take(MAX_GRAPH_BYTES + 1)
         .read_to_end(&mut bytes)

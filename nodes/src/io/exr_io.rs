@@ -4,7 +4,7 @@ use std::path::Path;
 
 use exr::prelude::{
     AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec,
-    WritableImage, read_first_flat_layer_from_file,
+    WritableImage,
 };
 
 use crate::stage::StageError;
@@ -61,33 +61,45 @@ fn encode_exr(
 /// Named f32 channels of an image.
 pub type Channels = Vec<(String, Vec<f32>)>;
 
+fn exr_error(path: &Path, e: exr::error::Error) -> StageError {
+    StageError::bad_input(
+        path,
+        "EXR",
+        format!("expected a readable OpenEXR image: {e}"),
+    )
+}
+
+/// The size its header gives the first layer of an EXR file, checked against the memory budget:
+/// what a caller compares with the size it expects before anything is decoded (a compressed file
+/// of a few bytes can declare any size).
+pub fn read_exr_size(path: &Path) -> Result<(usize, usize), StageError> {
+    let file = crate::io::open::open_regular(path)
+        .map_err(|e| exr_error(path, exr::error::Error::Io(e)))?;
+    let meta = exr::meta::MetaData::read_from_buffered(std::io::BufReader::new(file), false)
+        .map_err(|e| exr_error(path, e))?;
+    let Some(h) = meta.headers.first() else {
+        return Ok((0, 0));
+    };
+    let (w, ht) = (h.layer_size.width(), h.layer_size.height());
+    crate::params::check_cells(w as f64, ht as f64, 4 * h.channels.list.len().max(1))
+        .map_err(|m| StageError::bad_input(path, "EXR header", m))?;
+    Ok((w, ht))
+}
+
 /// The first layer of an EXR file: width, height and every channel as f32, by name.
 pub fn read_exr(path: &Path) -> Result<(usize, usize, Channels), StageError> {
-    let bad = |e: exr::error::Error| {
-        StageError::bad_input(
-            path,
-            "EXR",
-            format!("expected a readable OpenEXR image: {e}"),
-        )
-    };
-    // The header's size is checked before the decoder allocates it: a compressed file of a few
-    // bytes can declare any size.
-    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(bad)?;
-    if let Some(h) = meta.headers.first() {
-        crate::params::check_cells(
-            h.layer_size.width() as f64,
-            h.layer_size.height() as f64,
-            4 * h.channels.list.len().max(1),
-        )
-        .map_err(|m| StageError::bad_input(path, "EXR header", m))?;
-    }
-    let img = read_first_flat_layer_from_file(path).map_err(|e| {
-        StageError::bad_input(
-            path,
-            "EXR",
-            format!("expected a readable OpenEXR image: {e}"),
-        )
-    })?;
+    read_exr_size(path)?;
+    let file = crate::io::open::open_regular(path)
+        .map_err(|e| exr_error(path, exr::error::Error::Io(e)))?;
+    use exr::prelude::{ReadChannels, ReadLayers};
+    let img = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(std::io::BufReader::new(file))
+        .map_err(|e| exr_error(path, e))?;
     let layer = img.layer_data;
     let (w, h) = (layer.size.width(), layer.size.height());
     let channels = layer

@@ -51,7 +51,7 @@ pub fn read_footprints(
     names: &PropertyNames,
     site: &Site,
 ) -> Result<Footprints, StageError> {
-    let text = std::fs::read_to_string(path)
+    let text = crate::io::open::read_regular_to_string(path)
         .map_err(|e| StageError::bad_input(path, "open", e.to_string()))?;
     let doc: Value = serde_json::from_str(&text).map_err(|e| {
         StageError::bad_input(

@@ -131,7 +131,7 @@ type FileDecoder = Decoder<std::io::BufReader<std::fs::File>>;
 /// Reads a GeoTIFF's first image with its georeferencing. A TIFF without tiepoint and pixel scale
 /// (or a model transformation) is an error: we would not know where it is.
 pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
-    let file = std::fs::File::open(path)
+    let file = crate::io::open::open_regular(path)
         .map_err(|e| StageError::bad_input(path, "open", e.to_string()))?;
     let mut d = Decoder::new(std::io::BufReader::new(file))
         .map_err(|e| tiff_error(path, "header", e))?

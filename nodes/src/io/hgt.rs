@@ -100,8 +100,8 @@ pub fn read_hgt(path: &Path) -> Result<GeoTiff, StageError> {
             ),
         ));
     };
-    let bytes =
-        std::fs::read(path).map_err(|e| StageError::bad_input(path, "read", e.to_string()))?;
+    let bytes = crate::io::open::read_regular(path)
+        .map_err(|e| StageError::bad_input(path, "read", e.to_string()))?;
     if bytes.len() as u64 != len {
         return Err(StageError::bad_input(
             path,

@@ -15,6 +15,8 @@ pub mod hgt;
 /// ONNX models run on view images (feature `onnx`): the runtime found through `ORT_DYLIB_PATH`.
 #[cfg(feature = "onnx")]
 pub mod onnx;
+/// Opening user-named files: regular files only, never blocking on a FIFO or device.
+pub mod open;
 pub mod osm_xml;
 pub mod safe_name;
 pub mod sionna_xml;

@@ -80,7 +80,7 @@ pub enum OsmElement<'a> {
 /// optional byte-order mark and white space. A PBF file starts with a 4-byte length.
 pub fn is_osm_xml(path: &Path) -> Result<bool, StageError> {
     let mut head = Vec::with_capacity(64);
-    std::fs::File::open(path)
+    crate::io::open::open_regular(path)
         .and_then(|f| f.take(64).read_to_end(&mut head))
         .map_err(|e| StageError::bad_input(path, "open", e.to_string()))?;
     let head = head.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&head);
@@ -154,7 +154,7 @@ impl<R: BufRead> BufRead for Bounded<R> {
 
 /// The 1-based line holding byte `at` of the file (read again only when an error is reported).
 fn line_at(path: &Path, at: u64) -> u64 {
-    let Ok(f) = std::fs::File::open(path) else {
+    let Ok(f) = crate::io::open::open_regular(path) else {
         return 0;
     };
     let mut r = BufReader::new(f.take(at));
@@ -339,7 +339,7 @@ pub fn for_each_xml_element(
     want: OsmKind,
     mut f: impl FnMut(&OsmElement),
 ) -> Result<(), StageError> {
-    let file = std::fs::File::open(path)
+    let file = crate::io::open::open_regular(path)
         .map_err(|e| StageError::bad_input(path, "open", e.to_string()))?;
     let mut reader = Reader::from_reader(Bounded {
         inner: BufReader::with_capacity(1 << 16, file),

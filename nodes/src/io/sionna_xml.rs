@@ -27,7 +27,7 @@ pub fn read_scene_with_thickness(
     path: &Path,
 ) -> Result<(Scene, BTreeMap<Material, f64>), StageError> {
     let bad = |place: String, expected: &str| StageError::bad_input(path, place, expected);
-    let text = std::fs::read_to_string(path)
+    let text = crate::io::open::read_regular_to_string(path)
         .map_err(|e| bad("file".into(), &format!("a readable XML file ({e})")))?;
     check_depth(path, &text)?;
     let doc = roxmltree::Document::parse(&text).map_err(|e| {
@@ -207,7 +207,7 @@ fn check_depth(path: &Path, text: &str) -> Result<(), StageError> {
 /// Reads a binary little-endian PLY: vertex x, y, z (any other vertex properties skipped) and
 /// polygon faces (fanned into triangles).
 pub fn read_ply(path: &Path) -> Result<Mesh, StageError> {
-    let bytes = std::fs::read(path)
+    let bytes = crate::io::open::read_regular(path)
         .map_err(|e| ply_error(path, "file", &format!("a readable PLY file ({e})")))?;
     let (header, body) = split_header(path, &bytes)?;
     let header = parse_header(path, header)?;

@@ -21,7 +21,7 @@ use serde_json::{Value, json};
 
 use crate::artifact::{Instances, Intrinsics, PodVec, Pose, View, ViewHead, ViewSet};
 use crate::io::crs::{Crs, ToSite};
-use crate::io::exr_io::{Channels, read_exr, write_exr};
+use crate::io::exr_io::{Channels, read_exr, read_exr_size, write_exr};
 use crate::site::Site;
 use crate::stage::{PartStore, StageError};
 
@@ -82,8 +82,18 @@ pub fn store_all_checked(
         .map_err(|(place, m)| StageError::bad_input(file, place, format!("expected {m}")))
 }
 
+/// An image file decoded by its content (JPEG, PNG, ...), opened as [`crate::io::open`] opens
+/// files: a FIFO or device named as an image is an error, not a wait.
+fn decode_image(path: &Path) -> image::ImageResult<image::DynamicImage> {
+    let file = crate::io::open::open_regular(path).map_err(image::ImageError::IoError)?;
+    image::ImageReader::new(std::io::BufReader::new(file))
+        .with_guessed_format()
+        .map_err(image::ImageError::IoError)?
+        .decode()
+}
+
 fn read_views_json(views_json: &Path) -> Result<Value, StageError> {
-    let text = std::fs::read_to_string(views_json)
+    let text = crate::io::open::read_regular_to_string(views_json)
         .map_err(|e| StageError::bad_input(views_json, "open", e.to_string()))?;
     serde_json::from_str(&text).map_err(|e| {
         StageError::bad_input(
@@ -412,7 +422,7 @@ impl ViewFiles<'_> {
                 format!("the image {} does not exist", image_path.display()),
             ));
         }
-        let img = image::open(&image_path)
+        let img = decode_image(&image_path)
             .map_err(|e| {
                 StageError::bad_input(
                     &image_path,
@@ -431,7 +441,7 @@ impl ViewFiles<'_> {
         if !png.exists() {
             return Ok(None);
         }
-        let img = image::open(&png)
+        let img = decode_image(&png)
             .map_err(|e| {
                 StageError::bad_input(
                     &png,
@@ -468,7 +478,7 @@ impl ViewFiles<'_> {
                 ),
             ));
         }
-        let m = image::open(&material_png)
+        let m = decode_image(&material_png)
             .map_err(|e| {
                 StageError::bad_input(
                     &material_png,
@@ -501,9 +511,11 @@ impl ViewFiles<'_> {
         if !p.exists() {
             return Ok(None);
         }
-        let (w, h, ch) = read_exr(&p)?;
+        // The header's size against the view's before a pixel is decoded: a depth map whose
+        // header claims far more than its view would otherwise be decoded first.
+        let (w, h) = read_exr_size(&p)?;
         self.check_size(&p, w as u32, h as u32)?;
-        Ok(Some(ch))
+        Ok(Some(read_exr(&p)?.2))
     }
 
     fn depth(&self) -> Result<Option<PodVec<f32>>, StageError> {
@@ -543,7 +555,7 @@ impl ViewFiles<'_> {
 /// The class table `<png stem>.json` that must sit beside an instance PNG.
 fn read_instance_classes(png: &Path) -> Result<BTreeMap<u16, String>, StageError> {
     let json = png.with_extension("json");
-    let Ok(t) = std::fs::read_to_string(&json) else {
+    let Ok(t) = crate::io::open::read_regular_to_string(&json) else {
         return Err(StageError::bad_input(
             png,
             "classes",

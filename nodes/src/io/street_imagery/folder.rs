@@ -47,7 +47,7 @@ pub fn scan_folder(
         .iter()
         .filter(|f| exts.contains(&extension(f).as_str()))
         .map(|f| {
-            std::fs::read_to_string(f)
+            crate::io::open::read_regular_to_string(f)
                 .map(|t| (f.clone(), t))
                 .map_err(|e| StageError::bad_input(f, "open", e.to_string()))
         })

@@ -127,7 +127,8 @@ pub fn header_crs(path: &Path, header: &las::Header) -> Result<Option<Crs>, Stag
 pub fn check_las_header(path: &Path) -> Result<(), StageError> {
     use std::io::{Read, Seek, SeekFrom};
     let bad = |place: String, expected: String| StageError::bad_input(path, place, expected);
-    let mut f = std::fs::File::open(path).map_err(|e| bad("open".into(), e.to_string()))?;
+    let mut f =
+        crate::io::open::open_regular(path).map_err(|e| bad("open".into(), e.to_string()))?;
     let len = f
         .metadata()
         .map_err(|e| bad("open".into(), e.to_string()))?
@@ -321,7 +322,7 @@ fn check_laz_chunk_table(
 /// The laszip record among the VLRs after the header.
 fn laz_vlr(path: &Path, h: &las::raw::Header) -> Option<laz::LazVlr> {
     use std::io::{BufReader, Seek, SeekFrom};
-    let mut f = BufReader::new(std::fs::File::open(path).ok()?);
+    let mut f = BufReader::new(crate::io::open::open_regular(path).ok()?);
     f.seek(SeekFrom::Start(h.header_size as u64)).ok()?;
     for _ in 0..h.number_of_variable_length_records {
         let v = las::raw::Vlr::read_from(&mut f, false).ok()?;
@@ -358,7 +359,7 @@ fn laz_points_held(path: &Path, h: &las::raw::Header, n: u64) -> u64 {
         if vlr.items_size() != h.point_data_record_length as u64 {
             return None;
         }
-        let mut f = BufReader::new(std::fs::File::open(path).ok()?);
+        let mut f = BufReader::new(crate::io::open::open_regular(path).ok()?);
         f.seek(SeekFrom::Start(h.offset_to_point_data as u64))
             .ok()?;
         let mut d = laz::LasZipDecompressor::new(NoSeek(f), vlr).ok()?;

@@ -479,7 +479,7 @@ fn read_duke(
     tx_h: &CellHeights,
     rx_h: f64,
 ) -> Result<Measurements, StageError> {
-    let text = std::fs::read_to_string(cells_path)
+    let text = crate::io::open::read_regular_to_string(cells_path)
         .map_err(|e| StageError::bad_input(cells_path, "open", e.to_string()))?;
     let cells: DukeCells = serde_json::from_str(&text)
         .map_err(|e| StageError::bad_input(cells_path, format!("line {}, column {}", e.line(), e.column()), format!("expected {{\"cells\": [{{\"pci\", \"lat\", \"lon\", \"azimuth_deg\", \"freq_hz\"}}]}}: {e}")))?;

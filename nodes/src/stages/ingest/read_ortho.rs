@@ -204,7 +204,7 @@ fn read_tiff_rgb(path: &Path) -> Result<Decoded, StageError> {
 /// Reads a JPEG/PNG and its world file (six lines: A, D, B, E, C, F; C and F are the centre of the
 /// upper-left pixel).
 fn read_image_with_world_file(path: &Path, world: &Path) -> Result<Decoded, StageError> {
-    let text = std::fs::read_to_string(world)
+    let text = crate::io::open::read_regular_to_string(world)
         .map_err(|e| StageError::bad_input(world, "open", e.to_string()))?;
     let v: Vec<f64> = text
         .split_whitespace()

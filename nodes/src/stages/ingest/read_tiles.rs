@@ -164,7 +164,7 @@ fn read_tileset_file(
             "nested more than 16 deep (a cycle?)",
         ));
     }
-    let text = std::fs::read_to_string(json)
+    let text = crate::io::open::read_regular_to_string(json)
         .map_err(|e| StageError::bad_input(json, "open", e.to_string()))?;
     let doc: Value = serde_json::from_str(&text).map_err(|e| {
         StageError::bad_input(
@@ -279,8 +279,8 @@ fn read_content_file(
     tiles: &Tiles,
     scene: &mut Scene,
 ) -> Result<(), StageError> {
-    let bytes =
-        std::fs::read(file).map_err(|e| StageError::bad_input(file, "open", e.to_string()))?;
+    let bytes = crate::io::open::read_regular(file)
+        .map_err(|e| StageError::bad_input(file, "open", e.to_string()))?;
     let (glb, rtc) = if bytes.starts_with(b"b3dm") {
         split_b3dm(file, &bytes)?
     } else {
@@ -353,7 +353,7 @@ fn gltf_buffers(file: &Path, gltf: &gltf::Gltf, tiles: &Tiles) -> Result<Vec<Vec
             gltf::buffer::Source::Uri(u) => {
                 let base = file.parent().unwrap_or(Path::new("."));
                 let buffer = tiles.resolve(file, &format!("buffer {u}"), base, u)?;
-                std::fs::read(&buffer)
+                crate::io::open::read_regular(&buffer)
                     .map_err(|e| StageError::bad_input(file, format!("buffer {u}"), e.to_string()))
             }
         })

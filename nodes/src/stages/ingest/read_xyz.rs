@@ -36,8 +36,8 @@ impl Stage for ReadXyz {
 
     fn run(_: &Self::Params, _: &Inputs, ctx: &Ctx) -> Result<PointSet, StageError> {
         let path = ctx.file(0)?;
-        let text =
-            std::fs::read(path).map_err(|e| StageError::bad_input(path, "open", e.to_string()))?;
+        let text = crate::io::open::read_regular(path)
+            .map_err(|e| StageError::bad_input(path, "open", e.to_string()))?;
         let text = std::str::from_utf8(&text).map_err(|e| {
             StageError::bad_input(
                 path,

@@ -105,7 +105,7 @@ pub struct LabelTable {
 impl LabelTable {
     /// Reads and checks a table: RON of this shape, 1 to [`MAX_CLASSES`] classes.
     pub fn read(path: &Path) -> Result<LabelTable, StageError> {
-        let text = std::fs::read_to_string(path).map_err(|e| {
+        let text = crate::io::open::read_regular_to_string(path).map_err(|e| {
             StageError::bad_input(path, "file", format!("a readable label table: {e}"))
         })?;
         let table: LabelTable = ron::from_str(&text).map_err(|e| {
