@@ -110,6 +110,49 @@ pub fn check_bytes(what: &str, n: f64, bytes_each: usize) -> Result<(), String> 
     Ok(())
 }
 
+/// What one node reads in all through the files its inputs name (the meshes a scene file lists,
+/// a tileset's content and buffers, external tilesets): the same file named a thousand times
+/// counts a thousand times, so a few lines of references cannot make a run read or hold more than
+/// [`MAX_BYTES`]. Each file is counted by its size before it is read.
+pub struct ReadBudget {
+    spent: std::cell::Cell<u64>,
+    limit: u64,
+}
+
+impl Default for ReadBudget {
+    fn default() -> Self {
+        ReadBudget::new(MAX_BYTES)
+    }
+}
+
+impl ReadBudget {
+    /// A budget of `limit` bytes.
+    pub fn new(limit: u64) -> Self {
+        ReadBudget {
+            spent: std::cell::Cell::new(0),
+            limit,
+        }
+    }
+
+    /// Counts regular file `path` against the budget before it is read; past it, the error says
+    /// how much the references came to.
+    pub fn take(&self, path: &Path) -> Result<(), String> {
+        let len = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+        let spent = self.spent.get().saturating_add(len);
+        self.spent.set(spent);
+        if spent > self.limit {
+            return Err(format!(
+                "the files named come to {} with {}, past the limit of {} a node may read in \
+                 all (a file counts each time it is named)",
+                bytes(spent as f64),
+                path.display(),
+                bytes(self.limit as f64)
+            ));
+        }
+        Ok(())
+    }
+}
+
 fn count(n: f64) -> String {
     if n.is_finite() && n.abs() < 1e12 {
         format!("{n:.0}")

@@ -570,6 +570,118 @@ fn a_scene_xml_naming_a_ply_outside_its_folder_is_refused_before_reading_it() {
     }
 }
 
+/// One file named by many shapes counts each time: 17 shapes naming one 1 GiB file come to
+/// more than a node may read, refused before a byte of mesh is read (the file is sparse, and
+/// not even a PLY).
+#[test]
+fn a_file_named_by_many_shapes_counts_each_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let big = dir.path().join("scene/meshes/big.ply");
+    std::fs::create_dir_all(big.parent().unwrap()).unwrap();
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len(1 << 30)
+        .unwrap();
+    let shapes: String = (0..17)
+        .map(|i| {
+            format!(
+                "<shape type=\"ply\" id=\"mesh-{i}\"><string name=\"filename\" \
+                 value=\"meshes/big.ply\"/><ref id=\"itu_concrete\" name=\"bsdf\"/></shape>\n"
+            )
+        })
+        .collect();
+    let xml = format!(
+        "<scene version=\"2.1.0\">\n<bsdf type=\"itu-radio-material\" id=\"itu_concrete\">\
+         <string name=\"type\" value=\"concrete\"/></bsdf>\n{shapes}</scene>\n"
+    );
+    let xml = write(dir.path(), "scene/scene.xml", xml);
+    let e = read_scene(&xml).unwrap_err();
+    assert!(e.is_user_error(), "{e}");
+    expect_all(
+        &e.to_string(),
+        &[
+            "scene.xml",
+            "shape \"mesh-16\", filename",
+            "past the limit of 16.0 GiB",
+            "counts each time",
+        ],
+    );
+}
+
+/// The glb of [`glb_with_x`] with its JSON chunk edited by `edit`, the container rebuilt.
+fn glb_with_json(edit: impl Fn(&mut Value)) -> Vec<u8> {
+    let glb = glb_with_x(1.0);
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().unwrap()) as usize;
+    let mut doc: Value = serde_json::from_slice(&glb[20..20 + json_len]).unwrap();
+    edit(&mut doc);
+    let mut text = serde_json::to_vec(&doc).unwrap();
+    while text.len() % 4 != 0 {
+        text.push(b' ');
+    }
+    let bin = &glb[20 + json_len..];
+    let mut out = b"glTF".to_vec();
+    out.extend(2u32.to_le_bytes());
+    out.extend(((12 + 8 + text.len() + bin.len()) as u32).to_le_bytes());
+    out.extend((text.len() as u32).to_le_bytes());
+    out.extend(b"JSON");
+    out.extend(&text);
+    out.extend(bin);
+    out
+}
+
+/// glTF nodes form a forest: a node that is its own child, or a child of two nodes (a mesh
+/// reached by 2^40 paths takes 40 such nodes), is named instead of walked forever.
+#[test]
+fn gltf_nodes_that_are_no_tree_are_refused() {
+    let own_child = glb_with_json(|d| d["nodes"][0]["children"] = json!([0]));
+    let e = tileset_fails(own_child);
+    expect_all(&e, &["a.glb", "node 0", "form a tree"]);
+    let shared = glb_with_json(|d| {
+        let mesh = d["nodes"][0].clone();
+        d["nodes"] = json!([{"children": [2]}, {"children": [2]}, mesh]);
+        d["scenes"][0]["nodes"] = json!([0, 1]);
+    });
+    let e = tileset_fails(shared);
+    expect_all(&e, &["a.glb", "node 2", "form a tree"]);
+}
+
+/// External tilesets that fan out (a thousand children, each a tileset of a thousand...) stop
+/// at a bound on the tiles in all: depth alone bounds nothing here.
+#[test]
+fn a_tileset_fanning_out_is_bounded_in_width() {
+    let dir = tempfile::tempdir().unwrap();
+    let tile = |content: &str| {
+        json!({"geometricError": 0, "boundingVolume": {"box": [0,0,0,1,0,0,0,1,0,0,0,1]},
+               "content": {"uri": content}})
+    };
+    let fan = |children: Vec<Value>| {
+        json!({"asset": {"version": "1.0"}, "geometricError": 0,
+               "root": {"geometricError": 0, "refine": "ADD",
+                        "boundingVolume": {"box": [0,0,0,1,0,0,0,1,0,0,0,1]},
+                        "children": children}})
+    };
+    // 2,000 external tilesets of 2,000 empty tiles each: 4 million tiles, no cycle, depth 1.
+    let empty = json!({"geometricError": 0, "boundingVolume": {"box": [0,0,0,1,0,0,0,1,0,0,0,1]}});
+    let leaves = fan((0..2000).map(|_| empty.clone()).collect());
+    let root = fan((0..2000).map(|_| tile("fan.json")).collect());
+    write(
+        dir.path(),
+        "tiles/fan.json",
+        serde_json::to_vec(&leaves).unwrap(),
+    );
+    write(
+        dir.path(),
+        "tiles/tileset.json",
+        serde_json::to_vec(&root).unwrap(),
+    );
+    let e = fails::<kodama_nodes::stages::ingest::read_tiles::ReadTileset>(
+        json!({"path": "tiles/tileset.json", "crs": "EPSG:32618"}),
+        &Inputs::new(),
+        &[dir.path().join("tiles")],
+    );
+    expect_all(&e, &["fan.json", "at most 1048576 tiles"]);
+}
+
 #[test]
 fn a_view_image_outside_the_view_folder_or_an_id_that_is_a_path_is_refused() {
     let dir = tempfile::tempdir().unwrap();

@@ -102,7 +102,10 @@ pub fn read_scene_with_thickness(
         materials.insert(id, material);
     }
     let dir = path.parent().unwrap_or(Path::new("."));
-    let mut objects = Vec::new();
+    // Every shape's file resolved and counted first, so that a file named by thousands of
+    // shapes is refused before the first byte of meshes is read.
+    let budget = crate::params::ReadBudget::default();
+    let mut shapes = Vec::new();
     for s in doc.descendants().filter(|n| n.has_tag_name("shape")) {
         let id = s.attribute("id").unwrap_or_default();
         let place = || format!("line {}: shape \"{id}\"", line(s));
@@ -128,6 +131,13 @@ pub fn read_scene_with_thickness(
         // The node declared (and the cache digested) the XML's folder: nothing outside it is read.
         let ply = crate::io::safe_name::resolve_inside(dir, dir, file)
             .map_err(|m| bad(format!("{}, filename", place()), &m))?;
+        budget
+            .take(&ply)
+            .map_err(|m| bad(format!("{}, filename", place()), &m))?;
+        shapes.push((id, ply, material));
+    }
+    let mut objects = Vec::with_capacity(shapes.len());
+    for (id, ply, material) in shapes {
         let mut mesh = read_ply(&ply)?;
         mesh.materials = PodVec(vec![material as u8; mesh.triangles.len()]);
         mesh.check()

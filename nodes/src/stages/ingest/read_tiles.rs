@@ -78,6 +78,8 @@ impl Stage for ReadTileset {
         let tiles = Tiles {
             root: folder,
             place: &*place,
+            budget: crate::params::ReadBudget::default(),
+            tiles: std::cell::Cell::new(0),
         };
         read_tileset_file(&json, IDENTITY, None, &tiles, &mut scene, 0)?;
         if scene.objects.is_empty() {
@@ -123,6 +125,24 @@ type Placer = dyn Fn([f64; 3]) -> Result<[f64; 3], String> + Sync;
 struct Tiles<'a> {
     root: &'a Path,
     place: &'a Placer,
+    /// Every file read (tileset JSON, content, buffers), however often it is named.
+    budget: crate::params::ReadBudget,
+    /// Tiles visited so far, external tilesets' included: depth is bounded, and this bounds
+    /// the width (a tileset of a thousand external tilesets of a thousand each...).
+    tiles: std::cell::Cell<u64>,
+}
+
+/// The most tiles one tileset may have, external tilesets' included: far past any city's
+/// photogrammetry, and a bound on the walk when references fan out.
+const MAX_TILES: u64 = 1 << 20;
+
+impl Tiles<'_> {
+    /// Counts `file` against the read budget before it is read.
+    fn read(&self, json: &Path, field: &str, file: &Path) -> Result<(), StageError> {
+        self.budget
+            .take(file)
+            .map_err(|m| StageError::bad_input(json, field, m))
+    }
 }
 
 impl Tiles<'_> {
@@ -164,6 +184,7 @@ fn read_tileset_file(
             "nested more than 16 deep (a cycle?)",
         ));
     }
+    tiles.read(json, "open", json)?;
     let text = crate::io::open::read_regular_to_string(json)
         .map_err(|e| StageError::bad_input(json, "open", e.to_string()))?;
     let doc: Value = serde_json::from_str(&text).map_err(|e| {
@@ -202,6 +223,14 @@ fn visit_tile(
     depth: u32,
     path: String,
 ) -> Result<(), StageError> {
+    tiles.tiles.set(tiles.tiles.get() + 1);
+    if tiles.tiles.get() > MAX_TILES {
+        return Err(StageError::bad_input(
+            json,
+            path,
+            format!("a tileset of at most {MAX_TILES} tiles, external tilesets' included"),
+        ));
+    }
     let transform = match tile.get("transform").and_then(Value::as_array) {
         Some(t) if t.len() == 16 => {
             let mut m = [0.0; 16];
@@ -246,7 +275,11 @@ fn visit_tile(
             else {
                 continue;
             };
-            let file = tiles.resolve(json, &format!("{path}.content.uri"), base, uri)?;
+            let field = format!("{path}.content.uri");
+            let file = tiles.resolve(json, &field, base, uri)?;
+            if !uri.ends_with(".json") {
+                tiles.read(json, &field, &file)?;
+            }
             if uri.ends_with(".json") {
                 read_tileset_file(&file, transform, Some(refine), tiles, scene, depth + 1)?;
             } else {
@@ -302,7 +335,21 @@ fn read_content_file(
         buffers: &buffers,
     };
     let mut stack: Vec<(gltf::Node, Mat4)> = s.nodes().map(|n| (n, to_tile)).collect();
+    // glTF's nodes form a forest: a node reached twice is a cycle (its own child) or a shared
+    // child, either of which would make the walk endless or exponential.
+    let mut seen = vec![false; gltf.nodes().len()];
     while let Some((node, parent)) = stack.pop() {
+        if seen
+            .get_mut(node.index())
+            .is_none_or(|s| std::mem::replace(s, true))
+        {
+            return Err(StageError::bad_input(
+                file,
+                format!("node {}", node.index()),
+                "glTF nodes that form a tree (this node is reached twice: it is its own \
+                 ancestor, or the child of two nodes)",
+            ));
+        }
         let local = node.transform().matrix();
         let m: Mat4 = std::array::from_fn(|i| local[i / 4][i % 4] as f64);
         let world = mul(&parent, &m);
@@ -353,6 +400,7 @@ fn gltf_buffers(file: &Path, gltf: &gltf::Gltf, tiles: &Tiles) -> Result<Vec<Vec
             gltf::buffer::Source::Uri(u) => {
                 let base = file.parent().unwrap_or(Path::new("."));
                 let buffer = tiles.resolve(file, &format!("buffer {u}"), base, u)?;
+                tiles.read(file, &format!("buffer {u}"), &buffer)?;
                 crate::io::open::read_regular(&buffer)
                     .map_err(|e| StageError::bad_input(file, format!("buffer {u}"), e.to_string()))
             }
