@@ -401,6 +401,19 @@ fn a_geotiff_claiming_billions_of_pixels_is_refused_before_decoding() {
     expect_all(&e, &["dsm.tif", "dimensions", "would need", "GiB"]);
 }
 
+/// Within the cell limit but far past what the file holds: 46,340 x 46,340 floats (8.6 GB)
+/// claimed by a TIFF of a few hundred bytes are refused before the decoder allocates them.
+#[test]
+fn a_tiff_claiming_more_pixels_than_it_stores_is_refused_before_decoding() {
+    let dir = tempfile::tempdir().unwrap();
+    let tie = [0.0, 0.0, 0.0, 583200.0, 4506600.0, 0.0];
+    let e = read_raster_fails(dir.path(), tiff(46_340, 46_340, [1.0, 1.0, 0.0], tie));
+    expect_all(
+        &e,
+        &["dsm.tif", "strip or tile byte counts", "inside the file"],
+    );
+}
+
 #[test]
 fn a_synthetic_city_past_its_size_limit_is_refused() {
     use kodama_nodes::synth::synth_city::SynthCity;

@@ -297,6 +297,8 @@ fn image_samples(
         .unwrap_or(1);
     crate::params::check_cells(width as f64, height as f64, sample_bytes * bands as usize)
         .map_err(|m| StageError::bad_input(path, "dimensions", m))?;
+    let decoded = width as u64 * height as u64 * (sample_bytes * bands as usize) as u64;
+    check_stored_data(path, d, decoded)?;
     let samples = d
         .read_image()
         .map_err(|e| tiff_error(path, "pixel data", e))?;
@@ -312,6 +314,54 @@ fn image_samples(
         ));
     }
     Ok(samples)
+}
+
+/// Whether the file can hold the `decoded` bytes of pixels its tags claim, checked before the
+/// decoder allocates them: a 64-byte TIFF can claim 46,340 x 46,340 floats within the cell limit.
+/// The strips' or tiles' stored bytes must lie inside the file, and expand to the pixels at most
+/// by their compression's largest ratio (none 1, PackBits 64, Deflate 1,032, LZW 4,096; other
+/// methods only by the cell limit). Chunks stored as 0 bytes (GDAL's sparse files) hold none of
+/// the pixels and are not asked to.
+fn check_stored_data(path: &Path, d: &mut FileDecoder, decoded: u64) -> Result<(), StageError> {
+    let counts = d
+        .get_tag_u64_vec(Tag::TileByteCounts)
+        .or_else(|_| d.get_tag_u64_vec(Tag::StripByteCounts))
+        .unwrap_or_default();
+    if counts.is_empty() {
+        return Ok(());
+    }
+    let file_len = std::fs::metadata(path).map_or(u64::MAX, |m| m.len());
+    let stored = counts.iter().fold(0u64, |a, &c| a.saturating_add(c));
+    if stored > file_len {
+        return Err(StageError::bad_input(
+            path,
+            "strip or tile byte counts",
+            format!(
+                "image data inside the file ({file_len} bytes), found chunks of {stored} bytes in all"
+            ),
+        ));
+    }
+    let ratio: u64 = match d.get_tag_u32(Tag::Compression).unwrap_or(1) {
+        1 => 1,
+        32773 => 64,
+        8 | 32946 => 1032,
+        5 => 4096,
+        _ => return Ok(()),
+    };
+    let chunks = counts.len() as u64;
+    let held = counts.iter().filter(|&&c| c > 0).count() as u64;
+    let needed = decoded / chunks * held;
+    if needed > stored.saturating_mul(ratio) {
+        return Err(StageError::bad_input(
+            path,
+            "strip or tile byte counts",
+            format!(
+                "{needed} bytes of pixels from {stored} stored bytes, more than their compression \
+                 can expand to (at most {ratio} to 1)"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// How many samples the decoder returned, whatever their type.
