@@ -414,6 +414,55 @@ fn a_tiff_claiming_more_pixels_than_it_stores_is_refused_before_decoding() {
     );
 }
 
+/// A grid sized by the data, not by a param: footprints 60 km apart at 0.5 m cells would make
+/// 1.4 x 10^10 cells, refused naming what it would need instead of allocated (or wrapped).
+#[test]
+fn a_footprint_score_over_a_far_flung_extent_is_refused() {
+    use kodama_nodes::artifact::{Footprint, Footprints, Polygon};
+    use kodama_nodes::stages::eval::footprint_score::FootprintScore;
+    let square = |x: f64, y: f64| Footprint {
+        id: format!("{x}"),
+        polygons: vec![Polygon {
+            exterior: vec![[x, y], [x + 10.0, y], [x + 10.0, y + 10.0], [x, y + 10.0]],
+            holes: vec![],
+        }],
+        height_m: None,
+        min_height_m: None,
+        levels: None,
+        min_level: None,
+    };
+    let far = Footprints {
+        items: vec![square(0.0, 0.0), square(60_000.0, 60_000.0)],
+    };
+    let inputs = Inputs::new()
+        .with("predicted", slot(Artifact::Footprints(far.clone())))
+        .with("reference", slot(Artifact::Footprints(far)))
+        .with("region", kodama_nodes::stage::Slot::Optional(None))
+        .with("returns", kodama_nodes::stage::Slot::Optional(None));
+    let e = fails::<FootprintScore>(json!({"cell_m": 0.5}), &inputs, &[]);
+    expect_all(&e, &["cell_m", "would need", "region"]);
+}
+
+/// Params within their own ranges whose product is not: 100,000 views of 8192 x 8192 pixels.
+#[test]
+fn a_synthetic_view_set_is_bounded_as_a_whole() {
+    use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
+    let mut p = SynthViewsParams {
+        max_views: 100_000,
+        size: (8192, 8192),
+        ..Default::default()
+    };
+    let e = SynthViews::validate(&p).unwrap_err();
+    assert_eq!(e.field, "max_views");
+    assert!(
+        e.message.contains("lower max_views or size"),
+        "{}",
+        e.message
+    );
+    p.size = (640, 480);
+    assert!(SynthViews::validate(&p).is_ok());
+}
+
 #[test]
 fn a_synthetic_city_past_its_size_limit_is_refused() {
     use kodama_nodes::synth::synth_city::SynthCity;

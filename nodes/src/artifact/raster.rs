@@ -20,6 +20,21 @@ pub struct Grid {
 }
 
 impl Grid {
+    /// A grid of `cols` x `rows` cells computed from data (an extent over a cell size), checked
+    /// against the cell and memory limits ([`crate::params::check_cells`], as f32 cells) before
+    /// the counts are cast: a far-flung extent is an error, never a width that wraps.
+    pub fn sized(x0: f64, y0: f64, cell_m: f64, cols: f64, rows: f64) -> Result<Grid, String> {
+        let (cols, rows) = (cols.ceil(), rows.ceil());
+        crate::params::check_cells(cols, rows, 4)?;
+        Ok(Grid {
+            x0,
+            y0,
+            cell_m,
+            width: cols as u32,
+            height: rows as u32,
+        })
+    }
+
     /// Number of cells.
     pub fn len(&self) -> usize {
         self.width as usize * self.height as usize

@@ -181,6 +181,9 @@ impl SynthViewsParams {
 /// Renders street views of a city's truth scene.
 pub struct SynthViews;
 
+/// The most pixels a synthetic view set may hold over all its views (`size` x `max_views`).
+pub const MAX_SET_PIXELS: u64 = 1 << 35;
+
 impl Stage for SynthViews {
     const KIND: &'static str = "SynthViews";
     // 3: sensor errors after real models' and metadata's (issue 51): per-image depth scale and
@@ -245,6 +248,19 @@ impl Stage for SynthViews {
             return Err(ParamError::new(
                 "max_views",
                 "expected at most 100000 views",
+            ));
+        }
+        // Each factor within its range can still multiply past any disk: the set as a whole.
+        let pixels = p.size.0 as u64 * p.size.1 as u64 * p.max_views as u64;
+        if pixels > MAX_SET_PIXELS {
+            return Err(ParamError::new(
+                "max_views",
+                format!(
+                    "{} views of {} x {} pixels make {pixels} pixels; a view set holds at most \
+                     {MAX_SET_PIXELS} (2^35, some 800 GB of parts before compression): lower \
+                     max_views or size",
+                    p.max_views, p.size.0, p.size.1
+                ),
             ));
         }
         for (name, v) in [

@@ -87,16 +87,27 @@ impl Stage for FootprintScore {
         let reference: &Footprints = inputs.one("reference")?;
         let region: Option<&Raster> = inputs.optional("region")?;
         let returns: Option<&Raster> = inputs.optional("returns")?;
+        let scale = |n: u32, g: &Grid| n as f64 * g.cell_m / p.cell_m;
         let grid = match region {
-            Some(r) => Grid {
-                cell_m: p.cell_m,
-                width: (r.grid.width as f64 * r.grid.cell_m / p.cell_m).ceil() as u32,
-                height: (r.grid.height as f64 * r.grid.cell_m / p.cell_m).ceil() as u32,
-                ..r.grid
-            },
+            Some(r) => Grid::sized(
+                r.grid.x0,
+                r.grid.y0,
+                p.cell_m,
+                scale(r.grid.width, &r.grid),
+                scale(r.grid.height, &r.grid),
+            ),
             None => extent(&[predicted, reference], p.cell_m)
                 .ok_or_else(|| StageError::Failed("neither footprint set has a polygon".into()))?,
-        };
+        }
+        .map_err(|m| {
+            StageError::Param(ParamError::new(
+                "cell_m",
+                format!(
+                    "{m} (the footprints' extent over cell_m; a larger cell_m or a `region` \
+                     input bounds it)"
+                ),
+            ))
+        })?;
         let finite_at = |r: &Raster, i: usize| {
             let (x, y) = grid.center(i as u32 % grid.width, i as u32 / grid.width);
             r.grid
@@ -119,8 +130,9 @@ impl Stage for FootprintScore {
     }
 }
 
-/// A grid covering every polygon of `sets`.
-fn extent(sets: &[&Footprints], cell_m: f64) -> Option<Grid> {
+/// A grid covering every polygon of `sets` (none without a polygon; an error past the cell
+/// limits).
+fn extent(sets: &[&Footprints], cell_m: f64) -> Option<Result<Grid, String>> {
     let pts = sets
         .iter()
         .flat_map(|s| &s.items)
@@ -135,13 +147,13 @@ fn extent(sets: &[&Footprints], cell_m: f64) -> Option<Grid> {
             ),
         })
     })?;
-    Some(Grid {
-        x0: lo[0] - cell_m,
-        y0: hi[1] + cell_m,
+    Some(Grid::sized(
+        lo[0] - cell_m,
+        hi[1] + cell_m,
         cell_m,
-        width: ((hi[0] - lo[0]) / cell_m).ceil() as u32 + 2,
-        height: ((hi[1] - lo[1]) / cell_m).ceil() as u32 + 2,
-    })
+        ((hi[0] - lo[0]) / cell_m).ceil() + 2.0,
+        ((hi[1] - lo[1]) / cell_m).ceil() + 2.0,
+    ))
 }
 
 /// The scores on `grid`, counting only cells `in_region`; `returns`, if given, marks the cells
