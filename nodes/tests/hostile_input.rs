@@ -837,6 +837,48 @@ fn osm_xml_seed_reads() {
     assert_eq!(f.items[1].polygons[0].holes.len(), 1);
 }
 
+/// A height of 1e300 or `inf` levels is no building's: the tag is left out and named, the
+/// building and every other one kept (where one such building once emptied the scene).
+#[test]
+fn implausible_osm_building_tags_are_left_out_and_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let xml = OSM_XML.replace(r#"v="12 m""#, r#"v="1e300""#).replace(
+        r#"<tag k="building:levels" v="4"/>"#,
+        r#"<tag k="building:levels" v="inf"/>"#,
+    );
+    let path = write(dir.path(), "b.osm", xml);
+    let warnings = Warnings::default();
+    let files = [path];
+    let ctx = Ctx {
+        site: &site(),
+        files: &files,
+        progress: &warnings,
+        seed: [0; 32],
+        parts: kodama_nodes::stage::process_parts(),
+        window: None,
+    };
+    let f = kodama_nodes::stages::ingest::read_osm::ReadOsmBuildings::run(
+        &serde_json::from_value(json!({"path": "b.osm"})).unwrap(),
+        &Inputs::new(),
+        &ctx,
+    )
+    .unwrap();
+    let ids: Vec<&str> = f.items.iter().map(|b| b.id.as_str()).collect();
+    assert_eq!(ids, ["w13", "r20"]);
+    assert_eq!(f.items[0].height_m, None);
+    assert_eq!(f.items[1].levels, None);
+    let w = warnings.0.lock().unwrap().join("\n");
+    expect_all(
+        &w,
+        &[
+            "b.osm",
+            "2 building tags left out",
+            "way 13: height=1e300",
+            "relation 20: building:levels=inf",
+        ],
+    );
+}
+
 #[test]
 fn broken_osm_xml_is_named_by_line() {
     let dir = tempfile::tempdir().unwrap();

@@ -7,7 +7,7 @@ mod common;
 use common::*;
 
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use kodama_nodes::artifact::{Grid, PodVec, Raster, View, ViewSet};
 use kodama_nodes::io::mapillary::{
@@ -19,7 +19,7 @@ use kodama_nodes::stages::ingest::read_mapillary::{ReadMapillary, ReadMapillaryP
 use kodama_nodes::stages::ingest::read_panoramax::{ReadPanoramax, ReadPanoramaxParams};
 use kodama_nodes::synth::synth_city::generate;
 use kodama_nodes::synth::synth_views::{SynthViews, SynthViewsParams};
-use kodama_nodes::{Artifact, Ctx, FileRef, Inputs, Progress, Stage, StageError};
+use kodama_nodes::{Artifact, Ctx, FileRef, Inputs, Stage, StageError};
 use serde_json::Value;
 
 /// A fixture folder of this crate's `tests/fixtures`.
@@ -32,18 +32,6 @@ fn fixtures(rel: &str) -> PathBuf {
 fn expected(provider: &str) -> Value {
     let text = std::fs::read_to_string(fixtures(provider).join("expected.json")).unwrap();
     serde_json::from_str(&text).unwrap()
-}
-
-/// Collects what a stage warns of.
-#[derive(Default)]
-struct Warnings(Mutex<Vec<String>>);
-
-impl Progress for Warnings {
-    fn set_total(&self, _: u64) {}
-    fn advance(&self, _: u64) {}
-    fn warn(&self, message: &str) {
-        self.0.lock().unwrap().push(message.to_owned());
-    }
 }
 
 /// The terrain plane of the fixtures' expected.json, as a 1 m raster over the fixtures' cameras.

@@ -118,6 +118,18 @@ pub fn subset(set: &ViewSet, keep: impl Fn(usize, &ViewHead) -> bool) -> ViewSet
     }
 }
 
+/// Collects what a stage warns of.
+#[derive(Default)]
+pub struct Warnings(pub std::sync::Mutex<Vec<String>>);
+
+impl kodama_nodes::stage::Progress for Warnings {
+    fn set_total(&self, _: u64) {}
+    fn advance(&self, _: u64) {}
+    fn warn(&self, message: &str) {
+        self.0.lock().unwrap().push(message.to_owned());
+    }
+}
+
 /// An input slot holding one artifact.
 pub fn slot(a: Artifact) -> Slot {
     Slot::One(Arc::new(a))

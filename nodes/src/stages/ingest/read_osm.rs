@@ -86,7 +86,20 @@ impl Stage for ReadOsmBuildings {
         let files = p.paths.len().max(1);
         let mut parts = Vec::with_capacity(files);
         for i in 0..files {
-            parts.push(read_osm_buildings(ctx.file(i)?, &wgs84)?);
+            let path = ctx.file(i)?;
+            let (part, implausible) = read_osm_buildings(path, &wgs84)?;
+            if !implausible.is_empty() {
+                let shown: Vec<&str> = implausible.iter().map(String::as_str).collect();
+                ctx.progress.warn(&format!(
+                    "{}: {} building tags left out as no building's (heights up to \
+                     {MAX_BUILDING_HEIGHT_M} m, levels up to {MAX_LEVELS}; the buildings keep \
+                     their other tags): {}",
+                    path.display(),
+                    implausible.len(),
+                    crate::stage::named_few(&shown)
+                ));
+            }
+            parts.push(part);
         }
         let (merged, duplicates) = first_file_wins(parts);
         if duplicates > 0 {
@@ -140,7 +153,15 @@ struct Tags {
     min_height_m: Option<f64>,
     levels: Option<f64>,
     min_level: Option<f64>,
+    /// `key=value` of the tags left out as no building's (out of range, not finite).
+    implausible: Vec<String>,
 }
+
+/// The tallest building a height tag may give, metres: the tallest standing is 828 m, and a
+/// height of 1e300 (or `inf`) would make a solid no tracer can hold.
+pub const MAX_BUILDING_HEIGHT_M: f64 = 1000.0;
+/// The most levels a `building:levels` tag may give (the most built is 163).
+pub const MAX_LEVELS: f64 = 300.0;
 
 fn tags<'a>(it: impl Iterator<Item = (&'a str, &'a str)>) -> Tags {
     let mut t = Tags {
@@ -148,16 +169,39 @@ fn tags<'a>(it: impl Iterator<Item = (&'a str, &'a str)>) -> Tags {
         min_height_m: None,
         levels: None,
         min_level: None,
+        implausible: Vec::new(),
     };
+    // A value that parses but is no building's is left out, as an unparsable one is, and
+    // named, so one bad tag costs its building the tag, not the run its scene.
+    let mut within = |k: &str, v: &str, x: Option<f64>, most: f64| {
+        x.filter(|x| {
+            let ok = (0.0..=most).contains(x);
+            if !ok {
+                t.implausible.push(format!("{k}={v}"));
+            }
+            ok
+        })
+    };
+    let mut height = None;
+    let mut min_height = None;
+    let mut levels = None;
+    let mut min_level = None;
     for (k, v) in it {
+        let number = || v.trim().parse::<f64>().ok();
         match k {
-            "height" | "building:height" => t.height_m = t.height_m.or(parse_length(v)),
-            "min_height" => t.min_height_m = parse_length(v),
-            "building:levels" => t.levels = v.trim().parse().ok(),
-            "building:min_level" => t.min_level = v.trim().parse().ok(),
+            "height" | "building:height" => {
+                height = height.or(within(k, v, parse_length(v), MAX_BUILDING_HEIGHT_M))
+            }
+            "min_height" => min_height = within(k, v, parse_length(v), MAX_BUILDING_HEIGHT_M),
+            "building:levels" => levels = within(k, v, number(), MAX_LEVELS),
+            "building:min_level" => min_level = within(k, v, number(), MAX_LEVELS),
             _ => {}
         }
     }
+    t.height_m = height;
+    t.min_height_m = min_height;
+    t.levels = levels;
+    t.min_level = min_level;
     t
 }
 
@@ -191,8 +235,12 @@ fn assemble_rings(mut parts: Vec<Vec<i64>>) -> Vec<Vec<i64>> {
 }
 
 /// Three passes: building relations and their member ways; building ways and members' node ids;
-/// the coordinates of just those nodes.
-pub fn read_osm_buildings(path: &Path, wgs84: &ToSite) -> Result<Footprints, StageError> {
+/// the coordinates of just those nodes. Beside the footprints, the tags left out as no
+/// building's (`way 12: height=1e300`).
+pub fn read_osm_buildings(
+    path: &Path,
+    wgs84: &ToSite,
+) -> Result<(Footprints, Vec<String>), StageError> {
     let rels = read_building_relations(path)?;
     let members: HashSet<i64> = rels
         .iter()
@@ -201,9 +249,19 @@ pub fn read_osm_buildings(path: &Path, wgs84: &ToSite) -> Result<Footprints, Sta
         .collect();
     let ways = read_ways(path, &members)?;
     let nodes = read_node_coords(path, wgs84, &ways.refs)?;
+    let named = |kind: &str, id: i64, t: &Tags| {
+        t.implausible
+            .iter()
+            .map(|tag| format!("{kind} {id}: {tag}"))
+            .collect::<Vec<_>>()
+    };
+    let mut implausible: Vec<String> = (ways.buildings.iter())
+        .flat_map(|(id, t)| named("way", *id, t))
+        .collect();
+    implausible.extend(rels.iter().flat_map(|r| named("relation", r.id, &r.tags)));
     let mut items = way_footprints(ways.buildings, &ways.refs, &nodes);
     items.extend(relation_footprints(rels, &ways.refs, &nodes));
-    Ok(Footprints { items })
+    Ok((Footprints { items }, implausible))
 }
 
 /// A multipolygon (or `type=building`) relation tagged as a building.
