@@ -338,7 +338,7 @@ fn radiomap_device_cuda_without_a_gpu_is_a_clear_error() {
     assert!(!out.exists());
 }
 
-/// Flags are checked as a graph's params are: a non-finite transmitter and a cell that would
+/// Flags are checked as a graph's params are: a non-finite or far-off transmitter and a cell that would
 /// make more cells than a graph's RadioMap may (16 bytes each) are user errors, exit 2, before any
 /// map is allocated or file written.
 #[test]
@@ -348,6 +348,8 @@ fn radiomap_refuses_a_non_finite_transmitter_and_a_cell_too_fine() {
     for (tx, cell, says) in [
         ("NaN,0,10", "10", "expected finite coordinates"),
         ("0,inf,10", "10", "expected finite coordinates"),
+        // Finite, and nowhere a scene can be.
+        ("1e308,0,10", "10", "within 1e8 m of the site origin"),
         ("0,0,10", "1e-6", "use a coarser cell"),
     ] {
         let r = env.cli(&[

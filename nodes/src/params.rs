@@ -110,6 +110,21 @@ pub fn check_bytes(what: &str, n: f64, bytes_each: usize) -> Result<(), String> 
     Ok(())
 }
 
+/// A point in the site frame, metres: finite and within [`crate::artifact::MAX_COORD_M`] of the
+/// origin on every axis, as a scene's vertices must be. A transmitter at 1e308 m is finite, and
+/// silently empties a radio map.
+pub fn check_point(p: [f64; 3]) -> Result<(), String> {
+    let most = crate::artifact::MAX_COORD_M as f64;
+    if p.iter().all(|c| c.abs() <= most) {
+        Ok(())
+    } else {
+        Err(format!(
+            "finite coordinates within {most:e} m of the site origin, found ({}, {}, {})",
+            p[0], p[1], p[2]
+        ))
+    }
+}
+
 /// What one node reads in all through the files its inputs name (the meshes a scene file lists,
 /// a tileset's content and buffers, external tilesets): the same file named a thousand times
 /// counts a thousand times, so a few lines of references cannot make a run read or hold more than

@@ -110,6 +110,12 @@ fn a_las_scale_of_zero_or_a_non_finite_offset_is_refused() {
         (131, 0.0, "x scale factor"),
         (139, f64::NAN, "y scale factor"),
         (171, f64::INFINITY, "z offset"),
+        // Finite, but every point at 1e308 m.
+        (
+            171,
+            1e308,
+            "z scale and offset giving coordinates within 1e10",
+        ),
     ] {
         let path = las_file(dir.path(), "a.las", 10, false);
         let mut bytes = std::fs::read(&path).unwrap();

@@ -160,9 +160,7 @@ fn parse_point(s: &str) -> Result<[f64; 3], String> {
         })
         .collect::<Result<_, _>>()?;
     let p = <[f64; 3]>::try_from(v).map_err(|_| "expected X,Y,Z".to_string())?;
-    if !p.iter().all(|c| c.is_finite()) {
-        return Err("expected finite coordinates in metres".to_string());
-    }
+    kodama_nodes::params::check_point(p).map_err(|m| format!("expected {m}"))?;
     Ok(p)
 }
 

@@ -61,6 +61,9 @@ pub fn read_links(path: &Path) -> Result<Vec<LinkEnds>, StageError> {
                     )
                 })?;
         }
+        for (end, p) in [("tx", [v[0], v[1], v[2]]), ("rx", [v[3], v[4], v[5]])] {
+            crate::params::check_point(p).map_err(|m| bad(format!("line {line}, {end}"), &m))?;
+        }
         out.push(([v[0], v[1], v[2]], [v[3], v[4], v[5]]));
     }
     Ok(out)

@@ -360,7 +360,7 @@ mod tests {
                 },
             ],
         };
-        let grid = extent(&[&predicted, &reference], 0.25).unwrap();
+        let grid = extent(&[&predicted, &reference], 0.25).unwrap().unwrap();
         let all = vec![true; grid.len()];
         let m = score(&predicted, &reference, &grid, &all, None, 0.9);
         let close = |k: &str, v: f64| assert!((m.get(k).unwrap() - v).abs() < 1e-9, "{k}: {m:?}");

@@ -120,6 +120,10 @@ pub fn header_crs(path: &Path, header: &las::Header) -> Result<Option<Crs>, Stag
     Ok(None)
 }
 
+/// The farthest coordinate a LAS header's scale and offset may reach, in the file's map units:
+/// a thousand times any projected CRS's extent (10^7 m), so a scale of 1 still passes.
+pub const LAS_MAX_COORD: f64 = 1e10;
+
 /// What the las crate takes on trust from the header, checked against the file first: scales
 /// and offsets (a zero or non-finite one makes every coordinate garbage), extended VLR lengths
 /// (the crate allocates what they say) and, uncompressed, the points the data can hold (so a
@@ -149,6 +153,18 @@ pub fn check_las_header(path: &Path) -> Result<(), StageError> {
             return Err(bad(
                 "header".into(),
                 format!("a finite {axis} offset, found {offset}"),
+            ));
+        }
+        // Every coordinate is offset + scale x a 32-bit integer: finite factors can still put
+        // points at 1e308 m, where one point empties every raster made from the cloud.
+        let reach = offset.abs() + scale.abs() * f64::from(i32::MAX);
+        if !(reach <= LAS_MAX_COORD) {
+            return Err(bad(
+                "header".into(),
+                format!(
+                    "an {axis} scale and offset giving coordinates within {LAS_MAX_COORD:e} \
+                     (map units), found offset {offset} and scale {scale}: up to {reach:e}"
+                ),
             ));
         }
     }

@@ -188,12 +188,8 @@ impl Stage for RadioMap {
                 "expected a positive frequency in Hz",
             ));
         }
-        if ![p.tx.0, p.tx.1, p.tx.2].iter().all(|v| v.is_finite()) {
-            return Err(ParamError::new(
-                "tx",
-                "expected finite coordinates in metres",
-            ));
-        }
+        crate::params::check_point([p.tx.0, p.tx.1, p.tx.2])
+            .map_err(|m| ParamError::new("tx", format!("expected {m}")))?;
         if !p.height_m.is_finite() {
             return Err(ParamError::new(
                 "height_m",

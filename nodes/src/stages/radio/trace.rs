@@ -2,6 +2,7 @@
 //! (paper Sec. 5).
 
 use std::collections::BTreeMap;
+use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
@@ -187,7 +188,17 @@ impl Stage for Trace {
         let mut groups: BTreeMap<(u64, u64), Vec<usize>> = BTreeMap::new();
         let mut ends = Vec::with_capacity(links.links.len());
         for (i, l) in links.links.iter().enumerate() {
-            ends.push(([l.tx.x, l.tx.y, z(&l.tx)?], [l.rx.x, l.rx.y, z(&l.rx)?]));
+            let (tx, rx) = ([l.tx.x, l.tx.y, z(&l.tx)?], [l.rx.x, l.rx.y, z(&l.rx)?]);
+            for (end, p) in [("transmitter", tx), ("receiver", rx)] {
+                crate::params::check_point(p).map_err(|m| {
+                    StageError::bad_input(
+                        Path::new("the `links` input"),
+                        format!("link {i}, {end}"),
+                        format!("expected {m}"),
+                    )
+                })?;
+            }
+            ends.push((tx, rx));
             let az = l.tx.azimuth_deg.unwrap_or(f64::NAN);
             groups
                 .entry((l.freq_hz.to_bits(), az.to_bits()))
