@@ -63,8 +63,12 @@ impl<S: Stage> Params for Erased<S> {
     }
     fn run(&self, inputs: &Inputs, ctx: &Ctx) -> Result<Ran, StageError> {
         let r = S::run_reported(&self.0, inputs, ctx)?;
+        let mut output = r.output.into_artifact();
+        if let Artifact::Scene(scene) = &mut output {
+            sound_scene(scene, ctx)?;
+        }
         Ok(Ran {
-            output: r.output.into_artifact(),
+            output,
             reports: r.reports,
         })
     }
@@ -77,6 +81,31 @@ impl<S: Stage> Params for Erased<S> {
     fn clone_box(&self) -> Box<dyn Params> {
         Box::new(Erased::<S>(self.0.clone(), PhantomData))
     }
+}
+
+/// Every scene a stage builds is checked before anything downstream sees it: objects whose
+/// meshes are not sound (non-finite or far-off vertices, indices past the vertices) are left out
+/// and named in a warning; a scene that had objects and kept none is an error.
+fn sound_scene(scene: &mut kodama_nodes::artifact::Scene, ctx: &Ctx) -> Result<(), StageError> {
+    let had = scene.objects.len();
+    let dropped = scene.drop_unsound();
+    if dropped.is_empty() {
+        return Ok(());
+    }
+    let shown: Vec<&str> = dropped.iter().map(String::as_str).collect();
+    let named = kodama_nodes::stage::named_few(&shown);
+    if scene.objects.is_empty() {
+        return Err(StageError::bad_input(
+            std::path::Path::new("the node's inputs"),
+            "the scene built from them",
+            format!("objects with sound meshes; every one of the {had} failed: {named}"),
+        ));
+    }
+    ctx.progress.warn(&format!(
+        "{} of the scene's {had} objects left out, their meshes unsound: {named}",
+        dropped.len()
+    ));
+    Ok(())
 }
 
 /// The params of a report node (`"carved.outcomes"`): it has none, and runs nothing.

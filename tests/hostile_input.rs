@@ -803,3 +803,44 @@ fn a_graph_named_dot_dot_writes_inside_out() {
     assert!(env.path("out/graph/terrain.tif").is_file(), "{}", r.stderr);
     assert!(!env.path("terrain.tif").exists() && !env.path("out/terrain.tif").exists());
 }
+
+/// Every scene a stage builds is checked before anything downstream sees it: a DEM cell of 3e38
+/// (finite, and a terrain vertex no tracer can hold) leaves its mesh out, named; a scene left
+/// with nothing is exit 2 rather than an empty scene traced as if it were the site.
+#[test]
+fn a_scene_object_past_any_site_is_named_not_traced() {
+    use kodama_nodes::artifact::{Grid, PodVec, Raster};
+    let env = Env::new();
+    let site = kodama_nodes::site::Site {
+        crs: "EPSG:32618".into(),
+        origin: (0.0, 0.0),
+        cell_m: 1.0,
+    };
+    let mut data = vec![10.0f32; 100];
+    data[55] = 3e38;
+    let dem = Raster {
+        grid: Grid {
+            x0: 0.0,
+            y0: 10.0,
+            cell_m: 1.0,
+            width: 10,
+            height: 10,
+        },
+        data: PodVec(data),
+    };
+    let mut f = std::fs::File::create(env.path("dem.tif")).unwrap();
+    kodama_nodes::io::geotiff::write_geotiff(&dem, &site, &mut f).unwrap();
+    let g = env.write(
+        "g.ron",
+        &graph(
+            r#"        "dem": ReadRaster(path: "dem.tif"),
+        "scene": AssembleScene(terrain: "dem", objects: []),"#,
+            "",
+        ),
+    );
+    let r = run_bounded(env.run_cmd(&g, &[]), Duration::from_secs(120));
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    has(&r.stderr, "every one of the 1 failed");
+    has(&r.stderr, "terrain: vertex");
+    has(&r.stderr, "found 7.5e37");
+}

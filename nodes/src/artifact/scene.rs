@@ -46,7 +46,7 @@ impl Mesh {
                     return Err((
                         format!("vertex {i}"),
                         format!(
-                            "a finite {axis} within {MAX_COORD_M:e} m of the origin, found {v} (wrong CRS or units?)"
+                            "a finite {axis} within {MAX_COORD_M:e} m of the origin, found {v:e} (wrong CRS or units?)"
                         ),
                     ));
                 }
@@ -247,6 +247,22 @@ impl Scene {
         }
     }
 
+    /// Leaves out every object whose mesh fails [`Mesh::check`] (a vertex not finite or past
+    /// [`MAX_COORD_M`], an index past the vertices), returning each as `id: place: expected`.
+    /// What the engine applies to every scene a stage builds: one building at 1e300 m (a height
+    /// tag, a terrain cell of 3e38) costs that object, named, not the whole scene its BVH.
+    pub fn drop_unsound(&mut self) -> Vec<String> {
+        let mut dropped = Vec::new();
+        self.objects.retain(|o| match o.mesh.check() {
+            Ok(()) => true,
+            Err((place, expected)) => {
+                dropped.push(format!("{}: {place}: {expected}", o.id));
+                false
+            }
+        });
+        dropped
+    }
+
     /// [`Mesh::check`] for every object, the place naming the object.
     pub fn check(&self) -> Result<(), (String, String)> {
         for o in &self.objects {
@@ -261,6 +277,23 @@ impl Scene {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn unsound_objects_are_left_out_and_named() {
+        let mut bad = strip("far", ObjectClass::Building, 0.0);
+        bad.mesh.positions.0[1][2] = 3e38;
+        let mut scene = Scene {
+            objects: vec![strip("a", ObjectClass::Building, 0.0), bad],
+        };
+        let dropped = scene.drop_unsound();
+        assert_eq!(scene.objects.len(), 1);
+        assert_eq!(scene.objects[0].id, "a");
+        assert_eq!(dropped.len(), 1);
+        assert!(
+            dropped[0].starts_with("far: vertex 1: a finite z") && dropped[0].contains("3e38"),
+            "{dropped:?}"
+        );
+    }
 
     /// Two triangles side by side along x, 0-10 m and 10-20 m (a quad each half).
     fn strip(id: &str, class: ObjectClass, x0: f32) -> SceneObject {
