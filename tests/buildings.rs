@@ -265,13 +265,17 @@ fn chromium(browser: &Path, url: &str, extra: &[&str]) -> String {
 
 /// report.html in a real browser: the page finishes its first frame, the 3D view is not blank
 /// (over a fifth of the canvas differs from the background), and no script error is reported.
-/// A screenshot lands beside the report. Skipped, saying so, where no Chromium is installed
-/// (.ci/run installs Debian's).
+/// A screenshot lands beside the report. Skipped, saying so, where no Chromium is installed;
+/// under CI=true that fails instead, since .ci/run installs Debian's.
 fn check_report_in_browser(dir: &Path) {
     let Some(browser) = find_chromium() else {
-        eprintln!(
-            "SKIPPED: report.html browser check: no Chromium found (install Debian's `chromium`, or set KODAMA_CHROMIUM)"
+        let why = "report.html browser check: no Chromium found (install Debian's `chromium`, \
+                   or set KODAMA_CHROMIUM)";
+        assert!(
+            std::env::var("CI").as_deref() != Ok("true"),
+            "{why}; .ci/run installs it, see its output for why it did not"
         );
+        eprintln!("SKIPPED: {why}");
         return;
     };
     let url = format!(
