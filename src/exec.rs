@@ -552,7 +552,10 @@ impl<'a> Exec<'a> {
             Err(e) => {
                 let mut record = self.record(i, Status::Failed, reason, None);
                 record.user_error = e.is_user_error();
-                record.error = Some(e.to_string());
+                record.error = Some(crate::progress::cut(
+                    &e.to_string(),
+                    crate::progress::MAX_RECORD_CHARS,
+                ));
                 Outcome {
                     record,
                     digest: None,

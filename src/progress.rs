@@ -85,6 +85,7 @@ impl Reporter {
     }
 
     fn line(&self, text: &str) {
+        let text = &for_terminal(text);
         match &self.sink {
             Some(sink) => sink(text),
             None if self.mode == Mode::Bars => {
@@ -271,7 +272,7 @@ impl Task {
             bar
         });
         if mode == Mode::Lines {
-            eprintln!("{what}");
+            eprintln!("{}", for_terminal(what));
         }
         Task { mode, bar }
     }
@@ -287,7 +288,7 @@ impl Task {
     pub fn step(&self, what: &str) {
         match &self.bar {
             Some(bar) => bar.set_message(what.to_owned()),
-            None if self.mode == Mode::Lines => eprintln!("{what}"),
+            None if self.mode == Mode::Lines => eprintln!("{}", for_terminal(what)),
             None => {}
         }
     }
@@ -299,4 +300,51 @@ impl Drop for Task {
             bar.finish_and_clear();
         }
     }
+}
+
+/// The longest line printed whole; past it a line is cut and what was cut is counted.
+pub const MAX_LINE_CHARS: usize = 2000;
+
+/// The longest error a run record keeps: the record is read by programs (`--json`, the run
+/// records), which get more than a terminal line but not a file's worth.
+pub const MAX_RECORD_CHARS: usize = 20_000;
+
+/// `text` cut at `max` characters, with a count of the rest.
+pub fn cut(text: &str, max: usize) -> String {
+    match text.char_indices().nth(max) {
+        None => text.to_string(),
+        Some((at, _)) => {
+            let rest = text[at..].chars().count();
+            format!("{}... ({rest} more characters)", &text[..at])
+        }
+    }
+}
+
+/// `text` as it may reach a terminal: control characters other than newline and tab written as
+/// escapes (`\u{1b}`), so a node id or a file's content echoed in an error cannot move the cursor
+/// or retitle the window; and every line cut at [`MAX_LINE_CHARS`] characters with a count of
+/// the rest (a CSV header of 500,000 columns once made an error line of 8.8 MB).
+pub fn for_terminal(text: &str) -> String {
+    let mut out = String::with_capacity(text.len().min(8 * MAX_LINE_CHARS));
+    for (i, line) in text.split('\n').enumerate() {
+        if i > 0 {
+            out.push('\n');
+        }
+        let mut shown = 0;
+        let mut chars = line.chars();
+        for c in chars.by_ref() {
+            if shown == MAX_LINE_CHARS {
+                let rest = 1 + chars.count();
+                out.push_str(&format!("... ({rest} more characters)"));
+                break;
+            }
+            if c.is_control() && c != '\t' {
+                out.extend(c.escape_default());
+            } else {
+                out.push(c);
+            }
+            shown += 1;
+        }
+    }
+    out
 }

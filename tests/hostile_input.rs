@@ -24,26 +24,43 @@ fn has(stderr: &str, needle: &str) {
 
 /// Runs `cmd`, killing it after `limit`: a hang is a test failure, not a stuck test.
 fn run_bounded(mut cmd: Command, limit: Duration) -> Run {
+    use std::io::Read;
     let mut child = cmd
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .expect("spawn kodama-dag");
+    // Both pipes drained as the child writes: a child with more to say than a pipe holds
+    // would otherwise block, and look like a hang.
+    let drain = |mut r: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut v = Vec::new();
+            let _ = r.read_to_end(&mut v);
+            v
+        })
+    };
+    let out = drain(Box::new(child.stdout.take().unwrap()));
+    let err = drain(Box::new(child.stderr.take().unwrap()));
     let t0 = Instant::now();
-    loop {
-        if child.try_wait().unwrap().is_some() {
-            return finish(child.wait_with_output().unwrap());
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
         }
         if t0.elapsed() > limit {
             child.kill().unwrap();
-            let out = child.wait_with_output().unwrap();
+            let _ = child.wait();
             panic!(
                 "still running after {limit:?}; stderr: {}",
-                String::from_utf8_lossy(&out.stderr)
+                String::from_utf8_lossy(&err.join().unwrap())
             );
         }
         std::thread::sleep(Duration::from_millis(20));
-    }
+    };
+    finish(std::process::Output {
+        status,
+        stdout: out.join().unwrap(),
+        stderr: err.join().unwrap(),
+    })
 }
 
 /// `kodama-dag ARGS...` in the env's folder.
@@ -843,4 +860,40 @@ fn a_scene_object_past_any_site_is_named_not_traced() {
     has(&r.stderr, "every one of the 1 failed");
     has(&r.stderr, "terrain: vertex");
     has(&r.stderr, "found 7.5e37");
+}
+
+/// What an error echoes reaches a terminal tamed: a node id with an escape byte is printed as
+/// `\u{1b}`, never raw, and a file's 300,000 column names are cut to a line of bounded length.
+#[test]
+fn error_lines_are_escaped_and_bounded() {
+    let env = Env::new();
+    let g = env.write(
+        "g.ron",
+        &graph(
+            r#"        "a\u{1b}]0;owned\u{7}": ReadXyz(path: "missing.xyz"),"#,
+            "",
+        ),
+    );
+    let r = run_bounded(env.run_cmd(&g, &[]), Duration::from_secs(60));
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        !r.stderr.contains('\u{1b}') && !r.stderr.contains('\u{7}'),
+        "{:?}",
+        r.stderr
+    );
+    has(&r.stderr, "\\u{1b}");
+    let header: Vec<String> = (0..300_000).map(|i| format!("c{i}")).collect();
+    env.write("m.csv", &format!("{}\n", header.join(",")));
+    let g = env.write(
+        "m.ron",
+        &graph(
+            r#"        "m": ReadMeasurements(path: "m.csv"),"#,
+            r#""m": "m""#,
+        ),
+    );
+    let r = run_bounded(env.run_cmd(&g, &[]), Duration::from_secs(60));
+    assert_eq!(r.code, 2, "{}", &r.stderr[..r.stderr.len().min(500)]);
+    let longest = r.stderr.lines().map(|l| l.chars().count()).max().unwrap();
+    assert!(longest < 2100, "a line of {longest} characters");
+    has(&r.stderr, "more characters)");
 }

@@ -456,14 +456,23 @@ fn run_once(
         .collect();
     for n in &failed {
         eprintln!(
-            "error: node \"{}\" ({}) failed: {}",
-            n.id,
-            n.kind,
-            n.error.as_deref().unwrap_or("?")
+            "{}",
+            crate::progress::for_terminal(&format!(
+                "error: node \"{}\" ({}) failed: {}",
+                n.id,
+                n.kind,
+                n.error.as_deref().unwrap_or("?")
+            ))
         );
     }
     for (name, e) in &record.output_errors {
-        eprintln!("error: output \"{name}\" was not written: {}", e.error);
+        eprintln!(
+            "{}",
+            crate::progress::for_terminal(&format!(
+                "error: output \"{name}\" was not written: {}",
+                e.error
+            ))
+        );
     }
     if !quiet {
         for path in record.outputs.values() {
@@ -534,9 +543,9 @@ fn watch_loop(
         match &loaded {
             Ok(g) => match run_once(g, &cache, out_dir, vec![], jobs, json, quiet) {
                 Ok(_) => {}
-                Err(Fail(_, msg)) => eprintln!("{msg}"),
+                Err(Fail(_, msg)) => eprintln!("{}", crate::progress::for_terminal(&msg)),
             },
-            Err(Fail(_, msg)) => eprintln!("{msg}"),
+            Err(Fail(_, msg)) => eprintln!("{}", crate::progress::for_terminal(&msg)),
         }
         eprintln!("watching {} paths (Ctrl-C to stop)", paths.len());
         if !crate::watch::wait_for_change(
@@ -582,7 +591,7 @@ where
     let code = match dispatch(cli.command) {
         Ok(code) => code,
         Err(Fail(code, msg)) => {
-            eprintln!("{msg}");
+            eprintln!("{}", crate::progress::for_terminal(&msg));
             code
         }
     };
