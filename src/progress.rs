@@ -309,42 +309,45 @@ pub const MAX_LINE_CHARS: usize = 2000;
 /// records), which get more than a terminal line but not a file's worth.
 pub const MAX_RECORD_CHARS: usize = 20_000;
 
-/// `text` cut at `max` characters, with a count of the rest.
+/// `text` of at most `max` characters: past that its middle is left out and counted, so both
+/// the start of a message and its end (where an error says what was expected) stay.
 pub fn cut(text: &str, max: usize) -> String {
-    match text.char_indices().nth(max) {
-        None => text.to_string(),
-        Some((at, _)) => {
-            let rest = text[at..].chars().count();
-            format!("{}... ({rest} more characters)", &text[..at])
-        }
+    let n = text.chars().count();
+    if n <= max {
+        return text.to_string();
     }
+    let head = max / 2;
+    let tail = max - head;
+    let at = |k: usize| text.char_indices().nth(k).map_or(text.len(), |(i, _)| i);
+    format!(
+        "{} ... ({} characters left out) ... {}",
+        &text[..at(head)],
+        n - head - tail,
+        &text[at(n - tail)..]
+    )
 }
 
 /// `text` as it may reach a terminal: control characters other than newline and tab written as
 /// escapes (`\u{1b}`), so a node id or a file's content echoed in an error cannot move the cursor
-/// or retitle the window; and every line cut at [`MAX_LINE_CHARS`] characters with a count of
-/// the rest (a CSV header of 500,000 columns once made an error line of 8.8 MB).
+/// or retitle the window; and every line kept to [`MAX_LINE_CHARS`] characters, its middle left
+/// out and counted (a CSV header of 500,000 columns once made an error line of 8.8 MB).
 pub fn for_terminal(text: &str) -> String {
-    let mut out = String::with_capacity(text.len().min(8 * MAX_LINE_CHARS));
-    for (i, line) in text.split('\n').enumerate() {
-        if i > 0 {
-            out.push('\n');
-        }
-        let mut shown = 0;
-        let mut chars = line.chars();
-        for c in chars.by_ref() {
-            if shown == MAX_LINE_CHARS {
-                let rest = 1 + chars.count();
-                out.push_str(&format!("... ({rest} more characters)"));
-                break;
-            }
-            if c.is_control() && c != '\t' {
-                out.extend(c.escape_default());
-            } else {
-                out.push(c);
-            }
-            shown += 1;
-        }
-    }
-    out
+    let lines: Vec<String> = text
+        .split('\n')
+        .map(|line| {
+            cut(line, MAX_LINE_CHARS)
+                .chars()
+                .flat_map(|c| {
+                    let escaped = c.is_control() && c != '\t';
+                    let e: Vec<char> = if escaped {
+                        c.escape_default().collect()
+                    } else {
+                        vec![c]
+                    };
+                    e
+                })
+                .collect()
+        })
+        .collect();
+    lines.join("\n")
 }
