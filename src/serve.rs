@@ -13,6 +13,11 @@ use std::time::Duration;
 
 /// Connections served at once; more wait in the listen queue.
 const MAX_CONNECTIONS: usize = 16;
+/// How long one connection may take in all, request to last byte: a client that reads a byte
+/// a minute (or not at all) gives its slot back.
+const CONNECTION_DEADLINE: Duration = Duration::from_secs(120);
+/// How long one write may wait on a client that does not read.
+const WRITE_TIMEOUT: Duration = Duration::from_secs(20);
 /// The longest request head read.
 const MAX_HEAD: u64 = 16 * 1024;
 
@@ -54,7 +59,9 @@ pub fn serve(dir: &Path, port: u16) -> Result<(), String> {
 }
 
 fn handle(mut stream: TcpStream, root: &Path) -> std::io::Result<()> {
+    let start = std::time::Instant::now();
     stream.set_read_timeout(Some(Duration::from_secs(10)))?;
+    stream.set_write_timeout(Some(WRITE_TIMEOUT))?;
     let mut line = String::new();
     let mut head = BufReader::new((&stream).take(MAX_HEAD));
     head.read_line(&mut line)?;
@@ -71,16 +78,52 @@ fn handle(mut stream: TcpStream, root: &Path) -> std::io::Result<()> {
     let Some(path) = resolve(root, target) else {
         return respond(&mut stream, 404, "text/plain", b"not found\n", true);
     };
-    match std::fs::read(&path) {
-        Ok(body) => respond(
-            &mut stream,
-            200,
-            content_type(&path),
-            &body,
-            method == "GET",
-        ),
-        Err(_) => respond(&mut stream, 404, "text/plain", b"not found\n", true),
+    let Ok(mut file) = kodama_nodes::io::open::open_regular(&path) else {
+        return respond(&mut stream, 404, "text/plain", b"not found\n", true);
+    };
+    let len = file.metadata()?.len();
+    write!(
+        stream,
+        "HTTP/1.1 200 OK\r\nContent-Type: {}\r\nContent-Length: {len}\r\nConnection: close\r\n\r\n",
+        content_type(&path)
+    )?;
+    if method == "GET" {
+        // Streamed, not read whole: a report's 3D tiles can be large, and many clients many.
+        let mut buf = vec![0u8; 64 * 1024];
+        loop {
+            let n = file.read(&mut buf)?;
+            if n == 0 {
+                break;
+            }
+            write_before(&mut stream, &buf[..n], start + CONNECTION_DEADLINE)?;
+        }
     }
+    stream.flush()
+}
+
+/// `data` written to `stream`, every write waiting no longer than the time left before
+/// `deadline`: a client reading a byte now and then cannot hold its slot past the deadline.
+fn write_before(
+    stream: &mut TcpStream,
+    mut data: &[u8],
+    deadline: std::time::Instant,
+) -> std::io::Result<()> {
+    while !data.is_empty() {
+        let left = deadline.saturating_duration_since(std::time::Instant::now());
+        if left.is_zero() {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::TimedOut,
+                "the client took too long",
+            ));
+        }
+        stream.set_write_timeout(Some(left.min(WRITE_TIMEOUT)))?;
+        let n = stream.write(data)?;
+        if n == 0 {
+            return Err(std::io::ErrorKind::WriteZero.into());
+        }
+        data = &data[n..];
+    }
+    Ok(())
 }
 
 /// The file under `root` a request target names (`/` is `report.html`), or `None` when it

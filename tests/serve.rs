@@ -51,3 +51,49 @@ fn serve_gives_the_report_and_nothing_outside_its_folder() {
     child.wait().ok();
     checks.unwrap();
 }
+
+/// Clients that connect and never send, or never read, cost a slot for a bounded time: after
+/// 20 idle connections (past the 16 served at once) a real request is still answered, and a
+/// client that does not read a 16 MB file is let go while another is served.
+#[test]
+fn idle_and_stalled_clients_do_not_stall_serve() {
+    let env = Env::new();
+    let dir = env.path("report");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("report.html"), "<!doctype html>hi").unwrap();
+    std::fs::write(dir.join("big.bin"), vec![7u8; 16 << 20]).unwrap();
+    let mut child = Command::new(BIN)
+        .args(["serve", dir.to_str().unwrap(), "--port", "0"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stderr.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let addr = line
+        .split("http://")
+        .nth(1)
+        .and_then(|r| r.split('/').next())
+        .unwrap_or_else(|| panic!("no address in {line:?}"))
+        .to_owned();
+    let checks = std::panic::catch_unwind(|| {
+        // Never read their 16 MB (streamed: the server holds no copy of it per client).
+        let stalled: Vec<TcpStream> = (0..16)
+            .map(|_| {
+                let mut s = TcpStream::connect(&addr).unwrap();
+                write!(s, "GET /big.bin HTTP/1.1\r\n\r\n").unwrap();
+                s
+            })
+            .collect();
+        let idle: Vec<TcpStream> = (0..4).map(|_| TcpStream::connect(&addr).unwrap()).collect();
+        let t0 = std::time::Instant::now();
+        assert_eq!(get(&addr, "/"), (200, b"<!doctype html>hi".to_vec()));
+        assert!(t0.elapsed() < std::time::Duration::from_secs(90));
+        drop(idle);
+        drop(stalled);
+    });
+    child.kill().ok();
+    child.wait().ok();
+    checks.unwrap();
+}
