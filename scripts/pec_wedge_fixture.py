@@ -26,7 +26,6 @@ faces run 400 m from the edge, the edge along z through the origin, face 0 along
 receivers at 20 m. Needs scipy, sionna-rt 2.2 and libLLVM 19 (scripts/sionna_env.py)."""
 import csv
 import os
-import struct
 import sys
 import tempfile
 
@@ -36,6 +35,7 @@ from scipy.special import hankel2, jv
 from sionna.rt import PathSolver, PlanarArray, Receiver, Transmitter, load_scene
 
 from sionna_paths_fixture import link_gains
+from sionna_wedge_fixture import write_ply
 
 FREQ = 3.5e9
 WAVELENGTH = 299792458.0 / FREQ
@@ -124,13 +124,7 @@ def prism_ply(path, n):
     # Outward normals: the triangle runs clockwise seen from +z (face n, then face 0, CCW
     # from inside the solid), so the bottom keeps its order and the top reverses it.
     f = [(0, 1, 2), (3, 5, 4), (0, 3, 4), (0, 4, 1), (1, 4, 5), (1, 5, 2), (2, 5, 3), (2, 3, 0)]
-    head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\n"
-            "property float x\nproperty float y\nproperty float z\n"
-            f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
-    with open(path, "wb") as out:
-        out.write(head.encode())
-        out.write(b"".join(struct.pack("<3f", *p) for p in v))
-        out.write(b"".join(struct.pack("<B3i", 3, *t) for t in f))
+    write_ply(path, v, f)
 
 
 def sionna_gains(folder, n, tx, rxs, pol):

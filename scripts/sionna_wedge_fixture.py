@@ -28,11 +28,8 @@ TXS = [(40.0, 30.0, 20.0), (30.0, -10.0, 40.0)]
 MATERIALS = {"marble": 0.03, "metal": 0.002}
 
 
-def box_ply(path):
-    x0, x1, y0, y1, z0, z1 = BOX
-    v = [(x, y, z) for z in (z0, z1) for y in (y0, y1) for x in (x0, x1)]
-    f = [(0, 2, 3), (0, 3, 1), (4, 5, 7), (4, 7, 6), (0, 1, 5), (0, 5, 4),
-         (2, 6, 7), (2, 7, 3), (0, 4, 6), (0, 6, 2), (1, 3, 7), (1, 7, 5)]
+def write_ply(path, v, f):
+    """Binary little-endian PLY of float vertices `v` and triangles `f`."""
     head = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\n"
             "property float x\nproperty float y\nproperty float z\n"
             f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
@@ -40,6 +37,14 @@ def box_ply(path):
         out.write(head.encode())
         out.write(b"".join(struct.pack("<3f", *p) for p in v))
         out.write(b"".join(struct.pack("<B3i", 3, *t) for t in f))
+
+
+def box_ply(path):
+    x0, x1, y0, y1, z0, z1 = BOX
+    v = [(x, y, z) for z in (z0, z1) for y in (y0, y1) for x in (x0, x1)]
+    f = [(0, 2, 3), (0, 3, 1), (4, 5, 7), (4, 7, 6), (0, 1, 5), (0, 5, 4),
+         (2, 6, 7), (2, 7, 3), (0, 4, 6), (0, 6, 2), (1, 3, 7), (1, 7, 5)]
+    write_ply(path, v, f)
 
 
 def scene_xml(folder, material, thickness):
