@@ -17,14 +17,8 @@ fn get(addr: &str, target: &str) -> (u16, Vec<u8>) {
     (status, resp[head_end + 4..].to_vec())
 }
 
-#[test]
-fn serve_gives_the_report_and_nothing_outside_its_folder() {
-    let env = Env::new();
-    let dir = env.path("report");
-    std::fs::create_dir_all(dir.join("plots")).unwrap();
-    std::fs::write(dir.join("report.html"), "<!doctype html>hi").unwrap();
-    std::fs::write(dir.join("plots/scatter.png"), [137, 80, 78, 71]).unwrap();
-    std::fs::write(env.path("secret.txt"), "no").unwrap();
+/// `kodama-dag serve DIR` on a free port: the child and the address it printed.
+fn serve(dir: &std::path::Path) -> (std::process::Child, String) {
     let mut child = Command::new(BIN)
         .args(["serve", dir.to_str().unwrap(), "--port", "0"])
         .stderr(Stdio::piped())
@@ -40,6 +34,18 @@ fn serve_gives_the_report_and_nothing_outside_its_folder() {
         .and_then(|r| r.split('/').next())
         .unwrap_or_else(|| panic!("no address in {line:?}"))
         .to_owned();
+    (child, addr)
+}
+
+#[test]
+fn serve_gives_the_report_and_nothing_outside_its_folder() {
+    let env = Env::new();
+    let dir = env.path("report");
+    std::fs::create_dir_all(dir.join("plots")).unwrap();
+    std::fs::write(dir.join("report.html"), "<!doctype html>hi").unwrap();
+    std::fs::write(dir.join("plots/scatter.png"), [137, 80, 78, 71]).unwrap();
+    std::fs::write(env.path("secret.txt"), "no").unwrap();
+    let (mut child, addr) = serve(&dir);
     let checks = std::panic::catch_unwind(|| {
         assert_eq!(get(&addr, "/"), (200, b"<!doctype html>hi".to_vec()));
         assert_eq!(get(&addr, "/plots/scatter.png").0, 200);
@@ -62,21 +68,7 @@ fn idle_and_stalled_clients_do_not_stall_serve() {
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("report.html"), "<!doctype html>hi").unwrap();
     std::fs::write(dir.join("big.bin"), vec![7u8; 16 << 20]).unwrap();
-    let mut child = Command::new(BIN)
-        .args(["serve", dir.to_str().unwrap(), "--port", "0"])
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stderr.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let addr = line
-        .split("http://")
-        .nth(1)
-        .and_then(|r| r.split('/').next())
-        .unwrap_or_else(|| panic!("no address in {line:?}"))
-        .to_owned();
+    let (mut child, addr) = serve(&dir);
     let checks = std::panic::catch_unwind(|| {
         // Never read their 16 MB (streamed: the server holds no copy of it per client).
         let stalled: Vec<TcpStream> = (0..16)

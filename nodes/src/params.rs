@@ -68,6 +68,10 @@ pub fn folder_of(path: &str) -> String {
 #[serde(deny_unknown_fields)]
 pub struct NoParams {}
 
+/// The largest coordinate magnitude a scene may have, metres: a site frame spans kilometres, and
+/// past this f32 keeps no useful precision (8 m at 10^8) while the areas a BVH computes overflow.
+pub const MAX_COORD_M: f32 = 1e8;
+
 /// The most cells one grid a node makes may have (rasters, orthophotos, radio maps, the synthetic
 /// site): 2^31, 8 GiB as f32. Past it a run would more likely exhaust memory than finish, so it is
 /// refused before anything is allocated; real data that large is tiled.
@@ -110,11 +114,11 @@ pub fn check_bytes(what: &str, n: f64, bytes_each: usize) -> Result<(), String> 
     Ok(())
 }
 
-/// A point in the site frame, metres: finite and within [`crate::artifact::MAX_COORD_M`] of the
+/// A point in the site frame, metres: finite and within [`MAX_COORD_M`] of the
 /// origin on every axis, as a scene's vertices must be. A transmitter at 1e308 m is finite, and
 /// silently empties a radio map.
 pub fn check_point(p: [f64; 3]) -> Result<(), String> {
-    let most = crate::artifact::MAX_COORD_M as f64;
+    let most = MAX_COORD_M as f64;
     if p.iter().all(|c| c.abs() <= most) {
         Ok(())
     } else {

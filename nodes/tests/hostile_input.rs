@@ -855,14 +855,8 @@ fn implausible_osm_building_tags_are_left_out_and_named() {
     let path = write(dir.path(), "b.osm", xml);
     let warnings = Warnings::default();
     let files = [path];
-    let ctx = Ctx {
-        site: &site(),
-        files: &files,
-        progress: &warnings,
-        seed: [0; 32],
-        parts: kodama_nodes::stage::process_parts(),
-        window: None,
-    };
+    let site = site();
+    let ctx = ctx_warning_into(&site, &files, &warnings);
     let f = kodama_nodes::stages::ingest::read_osm::ReadOsmBuildings::run(
         &serde_json::from_value(json!({"path": "b.osm"})).unwrap(),
         &Inputs::new(),

@@ -232,14 +232,8 @@ fn yaw_disagreement_drops_the_view_with_a_warning() {
     let warnings = Warnings::default();
     let folder = fixtures("mapillary/per_image");
     let files = [folder];
-    let ctx = Ctx {
-        site: &site(),
-        files: &files,
-        progress: &warnings,
-        seed: [0; 32],
-        parts: kodama_nodes::stage::process_parts(),
-        window: None,
-    };
+    let the_site = site();
+    let ctx = ctx_warning_into(&the_site, &files, &warnings);
     let p: ReadMapillaryParams =
         serde_json::from_value(serde_json::json!({"path": "x", "trust_altitude": true})).unwrap();
     let set = ReadMapillary::run(&p, &Inputs::new(), &ctx).unwrap();

@@ -4,9 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use super::PodVec;
 
-/// The largest coordinate magnitude a scene may have, metres: a site frame spans kilometres, and
-/// past this f32 keeps no useful precision (8 m at 10^8) while the areas a BVH computes overflow.
-pub const MAX_COORD_M: f32 = 1e8;
+pub use crate::params::MAX_COORD_M;
 
 /// A triangle mesh: vertices in the site frame (metres, z up), triangles counter-clockwise seen
 /// from outside (normals point out of closed solids).

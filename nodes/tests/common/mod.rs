@@ -130,6 +130,22 @@ impl kodama_nodes::stage::Progress for Warnings {
     }
 }
 
+/// A context over `files` whose warnings `warnings` collects.
+pub fn ctx_warning_into<'a>(
+    site: &'a kodama_nodes::site::Site,
+    files: &'a [PathBuf],
+    warnings: &'a Warnings,
+) -> kodama_nodes::Ctx<'a> {
+    kodama_nodes::Ctx {
+        site,
+        files,
+        progress: warnings,
+        seed: [0; 32],
+        parts: process_parts(),
+        window: None,
+    }
+}
+
 /// An input slot holding one artifact.
 pub fn slot(a: Artifact) -> Slot {
     Slot::One(Arc::new(a))
