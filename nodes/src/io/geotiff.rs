@@ -297,8 +297,11 @@ fn image_samples(
         .unwrap_or(1);
     crate::params::check_cells(width as f64, height as f64, sample_bytes * bands as usize)
         .map_err(|m| StageError::bad_input(path, "dimensions", m))?;
-    let decoded = width as u64 * height as u64 * (sample_bytes * bands as usize) as u64;
-    check_stored_data(path, d, decoded)?;
+    // What the chunks hold uncompressed: rows of packed samples (a 1-bit mask stores an eighth
+    // of the bytes it decodes to).
+    let bits = d.colortype().map_or(8, |c| u64::from(c.bit_depth()));
+    let stored_rows = (width as u64 * bands as u64 * bits).div_ceil(8) * height as u64;
+    check_stored_data(path, d, stored_rows)?;
     let samples = d
         .read_image()
         .map_err(|e| tiff_error(path, "pixel data", e))?;
@@ -316,8 +319,9 @@ fn image_samples(
     Ok(samples)
 }
 
-/// Whether the file can hold the `decoded` bytes of pixels its tags claim, checked before the
-/// decoder allocates them: a 64-byte TIFF can claim 46,340 x 46,340 floats within the cell limit.
+/// Whether the file can hold the `decoded` bytes of pixels its tags claim (packed, as the chunks
+/// hold them uncompressed), checked before the decoder allocates them: a 64-byte TIFF can claim
+/// 46,340 x 46,340 floats within the cell limit.
 /// The strips' or tiles' stored bytes must lie inside the file, and expand to the pixels at most
 /// by their compression's largest ratio (none 1, PackBits 64, Deflate 1,032, LZW 4,096; other
 /// methods only by the cell limit). Chunks stored as 0 bytes (GDAL's sparse files) hold none of
