@@ -52,9 +52,25 @@ pub fn open_regular(path: impl AsRef<Path>) -> io::Result<File> {
 
 /// The whole of regular file `path` ([`open_regular`]).
 pub fn read_regular(path: impl AsRef<Path>) -> io::Result<Vec<u8>> {
-    let mut f = open_regular(path)?;
-    let mut out = Vec::with_capacity(f.metadata().map_or(0, |m| m.len() as usize));
-    f.read_to_end(&mut out)?;
+    let f = open_regular(path)?;
+    let len = f.metadata().map_or(0, |m| m.len());
+    // A file read whole is one buffer: past the budget (a sparse file of a terabyte) it is an
+    // error, and below it an allocation that fails is one too, never an abort.
+    let most = crate::params::MAX_BYTES;
+    if len > most {
+        return Err(io::Error::new(
+            io::ErrorKind::OutOfMemory,
+            format!("a file of {len} bytes, past the {most} a file read whole may take"),
+        ));
+    }
+    let mut out = Vec::new();
+    out.try_reserve_exact(len as usize).map_err(|_| {
+        io::Error::new(
+            io::ErrorKind::OutOfMemory,
+            format!("a file of {len} bytes, more than this machine can hold in memory"),
+        )
+    })?;
+    f.take(most).read_to_end(&mut out)?;
     Ok(out)
 }
 
@@ -95,5 +111,13 @@ mod tests {
         let file = dir.path().join("a.txt");
         std::fs::write(&file, "text").unwrap();
         assert_eq!(read_regular_to_string(&file).unwrap(), "text");
+        // Sparse: no disk, and past the budget of one buffer; refused before any allocation.
+        let huge = dir.path().join("huge");
+        std::fs::File::create(&huge)
+            .unwrap()
+            .set_len(crate::params::MAX_BYTES + 1)
+            .unwrap();
+        let e = read_regular(&huge).unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::OutOfMemory, "{e}");
     }
 }
