@@ -143,9 +143,7 @@ impl Tiles<'_> {
             .take(file)
             .map_err(|m| StageError::bad_input(json, field, m))
     }
-}
 
-impl Tiles<'_> {
     /// The file `uri` names, relative to `base` (the folder of the file naming it); refused when
     /// it is remote or leads outside the declared folder.
     fn resolve(
@@ -277,12 +275,10 @@ fn visit_tile(
             };
             let field = format!("{path}.content.uri");
             let file = tiles.resolve(json, &field, base, uri)?;
-            if !uri.ends_with(".json") {
-                tiles.read(json, &field, &file)?;
-            }
             if uri.ends_with(".json") {
                 read_tileset_file(&file, transform, Some(refine), tiles, scene, depth + 1)?;
             } else {
+                tiles.read(json, &field, &file)?;
                 read_content_file(&file, uri, &transform, tiles, scene)?;
             }
         }
