@@ -332,22 +332,18 @@ pub fn cut(text: &str, max: usize) -> String {
 /// or retitle the window; and every line kept to [`MAX_LINE_CHARS`] characters, its middle left
 /// out and counted (a CSV header of 500,000 columns once made an error line of 8.8 MB).
 pub fn for_terminal(text: &str) -> String {
-    let lines: Vec<String> = text
-        .split('\n')
-        .map(|line| {
-            cut(line, MAX_LINE_CHARS)
-                .chars()
-                .flat_map(|c| {
-                    let escaped = c.is_control() && c != '\t';
-                    let e: Vec<char> = if escaped {
-                        c.escape_default().collect()
-                    } else {
-                        vec![c]
-                    };
-                    e
-                })
-                .collect()
-        })
-        .collect();
-    lines.join("\n")
+    let mut out = String::with_capacity(text.len().min(8 * MAX_LINE_CHARS));
+    for (i, line) in text.split('\n').enumerate() {
+        if i > 0 {
+            out.push('\n');
+        }
+        for c in cut(line, MAX_LINE_CHARS).chars() {
+            if c.is_control() && c != '\t' {
+                out.extend(c.escape_default());
+            } else {
+                out.push(c);
+            }
+        }
+    }
+    out
 }

@@ -591,6 +591,31 @@ fn views_fail(intrinsics: Value, orientation: Value, material: Option<u8>) -> St
     e.to_string()
 }
 
+/// A depth map whose header gives another size than its view's is refused by its header, before
+/// a pixel of it is decoded.
+#[test]
+fn a_depth_map_of_another_size_than_its_view_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::create_dir_all(dir.path().join("v")).unwrap();
+    image::RgbImage::new(8, 4)
+        .save(dir.path().join("v/img.png"))
+        .unwrap();
+    let exr = kodama_nodes::io::exr_io::write_exr(16, 4, vec![("Z", vec![1.0; 64])]).unwrap();
+    write(dir.path(), "v/depth/a.exr", exr);
+    let doc = json!({
+        "views": [{"id": "a", "image": "img.png", "width": 8, "height": 4,
+                   "intrinsics": {"fx": 4, "fy": 4, "cx": 4, "cy": 2},
+                   "pose": {"x": 0, "y": 0, "z": 2}, "orientation": {"heading_deg": 0}}]
+    });
+    write(dir.path(), "v/views.json", doc.to_string());
+    let e = fails::<kodama_nodes::stages::ingest::read_views::ReadViews>(
+        json!({"path": "v/views.json"}),
+        &Inputs::new(),
+        &[dir.path().join("v")],
+    );
+    expect_all(&e, &["a.exr", "16 x 4 pixels, but views.json says 8 x 4"]);
+}
+
 #[test]
 fn views_with_no_focal_length_no_rotation_or_unknown_materials_are_refused() {
     let k = json!({"fx": 4, "fy": 4, "cx": 4, "cy": 2});

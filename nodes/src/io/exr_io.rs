@@ -69,27 +69,34 @@ fn exr_error(path: &Path, e: exr::error::Error) -> StageError {
     )
 }
 
-/// The size its header gives the first layer of an EXR file, checked against the memory budget:
-/// what a caller compares with the size it expects before anything is decoded (a compressed file
-/// of a few bytes can declare any size).
-pub fn read_exr_size(path: &Path) -> Result<(usize, usize), StageError> {
-    let file = crate::io::open::open_regular(path)
-        .map_err(|e| exr_error(path, exr::error::Error::Io(e)))?;
-    let meta = exr::meta::MetaData::read_from_buffered(std::io::BufReader::new(file), false)
-        .map_err(|e| exr_error(path, e))?;
-    let Some(h) = meta.headers.first() else {
-        return Ok((0, 0));
-    };
-    let (w, ht) = (h.layer_size.width(), h.layer_size.height());
-    crate::params::check_cells(w as f64, ht as f64, 4 * h.channels.list.len().max(1))
-        .map_err(|m| StageError::bad_input(path, "EXR header", m))?;
-    Ok((w, ht))
-}
-
 /// The first layer of an EXR file: width, height and every channel as f32, by name.
 pub fn read_exr(path: &Path) -> Result<(usize, usize, Channels), StageError> {
-    read_exr_size(path)?;
+    read_exr_expecting(path, |_, _| Ok(()))
+}
+
+/// [`read_exr`], with the size its header gives the first layer checked against the memory
+/// budget and handed to `expect` before anything is decoded: a compressed file of a few bytes
+/// can declare any size, and a caller that knows the size it wants (a view's) refuses another
+/// first.
+pub fn read_exr_expecting(
+    path: &Path,
+    expect: impl FnOnce(usize, usize) -> Result<(), StageError>,
+) -> Result<(usize, usize, Channels), StageError> {
+    use std::io::{BufReader, Seek};
     let file = crate::io::open::open_regular(path)
+        .map_err(|e| exr_error(path, exr::error::Error::Io(e)))?;
+    let mut reader = BufReader::new(file);
+    let meta = exr::meta::MetaData::read_from_buffered(&mut reader, false)
+        .map_err(|e| exr_error(path, e))?;
+    let (w, ht, channels) = meta.headers.first().map_or((0, 0, 0), |h| {
+        let size = h.layer_size;
+        (size.width(), size.height(), h.channels.list.len())
+    });
+    crate::params::check_cells(w as f64, ht as f64, 4 * channels.max(1))
+        .map_err(|m| StageError::bad_input(path, "EXR header", m))?;
+    expect(w, ht)?;
+    reader
+        .rewind()
         .map_err(|e| exr_error(path, exr::error::Error::Io(e)))?;
     use exr::prelude::{ReadChannels, ReadLayers};
     let img = exr::prelude::read()
@@ -98,7 +105,7 @@ pub fn read_exr(path: &Path) -> Result<(usize, usize, Channels), StageError> {
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_buffered(std::io::BufReader::new(file))
+        .from_buffered(reader)
         .map_err(|e| exr_error(path, e))?;
     let layer = img.layer_data;
     let (w, h) = (layer.size.width(), layer.size.height());

@@ -291,15 +291,12 @@ fn image_samples(
     height: u32,
     bands: u16,
 ) -> Result<DecodingResult, StageError> {
-    let sample_bytes = d
-        .colortype()
-        .map(|c| c.bit_depth().div_ceil(8).max(1) as usize)
-        .unwrap_or(1);
+    let bits = d.colortype().map_or(8, |c| u64::from(c.bit_depth()));
+    let sample_bytes = bits.div_ceil(8).max(1) as usize;
     crate::params::check_cells(width as f64, height as f64, sample_bytes * bands as usize)
         .map_err(|m| StageError::bad_input(path, "dimensions", m))?;
     // What the chunks hold uncompressed: rows of packed samples (a 1-bit mask stores an eighth
     // of the bytes it decodes to).
-    let bits = d.colortype().map_or(8, |c| u64::from(c.bit_depth()));
     let stored_rows = (width as u64 * bands as u64 * bits).div_ceil(8) * height as u64;
     check_stored_data(path, d, stored_rows)?;
     let samples = d

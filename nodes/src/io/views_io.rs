@@ -21,7 +21,7 @@ use serde_json::{Value, json};
 
 use crate::artifact::{Instances, Intrinsics, PodVec, Pose, View, ViewHead, ViewSet};
 use crate::io::crs::{Crs, ToSite};
-use crate::io::exr_io::{Channels, read_exr, read_exr_size, write_exr};
+use crate::io::exr_io::{Channels, read_exr_expecting, write_exr};
 use crate::site::Site;
 use crate::stage::{PartStore, StageError};
 
@@ -513,9 +513,8 @@ impl ViewFiles<'_> {
         }
         // The header's size against the view's before a pixel is decoded: a depth map whose
         // header claims far more than its view would otherwise be decoded first.
-        let (w, h) = read_exr_size(&p)?;
-        self.check_size(&p, w as u32, h as u32)?;
-        Ok(Some(read_exr(&p)?.2))
+        let (_, _, ch) = read_exr_expecting(&p, |w, h| self.check_size(&p, w as u32, h as u32))?;
+        Ok(Some(ch))
     }
 
     fn depth(&self) -> Result<Option<PodVec<f32>>, StageError> {

@@ -173,35 +173,31 @@ fn tags<'a>(it: impl Iterator<Item = (&'a str, &'a str)>) -> Tags {
     };
     // A value that parses but is no building's is left out, as an unparsable one is, and
     // named, so one bad tag costs its building the tag, not the run its scene.
+    let mut implausible = Vec::new();
     let mut within = |k: &str, v: &str, x: Option<f64>, most: f64| {
-        x.filter(|x| {
-            let ok = (0.0..=most).contains(x);
-            if !ok {
-                t.implausible.push(format!("{k}={v}"));
-            }
-            ok
-        })
+        let x = x?;
+        if (0.0..=most).contains(&x) {
+            Some(x)
+        } else {
+            implausible.push(format!("{k}={v}"));
+            None
+        }
     };
-    let mut height = None;
-    let mut min_height = None;
-    let mut levels = None;
-    let mut min_level = None;
     for (k, v) in it {
         let number = || v.trim().parse::<f64>().ok();
         match k {
             "height" | "building:height" => {
-                height = height.or(within(k, v, parse_length(v), MAX_BUILDING_HEIGHT_M))
+                t.height_m = t
+                    .height_m
+                    .or(within(k, v, parse_length(v), MAX_BUILDING_HEIGHT_M))
             }
-            "min_height" => min_height = within(k, v, parse_length(v), MAX_BUILDING_HEIGHT_M),
-            "building:levels" => levels = within(k, v, number(), MAX_LEVELS),
-            "building:min_level" => min_level = within(k, v, number(), MAX_LEVELS),
+            "min_height" => t.min_height_m = within(k, v, parse_length(v), MAX_BUILDING_HEIGHT_M),
+            "building:levels" => t.levels = within(k, v, number(), MAX_LEVELS),
+            "building:min_level" => t.min_level = within(k, v, number(), MAX_LEVELS),
             _ => {}
         }
     }
-    t.height_m = height;
-    t.min_height_m = min_height;
-    t.levels = levels;
-    t.min_level = min_level;
+    t.implausible = implausible;
     t
 }
 
