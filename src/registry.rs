@@ -159,6 +159,9 @@ pub struct Kind {
     pub output: ArtifactType,
     /// Reads this kind's params from a struct value (inputs already removed).
     pub parse: fn(&Ast) -> Result<Box<dyn Params>, DeError>,
+    /// The full path of its params type (`std::any::type_name`), the key of its entry in the
+    /// params reference (`kodama_nodes::params::reference`); empty for a report node's kind.
+    pub params_type: fn() -> &'static str,
     /// The reports the kind makes beside its output (`Stage::REPORTS`).
     pub reports: &'static [ReportSpec],
     /// For the kind of a report node (`"carved.outcomes"`, made by the loader, never written in a
@@ -187,6 +190,7 @@ macro_rules! kinds {
             inputs: <$s as Stage>::INPUTS,
             output: <<$s as Stage>::Output as Typed>::TYPE,
             parse: parse_params::<$s>,
+            params_type: std::any::type_name::<<$s as Stage>::Params>,
             reports: <$s as Stage>::REPORTS,
             report: None,
             windowed: <$s as Stage>::WINDOWED,
@@ -213,6 +217,7 @@ static REPORT_KINDS: LazyLock<Vec<Kind>> = LazyLock::new(|| {
             )])),
             output: r.ty,
             parse: parse_report_of,
+            params_type: || "",
             reports: &[],
             report: Some(r.name),
             windowed: false,

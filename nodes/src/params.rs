@@ -229,3 +229,69 @@ pub fn check_in(
         Err((name, format!("expected a value in [{lo}, {hi}], got {v}")))
     }
 }
+
+/// The params reference: every type in this crate that a graph's params deserialize into (each
+/// stage's params and the structs and enums inside them), with each field's type, whether it may
+/// be left out, and its doc comment: read from the source by build.rs, so it is the code's own
+/// documentation. `kodama-dag kinds KIND` prints it.
+pub mod reference {
+    /// A struct or an enum.
+    pub struct TypeDoc {
+        /// Its module, as `std::any::type_name` writes it.
+        pub module: &'static str,
+        /// Its name in the source.
+        pub name: &'static str,
+        /// Its doc comment.
+        pub doc: &'static str,
+        /// An enum's fields are its variants (with their payload as the type).
+        pub is_enum: bool,
+        /// Its fields, or its variants, in source order.
+        pub fields: &'static [FieldDoc],
+    }
+
+    /// A struct's field or an enum's variant.
+    pub struct FieldDoc {
+        /// The name a graph writes.
+        pub name: &'static str,
+        /// The Rust type as written (a variant's payload; empty for a unit variant).
+        pub ty: &'static str,
+        /// Its doc comment.
+        pub doc: &'static str,
+        /// Whether a graph may leave it out (a default, or an `Option`).
+        pub optional: bool,
+    }
+
+    /// Every documented type, in source order.
+    pub static TYPES: &[TypeDoc] = include!(concat!(env!("OUT_DIR"), "/params_reference.rs"));
+
+    /// The type whose full path (`std::any::type_name`) is `path`.
+    pub fn of_path(path: &str) -> Option<&'static TypeDoc> {
+        let (module, name) = path.rsplit_once("::")?;
+        TYPES.iter().find(|t| t.name == name && t.module == module)
+    }
+
+    /// The documented types a Rust type's text names (`Option<Antenna>` names `Antenna`), each
+    /// resolved to the one nearest `module` where two share a name.
+    pub fn named_in(ty: &str, module: &str) -> Vec<&'static TypeDoc> {
+        let mut out: Vec<&'static TypeDoc> = Vec::new();
+        for word in ty.split(|c: char| !(c.is_alphanumeric() || c == '_')) {
+            let nearest = TYPES
+                .iter()
+                .filter(|t| t.name == word)
+                .max_by_key(|t| shared_prefix(t.module, module));
+            if let Some(t) = nearest
+                && !out.iter().any(|o| std::ptr::eq(*o, t))
+            {
+                out.push(t);
+            }
+        }
+        out
+    }
+
+    fn shared_prefix(a: &str, b: &str) -> usize {
+        a.split("::")
+            .zip(b.split("::"))
+            .take_while(|(x, y)| x == y)
+            .count()
+    }
+}

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
+pub mod kinds;
 mod rf_commands;
 
 use crate::cache::{Cache, gc};
@@ -18,8 +19,6 @@ use crate::explain::{Plan, explain};
 use crate::graph::{Graph, LoadOptions, load, to_dot, to_mermaid};
 use crate::progress::{Mode, Reporter};
 use crate::record::Status;
-use crate::registry;
-use kodama_nodes::stage::Arity;
 
 #[derive(Parser)]
 #[command(
@@ -146,8 +145,12 @@ enum Command {
         #[arg(long, value_enum, default_value = "dot")]
         format: Format,
     },
-    /// List the node kinds with their inputs and outputs.
-    Kinds,
+    /// List the node kinds with their inputs and outputs; with a KIND, that kind's inputs and
+    /// every param with its type, default and documentation.
+    Kinds {
+        /// One kind to describe (`RadioMap`, `Trace`, ...).
+        kind: Option<String>,
+    },
 }
 
 /// `sweep` arguments.
@@ -671,8 +674,12 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
             crate::serve::serve(&dir, port).map_err(|m| Fail(2, format!("error: {m}")))?;
             Ok(0)
         }
-        Command::Kinds => {
-            print_kinds();
+        Command::Kinds { kind: None } => {
+            kinds::print_kinds();
+            Ok(0)
+        }
+        Command::Kinds { kind: Some(name) } => {
+            kinds::print_kind(&name)?;
             Ok(0)
         }
     }
@@ -1098,30 +1105,4 @@ fn gc_command(a: GcArgs) -> Result<u8, Fail> {
         );
     }
     Ok(0)
-}
-
-/// `kinds`: every node kind with its inputs, output, doc and reports.
-fn print_kinds() {
-    for k in registry::kinds() {
-        let inputs: Vec<String> = k
-            .inputs
-            .iter()
-            .map(|i| match i.arity {
-                Arity::One => format!("{}: {}", i.name, i.ty),
-                Arity::Optional => format!("{}: {}?", i.name, i.ty),
-                Arity::Many => format!("{}: [{}]", i.name, i.ty),
-            })
-            .collect();
-        println!(
-            "{} v{} ({}) -> {}\n    {}",
-            k.name,
-            k.version,
-            inputs.join(", "),
-            k.output,
-            k.doc
-        );
-        for r in k.reports {
-            println!("    report \"<node>.{}\" -> {}: {}", r.name, r.ty, r.doc);
-        }
-    }
 }
