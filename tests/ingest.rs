@@ -4,12 +4,6 @@
 mod common;
 use common::*;
 
-fn shared_data() -> std::path::PathBuf {
-    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
-    assert!(p.is_dir(), "real test data missing: {}", p.display());
-    p.canonicalize().unwrap()
-}
-
 const DELFT: &str = r#"
 Graph(
     site: Site(crs: "EPSG:28992", origin: (84800.0, 447400.0), cell_m: 0.5),

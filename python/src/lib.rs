@@ -158,7 +158,10 @@ fn run<'py>(
 ) -> PyResult<(String, Bound<'py, PyDict>)> {
     check_jobs(jobs)?;
     let g = load_graph(graph, sets, data, allow_outside, tile_m, halo_m)?;
-    let cache = open_cache(&cache)?;
+    let mut cache = open_cache(&cache)?;
+    if let Some(out) = &out {
+        cache.writes_outputs_to(out);
+    }
     let total = g
         .needed(&kodama_dag::exec::target_indices(&g, &targets).map_err(run_error)?)
         .iter()
@@ -208,8 +211,9 @@ fn sweep<'py>(
         None,
         None,
     )?;
-    let cache = open_cache(&cache)?;
+    let mut cache = open_cache(&cache)?;
     let out_dir = out.unwrap_or_else(|| Path::new("out").join(&sw.name));
+    cache.writes_outputs_to(&out_dir);
     let opts = SweepOptions {
         data_dir: data,
         sets,

@@ -88,6 +88,8 @@ pub struct InputStamp {
     folder: bool,
     /// Its files, sorted by relative path.
     files: Vec<FileSeen>,
+    /// The folders below it that were left out (kodama-dag's own: [`folder_files`]).
+    skip: Vec<PathBuf>,
 }
 
 impl InputStamp {
@@ -99,7 +101,7 @@ impl InputStamp {
     pub fn moved(&self) -> Option<String> {
         let shown = self.path.display();
         if self.folder {
-            let mut now = match folder_files(&self.path, false) {
+            let mut now = match folder_files(&self.path, false, &self.skip) {
                 Ok(f) => f,
                 Err(e) => return Some(format!("{shown} can no longer be read ({e})")),
             };
@@ -158,6 +160,15 @@ impl FileSeen {
 }
 
 impl Cache {
+    /// Tells the cache that runs through it write their outputs to `dir`, which folder inputs'
+    /// digests then leave out ([`folder_files`]), whether or not it exists yet.
+    pub fn writes_outputs_to(&mut self, dir: &Path) {
+        let c = canonical_to_be(dir);
+        if !self.own_folders.contains(&c) {
+            self.own_folders.push(c);
+        }
+    }
+
     /// The content digest of the file at `path`, read only if its size, mtime or inode changed
     /// since it was last digested. A folder's digest covers the relative paths and digests of
     /// every file below it, in sorted order.
@@ -168,7 +179,8 @@ impl Cache {
     /// [`Cache::file_digest`], with the stamp that tells later whether the input moved since.
     pub fn file_digest_stamped(&self, path: &Path) -> io::Result<(Digest, InputStamp)> {
         if path.is_dir() {
-            let mut files = folder_files(path, false)?;
+            let skip = self.own_folders.clone();
+            let mut files = folder_files(path, false, &skip)?;
             files.sort();
             let mut h = blake3::Hasher::new();
             h.update(b"kodama-dag folder 1\0");
@@ -185,6 +197,7 @@ impl Cache {
                 path: path.to_path_buf(),
                 folder: true,
                 files: seen,
+                skip,
             };
             return Ok((h.finalize(), stamp));
         }
@@ -193,6 +206,7 @@ impl Cache {
             path: path.to_path_buf(),
             folder: false,
             files: vec![file],
+            skip: Vec::new(),
         };
         Ok((stamp.files[0].digest, stamp))
     }
@@ -260,16 +274,44 @@ impl Cache {
 
 pub use kodama_nodes::io::open::describe_file_type;
 
+/// The canonical path `path` has, or will have once made: its nearest existing ancestor
+/// canonicalized, the rest appended.
+fn canonical_to_be(path: &Path) -> PathBuf {
+    let abs = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut rest = Vec::new();
+    let mut at = abs.as_path();
+    loop {
+        if let Ok(c) = fs::canonicalize(at) {
+            return rest.iter().rev().fold(c, |p, part| p.join(part));
+        }
+        match (at.parent(), at.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_os_string());
+                at = parent;
+            }
+            _ => return abs,
+        }
+    }
+}
+
 /// Checks that every entry below folder `root` is a regular file or a folder (symlinks followed),
 /// reached once: no FIFO, socket or device, no symlink loop. With `contained`, no symlink may
 /// lead out of `root`. Nothing is opened, so a FIFO cannot block.
 pub fn check_folder(root: &Path, contained: bool) -> io::Result<()> {
-    folder_files(root, contained).map(|_| ())
+    folder_files(root, contained, &[]).map(|_| ())
 }
 
 /// Every regular file below `root`, as (relative path with `/`, full path), after the checks of
-/// [`check_folder`].
-pub fn folder_files(root: &Path, contained: bool) -> io::Result<Vec<(String, std::path::PathBuf)>> {
+/// [`check_folder`]. Folders below `root` that kodama-dag itself writes are left out: a cache
+/// (found by its FORMAT marker) and the folders in `skip` (canonical: a run's output folder).
+/// A run writes into them while it reads the input, so counting them would give the input a
+/// new digest at every run (`watch` would rerun itself forever, and concurrent runs would see
+/// their input move); no stage reads its inputs from there.
+pub fn folder_files(
+    root: &Path,
+    contained: bool,
+    skip: &[PathBuf],
+) -> io::Result<Vec<(String, std::path::PathBuf)>> {
     let canonical_root = fs::canonicalize(root)?;
     let mut seen = std::collections::HashSet::new();
     let mut out = Vec::new();
@@ -309,6 +351,11 @@ pub fn folder_files(root: &Path, contained: bool) -> io::Result<Vec<(String, std
                     .file_type();
             }
             if t.is_dir() {
+                if Cache::is_cache_folder(&p)
+                    || (!skip.is_empty() && fs::canonicalize(&p).is_ok_and(|c| skip.contains(&c)))
+                {
+                    continue;
+                }
                 stack.push(p);
             } else if t.is_file() {
                 let rel = p

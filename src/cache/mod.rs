@@ -89,6 +89,9 @@ pub struct Cache {
     root: PathBuf,
     /// The remote tier, when the cache is shared through an object store.
     remote: Option<std::sync::Arc<Remote>>,
+    /// Folders runs through this cache write (their output folders, canonical), left out of
+    /// folder inputs' digests as the cache itself is ([`Cache::writes_outputs_to`]).
+    own_folders: Vec<PathBuf>,
 }
 
 /// Digest of `bytes`, using all threads for large inputs.
@@ -264,6 +267,7 @@ impl Cache {
         Ok(Cache {
             root: root.to_path_buf(),
             remote: None,
+            own_folders: Vec::new(),
         })
     }
 
@@ -304,10 +308,16 @@ impl Cache {
         Ok(Cache {
             root: root.to_path_buf(),
             remote: None,
+            own_folders: Vec::new(),
         })
     }
 
     /// Whether `root` carries this engine's FORMAT marker; an error if it carries another's.
+    /// Whether `dir` is a folder carrying this engine's cache marker (errors read as no).
+    pub fn is_cache_folder(dir: &Path) -> bool {
+        Self::marked(dir).unwrap_or(false)
+    }
+
     fn marked(root: &Path) -> io::Result<bool> {
         let fmt = root.join("FORMAT");
         match fs::symlink_metadata(&fmt) {

@@ -509,7 +509,7 @@ fn watch_loop(
     quiet: bool,
     debounce_ms: u64,
 ) -> Result<u8, Fail> {
-    let cache = open_cache(cache)?;
+    let mut cache = open_cache(cache)?;
     let mut ignore =
         vec![std::fs::canonicalize(cache.root()).unwrap_or_else(|_| cache.root().to_path_buf())];
     // The inputs of the last graph that loaded: kept while the graph does not load (an input was
@@ -524,7 +524,7 @@ fn watch_loop(
                 Path::new("out").join(crate::graph::folder_name(&args.graph, "graph"))
             }
         };
-        std::fs::create_dir_all(&out_dir).ok();
+        cache.writes_outputs_to(&out_dir);
         if let Ok(o) = std::fs::canonicalize(&out_dir) {
             ignore.push(o);
         }
@@ -637,8 +637,9 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
                 }
                 targets.extend(job.into_iter().map(|i| g.nodes[i].id.clone()));
             }
-            let cache = open_cache(cache)?;
+            let mut cache = open_cache(cache)?;
             let out_dir = out.unwrap_or_else(|| Path::new("out").join(&g.name));
+            cache.writes_outputs_to(&out_dir);
             run_once(&g, &cache, out_dir, targets, jobs, json, quiet)
         }
         Command::Watch {
@@ -717,8 +718,9 @@ fn sweep_command(a: SweepArgs) -> Result<u8, Fail> {
         }
         return Ok(0);
     }
-    let cache = open_cache(cache)?;
+    let mut cache = open_cache(cache)?;
     let out_dir = out.unwrap_or_else(|| Path::new("out").join(&sw.name));
+    cache.writes_outputs_to(&out_dir);
     let opts = crate::sweep::SweepOptions {
         data_dir: data,
         sets,
@@ -1011,7 +1013,9 @@ fn explain_command(
     json: bool,
 ) -> Result<u8, Fail> {
     let g = load_graph(graph)?;
-    let cache = open_cache(cache)?;
+    let mut cache = open_cache(cache)?;
+    // The folder `run` writes by default, left out of folder inputs as `run` leaves it out.
+    cache.writes_outputs_to(&Path::new("out").join(&g.name));
     let plan = explain(&g, &cache, targets)?;
     let tiles = g.tiling.as_ref().map(|t| {
         serde_json::json!({

@@ -72,6 +72,13 @@ pub struct Env {
     pub dir: tempfile::TempDir,
 }
 
+/// The real data in ../shared/data, read in place.
+pub fn shared_data() -> PathBuf {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data");
+    assert!(p.is_dir(), "real test data missing: {}", p.display());
+    p.canonicalize().unwrap()
+}
+
 /// One finished command.
 pub struct Run {
     pub code: i32,
