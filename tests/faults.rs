@@ -33,6 +33,55 @@ fn corrupt(path: &std::path::Path) {
     std::fs::write(path, bytes).unwrap();
 }
 
+/// A blob, or an action entry, replaced by a folder (or a symlink) heals: the thing in its
+/// place is moved into the cache's tmp/ (nothing of it deleted) and the entry is made again.
+/// Before, every later run that needed it failed (issue 55, class 10).
+#[test]
+fn a_blob_or_an_entry_replaced_by_a_folder_is_moved_aside_and_rebuilt() {
+    let env = Env::new();
+    let g = env.write("chain.ron", CHAIN);
+    let clean = env.run(&g, &[]).ok();
+    let blob = env.blob(&clean.digests()["lidar"]);
+    std::fs::remove_file(&blob).unwrap();
+    std::fs::create_dir(&blob).unwrap();
+    std::fs::write(blob.join("keep.txt"), "someone's file").unwrap();
+    let r = env.run(&g, &["--set", "dsm.mode=Min"]).ok();
+    assert_eq!(r.status("lidar"), "ran", "{}", r.stderr);
+    assert_eq!(r.digests()["lidar"], clean.digests()["lidar"]);
+    assert!(blob.is_file(), "the blob is a file again");
+    let displaced: Vec<_> = std::fs::read_dir(env.cache().join("tmp"))
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with("displaced-"))
+        .collect();
+    assert_eq!(displaced.len(), 1);
+    assert_eq!(
+        std::fs::read_to_string(displaced[0].path().join("keep.txt")).unwrap(),
+        "someone's file"
+    );
+
+    // Every action entry a folder: the run makes them again.
+    let ac = env.cache().join("ac");
+    let mut entries = Vec::new();
+    for shard in std::fs::read_dir(&ac).unwrap().flatten() {
+        for e in std::fs::read_dir(shard.path()).unwrap().flatten() {
+            entries.push(e.path());
+        }
+    }
+    for e in &entries {
+        std::fs::remove_file(e).unwrap();
+        std::fs::create_dir(e).unwrap();
+    }
+    let r = env.run(&g, &[]).ok();
+    assert_eq!(r.digests(), clean.digests());
+    let r = env.run(&g, &[]).ok();
+    assert!(
+        r.statuses().values().all(|s| s == "cached"),
+        "{:?}",
+        r.statuses()
+    );
+}
+
 #[test]
 fn corrupt_output_blob_is_detected_and_rebuilt() {
     let env = Env::new();

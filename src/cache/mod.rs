@@ -429,6 +429,7 @@ impl Cache {
             }
             let path = self.blob_path(&digest);
             fs::create_dir_all(path.parent().expect("sharded path has a parent"))?;
+            self.displace_non_file(&path);
             fs::rename(&tmp, &path)?;
             Ok((digest, size))
         })();
@@ -515,10 +516,32 @@ impl Cache {
 
     fn has_local_blob(&self, digest: &Digest, size: u64) -> bool {
         let path = self.blob_path(digest);
-        match fs::metadata(&path) {
-            Ok(m) if m.len() == size => {
+        match fs::symlink_metadata(&path) {
+            Ok(m) if m.is_file() && m.len() == size => {
                 touch(&path);
                 true
+            }
+            _ => false,
+        }
+    }
+
+    /// Moves whatever stands at a blob's or an action entry's path, if it is not a regular file
+    /// (a folder, a symlink, a FIFO someone put there), into `tmp/` under a name that says so:
+    /// the entry is then missing and is made again, where a folder there once failed every run
+    /// that needed it. Nothing is deleted (gc lists it as foreign). True if something moved.
+    fn displace_non_file(&self, path: &Path) -> bool {
+        match fs::symlink_metadata(path) {
+            Ok(m) if !m.is_file() => {
+                let name = path.file_name().map(|n| n.to_string_lossy().to_string());
+                let nanos = SystemTime::now()
+                    .duration_since(SystemTime::UNIX_EPOCH)
+                    .map_or(0, |d| d.as_nanos());
+                let to = self.tmp().join(format!(
+                    "displaced-{}-{}-{nanos}",
+                    name.unwrap_or_default(),
+                    std::process::id()
+                ));
+                fs::rename(path, to).is_ok()
             }
             _ => false,
         }
@@ -535,6 +558,9 @@ impl Cache {
 
     fn get_local_blob(&self, digest: &Digest) -> Result<Blob, BlobError> {
         let path = self.blob_path(digest);
+        if self.displace_non_file(&path) {
+            return Err(BlobError::Missing);
+        }
         let file = match File::open(&path) {
             Ok(f) => f,
             Err(e) if e.kind() == io::ErrorKind::NotFound => return Err(BlobError::Missing),
@@ -600,6 +626,7 @@ impl Cache {
         for (d, size) in &action.parts {
             text.push_str(&format!("part blake3:{} {size}\n", d.to_hex()));
         }
+        self.displace_non_file(&path);
         write_atomic(&self.tmp(), &path, text.as_bytes())?;
         if let Some(remote) = &self.remote {
             // Every blob first: a remote entry never names a blob that did not arrive.
