@@ -1185,6 +1185,39 @@ pub fn write_encoded(
         .collect())
 }
 
+/// Puts the finished folder `tmp` at `path`, replacing whatever is there. Runs sharing an output
+/// folder race here: each moves the old folder aside and renames its own in, and a rename that
+/// finds another run's folder already back in place tries again, so every run ends with a whole
+/// folder at `path`, its own or the other's (the same bytes: the same inputs give them).
+fn replace_folder(tmp: &Path, path: &Path) -> std::io::Result<()> {
+    use std::io::ErrorKind::{DirectoryNotEmpty, NotADirectory, NotFound};
+    let old = tmp.with_extension("old");
+    let mut last = None;
+    for _ in 0..100 {
+        let _ = std::fs::remove_dir_all(&old);
+        let aside = match std::fs::symlink_metadata(path) {
+            Ok(m) if m.is_dir() => std::fs::rename(path, &old),
+            Ok(_) => std::fs::remove_file(path),
+            Err(e) => Err(e),
+        };
+        match aside {
+            Ok(()) => {}
+            Err(e) if e.kind() == NotFound => {}
+            Err(e) => return Err(e),
+        }
+        match std::fs::rename(tmp, path) {
+            Ok(()) => {
+                let _ = std::fs::remove_dir_all(&old);
+                return Ok(());
+            }
+            Err(e) if matches!(e.kind(), DirectoryNotEmpty | NotADirectory) => last = Some(e),
+            Err(e) => return Err(e),
+        }
+    }
+    let _ = std::fs::remove_dir_all(tmp);
+    Err(last.unwrap_or_else(|| std::io::Error::other("could not replace the folder")))
+}
+
 /// Writes an encoded output as `file_name` in `dir` so that it never exists half-written: a file
 /// through a temp file and rename; a folder assembled under a hidden temp name, then renamed over
 /// the old one. Returns the stamps of the files written.
@@ -1197,24 +1230,27 @@ fn write_output(dir: &Path, file_name: &str, encoded: Encoded) -> std::io::Resul
         }
         Encoded::Folder(files) => {
             // Named by pid first, as write_atomic's temps are, so a later run can tell whether
-            // the process that left it is gone.
-            let tmp = dir.join(format!(".kodama-{}-{file_name}.tmp", std::process::id()));
+            // the process that left it is gone; then a number, for several writers in one.
+            static WRITES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+            let n = WRITES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let tmp = dir.join(format!(
+                ".kodama-{}-{n}-{file_name}.tmp",
+                std::process::id()
+            ));
             let _ = std::fs::remove_dir_all(&tmp);
             for (rel, bytes) in &files {
                 let f = tmp.join(rel);
                 std::fs::create_dir_all(f.parent().unwrap_or(&tmp))?;
                 std::fs::write(&f, bytes)?;
             }
-            if path.is_dir() {
-                std::fs::remove_dir_all(&path)?;
-            } else if path.exists() {
-                std::fs::remove_file(&path)?;
-            }
-            std::fs::rename(&tmp, &path)?;
-            files
+            // Stamped before the rename (which keeps sizes and times): afterwards another run
+            // may already have put its own copy there.
+            let stamps = files
                 .iter()
-                .map(|(rel, bytes)| stamp(format!("{file_name}/{rel}"), &path.join(rel), bytes))
-                .collect()
+                .map(|(rel, bytes)| stamp(format!("{file_name}/{rel}"), &tmp.join(rel), bytes))
+                .collect::<std::io::Result<Vec<_>>>()?;
+            replace_folder(&tmp, &path)?;
+            Ok(stamps)
         }
     }
 }

@@ -193,6 +193,74 @@ fn two_concurrent_runs_on_one_cache_agree() {
     assert_eq!(again.digests(), a.digests());
 }
 
+/// Runs sharing one `--out` with folder outputs (a Sionna scene folder, 3D Tiles) all succeed
+/// and leave whole folders: each replaces the folder by moving the old one aside and renaming
+/// its own in, and tries again when another's landed first. Before, 6 of 30 such runs failed
+/// (issue 55, class 10).
+#[test]
+fn runs_sharing_an_output_folder_with_folder_outputs_all_succeed() {
+    let env = Env::new();
+    let g = env.write(
+        "g.ron",
+        r#"Graph(
+    site: Site(crs: "EPSG:32618", origin: (0.0, 0.0), cell_m: 1.0),
+    nodes: {
+        "t": SynthTerrain(size_m: (400.0, 300.0)),
+        "scene": AssembleScene(terrain: "t", objects: []),
+    },
+    outputs: {
+        "a.sionna": "scene", "b.sionna": "scene", "c.sionna": "scene",
+        "a.3dtiles": "scene", "b.3dtiles": "scene", "c.3dtiles": "scene",
+    },
+)
+"#,
+    );
+    // One run first, so that the others race only over the outputs, not the cache.
+    env.run(&g, &[]).ok();
+    let expected = files_below(&env.out());
+    for round in 0..3 {
+        // Gone, so that every run writes every output at once.
+        std::fs::remove_dir_all(env.out()).unwrap();
+        let children: Vec<_> = (0..12)
+            .map(|_| {
+                env.run_cmd(&g, &[])
+                    .stdout(std::process::Stdio::piped())
+                    .stderr(std::process::Stdio::piped())
+                    .spawn()
+                    .unwrap()
+            })
+            .collect();
+        for c in children {
+            let r = finish(c.wait_with_output().unwrap());
+            assert_eq!(r.code, 0, "round {round}: {}", r.stderr);
+        }
+        assert_eq!(files_below(&env.out()), expected, "round {round}");
+    }
+}
+
+/// Every output file below `dir` with its content digest, sorted by relative path (the record of
+/// what was exported, whose times differ run to run, left out).
+fn files_below(dir: &std::path::Path) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                let rel = p.strip_prefix(dir).unwrap().to_string_lossy().to_string();
+                if rel != ".kodama-outputs.json" {
+                    let digest = blake3::hash(&std::fs::read(&p).unwrap());
+                    out.push((rel, digest.to_hex().to_string()));
+                }
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
 const TWO_BRANCHES: &str = r#"
 Graph(
     site: Site(crs: "EPSG:32618", origin: (1000.0, 2000.0), cell_m: 1.0),
