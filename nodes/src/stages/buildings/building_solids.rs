@@ -17,7 +17,6 @@ use spade::{
     ConstrainedDelaunayTriangulation, HasPosition, Point2, PositionInTriangulation, Triangulation,
 };
 
-use crate::artifact::point_in_ring;
 use crate::artifact::{
     ArtifactType, Grid, ObjectClass, PodVec, PointSet, Polygon, Raster, Scene, SceneObject,
 };
@@ -511,10 +510,8 @@ fn shell(
             "outline vertex {q:?} touches no cell of the building"
         ));
     }
-    let inside = |x: f64, y: f64| {
-        point_in_ring([x, y], &poly.exterior)
-            && !poly.holes.iter().any(|h| point_in_ring([x, y], h))
-    };
+    let index = poly.index();
+    let inside = |x: f64, y: f64| index.contains([x, y]);
     // Cell centres well inside the outline: never on a wall, so the roof's rim stays the ring.
     let margin = 0.25 * g.cell_m;
     let segments: Vec<([f64; 2], [f64; 2])> = std::iter::once(&poly.exterior)
