@@ -497,6 +497,27 @@ class KindInfo:
     """(name, artifact type, "one" | "optional" | "many", description) per input."""
     reports: tuple[tuple[str, str, str], ...]
     """(name, artifact type, description) per report the kind makes beside its output."""
+    params: tuple[ParamInfo, ...]
+    """Every param, in the order of the stage's source."""
+    reference: str
+    """The kind's reference as `kodama-dag kinds KIND` prints it: inputs, output, reports, and
+    every param (nested ones too) with its type, default and documentation."""
+
+
+@dataclass(frozen=True)
+class ParamInfo:
+    """One param of a node kind, read from the stage's own source."""
+
+    name: str
+    type: str
+    """The Rust type as written (`f64`, `(f64, f64, f64)`, `Option<f64>`, `MapOptions`)."""
+    required: bool
+    """Whether a graph must give it."""
+    default: Any
+    """Its default (numbers, strings, lists, dicts; an enum variant by name), None when required
+    or when a default cannot be read."""
+    doc: str
+    """Its documentation: meaning, unit, convention."""
 
 
 def kinds() -> dict[str, KindInfo]:
@@ -510,5 +531,16 @@ def kinds() -> dict[str, KindInfo]:
             output=k["output"],
             inputs=tuple(tuple(i) for i in k["inputs"]),
             reports=tuple(tuple(r) for r in k["reports"]),
+            params=tuple(
+                ParamInfo(
+                    name=name,
+                    type=ty,
+                    required=required,
+                    default=None if default is None else json.loads(default),
+                    doc=doc,
+                )
+                for name, ty, required, default, doc in k["params"]
+            ),
+            reference=k["reference"],
         )
     return out

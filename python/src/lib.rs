@@ -299,6 +299,18 @@ fn kinds(py: Python<'_>) -> PyResult<Bound<'_, PyList>> {
             reports.append((r.name, r.ty.to_string(), r.doc))?;
         }
         d.set_item("reports", reports)?;
+        // Every param with its type, default (JSON text, None when required or not readable)
+        // and doc, as `kodama-dag kinds KIND` prints them; and that text.
+        let params = PyList::empty(py);
+        if let Some(t) = kodama_nodes::params::reference::of_path((k.params_type)()) {
+            let defaults = kodama_dag::cli::kinds::defaults_of(k, t).unwrap_or_default();
+            for f in t.fields {
+                let default = defaults.get(f.name).map(|v| v.to_string());
+                params.append((f.name, f.ty, !f.optional, default, f.doc))?;
+            }
+        }
+        d.set_item("params", params)?;
+        d.set_item("reference", kodama_dag::cli::kinds::kind_reference(k))?;
         out.append(d)?;
     }
     Ok(out)

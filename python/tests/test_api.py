@@ -147,6 +147,17 @@ def test_kinds_name_their_inputs_and_outputs():
     assert len(k) > 50
 
 
+def test_kinds_give_every_param_with_its_default_and_doc():
+    m = kodama_dag.kinds()["RadioMap"]
+    params = {p.name: p for p in m.params}
+    assert params["tx"].required and params["tx"].type == "(f64, f64, f64)"
+    assert "above the terrain" in params["tx"].doc
+    assert params["cell_m"].default == 5.0 and not params["cell_m"].required
+    assert params["options"].default["max_depth"] == 3
+    assert params["antenna"].default["pattern"] == "Isotropic"
+    assert "struct MapOptions:" in m.reference and "clockwise from grid north" in m.reference
+
+
 def test_a_bad_graph_is_a_user_error_naming_file_and_place(tmp_path, cache):
     bad = tmp_path / "bad.ron"
     bad.write_text(SMALL.read_text().replace('"city": SynthCity', '"city": SynthCty', 1).replace('"city":       SynthCity', '"city":       SynthCty'))
