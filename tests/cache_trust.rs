@@ -307,6 +307,21 @@ fn a_folder_input_holding_the_cache_and_the_outputs_is_a_hit_on_the_next_run() {
     );
     assert_eq!(env.run(&g, &[]).ok().status("p"), "ran");
     assert_eq!(env.run(&g, &[]).ok().status("p"), "cached");
+    // explain, told the same output folder, plans the same keys.
+    let r = env.cli(&[
+        "explain",
+        g.to_str().unwrap(),
+        "--cache",
+        env.cache().to_str().unwrap(),
+        "--out",
+        env.out().to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let plan: serde_json::Value = serde_json::from_str(&r.stdout).unwrap();
+    for n in plan["nodes"].as_array().unwrap() {
+        assert_eq!(n["plan"], "cached", "{n}");
+    }
     // Another run's cache in the same folder.
     let other = env.path("other_cache");
     let r = env.cli(&[

@@ -120,6 +120,10 @@ enum Command {
         /// Cache directory (default: $KODAMA_DAG_CACHE, else ./cache).
         #[arg(long)]
         cache: Option<PathBuf>,
+        /// The output folder `run` would write (default: out/<graph name>): left out of folder
+        /// inputs' digests as `run` leaves it out, so the plan names the keys `run` would use.
+        #[arg(long)]
+        out: Option<PathBuf>,
         /// Explain only this node and what it needs (repeatable).
         #[arg(long = "target", value_name = "NODE")]
         targets: Vec<String>,
@@ -656,9 +660,10 @@ fn dispatch(cmd: Command) -> Result<u8, Fail> {
         Command::Explain {
             graph,
             cache,
+            out,
             targets,
             json,
-        } => explain_command(&graph, cache, &targets, json),
+        } => explain_command(&graph, cache, out, &targets, json),
         Command::Gc(a) => gc_command(a),
         Command::Graph { graph, format } => {
             let g = load_graph(&graph)?;
@@ -1009,13 +1014,14 @@ const MAX_RECORDS_SIZING: usize = 2000;
 fn explain_command(
     graph: &GraphArgs,
     cache: Option<PathBuf>,
+    out: Option<PathBuf>,
     targets: &[String],
     json: bool,
 ) -> Result<u8, Fail> {
     let g = load_graph(graph)?;
     let mut cache = open_cache(cache)?;
-    // The folder `run` writes by default, left out of folder inputs as `run` leaves it out.
-    cache.writes_outputs_to(&Path::new("out").join(&g.name));
+    // The folder `run` would write, left out of folder inputs as `run` leaves it out.
+    cache.writes_outputs_to(&out.unwrap_or_else(|| Path::new("out").join(&g.name)));
     let plan = explain(&g, &cache, targets)?;
     let tiles = g.tiling.as_ref().map(|t| {
         serde_json::json!({
