@@ -407,6 +407,27 @@ fn a_geotiff_claiming_billions_of_pixels_is_refused_before_decoding() {
     expect_all(&e, &["dsm.tif", "dimensions", "would need", "GiB"]);
 }
 
+/// A TIFF of a few hundred bytes whose 12 pixels claim 2,228 km each: the site grid covering it
+/// holds 107 million cells, within the cell limit but sized by the georeferencing, not the data
+/// (found by AFL++: 18 s a read). Refused before any cell is sampled.
+#[test]
+fn a_geotiff_whose_few_pixels_claim_thousands_of_km_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let tie = [0.0, 0.0, 0.0, 583200.0, 4506600.0, 0.0];
+    let e = read_raster_fails(dir.path(), tiff(4, 3, [1.0, 2_228_224.0, 0.0], tie));
+    expect_all(&e, &["dsm.tif", "4 x 3 pixels", "per pixel", "pixel size"]);
+    // A coarse DEM on a fine grid is no such claim: 90 m pixels onto 0.5 m cells.
+    let p = write(dir.path(), "coarse.tif", tiff(4, 3, [90.0, 90.0, 0.0], tie));
+    let coarse: Raster = kodama_nodes::stages::ingest::read_raster::ReadRaster::run(
+        &serde_json::from_value(json!({"path": "coarse.tif", "crs": "EPSG:32618", "cell_m": 0.5}))
+            .unwrap(),
+        &Inputs::new(),
+        &Ctx::new(&site(), &[p]),
+    )
+    .unwrap();
+    assert_eq!((coarse.grid.width, coarse.grid.height), (721, 542));
+}
+
 /// Within the cell limit but far past what the file holds: 46,340 x 46,340 floats (8.6 GB)
 /// claimed by a TIFF of a few hundred bytes are refused before the decoder allocates them.
 #[test]

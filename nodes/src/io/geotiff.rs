@@ -111,6 +111,19 @@ impl GeoTiff {
     }
 }
 
+/// The decoder's limits while tags are read: a tag's values lie in the file, at least a byte
+/// each, so a tag claiming more values than the file has bytes is refused before the decoder
+/// allocates them (the tiff crate sizes a tag's vector from its count against
+/// `decoding_buffer_size`; a 280-byte TIFF claiming 200 million doubles asked for 6.4 GB).
+fn tag_limits(file_len: u64) -> Limits {
+    let mut l = limits();
+    let per_value = std::mem::size_of::<tiff::decoder::ifd::Value>() as u64;
+    let most = file_len.saturating_add(64).saturating_mul(per_value);
+    l.decoding_buffer_size = most.min(crate::params::MAX_BYTES) as usize;
+    l.ifd_value_size = l.ifd_value_size.min(file_len.saturating_add(64) as usize);
+    l
+}
+
 /// The decoder's buffers, bounded by the shared budget rather than left unlimited (a crafted
 /// tag or strip length would otherwise be allocated as stated).
 fn limits() -> Limits {
@@ -133,9 +146,10 @@ type FileDecoder = Decoder<std::io::BufReader<std::fs::File>>;
 pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
     let file = crate::io::open::open_regular(path)
         .map_err(|e| StageError::bad_input(path, "open", e.to_string()))?;
+    let file_len = file.metadata().map_or(0, |m| m.len());
     let mut d = Decoder::new(std::io::BufReader::new(file))
         .map_err(|e| tiff_error(path, "header", e))?
-        .with_limits(limits());
+        .with_limits(tag_limits(file_len));
     let (width, height) = d
         .dimensions()
         .map_err(|e| tiff_error(path, "dimensions", e))?;
@@ -143,7 +157,7 @@ pub fn read_geotiff(path: &Path) -> Result<GeoTiff, StageError> {
     let pixels = pixel_grid(path, &mut d, width, height)?;
     let crs = geokeys_crs(path, &mut d)?;
     let nodata = gdal_nodata(&mut d);
-    let samples = image_samples(path, &mut d, width, height, bands)?;
+    let samples = image_samples(path, d, width, height, bands)?;
     Ok(GeoTiff {
         pixels,
         bands,
@@ -283,10 +297,10 @@ fn gdal_nodata(d: &mut FileDecoder) -> Option<f64> {
 
 /// The image's samples, its size checked against the budget before the decoder allocates it (a
 /// few bytes of TIFF can claim 10^10 x 10^10 pixels) and what it decoded checked to hold every
-/// pixel's `bands` samples.
+/// pixel's `bands` samples. `d` comes with [`tag_limits`] and leaves with [`limits`].
 fn image_samples(
     path: &Path,
-    d: &mut FileDecoder,
+    mut d: FileDecoder,
     width: u32,
     height: u32,
     bands: u16,
@@ -298,8 +312,10 @@ fn image_samples(
     // What the chunks hold uncompressed: rows of packed samples (a 1-bit mask stores an eighth
     // of the bytes it decodes to).
     let stored_rows = (width as u64 * bands as u64 * bits).div_ceil(8) * height as u64;
-    check_stored_data(path, d, stored_rows)?;
+    check_stored_data(path, &mut d, stored_rows)?;
+    // Tags read; the pixels, checked above, may take the whole budget.
     let samples = d
+        .with_limits(limits())
         .read_image()
         .map_err(|e| tiff_error(path, "pixel data", e))?;
     // The decoder returns what the strips hold, which a file's tags can make fewer than the

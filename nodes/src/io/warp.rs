@@ -31,6 +31,30 @@ pub fn covering_grid(src: &PixelGrid, to_site: &ToSite, cell_m: f64) -> Result<G
     Grid::covering_checked(lo, hi, cell_m).map_err(|m| format!("{m}; use a coarser cell"))
 }
 
+/// Most target cells per source pixel a resampling may fill, beyond [`MIN_BOUNDED_CELLS`]: a 90 m
+/// DEM on a 0.25 m grid is 129,600 per pixel. Past it the georeferencing, not the data, sizes the
+/// work: a 533-byte TIFF whose 12 pixels claim 2,228 km each filled 107 million cells.
+pub const MAX_CELLS_PER_PIXEL: u64 = 1 << 20;
+
+/// Target grids up to this many cells are never refused for their ratio to the source.
+pub const MIN_BOUNDED_CELLS: u64 = 1 << 24;
+
+/// Refuses resampling `src` onto `target` when the target holds more than
+/// [`MAX_CELLS_PER_PIXEL`] cells per source pixel (and more than [`MIN_BOUNDED_CELLS`]).
+pub fn check_upsampling(src: &PixelGrid, target: &Grid) -> Result<(), String> {
+    let pixels = src.width as u64 * src.height as u64;
+    let cells = target.len() as u64;
+    if cells > MIN_BOUNDED_CELLS && cells / pixels.max(1) > MAX_CELLS_PER_PIXEL {
+        return Err(format!(
+            "its {} x {} pixels of {} x {} CRS units would fill {cells} cells of {} m, more than \
+             {MAX_CELLS_PER_PIXEL} per pixel: check its pixel size (ModelPixelScale or the \
+             geotransform), or give a window",
+            src.width, src.height, src.dx, src.dy, target.cell_m
+        ));
+    }
+    Ok(())
+}
+
 /// `grid` cut to the cells whose centres lie in `window` (site metres), when one is given: a
 /// file far larger than the site (a DEM tile, an SRTM degree) is resampled only where it is used.
 /// The column and row of the cut's first cell in `grid` come with it.

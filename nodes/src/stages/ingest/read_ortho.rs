@@ -10,7 +10,7 @@ use crate::artifact::{Ortho, PodVec};
 use crate::io::crs::source_crs;
 use crate::io::crs::{Crs, ToSite};
 use crate::io::geotiff::{PixelGrid, read_geotiff};
-use crate::io::warp::{Resample, SourceMap, covering_grid, sample, windowed};
+use crate::io::warp::{Resample, SourceMap, check_upsampling, covering_grid, sample, windowed};
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`ReadOrtho`].
@@ -129,6 +129,8 @@ impl Stage for ReadOrtho {
             .map_err(|m| StageError::bad_input(path, "reprojection", m))?;
         let (grid, _, _) =
             windowed(grid, p.window).map_err(|m| StageError::bad_input(path, "window", m))?;
+        check_upsampling(&pixels, &grid)
+            .map_err(|m| StageError::bad_input(path, "georeferencing", m))?;
         let map = SourceMap::new(&grid, &pixels, &to_site);
         ctx.progress.set_total(grid.height as u64);
         let w = grid.width as usize;

@@ -10,7 +10,7 @@ use crate::io::crs::ToSite;
 use crate::io::crs::source_crs;
 use crate::io::geotiff::{GeoTiff, read_geotiff};
 use crate::io::hgt::{is_hgt, read_hgt};
-use crate::io::warp::{Resample, SourceMap, covering_grid, sample, windowed};
+use crate::io::warp::{Resample, SourceMap, check_upsampling, covering_grid, sample, windowed};
 use crate::stage::{Ctx, FileRef, InputSpec, Inputs, ParamError, Stage, StageError};
 
 /// Params of [`ReadRaster`].
@@ -165,6 +165,7 @@ fn warp_raster(
 ) -> Result<Raster, String> {
     let px = tif.pixels;
     let (grid, _, _) = windowed(covering_grid(&px, to_site, cell_m)?, window)?;
+    check_upsampling(&px, &grid)?;
     let map = SourceMap::new(&grid, &px, to_site);
     ctx.progress.set_total(grid.height as u64);
     let mut data = vec![f32::NAN; grid.len()];
