@@ -69,6 +69,32 @@ fn exr_error(path: &Path, e: exr::error::Error) -> StageError {
     )
 }
 
+/// The most an EXR's pixels may expand from the file that holds them: deflate's limit is 1,032
+/// to 1, and run-length and wavelet codings of a flat image stay below this.
+pub const MAX_EXPANSION: u64 = 4096;
+
+/// Whether a file of `file_len` bytes can hold `width` x `height` pixels of `channels` f32
+/// samples: the decoder allocates the whole image from the header before reading a chunk, and a
+/// 300-byte file claimed 8 GB (found by AFL++).
+fn check_expansion(
+    width: usize,
+    height: usize,
+    channels: usize,
+    file_len: u64,
+) -> Result<(), String> {
+    let decoded = (width as u64)
+        .saturating_mul(height as u64)
+        .saturating_mul(channels as u64 * 4);
+    if decoded > file_len.max(1).saturating_mul(MAX_EXPANSION) {
+        return Err(format!(
+            "{width} x {height} pixels of {channels} channels ({decoded} bytes decoded) from a \
+             file of {file_len} bytes, more than any EXR compression expands to \
+             ({MAX_EXPANSION} to 1)"
+        ));
+    }
+    Ok(())
+}
+
 /// The first layer of an EXR file: width, height and every channel as f32, by name.
 pub fn read_exr(path: &Path) -> Result<(usize, usize, Channels), StageError> {
     read_exr_expecting(path, |_, _| Ok(()))
@@ -85,15 +111,23 @@ pub fn read_exr_expecting(
     use std::io::{BufReader, Seek};
     let file = crate::io::open::open_regular(path)
         .map_err(|e| exr_error(path, exr::error::Error::Io(e)))?;
+    let file_len = file.metadata().map_or(0, |m| m.len());
     let mut reader = BufReader::new(file);
     let meta = exr::meta::MetaData::read_from_buffered(&mut reader, false)
         .map_err(|e| exr_error(path, e))?;
-    let (w, ht, channels) = meta.headers.first().map_or((0, 0, 0), |h| {
+    // Every layer, since the decoder takes the first valid one, not necessarily the first.
+    for h in &meta.headers {
         let size = h.layer_size;
-        (size.width(), size.height(), h.channels.list.len())
-    });
-    crate::params::check_cells(w as f64, ht as f64, 4 * channels.max(1))
-        .map_err(|m| StageError::bad_input(path, "EXR header", m))?;
+        let (w, ht, channels) = (size.width(), size.height(), h.channels.list.len().max(1));
+        crate::params::check_cells(w as f64, ht as f64, 4 * channels)
+            .map_err(|m| StageError::bad_input(path, "EXR header", m))?;
+        check_expansion(w, ht, channels, file_len)
+            .map_err(|m| StageError::bad_input(path, "EXR header", m))?;
+    }
+    let (w, ht) = meta
+        .headers
+        .first()
+        .map_or((0, 0), |h| (h.layer_size.width(), h.layer_size.height()));
     expect(w, ht)?;
     reader
         .rewind()
