@@ -133,14 +133,24 @@ pub fn read_exr_expecting(
         .rewind()
         .map_err(|e| exr_error(path, exr::error::Error::Io(e)))?;
     use exr::prelude::{ReadChannels, ReadLayers};
-    let img = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .first_valid_layer()
-        .all_attributes()
-        .from_buffered(reader)
-        .map_err(|e| exr_error(path, e))?;
+    // On this thread, so that a panic of the decoder on a malformed block (the exr crate's B44
+    // arithmetic overflows on some, found by AFL++) is this file's error, not a worker thread's.
+    let img = StageError::catch_decoder_panic(
+        path,
+        "EXR",
+        "expected a well-formed OpenEXR image (its decoder failed",
+        || {
+            exr::prelude::read()
+                .no_deep_data()
+                .largest_resolution_level()
+                .all_channels()
+                .first_valid_layer()
+                .all_attributes()
+                .non_parallel()
+                .from_buffered(reader)
+        },
+    )?
+    .map_err(|e| exr_error(path, e))?;
     let layer = img.layer_data;
     let (w, h) = (layer.size.width(), layer.size.height());
     let channels = layer

@@ -336,9 +336,10 @@ fn image_samples(
 /// hold them uncompressed), checked before the decoder allocates them: a 64-byte TIFF can claim
 /// 46,340 x 46,340 floats within the cell limit.
 /// The strips' or tiles' stored bytes must lie inside the file, and expand to the pixels at most
-/// by their compression's largest ratio (none 1, PackBits 64, Deflate 1,032, LZW 4,096; other
-/// methods only by the cell limit). Chunks stored as 0 bytes (GDAL's sparse files) hold none of
-/// the pixels and are not asked to.
+/// by their compression's largest ratio (none 1, PackBits 64, Deflate 1,032, LZW and JPEG 4,096,
+/// CCITT Group 4 65,536); a compression the decoder does not read is refused here, before it
+/// allocates the image (found by AFL++: 4-12 GB from a few hundred bytes). Chunks stored as 0
+/// bytes (GDAL's sparse files) hold none of the pixels and are not asked to.
 fn check_stored_data(path: &Path, d: &mut FileDecoder, decoded: u64) -> Result<(), StageError> {
     let counts = d
         .get_tag_u64_vec(Tag::TileByteCounts)
@@ -358,12 +359,27 @@ fn check_stored_data(path: &Path, d: &mut FileDecoder, decoded: u64) -> Result<(
             ),
         ));
     }
-    let ratio: u64 = match d.get_tag_u32(Tag::Compression).unwrap_or(1) {
+    let compression = d.get_tag_u32(Tag::Compression).unwrap_or(1);
+    let ratio: u64 = match compression {
         1 => 1,
         32773 => 64,
         8 | 32946 => 1032,
         5 => 4096,
-        _ => return Ok(()),
+        // JPEG: a flat 8 x 8 block takes a few bits of its 192 bytes.
+        7 => 4096,
+        // CCITT Group 4: a blank row is a bit; bilevel images only.
+        4 => 1 << 16,
+        other => {
+            // The decoder would refuse it too, but only after allocating the whole image.
+            return Err(StageError::bad_input(
+                path,
+                "Compression",
+                format!(
+                    "none, LZW, Deflate, PackBits, JPEG or CCITT Group 4, found compression \
+                     {other} (gdal_translate -co COMPRESS=DEFLATE rewrites it)"
+                ),
+            ));
+        }
     };
     let chunks = counts.len() as u64;
     let held = counts.iter().filter(|&&c| c > 0).count() as u64;
