@@ -1191,7 +1191,8 @@ pub fn write_encoded(
 /// folder at `path`, its own or the other's (the same bytes: the same inputs give them).
 fn replace_folder(tmp: &Path, path: &Path) -> std::io::Result<()> {
     use std::io::ErrorKind::{DirectoryNotEmpty, NotADirectory, NotFound};
-    let old = tmp.with_extension("old");
+    // A temp name too (`.kodama-<pid>-...tmp`), so a killed run's leftover is cleaned up.
+    let old = tmp.with_extension("old.tmp");
     let mut last = None;
     for _ in 0..100 {
         let _ = std::fs::remove_dir_all(&old);

@@ -552,7 +552,7 @@ fn watch_loop(
                 Ok(_) => {}
                 Err(Fail(_, msg)) => eprintln!("{}", crate::progress::for_terminal(&msg)),
             },
-            Err(Fail(_, msg)) => eprintln!("{}", crate::progress::for_terminal(&msg)),
+            Err(Fail(_, msg)) => eprintln!("{}", crate::progress::for_terminal(msg)),
         }
         eprintln!("watching {} paths (Ctrl-C to stop)", paths.len());
         if !crate::watch::wait_for_change(
