@@ -263,53 +263,42 @@ fn read_views_json(dir: &Path, bytes: &[u8]) -> Outcome {
     )
 }
 
+/// A one-file ingest stage on `bytes` written as `name`: its params `params` with `path` set.
+fn read_one_file<S: Stage>(dir: &Path, name: &str, bytes: &[u8], mut params: Value) -> Outcome {
+    let p = write(dir, name, bytes);
+    params["path"] = json!(name);
+    run_stage::<S>(params, &[p])
+}
+
 fn read_measurements_csv(dir: &Path, bytes: &[u8]) -> Outcome {
-    let p = write(dir, "links.csv", bytes);
-    run_stage::<kodama_nodes::stages::ingest::read_measurements::ReadMeasurements>(
-        json!({"path": "links.csv"}),
-        &[p],
-    )
+    use kodama_nodes::stages::ingest::read_measurements::ReadMeasurements;
+    read_one_file::<ReadMeasurements>(dir, "links.csv", bytes, json!({}))
 }
 
 fn read_las(dir: &Path, bytes: &[u8]) -> Outcome {
     // The reader tells LAS from LAZ by the header, not the name.
-    let p = write(dir, "p.las", bytes);
-    run_stage::<kodama_nodes::stages::ingest::read_las::ReadLas>(
-        json!({"path": "p.las", "crs": "EPSG:32618"}),
-        &[p],
-    )
+    use kodama_nodes::stages::ingest::read_las::ReadLas;
+    read_one_file::<ReadLas>(dir, "p.las", bytes, json!({"crs": "EPSG:32618"}))
 }
 
 fn read_geotiff(dir: &Path, bytes: &[u8]) -> Outcome {
-    let p = write(dir, "dsm.tif", bytes);
-    run_stage::<kodama_nodes::stages::ingest::read_raster::ReadRaster>(
-        json!({"path": "dsm.tif", "crs": "EPSG:32618"}),
-        &[p],
-    )
+    use kodama_nodes::stages::ingest::read_raster::ReadRaster;
+    read_one_file::<ReadRaster>(dir, "dsm.tif", bytes, json!({"crs": "EPSG:32618"}))
 }
 
 fn read_osm_xml(dir: &Path, bytes: &[u8]) -> Outcome {
-    let p = write(dir, "b.osm", bytes);
-    run_stage::<kodama_nodes::stages::ingest::read_osm::ReadOsmBuildings>(
-        json!({"path": "b.osm"}),
-        &[p],
-    )
+    use kodama_nodes::stages::ingest::read_osm::ReadOsmBuildings;
+    read_one_file::<ReadOsmBuildings>(dir, "b.osm", bytes, json!({}))
 }
 
 fn read_geojson(dir: &Path, bytes: &[u8]) -> Outcome {
-    let p = write(dir, "footprints.geojson", bytes);
-    run_stage::<kodama_nodes::stages::ingest::read_footprints::ReadFootprints>(
-        json!({"path": "footprints.geojson"}),
-        &[p],
-    )
+    use kodama_nodes::stages::ingest::read_footprints::ReadFootprints;
+    read_one_file::<ReadFootprints>(dir, "footprints.geojson", bytes, json!({}))
 }
 
 fn read_xyz(dir: &Path, bytes: &[u8]) -> Outcome {
-    let p = write(dir, "points.xyz", bytes);
-    run_stage::<kodama_nodes::stages::ingest::read_xyz::ReadXyz>(
-        json!({"path": "points.xyz"}),
-        &[p],
-    )
+    use kodama_nodes::stages::ingest::read_xyz::ReadXyz;
+    read_one_file::<ReadXyz>(dir, "points.xyz", bytes, json!({}))
 }
 
 fn read_exr(dir: &Path, bytes: &[u8]) -> Outcome {
