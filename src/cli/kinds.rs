@@ -2,11 +2,11 @@
 //! inputs, output, reports and every param with its type, default and documentation, read from
 //! the stage's own source by `kodama_nodes::params::reference`).
 
-use std::collections::BTreeMap;
+use std::collections::VecDeque;
 
 use kodama_nodes::params::reference::{self, FieldDoc, TypeDoc};
 use kodama_nodes::stage::{Arity, InputSpec};
-use serde_json::Value;
+use serde_json::{Map, Value};
 
 use super::Fail;
 use crate::registry::{self, Kind};
@@ -82,11 +82,10 @@ pub fn kind_reference(kind: &Kind) -> String {
         "\nParams ({}; `= value` is the default):\n",
         params.name
     ));
-    let mut queue = Vec::new();
+    let mut queue = VecDeque::new();
     write_fields(&mut out, params, defaults.as_ref(), &mut queue);
     let mut written = vec![params as *const TypeDoc];
-    while let Some((ty, default)) = queue.first().cloned() {
-        queue.remove(0);
+    while let Some((ty, default)) = queue.pop_front() {
         if written.contains(&(ty as *const TypeDoc)) {
             continue;
         }
@@ -99,11 +98,12 @@ pub fn kind_reference(kind: &Kind) -> String {
         if !ty.doc.is_empty() {
             out.push_str(&indent(ty.doc, 2));
         }
-        let fields = default.as_ref().and_then(|v| match v {
-            Value::Object(m) => Some(m.clone().into_iter().collect::<BTreeMap<_, _>>()),
-            _ => None,
-        });
-        write_fields(&mut out, ty, fields.as_ref(), &mut queue);
+        write_fields(
+            &mut out,
+            ty,
+            default.as_ref().and_then(Value::as_object),
+            &mut queue,
+        );
     }
     out
 }
@@ -114,8 +114,8 @@ type Pending = (&'static TypeDoc, Option<Value>);
 fn write_fields(
     out: &mut String,
     ty: &'static TypeDoc,
-    defaults: Option<&BTreeMap<String, Value>>,
-    queue: &mut Vec<Pending>,
+    defaults: Option<&Map<String, Value>>,
+    queue: &mut VecDeque<Pending>,
 ) {
     for f in ty.fields {
         let default = defaults.and_then(|d| d.get(f.name));
@@ -124,7 +124,7 @@ fn write_fields(
             out.push_str(&indent(f.doc, 6));
         }
         for nested in reference::named_in(f.ty, ty.module) {
-            queue.push((nested, default.cloned()));
+            queue.push_back((nested, default.cloned()));
         }
     }
 }
@@ -179,7 +179,7 @@ fn indent(text: &str, n: usize) -> String {
 /// Every field's default, read from the kind's own params parser: the required fields filled
 /// with placeholders of their type, the rest left to their defaults. None where a required
 /// field's type has no placeholder (then only the docs are printed).
-pub fn defaults_of(kind: &Kind, params: &TypeDoc) -> Option<BTreeMap<String, Value>> {
+pub fn defaults_of(kind: &Kind, params: &TypeDoc) -> Option<Map<String, Value>> {
     let mut fields = Vec::new();
     for f in params.fields.iter().filter(|f| !f.optional) {
         fields.push(format!("{}: {}", f.name, placeholder(f.ty)?));
