@@ -124,7 +124,7 @@ fn collect(items: &[syn::Item], module: &str, out: &mut Vec<TypeDoc>) {
     for item in items {
         match item {
             syn::Item::Struct(s) if derives_deserialize(&s.attrs) => {
-                let container_default = serde_flag(&s.attrs, "default");
+                let container_default = serde_attr(&s.attrs, "default").is_some();
                 let fields = match &s.fields {
                     syn::Fields::Named(named) => named
                         .named
@@ -142,7 +142,8 @@ fn collect(items: &[syn::Item], module: &str, out: &mut Vec<TypeDoc>) {
                 });
             }
             syn::Item::Enum(e) if derives_deserialize(&e.attrs) => {
-                let lowercase = serde_value(&e.attrs, "rename_all").as_deref() == Some("lowercase");
+                let lowercase =
+                    serde_attr(&e.attrs, "rename_all").flatten().as_deref() == Some("lowercase");
                 let fields = e
                     .variants
                     .iter()
@@ -200,10 +201,8 @@ fn payload(fields: &syn::Fields) -> String {
 fn field_doc(f: &syn::Field, container_default: bool) -> FieldDoc {
     let ty = tidy(&f.ty.to_token_stream().to_string());
     // serde fills a missing Option with None, and a field marked default with its default.
-    let optional = container_default
-        || serde_flag(&f.attrs, "default")
-        || serde_value(&f.attrs, "default").is_some()
-        || ty.starts_with("Option<");
+    let optional =
+        container_default || serde_attr(&f.attrs, "default").is_some() || ty.starts_with("Option<");
     FieldDoc {
         name: f
             .ident
@@ -254,48 +253,30 @@ fn doc_of(attrs: &[syn::Attribute]) -> String {
     lines.join("\n")
 }
 
-/// Whether `#[serde(..., name, ...)]` is present as a bare word.
-fn serde_flag(attrs: &[syn::Attribute], name: &str) -> bool {
-    let mut found = false;
-    for a in attrs.iter().filter(|a| a.path().is_ident("serde")) {
-        let _ = a.parse_nested_meta(|m| {
-            if m.input.peek(syn::Token![=]) {
-                let _: syn::Expr = m.value()?.parse()?;
-            } else if m.input.peek(syn::token::Paren) {
-                skip_parenthesized(m.input)?;
-            } else if m.path.is_ident(name) {
-                found = true;
-            }
-            Ok(())
-        });
-    }
-    found
-}
-
-fn skip_parenthesized(input: syn::parse::ParseStream) -> syn::Result<()> {
-    let content;
-    syn::parenthesized!(content in input);
-    let _: proc_macro2::TokenStream = content.parse()?;
-    Ok(())
-}
-
-/// The string of `#[serde(name = "...")]`.
-fn serde_value(attrs: &[syn::Attribute], name: &str) -> Option<String> {
+/// `#[serde(..., name, ...)]`: None when absent, `Some(None)` as a bare word (`default`),
+/// `Some(Some(v))` with a string value (`default = "five"`, `rename_all = "lowercase"`).
+fn serde_attr(attrs: &[syn::Attribute], name: &str) -> Option<Option<String>> {
     let mut found = None;
     for a in attrs.iter().filter(|a| a.path().is_ident("serde")) {
         let _ = a.parse_nested_meta(|m| {
+            let this = m.path.is_ident(name);
             if m.input.peek(syn::Token![=]) {
                 let v: syn::Expr = m.value()?.parse()?;
-                if m.path.is_ident(name)
-                    && let syn::Expr::Lit(syn::ExprLit {
-                        lit: syn::Lit::Str(s),
-                        ..
-                    }) = v
-                {
-                    found = Some(s.value());
+                if this {
+                    found = Some(match v {
+                        syn::Expr::Lit(syn::ExprLit {
+                            lit: syn::Lit::Str(s),
+                            ..
+                        }) => Some(s.value()),
+                        _ => None,
+                    });
                 }
             } else if m.input.peek(syn::token::Paren) {
-                skip_parenthesized(m.input)?;
+                let content;
+                syn::parenthesized!(content in m.input);
+                let _: proc_macro2::TokenStream = content.parse()?;
+            } else if this {
+                found = Some(None);
             }
             Ok(())
         });
