@@ -105,13 +105,13 @@ def world(rho, phi, z=0.0):
             round(float(rho * np.sin(phi - np.pi / 2)), 9), z)
 
 
-def receiver_angles(n, phi_s):
-    """RECEIVERS angles across the open region, none within 0.01 pi of a shadow boundary (where
-    geometrical optics jumps and its subtraction is not defined)."""
+def receiver_angles(n, phi_s, margin=0.01):
+    """RECEIVERS angles across the open region, none within `margin` pi of a shadow boundary
+    (where geometrical optics jumps and its subtraction is not defined)."""
     bounds = [phi_s + np.pi, phi_s - np.pi, np.pi - phi_s, (2 * n - 1) * np.pi - phi_s]
     out = []
     for a in np.linspace(0.03 * np.pi, (n - 0.03) * np.pi, RECEIVERS):
-        while min(abs(a - b) for b in bounds) < 0.01 * np.pi:
+        while min(abs(a - b) for b in bounds) < margin * np.pi:
             a += 0.01 * np.pi
         out.append(a)
     return out
@@ -127,17 +127,19 @@ def prism_ply(path, n):
     write_ply(path, v, f)
 
 
-def sionna_gains(folder, n, tx, rxs, pol):
+def sionna_gains(folder, n, tx, rxs, pol, material="metal", thickness=0.002):
+    """Sionna RT's path gains (dB) of the links tx -> rxs over the prism wedge of `n` made of
+    the ITU `material` as a slab `thickness` metres thick."""
     os.makedirs(f"{folder}/meshes", exist_ok=True)
     prism_ply(f"{folder}/meshes/wedge.ply", n)
     with open(f"{folder}/scene.xml", "w") as out:
-        out.write("""<scene version="2.1.0">
-<bsdf type="itu-radio-material" id="itu_metal">
-  <string name="type" value="metal"/><float name="thickness" value="0.002"/>
+        out.write(f"""<scene version="2.1.0">
+<bsdf type="itu-radio-material" id="itu_{material}">
+  <string name="type" value="{material}"/><float name="thickness" value="{thickness}"/>
 </bsdf>
 <shape type="ply" id="mesh-wedge">
   <string name="filename" value="meshes/wedge.ply"/><boolean name="face_normals" value="true"/>
-  <ref id="itu_metal" name="bsdf"/>
+  <ref id="itu_{material}" name="bsdf"/>
 </shape>
 </scene>
 """)

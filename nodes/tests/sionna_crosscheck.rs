@@ -733,10 +733,125 @@ fn diffraction_by_a_conducting_wedge_against_the_exact_solution() {
     );
 }
 
+/// Edge diffraction by lossy wedges against Maliuzhinets' exact solution, with Sionna RT beside
+/// it: tests/fixtures/impedance_wedge.csv (scripts/impedance_wedge_fixture.py). The reference is
+/// neither tracer: the far-field coefficient of the impedance wedge, its faces the Leontovich
+/// impedance of the material's half-space. The wedges of the conducting test in ITU wet ground
+/// and concrete (slabs 2 m thick, so both tracers reflect as a half-space), receivers at least
+/// 0.06 π from every shadow boundary (where the far field is the whole diffracted field).
+/// `luebbers` is Luebbers' heuristic with the reference's own faces, computed by the script.
+#[test]
+fn diffraction_by_a_lossy_wedge_against_maliuzhinets() {
+    use kodama_nodes::artifact::Material;
+    use kodama_nodes::rf::antenna::Polarization;
+    let mut r = csv::Reader::from_path(fixture("impedance_wedge.csv")).unwrap();
+    // (material, n, φ'/π, polarisation) -> links, and (exact, Luebbers, Sionna) dB per link.
+    type Case = (String, String, String, String);
+    let mut cases: BTreeMap<Case, Vec<LinkEndsRow>> = BTreeMap::new();
+    let mut refs: BTreeMap<Case, Vec<[f64; 3]>> = BTreeMap::new();
+    for rec in r.records() {
+        let rec = rec.unwrap();
+        let f = |i: usize| -> f64 { rec[i].parse().unwrap() };
+        let key = (
+            rec[0].to_string(),
+            rec[1].to_string(),
+            rec[2].to_string(),
+            rec[4].to_string(),
+        );
+        cases
+            .entry(key.clone())
+            .or_default()
+            .push(([f(5), f(6), f(7)], [f(8), f(9), f(10)]));
+        refs.entry(key).or_default().push([f(11), f(12), f(13)]);
+    }
+    let opt = diffraction_only(100_000);
+    let mut all: BTreeMap<&str, [Vec<f64>; 3]> = BTreeMap::new();
+    for (key, links) in &cases {
+        let (material, n, phi_s, pol) = key;
+        let m = match material.as_str() {
+            "wet_ground" => Material::WetGround,
+            "concrete" => Material::Concrete,
+            other => panic!("material {other}"),
+        };
+        let rf = prism_wedge(n.parse().unwrap(), m).with_thickness(m, 2.0);
+        let ant = Antenna {
+            polarization: if pol == "V" {
+                Polarization::V
+            } else {
+                Polarization::H
+            },
+            ..Antenna::default()
+        };
+        let got = trace_links(&rf, links, &ant, &ant, &opt, 3.5e9);
+        let mut errs: [Vec<f64>; 3] = Default::default();
+        for (g, [exact, lue, sionna]) in got.iter().zip(&refs[key]) {
+            errs[0].push((g.gain_db - exact).abs());
+            errs[1].push((sionna - exact).abs());
+            errs[2].push((lue - exact).abs());
+        }
+        let totals = all.entry(material.as_str()).or_default();
+        for (t, e) in totals.iter_mut().zip(&errs) {
+            t.extend_from_slice(e);
+        }
+        let [o, s, l] = errs.map(|mut e| (percentile(&mut e, 0.5), percentile(&mut e, 0.9)));
+        println!(
+            "{material} wedge n {n}, φ' {phi_s}π, {pol}: {} receivers; |ours - exact| median \
+             {:.3} dB, 90th percentile {:.3} dB; |Sionna RT - exact| {:.3} / {:.3} dB; \
+             |Luebbers - exact| {:.3} / {:.3} dB",
+            links.len(),
+            o.0,
+            o.1,
+            s.0,
+            s.1,
+            l.0,
+            l.1
+        );
+    }
+    for (material, errs) in &mut all {
+        let [o, s, l] = errs
+            .each_mut()
+            .map(|e| (percentile(e, 0.5), percentile(e, 0.9)));
+        println!(
+            "{material} wedges, all {} links: |ours - exact| median {:.3} dB, 90th percentile \
+             {:.3} dB; |Sionna RT - exact| {:.3} / {:.3} dB; |Luebbers - exact| {:.3} / {:.3} dB",
+            errs[0].len(),
+            o.0,
+            o.1,
+            s.0,
+            s.1,
+            l.0,
+            l.1
+        );
+        // Measured: wet ground 2.037 / 11.308 dB (Sionna RT 4.013 / 14.109), concrete 3.456 /
+        // 15.509 dB (4.195 / 17.685). Neither heuristic follows the exact solution: both are
+        // within a dB of it only where both faces are lit (ours) or for V with one face lit
+        // (Sionna's); a regression bound, and ours the closer over each material's links.
+        let (bound_median, bound_p90) = match *material {
+            "wet_ground" => (2.3, 12.0),
+            _ => (3.8, 16.2),
+        };
+        assert!(
+            o.0 <= bound_median && o.1 <= bound_p90,
+            "{material}: ours median {} dB, 90th percentile {} dB",
+            o.0,
+            o.1
+        );
+        assert!(
+            o.0 < s.0 && o.1 < s.1,
+            "{material}: ours is no closer to Maliuzhinets' solution than Sionna RT"
+        );
+    }
+}
+
 /// The closed metal prism of scripts/pec_wedge_fixture.py: its edge the z axis, face 0 along -y,
 /// face n at n π from it, both 400 m long, 600 m tall.
 fn conducting_wedge(n: f64) -> RfScene {
-    use kodama_nodes::artifact::{Material, ObjectClass, Polygon, Scene, SceneObject};
+    prism_wedge(n, kodama_nodes::artifact::Material::Metal)
+}
+
+/// The prism wedge of `conducting_wedge` made of `material`.
+fn prism_wedge(n: f64, material: kodama_nodes::artifact::Material) -> RfScene {
+    use kodama_nodes::artifact::{ObjectClass, Polygon, Scene, SceneObject};
     use kodama_nodes::geom::mesh_build::prism;
     let world = |a: f64| {
         let t = a - std::f64::consts::FRAC_PI_2;
@@ -748,7 +863,7 @@ fn conducting_wedge(n: f64) -> RfScene {
         exterior,
         holes: vec![],
     };
-    let mesh = prism(&poly, -300.0, 300.0, Material::Metal, Material::Metal).unwrap();
+    let mesh = prism(&poly, -300.0, 300.0, material, material).unwrap();
     let scene = Scene {
         objects: vec![SceneObject {
             id: "wedge".into(),
