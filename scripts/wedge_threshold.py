@@ -9,7 +9,13 @@ above the terrain mesh at random points outside every building's bounding box; t
 the threshold on, `test` (seed 2, the transmitter at (110, 210)) to report it on. Each set is
 traced at depth 3 with diffraction, 200,000 rays (the demo's Trace), at each threshold; printed:
 the wall time, and |gain - gain at 0 degrees| over the links both reach (median, 90th percentile,
-largest) with the links reached at one threshold only."""
+largest) with the links reached at one threshold only.
+
+    python3 scripts/wedge_threshold.py out/demo/scene.sionna target/release/kodama-dag --within-shapes
+
+traces each set twice at threshold 0 instead: with our wedges, and with only the wedges Sionna RT
+finds (`--wedges-within-shapes`: both faces in one shape, where the export splits a building by
+material): what a Sionna trace of the export loses to that split."""
 import argparse
 import csv
 import os
@@ -70,10 +76,10 @@ def link_set(scene_dir, which):
     return links
 
 
-def trace(binary, scene_dir, links_csv, threshold, out):
+def trace(binary, scene_dir, links_csv, threshold, out, extra=()):
     cmd = [binary, "trace", "--scene", os.path.join(scene_dir, "scene.xml"), "--links", links_csv,
            "--freq-hz", "3.5e9", "--max-depth", "3", "--rays", "200000", "--diffraction",
-           "--min-wedge-deg", str(threshold), "--out", out]
+           "--min-wedge-deg", str(threshold), "--out", out, *extra]
     start = time.perf_counter()
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     took = time.perf_counter() - start
@@ -87,6 +93,8 @@ def main():
     ap.add_argument("scene_dir")
     ap.add_argument("binary")
     ap.add_argument("--set", choices=sorted(SETS), default="dev")
+    ap.add_argument("--within-shapes", action="store_true",
+                    help="compare our wedges with Sionna's (both faces in one shape)")
     args = ap.parse_args()
     links = link_set(args.scene_dir, args.set)
     with tempfile.TemporaryDirectory() as tmp:
@@ -97,15 +105,19 @@ def main():
             w.writerows(links)
         base = None
         print(f"{args.set} set: {len(links)} links")
-        for t in THRESHOLDS:
+        runs = [(t, ()) for t in THRESHOLDS]
+        if args.within_shapes:
+            runs = [(0.0, ()), (0.0, ("--wedges-within-shapes",))]
+        for t, extra in runs:
             took, gains = trace(args.binary, args.scene_dir, links_csv, t,
-                                os.path.join(tmp, f"out{t}.csv"))
+                                os.path.join(tmp, f"out{t}{len(extra)}.csv"), extra)
             if base is None:
                 base = gains
             both = np.isfinite(base) & np.isfinite(gains)
             d = np.abs(gains[both] - base[both])
             one = int(np.count_nonzero(np.isfinite(base) != np.isfinite(gains)))
-            print(f"min_wedge_deg {t:5.1f}: {took:7.2f} s; |gain - gain at 0| median "
+            print(f"min_wedge_deg {t:5.1f}{' within shapes' if extra else ''}: {took:7.2f} s; "
+                  f"|gain - gain at 0| median "
                   f"{np.median(d):.3f} dB, 90th percentile {np.percentile(d, 90):.3f} dB, "
                   f"largest {d.max():.3f} dB over {both.sum()} links; {one} reached on one side")
             sys.stdout.flush()
