@@ -6,8 +6,9 @@
         [--diffraction]
 
 Sionna: RadioMapSolver, 10^6 rays (--rays), depth 3 (--depth), 5 m cells at 1.5 m, LOS + specular + refraction, no
-diffuse, no diffraction (--diffraction: first-order edge diffraction; run ours with --diffraction
-too), isotropic V antennas; timed warm (best of --runs, default 3, after one run). The maps are
+diffuse (--diffuse S: Lambertian diffuse reflection with scattering coefficient S on every
+material; run ours with --diffuse --scattering-coefficient S), no diffraction (--diffraction:
+first-order edge diffraction; run ours with --diffraction too), isotropic V antennas; timed warm (best of --runs, default 3, after one run). The maps are
 compared cell by cell in dB where both are reached; `-` for ours times Sionna alone. --threads N
 limits Dr.Jit's LLVM backend to N threads (thread scaling); KODAMA_MI_VARIANT=cuda_ad_mono_polarized
 runs it on the GPU. Needs sionna-rt 2.2, rasterio (for the comparison), libLLVM 19."""
@@ -26,6 +27,8 @@ ap.add_argument("--rays", type=float, default=1e6)
 ap.add_argument("--depth", type=int, default=3)
 ap.add_argument("--runs", type=int, default=3)
 ap.add_argument("--diffraction", action="store_true")
+ap.add_argument("--diffuse", type=float, default=0.0, metavar="S",
+                help="diffuse reflection too, every material's scattering coefficient S")
 ap.add_argument("--threads", type=int, default=0)
 args = ap.parse_args()
 if args.threads > 0:
@@ -33,12 +36,15 @@ if args.threads > 0:
 
 scene = load_scene(args.scene)
 scene.frequency = 3.5e9
+if args.diffuse > 0:
+    for m in scene.radio_materials.values():
+        m.scattering_coefficient = args.diffuse
 scene.tx_array = PlanarArray(num_rows=1, num_cols=1, pattern="iso", polarization="V")
 scene.rx_array = PlanarArray(num_rows=1, num_cols=1, pattern="iso", polarization="V")
 scene.add(Transmitter(name="tx", position=[8.5, 21.0, 27.0]))
 solver = RadioMapSolver()
 kw = dict(cell_size=(5.0, 5.0), samples_per_tx=int(args.rays), max_depth=args.depth, los=True,
-          specular_reflection=True, diffuse_reflection=False, refraction=True,
+          specular_reflection=True, diffuse_reflection=args.diffuse > 0, refraction=True,
           diffraction=args.diffraction)
 rm = solver(scene, **kw)
 times = []

@@ -216,12 +216,23 @@ fn device_order_is_patch_order() {
 }
 
 fn map_inputs(scene: &RfScene, tx: DVec3, plane: &MapPlane, rays: u32, depth: u32) -> MapInputs {
-    let opt = TraceOptions {
+    map_inputs_with(scene, tx, plane, &map_options(rays, depth, false))
+}
+
+fn map_inputs_with(scene: &RfScene, tx: DVec3, plane: &MapPlane, opt: &TraceOptions) -> MapInputs {
+    MapInputs::new(scene, tx, &Antenna::default(), plane, opt).unwrap()
+}
+
+/// LOS, specular reflection and transmission at `depth`; with `diffuse`, Lambertian diffuse
+/// reflection at roughness 0.3 too (the paper's settings at depth 12).
+fn map_options(rays: u32, depth: u32, diffuse: bool) -> TraceOptions {
+    TraceOptions {
         rays,
         max_depth: depth,
+        diffuse,
+        scattering_coefficient: if diffuse { 0.3 } else { 0.0 },
         ..Default::default()
-    };
-    MapInputs::new(scene, tx, &Antenna::default(), plane, &opt).unwrap()
+    }
 }
 
 /// The device map is the host twin's to the bit (the same integer sums), twice.
@@ -230,16 +241,25 @@ fn device_maps_are_the_host_maps() {
     let Some(gpu) = gpu() else { return };
     let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
     let plane = default_plane(&scene, 4.0, 1.5);
-    let mut cases = vec![(
-        "street grid",
-        map_inputs(&scene, DVec3::new(-60.0, -56.0, 12.0), &plane, 100_000, 3),
-    )];
+    let street_tx = DVec3::new(-60.0, -56.0, 12.0);
+    let mut cases = vec![
+        (
+            "street grid",
+            map_inputs(&scene, street_tx, &plane, 100_000, 3),
+        ),
+        (
+            "street grid, diffuse",
+            map_inputs_with(&scene, street_tx, &plane, &map_options(100_000, 3, true)),
+        ),
+    ];
     let munich = munich_xml().map(|xml| gpu_common::munich_rf(&xml));
     if let Some(m) = &munich {
         let plane = default_plane(m, 5.0, 1.5);
+        let tx = DVec3::new(8.5, 21.0, 27.0);
+        cases.push(("munich", map_inputs(m, tx, &plane, 100_000, 3)));
         cases.push((
-            "munich",
-            map_inputs(m, DVec3::new(8.5, 21.0, 27.0), &plane, 100_000, 3),
+            "munich, diffuse, depth 12",
+            map_inputs_with(m, tx, &plane, &map_options(100_000, 12, true)),
         ));
     }
     for (name, inputs) in cases {
@@ -310,36 +330,40 @@ fn device_map_speed_on_munich() {
         rayon::current_num_threads()
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for n in [1_000_000u32, 10_000_000] {
-        for depth in [3u32, 5] {
-            let opt = TraceOptions {
-                rays: n,
-                max_depth: depth,
-                ..Default::default()
-            };
-            let params = MapParams::new(&scene, tx, &Antenna::default(), &plane, &opt).unwrap();
-            let (a, t) = gpu.map(&dev, &params).unwrap();
-            let (b, t2) = gpu.map(&dev, &params).unwrap();
-            let call_s = t.call.min(t2.call);
-            let kernel_s = t.kernel.min(t2.kernel);
-            let same = a
-                .data
-                .0
-                .iter()
-                .zip(&b.data.0)
-                .all(|(x, y)| x.to_bits() == y.to_bits());
-            let clock = Instant::now();
-            let cpu = radio_map(&scene, tx, &Antenna::default(), &plane, &opt, 3.5e9);
-            let cpu_s = clock.elapsed().as_secs_f64();
-            let (both, only, median, _, max) = gpu_common::compare_maps(&a.data.0, &cpu.data.0);
-            println!(
-                "| {} | {n} | {depth} | {call_s:.4} | {kernel_s:.4} | {:.0} | {cpu_s:.4} | \
+    // The issue's rows, then the paper's settings: depth 12 with diffuse reflection (S 0.3).
+    let rows = [
+        (1_000_000u32, 3u32, false),
+        (1_000_000, 5, false),
+        (10_000_000, 3, false),
+        (10_000_000, 5, false),
+        (1_000_000, 12, true),
+        (10_000_000, 12, true),
+    ];
+    for (n, depth, diffuse) in rows {
+        let opt = map_options(n, depth, diffuse);
+        let params = MapParams::new(&scene, tx, &Antenna::default(), &plane, &opt).unwrap();
+        let (a, t) = gpu.map(&dev, &params).unwrap();
+        let (b, t2) = gpu.map(&dev, &params).unwrap();
+        let call_s = t.call.min(t2.call);
+        let kernel_s = t.kernel.min(t2.kernel);
+        let same = a
+            .data
+            .0
+            .iter()
+            .zip(&b.data.0)
+            .all(|(x, y)| x.to_bits() == y.to_bits());
+        let clock = Instant::now();
+        let cpu = radio_map(&scene, tx, &Antenna::default(), &plane, &opt, 3.5e9);
+        let cpu_s = clock.elapsed().as_secs_f64();
+        let (both, only, median, _, max) = gpu_common::compare_maps(&a.data.0, &cpu.data.0);
+        let depth = format!("{depth}{}", if diffuse { " + diffuse" } else { "" });
+        println!(
+            "| {} | {n} | {depth} | {call_s:.4} | {kernel_s:.4} | {:.0} | {cpu_s:.4} | \
                  {:.1}x | {both} | {only} | {median:.2e} | {max:.2e} | {same} |",
-                gpu.name(),
-                n as f64 / call_s / 1e6,
-                cpu_s / call_s
-            );
-            assert!(same, "two device maps differ");
-        }
+            gpu.name(),
+            n as f64 / call_s / 1e6,
+            cpu_s / call_s
+        );
+        assert!(same, "two device maps differ");
     }
 }

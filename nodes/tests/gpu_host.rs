@@ -66,6 +66,23 @@ fn check_map(name: &str, scene: &RfScene, tx: DVec3, plane: &MapPlane, rays: u32
         max_depth: 3,
         ..Default::default()
     };
+    check_map_with(name, scene, tx, plane, &opt);
+}
+
+/// Diffuse reflection as the paper traces it: roughness 0.3, Lambertian, with reflection and
+/// transmission, depth 3.
+fn diffuse(rays: u32) -> TraceOptions {
+    TraceOptions {
+        rays,
+        max_depth: 3,
+        diffuse: true,
+        scattering_coefficient: 0.3,
+        ..Default::default()
+    }
+}
+
+fn check_map_with(name: &str, scene: &RfScene, tx: DVec3, plane: &MapPlane, opt: &TraceOptions) {
+    let (rays, opt) = (opt.rays, opt.clone());
     let antenna = Antenna::default();
     let cpu = radio_map(scene, tx, &antenna, plane, &opt, 3.5e9);
     let inputs = MapInputs::new(scene, tx, &antenna, plane, &opt).unwrap();
@@ -74,8 +91,9 @@ fn check_map(name: &str, scene: &RfScene, tx: DVec3, plane: &MapPlane, rays: u32
     assert_eq!(host.data.0, again.data.0, "{name}: two host maps differ");
     let (both, only, median, p99, max) = gpu_common::compare_maps(&host.data.0, &cpu.data.0);
     println!(
-        "{name}: {rays} rays, depth 3: {both} cells both reach, {only} one only; |dB| median \
-         {median:.2e}, p99 {p99:.2e}, max {max:.2e}"
+        "{name}: {rays} rays, depth {}: {both} cells both reach, {only} one only; |dB| median \
+         {median:.2e}, p99 {p99:.2e}, max {max:.2e}",
+        opt.max_depth
     );
     assert!(both > 100, "{name}: only {both} cells reached");
     assert!(
@@ -105,6 +123,56 @@ fn host_kernel_maps_street_grid_as_the_cpu() {
         &plane,
         100_000,
     );
+}
+
+#[test]
+fn host_kernel_maps_diffuse_reflection_as_the_cpu() {
+    let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
+    let plane = MapPlane::plane(
+        Grid {
+            x0: -100.0,
+            y0: 100.0,
+            cell_m: 4.0,
+            width: 50,
+            height: 50,
+        },
+        1.5,
+    );
+    let tx = DVec3::new(-60.0, -56.0, 12.0);
+    check_map_with(
+        "street grid, diffuse",
+        &scene,
+        tx,
+        &plane,
+        &diffuse(100_000),
+    );
+    let Some(xml) = munich_xml() else { return };
+    let scene = gpu_common::munich_rf(&xml);
+    let plane = default_plane(&scene, 5.0, 1.5);
+    let tx = DVec3::new(8.5, 21.0, 27.0);
+    check_map_with("munich, diffuse", &scene, tx, &plane, &diffuse(100_000));
+}
+
+/// A directive diffuse pattern is refused by name, not traced as Lambertian.
+#[test]
+fn the_map_kernel_refuses_a_directive_pattern() {
+    use kodama_nodes::rf::scattering::ScatteringPattern;
+    let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
+    let plane = default_plane(&scene, 5.0, 1.5);
+    let opt = TraceOptions {
+        scattering_pattern: ScatteringPattern::Directive { alpha_r: 4 },
+        ..diffuse(1000)
+    };
+    let err = MapInputs::new(
+        &scene,
+        DVec3::new(0.0, 0.0, 10.0),
+        &Antenna::default(),
+        &plane,
+        &opt,
+    )
+    .err()
+    .expect("a directive pattern was accepted");
+    assert!(err.contains("other than Lambertian"), "{err}");
 }
 
 #[test]

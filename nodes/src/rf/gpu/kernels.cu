@@ -329,7 +329,9 @@ enum {
     C_WIDTH = 14,
     C_HEIGHT = 15,
     C_TABLE = 16,
-    C_COUNT = 17
+    C_DIFFUSE = 17,
+    C_SCAT = 18,
+    C_COUNT = 19
 };
 
 struct Cx {
@@ -477,6 +479,51 @@ CUDA_CALLABLE void slab_get(const double* slabs, u32 len, u32 m, double cos_t, C
     }
 }
 
+// `antenna::spherical_basis`: (θ̂, φ̂) of the unit direction k.
+CUDA_CALLABLE void spherical_basis(V3 k, V3* th, V3* ph) {
+    double rho = dsqrt(k.x * k.x + k.y * k.y);
+    if (rho < 1e-12) {
+        *ph = v3(0.0, 1.0, 0.0);
+        *th = v3(1.0 * k.z, -0.0 * k.z, 0.0);
+        return;
+    }
+    double cp = k.x / rho, sp = k.y / rho;
+    *th = v3(k.z * cp, k.z * sp, -rho);
+    *ph = v3(-sp, cp, 0.0);
+}
+
+// f64::signum: ±1 by the sign bit, so -0.0 gives -1.
+CUDA_CALLABLE double signum_d(double x) {
+#ifdef KODAMA_DEVICE
+    return copysign(1.0, x);
+#else
+    return std::copysign(1.0, x);
+#endif
+}
+
+// `radiomap::hemisphere`: a direction round the unit normal n, uniform in solid angle, from two
+// uniforms (glam's `any_orthonormal_pair` for the tangents).
+CUDA_CALLABLE V3 hemisphere(V3 n, double u1, double u2) {
+    double z = u1;
+    double r2 = 1.0 - z * z;
+    double r = dsqrt(r2 > 0.0 ? r2 : 0.0);
+    double phi = 2.0 * 3.141592653589793 * u2;
+    double sign = signum_d(n.z);
+    double a_ = -1.0 / (sign + n.z);
+    double b_ = n.x * n.y * a_;
+    V3 a = v3(1.0 + sign * n.x * n.x * a_, sign * b_, -sign * n.x);
+    V3 b = v3(b_, sign + n.y * n.y * a_, -n.y);
+    double s, c;
+#ifdef KODAMA_DEVICE
+    s = sin(phi);
+    c = cos(phi);
+#else
+    s = std::sin(phi);
+    c = std::cos(phi);
+#endif
+    return vnormalize(vadd(vadd(vmul(a, r * c), vmul(b, r * s)), vmul(n, z)));
+}
+
 // One launched ray, the `lattice_index`-th, from the transmitter to the end of its bounces.
 // `tri` holds per triangle its unit normal and first vertex (6 f64).
 CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packets,
@@ -558,8 +605,9 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
         double pr = cnorm2(co[0]) + cnorm2(co[1]);
         double pt = cnorm2(co[2]) + cnorm2(co[3]);
         double p_spec = k[C_REFLECT] != 0.0 ? pr * (1.0 - s2) : 0.0;
+        double p_diff = k[C_DIFFUSE] != 0.0 ? pr * s2 : 0.0;
         double p_tran = k[C_TRANSMIT] != 0.0 ? pt : 0.0;
-        double total = p_spec + p_tran;
+        double total = p_spec + p_diff + p_tran;
         if (total <= 0.0) return;
         u64 seed = mix64(((u64)lattice_index * 0x9E3779B97F4A7C15ull) ^ (u64)depth);
         double u = unit01(seed) * total;
@@ -573,6 +621,28 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
             double w = dsqrt((1.0 - s2) * total / p_spec);
             for (int q = 0; q < 3; q++) e.c[q] = cscale(e2.c[q], w);
             d = kr;
+        } else if (u < p_spec + p_diff) {
+            // Diffuse (Lambertian): uniform on the hemisphere the wave came from, weighted by the
+            // pattern and the specular field's share; the new tube spans 2π.
+            V3 side = dn < 0.0 ? n : vmul(n, -1.0);
+            V3 ko = hemisphere(side, unit01(mix64(seed ^ 1ull)), unit01(mix64(seed ^ 2ull)));
+            V3 kr = vsub(d, vmul(n, 2.0 * vdot(d, n)));
+            V3 par_r = vcross(perp, kr);
+            Field e_spec = combine(cmul(co[0], field_dot(e, perp)), perp,
+                                   cmul(co[1], field_dot(e, par)), par_r);
+            double before = field_norm2(e);
+            double gamma = dsqrt(field_norm2(e_spec) / (before > 1e-300 ? before : 1e-300));
+            double cos_s = vdot(ko, side);
+            double fp = cos_s <= 0.0 ? 0.0 : cos_s / 3.141592653589793;
+            V3 th_i, ph_i, th_o, ph_o;
+            spherical_basis(d, &th_i, &ph_i);
+            spherical_basis(ko, &th_o, &ph_o);
+            Cx e_th = field_dot(e, th_i), e_ph = field_dot(e, ph_i);
+            double w = k[C_SCAT] * gamma * dsqrt(fp * omega * total / p_diff);
+            Field e2 = combine(e_th, th_o, e_ph, ph_o);
+            for (int q = 0; q < 3; q++) e.c[q] = cscale(e2.c[q], w);
+            d = ko;
+            omega = 2.0 * 3.141592653589793;
         } else {
             Field e2 = combine(cmul(co[2], field_dot(e, perp)), perp, cmul(co[3], field_dot(e, par)),
                                par);

@@ -17,8 +17,9 @@
 //! - The radio map is one megakernel, a thread per launched ray (Sionna RT's symbolic loop is
 //!   one too), summing into cells as exact fixed-point integers: a GPU map is the same bits on
 //!   every run whatever the scheduling, and the same bits as the host twin's. It covers the
-//!   flat plane, iso antennas, reflection and transmission; anything else is refused by name
-//!   ([`map_unavailable`], `map_unsupported`), and the CPU path stays the default.
+//!   flat plane, iso antennas, reflection, transmission and Lambertian diffuse reflection;
+//!   anything else is refused by name ([`map_unavailable`], `map_unsupported`), and the CPU path
+//!   stays the default.
 //! - A scene goes up once (`Gpu::upload_scene`) and stays for any number of maps (`Gpu::map`):
 //!   per map only its scalars travel, the rays' patch order is computed on the device
 //!   (`kodama_order`, `fibonacci::patch_order`'s to the ray) and the cells come back.
@@ -99,8 +100,9 @@ pub fn map_unavailable(device: Device) -> Option<String> {
 
 /// [`radio_map`](crate::rf::radiomap::radio_map) on `device`. On the GPU the map is the host
 /// twin's to the bit and the CPU's within the tolerance `tests/gpu_host.rs` states; a map the
-/// kernel does not cover (foliage, diffuse, diffraction, a terrain-following surface, antennas
-/// other than iso vertical) is an error naming what, since the user asked for the GPU.
+/// kernel does not cover (foliage, a directive diffuse pattern, diffraction, a terrain-following
+/// surface, antennas other than iso vertical) is an error naming what, since the user asked for
+/// the GPU.
 pub fn radio_map_on(
     device: Device,
     scene: &RfScene,
