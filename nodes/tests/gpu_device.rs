@@ -220,7 +220,7 @@ fn map_inputs(scene: &RfScene, tx: DVec3, plane: &MapPlane, rays: u32, depth: u3
 }
 
 fn map_inputs_with(scene: &RfScene, tx: DVec3, plane: &MapPlane, opt: &TraceOptions) -> MapInputs {
-    MapInputs::new(scene, tx, &Antenna::default(), plane, opt).unwrap()
+    MapInputs::new(scene, tx, &Antenna::default(), plane, opt, 3.5e9).unwrap()
 }
 
 /// LOS, specular reflection and transmission at `depth`; with `diffuse`, Lambertian diffuse
@@ -341,7 +341,7 @@ fn device_map_speed_on_munich() {
     ];
     for (n, depth, diffuse) in rows {
         let opt = map_options(n, depth, diffuse);
-        let params = MapParams::new(&scene, tx, &Antenna::default(), &plane, &opt).unwrap();
+        let params = MapParams::new(&scene, tx, &Antenna::default(), &plane, &opt, 3.5e9).unwrap();
         let (a, t) = gpu.map(&dev, &params).unwrap();
         let (b, t2) = gpu.map(&dev, &params).unwrap();
         let call_s = t.call.min(t2.call);

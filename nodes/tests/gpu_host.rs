@@ -85,7 +85,7 @@ fn check_map_with(name: &str, scene: &RfScene, tx: DVec3, plane: &MapPlane, opt:
     let (rays, opt) = (opt.rays, opt.clone());
     let antenna = Antenna::default();
     let cpu = radio_map(scene, tx, &antenna, plane, &opt, 3.5e9);
-    let inputs = MapInputs::new(scene, tx, &antenna, plane, &opt).unwrap();
+    let inputs = MapInputs::new(scene, tx, &antenna, plane, &opt, 3.5e9).unwrap();
     let host = host_radio_map(&inputs);
     let again = host_radio_map(&inputs);
     assert_eq!(host.data.0, again.data.0, "{name}: two host maps differ");
@@ -153,6 +153,75 @@ fn host_kernel_maps_diffuse_reflection_as_the_cpu() {
     check_map_with("munich, diffuse", &scene, tx, &plane, &diffuse(100_000));
 }
 
+/// The street grid with canopies: one round the transmitter (its rays start inside), two that
+/// overlap (a ray in both counts its metres once), and a crown over a street.
+fn street_grid_with_canopies() -> RfScene {
+    use kodama_nodes::artifact::{Material, ObjectClass, SceneObject};
+    use kodama_nodes::geom::mesh_build::cuboid;
+    let mut scene = street_grid();
+    let crowns = [
+        ([-60.0, -56.0], [12.0, 10.0, 8.0], 6.0),
+        ([-45.0, -30.0], [14.0, 10.0, 10.0], 2.0),
+        ([-38.0, -26.0], [12.0, 12.0, 9.0], 4.0),
+        ([0.0, -42.0], [30.0, 6.0, 6.0], 5.0),
+    ];
+    for (k, (c, size, z0)) in crowns.into_iter().enumerate() {
+        scene.objects.push(SceneObject {
+            id: format!("canopy{k}"),
+            class: ObjectClass::Vegetation,
+            mesh: cuboid(c, size, 0.0, z0, Material::Foliage),
+        });
+    }
+    RfScene::new(&scene, 3.5e9, false).unwrap()
+}
+
+/// Foliage on the GPU as on the CPU: the linear law and P.833's saturating one, with diffuse
+/// reflection, rays starting inside a canopy.
+#[test]
+fn host_kernel_maps_foliage_as_the_cpu() {
+    use kodama_nodes::rf::foliage::FoliageLaw;
+    let scene = street_grid_with_canopies();
+    assert!(scene.has_foliage());
+    let plane = MapPlane::plane(
+        Grid {
+            x0: -100.0,
+            y0: 100.0,
+            cell_m: 4.0,
+            width: 50,
+            height: 50,
+        },
+        1.5,
+    );
+    let tx = DVec3::new(-60.0, -56.0, 12.0);
+    let bare = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
+    let without = radio_map(
+        &bare,
+        tx,
+        &Antenna::default(),
+        &plane,
+        &diffuse(100_000),
+        3.5e9,
+    );
+    for (name, law) in [("linear", FoliageLaw::Linear), ("P.833", FoliageLaw::P833)] {
+        let opt = TraceOptions {
+            foliage_law: law,
+            ..diffuse(100_000)
+        };
+        let name = format!("street grid, canopies ({name})");
+        check_map_with(&name, &scene, tx, &plane, &opt);
+        // The canopies must cost something for the comparison to test them.
+        let with = radio_map(&scene, tx, &Antenna::default(), &plane, &opt, 3.5e9);
+        let mut loss: Vec<f64> = (with.data.0.iter().zip(&without.data.0))
+            .filter(|(a, b)| **a > 0.0 && **b > 0.0)
+            .map(|(a, b)| 10.0 * (*b as f64 / *a as f64).log10())
+            .collect();
+        loss.sort_by(f64::total_cmp);
+        let median = loss[loss.len() / 2];
+        println!("{name}: the canopies take a median {median:.2} dB from a cell");
+        assert!(median > 1.0, "{name}: canopies cost only {median} dB");
+    }
+}
+
 /// A directive diffuse pattern is refused by name, not traced as Lambertian.
 #[test]
 fn the_map_kernel_refuses_a_directive_pattern() {
@@ -169,6 +238,7 @@ fn the_map_kernel_refuses_a_directive_pattern() {
         &Antenna::default(),
         &plane,
         &opt,
+        3.5e9,
     )
     .err()
     .expect("a directive pattern was accepted");

@@ -153,6 +153,11 @@ impl FoliageDepth {
         FoliageDepth(net.max(0) as u32)
     }
 
+    /// How many canopies the point is inside.
+    pub fn canopies(self) -> u32 {
+        self.0
+    }
+
     /// Whether the point is in foliage.
     pub fn inside(self) -> bool {
         self.0 > 0

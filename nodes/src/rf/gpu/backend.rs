@@ -13,10 +13,12 @@ use rayon::prelude::*;
 
 use glam::DVec3;
 
+use crate::artifact::Material;
 use crate::artifact::{Grid, PodVec, Raster};
 use crate::geom::wide_bvh::{GPU_NODE_WORDS, GPU_PACKET_WORDS, WideBvh};
 use crate::rf::antenna::{Antenna, Pattern, Polarization};
 use crate::rf::em::slab;
+use crate::rf::foliage::FoliageDepth;
 use crate::rf::map_plane::MapPlane;
 use crate::rf::path::TraceOptions;
 use crate::rf::scattering::ScatteringPattern;
@@ -270,7 +272,8 @@ pub const SLAB_SAMPLES: usize = 1 << 14;
 
 /// Why the map kernel cannot trace this map, or `None` when it can: it covers the flat
 /// measurement plane, the isotropic vertically polarised antenna, specular reflection, slab
-/// transmission and Lambertian diffuse reflection, without foliage or edge diffraction.
+/// transmission, Lambertian diffuse reflection and foliage (either law), without edge
+/// diffraction.
 pub fn map_unsupported(
     scene: &RfScene,
     antenna: &Antenna,
@@ -283,9 +286,6 @@ pub fn map_unsupported(
     }
     if antenna.pattern != Pattern::Isotropic || antenna.polarization != Polarization::V {
         why.push("an antenna other than iso, vertical");
-    }
-    if scene.has_foliage() {
-        why.push("foliage");
     }
     if opt.diffuse && opt.scattering_pattern != ScatteringPattern::Lambertian {
         why.push("a diffuse pattern other than Lambertian");
@@ -309,12 +309,8 @@ pub struct MapScene {
 }
 
 impl MapScene {
-    /// `scene` flattened for the map kernel; an error when its BVH is too deep for the kernel
-    /// or it holds foliage (which the kernel does not cover).
+    /// `scene` flattened for the map kernel; an error when its BVH is too deep for the kernel.
     pub fn new(scene: &RfScene) -> Result<MapScene, String> {
-        if scene.has_foliage() {
-            return Err("the GPU map kernel does not cover foliage".into());
-        }
         let tree = Tree::new(scene.rays().wide_bvh())?;
         let mut tri = Vec::with_capacity(6 * scene.tris.len());
         for (n, v) in scene.normals.iter().zip(&scene.tris) {
@@ -323,7 +319,7 @@ impl MapScene {
         let material = scene.material.iter().map(|&m| m as u32).collect();
         let mut slabs = vec![0.0f64; scene.material_count() * SLAB_SAMPLES * 8];
         for m in 0..scene.material_count() {
-            // Materials without coefficients (foliage, refused above) keep zeros.
+            // Materials without coefficients (foliage: the kernel never reads its row) keep zeros.
             let Some((eta, d)) = scene.slab_params(m) else {
                 continue;
             };
@@ -360,18 +356,21 @@ pub struct MapParams {
 
 impl MapParams {
     /// The scalars of [`radio_map`](crate::rf::radiomap::radio_map)`(scene, tx, antenna,
-    /// plane, opt)`; an error when the kernel does not cover the map ([`map_unsupported`]).
+    /// plane, opt, freq_hz)`; an error when the kernel does not cover the map ([`map_unsupported`]).
     pub fn new(
         scene: &RfScene,
         tx: DVec3,
         antenna: &Antenna,
         plane: &MapPlane,
         opt: &TraceOptions,
+        freq_hz: f64,
     ) -> Result<MapParams, String> {
         if let Some(why) = map_unsupported(scene, antenna, plane, opt) {
             return Err(why);
         }
         let g = plane.grid;
+        let foliage = opt.foliage_loss(freq_hz);
+        let at_tx = FoliageDepth::at(scene, tx);
         let flag = |b: bool| if b { 1.0 } else { 0.0 };
         let consts = vec![
             tx.x,
@@ -393,6 +392,10 @@ impl MapParams {
             SLAB_SAMPLES as f64,
             flag(opt.diffuse),
             opt.scattering_coefficient,
+            at_tx.canopies() as f64,
+            foliage.db_per_m,
+            foliage.max_db.unwrap_or(0.0),
+            Material::Foliage as u32 as f64,
         ];
         Ok(MapParams {
             consts,
@@ -420,8 +423,9 @@ impl MapInputs {
         antenna: &Antenna,
         plane: &MapPlane,
         opt: &TraceOptions,
+        freq_hz: f64,
     ) -> Result<MapInputs, String> {
-        let map = MapParams::new(scene, tx, antenna, plane, opt)?;
+        let map = MapParams::new(scene, tx, antenna, plane, opt, freq_hz)?;
         Ok(MapInputs {
             scene: MapScene::new(scene)?,
             map,

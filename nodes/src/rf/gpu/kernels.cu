@@ -331,7 +331,11 @@ enum {
     C_TABLE = 16,
     C_DIFFUSE = 17,
     C_SCAT = 18,
-    C_COUNT = 19
+    C_FOL_AT_TX = 19,  // canopies the transmitter stands in (`FoliageDepth::at`)
+    C_FOL_DB_M = 20,   // foliage loss, dB/m
+    C_FOL_MAX = 21,    // P.833's saturation A_m, dB; 0 for the linear law
+    C_FOL_MAT = 22,    // foliage's material index
+    C_COUNT = 23
 };
 
 struct Cx {
@@ -524,6 +528,34 @@ CUDA_CALLABLE V3 hemisphere(V3 n, double u1, double u2) {
     return vnormalize(vadd(vadd(vmul(a, r * c), vmul(b, r * s)), vmul(n, z)));
 }
 
+CUDA_CALLABLE double pow10_d(double x) {
+#ifdef KODAMA_DEVICE
+    return pow(10.0, x);
+#else
+    return std::pow(10.0, x);
+#endif
+}
+
+// `FoliageLoss::loss_db`: linear in the metres inside canopies, or P.833's saturating law.
+CUDA_CALLABLE double foliage_loss_db(const double* k, double len) {
+    double linear = k[C_FOL_DB_M] * len;
+    double m = k[C_FOL_MAX];
+    if (m == 0.0) return linear;
+#ifdef KODAMA_DEVICE
+    return m * -expm1(-linear / m);
+#else
+    return m * -std::expm1(-linear / m);
+#endif
+}
+
+// `FoliageLoss::step_amplitude`: the field's factor over `len` more metres inside canopies after
+// `before` metres (P.833 saturates on the whole path's metres).
+CUDA_CALLABLE double foliage_step(const double* k, double before, double len) {
+    if (k[C_FOL_MAX] == 0.0) return pow10_d(-k[C_FOL_DB_M] * len / 20.0);
+    double added = foliage_loss_db(k, before + len) - foliage_loss_db(k, before);
+    return pow10_d(-added / 20.0);
+}
+
 // One launched ray, the `lattice_index`-th, from the transmitter to the end of its bounces.
 // `tri` holds per triangle its unit normal and first vertex (6 f64).
 CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packets,
@@ -553,7 +585,13 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
     }
     double omega = k[C_OMEGA];
     u32 depth = 0;
+    // Canopies the ray is inside (`FoliageDepth`) and the metres it has run in them.
+    u32 canopies = (u32)k[C_FOL_AT_TX];
+    double in_foliage = 0.0;
+    u32 foliage_mat = (u32)k[C_FOL_MAT];
     for (;;) {
+        bool inside = canopies > 0;
+        double before = in_foliage;
         float of[3] = {(float)o.x, (float)o.y, (float)o.z};
         float df[3] = {(float)d.x, (float)d.y, (float)d.z};
         float t32;
@@ -587,16 +625,30 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
                         double cosv = d.z < 0.0 ? -d.z : d.z;
                         if (cosv < 1e-6) cosv = 1e-6;
                         double weight = 1.0 / (cosv * (cell * cell / 1.0));
-                        double v = field_norm2(e) * 1.0 * 1.0 * omega * weight;
+                        double a = inside ? foliage_step(k, before, t) : 1.0;
+                        double v = field_norm2(e) * a * a * omega * weight;
                         accumulate(acc, (u32)r * width + (u32)c, v);
                     }
                 }
             }
         }
         if (!hit) return;
+        if (inside) {
+            double a = foliage_step(k, before, t_end);
+            for (int q = 0; q < 3; q++) e.c[q] = cscale(e.c[q], a);
+            in_foliage += t_end;
+        }
         o = vadd(o, vmul(d, t_end));
         const double* tr = tri + 6 * (u64)hit_tri;
         V3 n = v3(tr[0], tr[1], tr[2]);
+        if (material[hit_tri] == foliage_mat) {
+            // A canopy's boundary: in or out, straight on (`FoliageDepth::cross`).
+            if (vdot(d, n) < 0.0)
+                canopies++;
+            else if (canopies > 0)
+                canopies--;
+            continue;
+        }
         depth++;
         if (depth > max_depth) return;
         double dn = vdot(d, n);

@@ -17,7 +17,8 @@
 //! - The radio map is one megakernel, a thread per launched ray (Sionna RT's symbolic loop is
 //!   one too), summing into cells as exact fixed-point integers: a GPU map is the same bits on
 //!   every run whatever the scheduling, and the same bits as the host twin's. It covers the
-//!   flat plane, iso antennas, reflection, transmission and Lambertian diffuse reflection;
+//!   flat plane, iso antennas, reflection, transmission, Lambertian diffuse reflection and
+//!   foliage;
 //!   anything else is refused by name ([`map_unavailable`], `map_unsupported`), and the CPU path
 //!   stays the default.
 //! - A scene goes up once (`Gpu::upload_scene`) and stays for any number of maps (`Gpu::map`):
@@ -100,9 +101,8 @@ pub fn map_unavailable(device: Device) -> Option<String> {
 
 /// [`radio_map`](crate::rf::radiomap::radio_map) on `device`. On the GPU the map is the host
 /// twin's to the bit and the CPU's within the tolerance `tests/gpu_host.rs` states; a map the
-/// kernel does not cover (foliage, a directive diffuse pattern, diffraction, a terrain-following
-/// surface, antennas other than iso vertical) is an error naming what, since the user asked for
-/// the GPU.
+/// kernel does not cover (a directive diffuse pattern, diffraction, a terrain-following surface,
+/// antennas other than iso vertical) is an error naming what, since the user asked for the GPU.
 pub fn radio_map_on(
     device: Device,
     scene: &RfScene,
@@ -119,7 +119,7 @@ pub fn radio_map_on(
         Device::Cpu => Ok(crate::rf::radiomap::radio_map(
             scene, tx, antenna, plane, opt, freq_hz,
         )),
-        Device::Cuda => cuda_map(scene, tx, antenna, plane, opt),
+        Device::Cuda => cuda_map(scene, tx, antenna, plane, opt, freq_hz),
     }
 }
 
@@ -130,8 +130,9 @@ fn cuda_map(
     antenna: &Antenna,
     plane: &MapPlane,
     opt: &TraceOptions,
+    freq_hz: f64,
 ) -> Result<Raster, String> {
-    let inputs = MapInputs::new(scene, tx, antenna, plane, opt)
+    let inputs = MapInputs::new(scene, tx, antenna, plane, opt, freq_hz)
         .map_err(|e| format!("device cuda: {e}; use --device cpu"))?;
     let gpu = Gpu::new().map_err(|e| format!("device cuda: {e}"))?;
     let (map, _) = gpu
@@ -147,6 +148,7 @@ fn cuda_map(
     _: &Antenna,
     _: &MapPlane,
     _: &TraceOptions,
+    _: f64,
 ) -> Result<Raster, String> {
     unreachable!("map_unavailable refuses cuda without the feature")
 }
