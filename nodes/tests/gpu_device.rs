@@ -251,6 +251,15 @@ fn device_maps_are_the_host_maps() {
             "street grid, diffuse",
             map_inputs_with(&scene, street_tx, &plane, &map_options(100_000, 3, true)),
         ),
+        (
+            "street grid, rolling surface",
+            map_inputs_with(
+                &scene,
+                street_tx,
+                &gpu_common::rolling_surface(),
+                &map_options(100_000, 3, true),
+            ),
+        ),
     ];
     let munich = munich_xml().map(|xml| gpu_common::munich_rf(&xml));
     if let Some(m) = &munich {

@@ -222,6 +222,22 @@ fn host_kernel_maps_foliage_as_the_cpu() {
     }
 }
 
+/// A map on a surface following rolling terrain (tilted patches, rays crossing it more than
+/// once) as on the CPU, with diffuse reflection.
+#[test]
+fn host_kernel_maps_a_terrain_following_surface_as_the_cpu() {
+    let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
+    let plane = gpu_common::rolling_surface();
+    let tx = DVec3::new(-60.0, -56.0, 12.0);
+    check_map_with(
+        "street grid, rolling surface",
+        &scene,
+        tx,
+        &plane,
+        &diffuse(100_000),
+    );
+}
+
 /// A directive diffuse pattern is refused by name, not traced as Lambertian.
 #[test]
 fn the_map_kernel_refuses_a_directive_pattern() {

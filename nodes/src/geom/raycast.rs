@@ -190,15 +190,28 @@ impl SceneRays {
     #[inline(always)]
     fn hit(&self, hit: WideHit) -> Hit {
         let prim = hit.prim as usize;
-        let tri = &self.tris[prim];
-        let n = (tri.v1 - tri.v0).cross(tri.v2 - tri.v0).normalize_or_zero();
         let (object, triangle) = self.owner[prim];
         Hit {
             t: hit.t,
             object: object as usize,
             triangle: triangle as usize,
-            normal: n.into(),
+            normal: self.normal(prim).into(),
         }
+    }
+
+    /// The unit geometric normal of the BVH's triangle `prim`, as a hit on it gives.
+    #[inline(always)]
+    fn normal(&self, prim: usize) -> Vec3A {
+        let tri = &self.tris[prim];
+        (tri.v1 - tri.v0).cross(tri.v2 - tri.v0).normalize_or_zero()
+    }
+
+    /// Every triangle's normal as [`SceneRays::cast`] gives it, indexed as the BVH's hits name
+    /// triangles (`WideHit::prim`): what a GPU copy of the tree needs beside it.
+    pub fn prim_normals(&self) -> Vec<[f32; 3]> {
+        (0..self.tris.len())
+            .map(|p| self.normal(p).into())
+            .collect()
     }
 
     /// The closest hits of the rays of a `width` x `height` grid (a camera's pixels, a raster's

@@ -107,6 +107,10 @@ impl MapPlane {
                     let t = h.t as f64;
                     add(t, DVec3::from(h.normal.map(f64::from)));
                     tmin = t + EPS;
+                    // Past 2^14 m an f32 step of EPS can round back onto the same hit.
+                    if (tmin as f32) <= h.t {
+                        break;
+                    }
                 }
             }
         }

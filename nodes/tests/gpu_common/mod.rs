@@ -132,3 +132,37 @@ pub fn compare_maps(a: &[f32], b: &[f32]) -> (usize, usize, f64, f64, f64) {
     let at = |q: f64| diff[((diff.len() - 1) as f64 * q) as usize];
     (diff.len(), only, at(0.5), at(0.99), at(1.0))
 }
+
+/// The street grid's map cells (4 m, 50 x 50 over x, y in [-100, 100]) on a surface 1.5 m above
+/// rolling terrain: a slope with hills 3 m high, so patches tilt and rays cross it more than
+/// once.
+pub fn rolling_surface() -> kodama_nodes::rf::map_plane::MapPlane {
+    use kodama_nodes::artifact::{Grid, PodVec, Raster};
+    let grid = Grid {
+        x0: -100.0,
+        y0: 100.0,
+        cell_m: 4.0,
+        width: 50,
+        height: 50,
+    };
+    let n = 110u32;
+    let terrain = Raster {
+        grid: Grid {
+            x0: -110.0,
+            y0: 110.0,
+            cell_m: 2.0,
+            width: n,
+            height: n,
+        },
+        data: PodVec(
+            (0..n * n)
+                .map(|i| {
+                    let x = (i % n) as f64 * 2.0 - 110.0;
+                    let y = 110.0 - (i / n) as f64 * 2.0;
+                    (0.04 * x + 3.0 * (x / 17.0).sin() * (y / 23.0).cos()) as f32
+                })
+                .collect(),
+        ),
+    };
+    kodama_nodes::rf::map_plane::MapPlane::above_terrain(grid, &terrain, 1.5).unwrap()
+}

@@ -271,19 +271,11 @@ impl Gpu {
 pub const SLAB_SAMPLES: usize = 1 << 14;
 
 /// Why the map kernel cannot trace this map, or `None` when it can: it covers the flat
-/// measurement plane, the isotropic vertically polarised antenna, specular reflection, slab
-/// transmission, Lambertian diffuse reflection and foliage (either law), without edge
-/// diffraction.
-pub fn map_unsupported(
-    scene: &RfScene,
-    antenna: &Antenna,
-    plane: &MapPlane,
-    opt: &TraceOptions,
-) -> Option<String> {
+/// measurement plane or a surface following the terrain, the isotropic vertically polarised
+/// antenna, specular reflection, slab transmission, Lambertian diffuse reflection and foliage
+/// (either law), without edge diffraction.
+pub fn map_unsupported(antenna: &Antenna, opt: &TraceOptions) -> Option<String> {
     let mut why = Vec::new();
-    if plane.lifted.is_some() {
-        why.push("a map following the terrain (only a flat plane)");
-    }
     if antenna.pattern != Pattern::Isotropic || antenna.polarization != Polarization::V {
         why.push("an antenna other than iso, vertical");
     }
@@ -347,11 +339,20 @@ impl MapScene {
     }
 }
 
-/// What one map adds to its scene: the transmitter, grid and options as the kernel's scalars.
+/// What one map adds to its scene: the transmitter, grid and options as the kernel's scalars,
+/// and the terrain-following surface, if any.
 pub struct MapParams {
     consts: Vec<f64>,
     grid: Grid,
     rays: u32,
+    surface: Option<MapSurface>,
+}
+
+/// A terrain-following map surface for the kernel: its tree and each triangle's normal as the
+/// CPU's cast gives it (3 f32, by the tree's triangle index).
+struct MapSurface {
+    tree: Tree,
+    normals: Vec<f32>,
 }
 
 impl MapParams {
@@ -365,7 +366,7 @@ impl MapParams {
         opt: &TraceOptions,
         freq_hz: f64,
     ) -> Result<MapParams, String> {
-        if let Some(why) = map_unsupported(scene, antenna, plane, opt) {
+        if let Some(why) = map_unsupported(antenna, opt) {
             return Err(why);
         }
         let g = plane.grid;
@@ -397,10 +398,18 @@ impl MapParams {
             foliage.max_db.unwrap_or(0.0),
             Material::Foliage as u32 as f64,
         ];
+        let surface = match &plane.lifted {
+            None => None,
+            Some(rays) => Some(MapSurface {
+                tree: Tree::new(rays.wide_bvh())?,
+                normals: rays.prim_normals().concat(),
+            }),
+        };
         Ok(MapParams {
             consts,
             grid: g,
             rays: opt.rays,
+            surface,
         })
     }
 }
@@ -467,6 +476,10 @@ unsafe extern "C" {
         tri: *const f64,
         material: *const u32,
         slabs: *const f64,
+        s_nodes: *const u32,
+        s_n_nodes: u32,
+        s_packets: *const u32,
+        s_normals: *const f32,
         consts: *const f64,
         first: u32,
         n: u64,
@@ -496,12 +509,22 @@ pub fn host_radio_map(inputs: &MapInputs) -> Raster {
     let acc = (0..mp.rays.div_ceil(CHUNK))
         .into_par_iter()
         .map(|k| {
+            let (s_nodes, s_n_nodes, s_packets, s_normals) = match &mp.surface {
+                Some(s) => (
+                    s.tree.nodes.as_ptr(),
+                    s.tree.node_count(),
+                    s.tree.packets.as_ptr(),
+                    s.normals.as_ptr(),
+                ),
+                None => (std::ptr::null(), 0, std::ptr::null(), std::ptr::null()),
+            };
             let first = k * CHUNK;
             let n = CHUNK.min(mp.rays - first);
             let mut acc = vec![0u64; 2 * cells];
             // SAFETY: the buffers are what `MapScene::new` and `MapParams::new` built for this
             // scene and grid (consts names the grid's width and height, acc has two words a
-            // cell); rays first..first + n are within the lattice.
+            // cell; the surface's pointers are read only when its node count is not 0); rays
+            // first..first + n are within the lattice.
             unsafe {
                 kodama_host_map(
                     t.nodes.as_ptr(),
@@ -510,6 +533,10 @@ pub fn host_radio_map(inputs: &MapInputs) -> Raster {
                     sc.tri.as_ptr(),
                     sc.material.as_ptr(),
                     sc.slabs.as_ptr(),
+                    s_nodes,
+                    s_n_nodes,
+                    s_packets,
+                    s_normals,
                     mp.consts.as_ptr(),
                     first,
                     n as u64,
@@ -624,6 +651,23 @@ impl Gpu {
         let s = &self.stream;
         let call = Instant::now();
         let consts = s.clone_htod(&map.consts).map_err(driver_err("upload"))?;
+        // The terrain-following surface goes up with its map; a flat plane passes one-word
+        // stand-ins the kernel never reads (its node count is 0).
+        let (s_nodes, s_n_nodes, s_packets, s_normals) = match &map.surface {
+            Some(m) => (
+                s.clone_htod(&m.tree.nodes).map_err(driver_err("upload"))?,
+                m.tree.node_count(),
+                s.clone_htod(&m.tree.packets)
+                    .map_err(driver_err("upload"))?,
+                s.clone_htod(&m.normals).map_err(driver_err("upload"))?,
+            ),
+            None => (
+                s.alloc_zeros::<u32>(1).map_err(driver_err("alloc"))?,
+                0,
+                s.alloc_zeros::<u32>(1).map_err(driver_err("alloc"))?,
+                s.alloc_zeros::<f32>(1).map_err(driver_err("alloc"))?,
+            ),
+        };
         let mut acc = s
             .alloc_zeros::<u64>(2 * map.grid.len())
             .map_err(driver_err("alloc"))?;
@@ -648,6 +692,10 @@ impl Gpu {
                     .arg(&scene.tri)
                     .arg(&scene.material)
                     .arg(&scene.slabs)
+                    .arg(&s_nodes)
+                    .arg(&s_n_nodes)
+                    .arg(&s_packets)
+                    .arg(&s_normals)
                     .arg(&consts)
                     .arg(&order)
                     .arg(&n)

@@ -556,14 +556,33 @@ CUDA_CALLABLE double foliage_step(const double* k, double before, double len) {
     return pow10_d(-added / 20.0);
 }
 
+// A map surface following the terrain (`MapPlane::lifted`): its own tree, and per triangle the
+// f32 unit normal `SceneRays::cast` gives (3 f32). n_nodes 0: the flat plane at C_Z.
+struct Surface {
+    const Node* nodes;
+    u32 n_nodes;
+    const TriPacket* packets;
+    const float* normals;
+};
+
+// `cell_of`: the cell (row-major index) under (x, y), false outside the grid.
+CUDA_CALLABLE bool cell_index(const double* k, double x, double y, u32* index) {
+    double cell = k[C_CELL];
+    double c = (x - k[C_X0]) / cell;
+    double r = (k[C_Y0] - y) / cell;
+    u32 width = (u32)k[C_WIDTH], height = (u32)k[C_HEIGHT];
+    if (!(c >= 0.0 && r >= 0.0 && c < (double)width && r < (double)height)) return false;
+    *index = (u32)r * width + (u32)c;
+    return true;
+}
+
 // One launched ray, the `lattice_index`-th, from the transmitter to the end of its bounces.
 // `tri` holds per triangle its unit normal and first vertex (6 f64).
 CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packets,
                          const double* tri, const u32* material, const double* slabs,
-                         const double* k, u32 lattice_index, u64* acc) {
+                         const Surface& surface, const double* k, u32 lattice_index, u64* acc) {
     u32 n_rays = (u32)k[C_NRAYS];
     u32 max_depth = (u32)k[C_DEPTH];
-    u32 width = (u32)k[C_WIDTH], height = (u32)k[C_HEIGHT];
     double cell = k[C_CELL];
     double s2 = k[C_S2];
     V3 d = lattice(n_rays, lattice_index);
@@ -614,22 +633,48 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
                 t_end = (double)t32;
             }
         }
-        if (depth > 0 || k[C_LOS] != 0.0) {
+        if ((depth > 0 || k[C_LOS] != 0.0) && surface.n_nodes == 0) {
             if (d.z != 0.0) {
                 double t = (k[C_Z] - o.z) / d.z;
-                if (t > EPS_M && t < t_end) {
-                    V3 p = vadd(o, vmul(d, t));
-                    double c = (p.x - k[C_X0]) / cell;
-                    double r = (k[C_Y0] - p.y) / cell;
-                    if (c >= 0.0 && r >= 0.0 && c < (double)width && r < (double)height) {
-                        double cosv = d.z < 0.0 ? -d.z : d.z;
-                        if (cosv < 1e-6) cosv = 1e-6;
-                        double weight = 1.0 / (cosv * (cell * cell / 1.0));
-                        double a = inside ? foliage_step(k, before, t) : 1.0;
-                        double v = field_norm2(e) * a * a * omega * weight;
-                        accumulate(acc, (u32)r * width + (u32)c, v);
-                    }
+                u32 at;
+                if (t > EPS_M && t < t_end && cell_index(k, o.x + d.x * t, o.y + d.y * t, &at)) {
+                    double cosv = d.z < 0.0 ? -d.z : d.z;
+                    if (cosv < 1e-6) cosv = 1e-6;
+                    double weight = 1.0 / (cosv * (cell * cell / 1.0));
+                    double a = inside ? foliage_step(k, before, t) : 1.0;
+                    double v = field_norm2(e) * a * a * omega * weight;
+                    accumulate(acc, at, v);
                 }
+            }
+        } else if (depth > 0 || k[C_LOS] != 0.0) {
+            // Every crossing of the terrain-following surface up to the hit, in turn
+            // (`MapPlane::crossings`).
+            float tmax = t_end < 3.4028234663852886e38 ? (float)t_end : 3.40282347e38f;
+            double tmin = EPS_M;
+            for (;;) {
+                float ts;
+                u32 sp;
+                if (!closest_hit(surface.nodes, surface.n_nodes, surface.packets, of, df,
+                                 (float)tmin, tmax, &ts, &sp))
+                    break;
+                double t = (double)ts;
+                const float* nf = surface.normals + 3 * (u64)sp;
+                V3 nn = v3((double)nf[0], (double)nf[1], (double)nf[2]);
+                u32 at;
+                if (cell_index(k, o.x + d.x * t, o.y + d.y * t, &at)) {
+                    double cosv = vdot(d, nn);
+                    if (cosv < 0.0) cosv = -cosv;
+                    if (cosv < 1e-6) cosv = 1e-6;
+                    double nz = nn.z < 0.0 ? -nn.z : nn.z;
+                    if (nz < 1e-6) nz = 1e-6;
+                    double weight = 1.0 / (cosv * (cell * cell / nz));
+                    double a = inside ? foliage_step(k, before, t) : 1.0;
+                    double v = field_norm2(e) * a * a * omega * weight;
+                    accumulate(acc, at, v);
+                }
+                tmin = t + EPS_M;
+                // Past 2^14 m an f32 step of EPS_M can round back onto the same hit.
+                if (!((float)tmin > ts)) break;
             }
         }
         if (!hit) return;
@@ -878,9 +923,13 @@ extern "C" __global__ void kodama_cast(const Node* nodes, u32 n_nodes, const Tri
 // leave side by side and walk the same nodes.
 extern "C" __global__ void kodama_map(const Node* nodes, u32 n_nodes, const TriPacket* packets,
                                       const double* tri, const u32* material, const double* slabs,
+                                      const Node* s_nodes, u32 s_n_nodes,
+                                      const TriPacket* s_packets, const float* s_normals,
                                       const double* consts, const u32* order, u64 n, u64* acc) {
     u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
-    if (i < n) shoot(nodes, n_nodes, packets, tri, material, slabs, consts, order[i], acc);
+    Surface surface = {s_nodes, s_n_nodes, s_packets, s_normals};
+    if (i < n)
+        shoot(nodes, n_nodes, packets, tri, material, slabs, surface, consts, order[i], acc);
 }
 
 // Block c orders rays c * chunk.. of an n-ray lattice (chunk at most ORDER_CHUNK, ORDER_THREADS
@@ -935,10 +984,13 @@ extern "C" void kodama_host_cast(const void* nodes, u32 n_nodes, const void* pac
 // same integer sums).
 extern "C" void kodama_host_map(const void* nodes, u32 n_nodes, const void* packets,
                                 const double* tri, const u32* material, const double* slabs,
-                                const double* consts, u32 first, u64 n, u64* acc) {
+                                const void* s_nodes, u32 s_n_nodes, const void* s_packets,
+                                const float* s_normals, const double* consts, u32 first, u64 n,
+                                u64* acc) {
+    Surface surface = {(const Node*)s_nodes, s_n_nodes, (const TriPacket*)s_packets, s_normals};
     for (u64 i = 0; i < n; i++)
-        shoot((const Node*)nodes, n_nodes, (const TriPacket*)packets, tri, material, slabs, consts,
-              first + (u32)i, acc);
+        shoot((const Node*)nodes, n_nodes, (const TriPacket*)packets, tri, material, slabs,
+              surface, consts, first + (u32)i, acc);
 }
 // The host twin of `kodama_order` for one chunk, rays `start..start + len` of an n-ray lattice
 // (len at most ORDER_CHUNK and within n), as offsets from start: the device's phases, run one

@@ -17,8 +17,8 @@
 //! - The radio map is one megakernel, a thread per launched ray (Sionna RT's symbolic loop is
 //!   one too), summing into cells as exact fixed-point integers: a GPU map is the same bits on
 //!   every run whatever the scheduling, and the same bits as the host twin's. It covers the
-//!   flat plane, iso antennas, reflection, transmission, Lambertian diffuse reflection and
-//!   foliage;
+//!   flat plane and terrain-following surfaces, iso antennas, reflection, transmission,
+//!   Lambertian diffuse reflection and foliage;
 //!   anything else is refused by name ([`map_unavailable`], `map_unsupported`), and the CPU path
 //!   stays the default.
 //! - A scene goes up once (`Gpu::upload_scene`) and stays for any number of maps (`Gpu::map`):
@@ -101,8 +101,8 @@ pub fn map_unavailable(device: Device) -> Option<String> {
 
 /// [`radio_map`](crate::rf::radiomap::radio_map) on `device`. On the GPU the map is the host
 /// twin's to the bit and the CPU's within the tolerance `tests/gpu_host.rs` states; a map the
-/// kernel does not cover (a directive diffuse pattern, diffraction, a terrain-following surface,
-/// antennas other than iso vertical) is an error naming what, since the user asked for the GPU.
+/// kernel does not cover (a directive diffuse pattern, diffraction, antennas other than iso
+/// vertical) is an error naming what, since the user asked for the GPU.
 pub fn radio_map_on(
     device: Device,
     scene: &RfScene,
