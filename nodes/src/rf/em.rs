@@ -62,6 +62,49 @@ pub fn slab(cos_theta: f64, eta: C64, d: f64, wavelength: f64) -> ((C64, C64), (
     ((refl(r_te), refl(r_tm)), (trans(r_te), trans(r_tm)))
 }
 
+/// The derivatives d/dη of [`slab`]'s coefficients `((R_TE, R_TM), (T_TE, T_TM))`: each is a
+/// holomorphic function of the permittivity η at fixed incidence, thickness and wavelength, and
+/// this is the chain rule through P.2040 eqs (37), (43a), (43b), (44) (with a = √(η − sin²θ),
+/// da/dη = 1 / 2a). What calibration fits materials with (`rf::calibration`). Zero where a = 0
+/// (a lossless slab at the critical angle), where the derivative does not exist.
+pub fn slab_derivative(
+    cos_theta: f64,
+    eta: C64,
+    d: f64,
+    wavelength: f64,
+) -> ((C64, C64), (C64, C64)) {
+    let zero = C64::new(0.0, 0.0);
+    let sin2 = 1.0 - cos_theta * cos_theta;
+    let a = csqrt(eta - sin2);
+    if a.norm_sqr() == 0.0 {
+        return ((zero, zero), (zero, zero));
+    }
+    let da = 0.5 / a;
+    let c = C64::from(cos_theta);
+    let (r_te, r_tm) = fresnel_with_root(cos_theta, eta, a);
+    let dr_te = -2.0 * c * da / ((c + a) * (c + a));
+    let (num, den) = (eta * c - a, eta * c + a);
+    let dr_tm = ((c - da) * den - num * (c + da)) / (den * den);
+    let k = 2.0 * std::f64::consts::PI * d / wavelength;
+    let e1 = (-C64::i() * k * a).exp();
+    let de1 = -C64::i() * k * da * e1;
+    let (e2, de2) = (e1 * e1, 2.0 * e1 * de1);
+    let quotient = |(u, du): (C64, C64), (v, dv): (C64, C64)| (du * v - u * dv) / (v * v);
+    let denominator = |r: C64, dr: C64| (1.0 - r * r * e2, -(2.0 * r * dr * e2 + r * r * de2));
+    let refl = |r: C64, dr: C64| {
+        let u = (r * (1.0 - e2), dr * (1.0 - e2) - r * de2);
+        quotient(u, denominator(r, dr))
+    };
+    let trans = |r: C64, dr: C64| {
+        let u = ((1.0 - r * r) * e1, -2.0 * r * dr * e1 + (1.0 - r * r) * de1);
+        quotient(u, denominator(r, dr))
+    };
+    (
+        (refl(r_te, dr_te), refl(r_tm, dr_tm)),
+        (trans(r_te, dr_te), trans(r_tm, dr_tm)),
+    )
+}
+
 /// Free-space path loss 20 log10(4π d f / c), dB.
 pub fn fspl_db(distance_m: f64, freq_hz: f64) -> f64 {
     20.0 * (4.0 * std::f64::consts::PI * distance_m * freq_hz / super::SPEED_OF_LIGHT).log10()
@@ -78,6 +121,46 @@ mod tests {
 
     fn close(a: f64, b: f64, tol: f64, what: &str) {
         assert!((a - b).abs() <= tol, "{what}: {a} vs {b}");
+    }
+
+    /// The slab's derivatives in η against central differences of [`slab`] itself, for lossy
+    /// and nearly lossless materials, thin and thick slabs, at normal to grazing incidence.
+    #[test]
+    fn slab_derivatives_match_central_differences() {
+        for eta in [
+            C64::new(5.24, -0.632),
+            C64::new(6.31, -0.02),
+            C64::new(18.3, -3.93),
+        ] {
+            for d in [0.01, 0.2, 2.0] {
+                for cos in [1.0, 0.7, 0.3, 0.05] {
+                    let got = slab_derivative(cos, eta, d, 0.0857);
+                    let h = 1e-6 * eta.norm();
+                    for (dir, along) in
+                        [(C64::new(h, 0.0), "real"), (C64::new(0.0, h), "imaginary")]
+                    {
+                        let (p, m) = (
+                            slab(cos, eta + dir, d, 0.0857),
+                            slab(cos, eta - dir, d, 0.0857),
+                        );
+                        let fd = |a: C64, b: C64| (a - b) / (2.0 * dir);
+                        let want = [
+                            fd(p.0.0, m.0.0),
+                            fd(p.0.1, m.0.1),
+                            fd(p.1.0, m.1.0),
+                            fd(p.1.1, m.1.1),
+                        ];
+                        let got = [got.0.0, got.0.1, got.1.0, got.1.1];
+                        for (g, w) in got.iter().zip(want) {
+                            assert!(
+                                (g - w).norm() <= 1e-5 * (1.0 + w.norm()),
+                                "η {eta}, d {d}, cos {cos}, {along} step: {g} vs {w}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
     }
 
     /// Reference values computed apart from ITU-R P.2040 eqs (37), (43), (44): concrete at

@@ -7,6 +7,7 @@
 //! sources of its formulas.
 
 pub mod antenna;
+pub mod calibration;
 pub mod diffracted;
 pub mod diffraction;
 pub mod diffraction_search;

@@ -129,6 +129,16 @@ impl RfScene {
         self
     }
 
+    /// Material `m` with the relative permittivity `eta` (ε' − jσ/(ε0 ω)) instead of its P.2040
+    /// value: a twin calibrated against measurements, or a synthetic truth whose materials are
+    /// not the twin's. A material no triangle uses stays unused.
+    pub fn with_permittivity(mut self, m: Material, eta: C64) -> RfScene {
+        if self.eta[m as usize].is_some() {
+            self.eta[m as usize] = Some(eta);
+        }
+        self
+    }
+
     /// Surfaces of material `m` as slabs of `d` metres (a scene file's own thickness).
     pub fn with_thickness(mut self, m: Material, d: f64) -> RfScene {
         self.thickness[m as usize] = d;

@@ -1,0 +1,616 @@
+//! Calibration: measurements as a training signal (the paper's future work, Sec. 7; issue 57).
+//!
+//! For a fixed set of traced paths a link's gain Σ |a_p|² is a smooth function of what a twin
+//! leaves uncertain: each material's permittivity and conductivity (through the slab
+//! coefficients of every reflection and transmission on a path), the foliage loss rate (through
+//! the metres a path runs in canopies) and a per-cell offset. So the paths are traced once, each
+//! is kept as the interactions it makes ([`PathReplay`]), and a fit moves the parameters by
+//! replaying them: no ray is cast. Derivatives are analytic: the slab coefficients' in η
+//! ([`em::slab_derivative`]) carried forward through each path's field, which is linear in
+//! every coefficient. The fit is Levenberg-Marquardt on the training links' path loss, with
+//! Gaussian priors at the ITU-R P.2040 values in log space and bounds round them.
+//!
+//! Paths through an edge (diffraction) and diffusely scattered power keep their traced power: a
+//! material moves them too, through the wedge faces' reflection and the scattering surface, and
+//! they are left fixed here (the share they carry is small where specular paths exist).
+
+use glam::DVec3;
+use num_complex::Complex64 as C64;
+use serde::{Deserialize, Serialize};
+
+use super::antenna::Antenna;
+use super::em::{slab, slab_derivative};
+use super::field::{self, CVec};
+use super::foliage::FoliageLoss;
+use super::path::{InteractionKind, LinkPaths, Path, TraceOptions};
+use super::scene::RfScene;
+use crate::artifact::Material;
+
+/// A parameter a calibration can move.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+pub enum Parameter {
+    /// The real relative permittivity ε' of a material (fitted as ln ε').
+    Permittivity(Material),
+    /// The conductivity σ of a material, S/m (fitted as ln σ).
+    Conductivity(Material),
+    /// The foliage loss rate, dB/m (the linear law's).
+    FoliageDbPerM,
+}
+
+/// The material and foliage values a replay evaluates paths with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct State {
+    /// (ε', σ) per material, indexed by discriminant; `None` for foliage and unused materials.
+    pub eps_sigma: Vec<Option<(f64, f64)>>,
+    /// Slab thickness per material, metres.
+    pub thickness: Vec<f64>,
+    /// Carrier frequency, Hz.
+    pub freq_hz: f64,
+    /// Foliage loss (its rate is the parameter; a saturating law keeps its maximum).
+    pub foliage: FoliageLoss,
+}
+
+impl State {
+    /// The scene's own materials (its P.2040 values and slab thicknesses) and foliage loss.
+    pub fn of_scene(scene: &RfScene, freq_hz: f64, foliage: FoliageLoss) -> State {
+        let n = scene.material_count();
+        let omega_eps0 = 2.0 * std::f64::consts::PI * freq_hz * EPS0;
+        let (mut eps_sigma, mut thickness) = (vec![None; n], vec![0.0; n]);
+        for m in 0..n {
+            if let Some((eta, d)) = scene.slab_params(m) {
+                eps_sigma[m] = Some((eta.re, -eta.im * omega_eps0));
+                thickness[m] = d;
+            }
+        }
+        State {
+            eps_sigma,
+            thickness,
+            freq_hz,
+            foliage,
+        }
+    }
+
+    /// The value of `p` in this state (ε', σ or dB/m).
+    pub fn get(&self, p: Parameter) -> Option<f64> {
+        match p {
+            Parameter::Permittivity(m) => self.eps_sigma[m as usize].map(|v| v.0),
+            Parameter::Conductivity(m) => self.eps_sigma[m as usize].map(|v| v.1),
+            Parameter::FoliageDbPerM => Some(self.foliage.db_per_m),
+        }
+    }
+
+    /// This state with each parameter of `multipliers` multiplied by its factor (ε' kept at 1
+    /// or above): how a calibration, fitted as factors on the P.2040 values, applies at any
+    /// carrier.
+    pub fn scaled(&self, multipliers: &[(Parameter, f64)]) -> State {
+        let mut s = self.clone();
+        for &(p, k) in multipliers {
+            if let Some(v) = s.get(p) {
+                let v = v * k;
+                s.set(
+                    p,
+                    if matches!(p, Parameter::Permittivity(_)) {
+                        v.max(1.0)
+                    } else {
+                        v
+                    },
+                );
+            }
+        }
+        s
+    }
+
+    fn set(&mut self, p: Parameter, v: f64) {
+        match p {
+            Parameter::Permittivity(m) => {
+                if let Some(es) = &mut self.eps_sigma[m as usize] {
+                    es.0 = v;
+                }
+            }
+            Parameter::Conductivity(m) => {
+                if let Some(es) = &mut self.eps_sigma[m as usize] {
+                    es.1 = v;
+                }
+            }
+            Parameter::FoliageDbPerM => self.foliage.db_per_m = v,
+        }
+    }
+
+    /// η = ε' − j σ / (ε0 ω) of material `m` (P.2040 eq. (9b), e^{+jωt}).
+    fn eta(&self, m: Material) -> Option<C64> {
+        let (eps, sigma) = self.eps_sigma[m as usize]?;
+        Some(C64::new(
+            eps,
+            -sigma / (EPS0 * 2.0 * std::f64::consts::PI * self.freq_hz),
+        ))
+    }
+
+    fn wavelength(&self) -> f64 {
+        super::wavelength(self.freq_hz)
+    }
+}
+
+/// Vacuum permittivity, F/m (as `em`'s).
+const EPS0: f64 = 8.854_187_812_8e-12;
+
+/// One reflection or transmission of a path, as its replay needs it.
+#[derive(Clone, Copy, Debug)]
+struct Op {
+    transmit: bool,
+    /// The direction the wave arrives along.
+    d: DVec3,
+    /// The surface's unit normal.
+    n: DVec3,
+    material: Material,
+}
+
+/// A traced path kept as what it does to the field: the transmit antenna's field along its
+/// first leg, its reflections and transmissions in order, the receive antenna's pattern along
+/// its last, and what does not depend on any parameter (spreading over its length, the
+/// roughness factor of its reflections). [`PathReplay::evaluate`] gives its gain `a` in any
+/// [`State`].
+#[derive(Clone, Debug)]
+pub struct PathReplay {
+    e0: CVec,
+    ops: Vec<Op>,
+    rx: DVec3,
+    scale: f64,
+    foliage_m: f64,
+}
+
+/// The traced links, each as its replayable paths and the power that stays fixed.
+#[derive(Clone, Debug, Default)]
+pub struct LinkModel {
+    /// The specular paths (reflections and transmissions only).
+    pub paths: Vec<PathReplay>,
+    /// Power of the paths through an edge and of the diffuse scattering, as traced.
+    pub fixed_power: f64,
+}
+
+/// What the paths of a trace were evaluated with.
+pub struct TraceSetup<'a> {
+    /// The scene traced.
+    pub scene: &'a RfScene,
+    /// Transmit antenna.
+    pub tx_antenna: &'a Antenna,
+    /// Receive antenna.
+    pub rx_antenna: &'a Antenna,
+    /// The options traced with.
+    pub opt: &'a TraceOptions,
+}
+
+impl LinkModel {
+    /// The link `tx` -> `rx` traced as `traced`, for replay. The polyline of each specular path
+    /// is the transmitter, its interactions and the receiver; the directions, normals and
+    /// materials are the scene's, as `path_field::evaluate` took them.
+    pub fn new(setup: &TraceSetup, tx: DVec3, rx: DVec3, traced: &LinkPaths) -> LinkModel {
+        let mut model = LinkModel {
+            paths: Vec::new(),
+            fixed_power: if traced.diffuse_gain_db.is_finite() {
+                10f64.powf(traced.diffuse_gain_db / 10.0)
+            } else {
+                0.0
+            },
+        };
+        for p in &traced.paths {
+            match PathReplay::new(setup, tx, rx, p) {
+                Some(r) => model.paths.push(r),
+                None => model.fixed_power += p.a[0] * p.a[0] + p.a[1] * p.a[1],
+            }
+        }
+        model
+    }
+
+    /// The link's gain in dB in `state`, and its derivative in the logarithm of each of
+    /// `params` (ln ε', ln σ, ln of the foliage rate): a multiplier's derivative at 1.
+    pub fn gain_db(&self, state: &State, params: &[Parameter]) -> (f64, Vec<f64>) {
+        let mut power = self.fixed_power;
+        let mut dpower = vec![0.0; params.len()];
+        for p in &self.paths {
+            let (a, da) = p.evaluate(state, params);
+            power += a.norm_sqr();
+            for (acc, d) in dpower.iter_mut().zip(&da) {
+                *acc += 2.0 * (a.conj() * d).re;
+            }
+        }
+        if power <= 0.0 {
+            return (f64::NEG_INFINITY, vec![0.0; params.len()]);
+        }
+        let to_db = 10.0 / std::f64::consts::LN_10 / power;
+        (
+            10.0 * power.log10(),
+            dpower.into_iter().map(|d| d * to_db).collect(),
+        )
+    }
+}
+
+impl PathReplay {
+    /// `path` of the link `tx` -> `rx` as a replay; `None` for a path through an edge.
+    pub fn new(setup: &TraceSetup, tx: DVec3, rx: DVec3, path: &Path) -> Option<PathReplay> {
+        let scene = setup.scene;
+        let mut points = vec![tx];
+        let mut ops = Vec::new();
+        let mut reflections = 0;
+        for i in &path.interactions {
+            let transmit = match i.kind {
+                InteractionKind::Reflection => false,
+                InteractionKind::Transmission => true,
+                InteractionKind::Diffraction => return None,
+            };
+            let at = DVec3::from(i.point);
+            let d = (at - *points.last().expect("starts with tx")).normalize();
+            ops.push(Op {
+                transmit,
+                d,
+                n: scene.normals[i.triangle as usize],
+                material: scene.material[i.triangle as usize],
+            });
+            if !transmit {
+                reflections += 1;
+                points.push(at);
+            }
+        }
+        points.push(rx);
+        // A transmission does not bend the path: each leg's direction is its reflection
+        // polyline's, as the trace took it.
+        let legs: Vec<DVec3> = points
+            .windows(2)
+            .map(|w| (w[1] - w[0]).normalize())
+            .collect();
+        let mut leg = 0;
+        for op in &mut ops {
+            op.d = legs[leg];
+            if !op.transmit {
+                leg += 1;
+            }
+        }
+        let k0 = legs[0];
+        let k_last = *legs.last().expect("at least one leg");
+        let specular = (1.0 - setup.opt.scattering_coefficient.powi(2))
+            .max(0.0)
+            .sqrt();
+        Some(PathReplay {
+            e0: field::real(DVec3::from(setup.tx_antenna.field(k0.to_array()))),
+            ops,
+            rx: DVec3::from(setup.rx_antenna.field((-k_last).to_array())),
+            scale: scene.wavelength / (4.0 * std::f64::consts::PI * path.length_m)
+                * specular.powi(reflections),
+            foliage_m: path.foliage_m,
+        })
+    }
+
+    /// The path's gain `a` in `state` and its derivative in the logarithm of each of `params`
+    /// (ln ε', ln σ, ln of the foliage rate): forward through the interactions, each linear in the field and in its two
+    /// coefficients, so a derivative is the interaction applied to the field's derivative plus
+    /// the coefficients' derivative applied to the field.
+    pub fn evaluate(&self, state: &State, params: &[Parameter]) -> (C64, Vec<C64>) {
+        let lambda = state.wavelength();
+        let mut e = self.e0;
+        let mut de = vec![[C64::new(0.0, 0.0); 3]; params.len()];
+        for op in &self.ops {
+            let Some(eta) = state.eta(op.material) else {
+                continue;
+            };
+            let thickness = state.thickness[op.material as usize];
+            let cos = op.d.dot(op.n).abs().min(1.0);
+            let (r, t) = slab(cos, eta, thickness, lambda);
+            let (dr, dt) = slab_derivative(cos, eta, thickness, lambda);
+            let (c, dc) = if op.transmit { (t, dt) } else { (r, dr) };
+            let apply = |e: &CVec, c: (C64, C64)| -> CVec {
+                if op.transmit {
+                    field::transmit(e, op.d, op.n, c)
+                } else {
+                    field::reflect(e, op.d, op.n, c).0
+                }
+            };
+            for (j, p) in params.iter().enumerate() {
+                let mut next = apply(&de[j], c);
+                // dη / d(ln ε') = ε'; dη / d(ln σ) = -j σ / (ε0 ω).
+                let deta = match *p {
+                    Parameter::Permittivity(m) if m == op.material => C64::new(eta.re, 0.0),
+                    Parameter::Conductivity(m) if m == op.material => C64::new(0.0, eta.im),
+                    _ => C64::new(0.0, 0.0),
+                };
+                if deta.norm_sqr() > 0.0 {
+                    let moved = apply(&e, (dc.0 * deta, dc.1 * deta));
+                    for (x, y) in next.iter_mut().zip(moved) {
+                        *x += y;
+                    }
+                }
+                de[j] = next;
+            }
+            e = apply(&e, c);
+        }
+        let scale = self.scale * state.foliage.amplitude(self.foliage_m);
+        let a = field::dot(&e, self.rx) * scale;
+        // d(loss dB)/dγ: the metres in foliage, or m (1 - e^{-γ d / m}) differentiated.
+        let dloss = match state.foliage.max_db {
+            None => self.foliage_m,
+            Some(m) => self.foliage_m * (-state.foliage.db_per_m * self.foliage_m / m).exp(),
+        };
+        let da = params
+            .iter()
+            .zip(&de)
+            .map(|(p, d)| match p {
+                Parameter::FoliageDbPerM => {
+                    a * (-std::f64::consts::LN_10 / 20.0 * dloss * state.foliage.db_per_m)
+                }
+                _ => field::dot(d, self.rx) * scale,
+            })
+            .collect();
+        (a, da)
+    }
+}
+
+/// How a fit holds one parameter, as a factor on its value in each carrier's state (the P.2040
+/// value at that carrier, or the foliage rate): a Gaussian prior on ln k round 0 of standard
+/// deviation `width`, and bounds on k.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Prior {
+    /// The parameter.
+    pub parameter: Parameter,
+    /// The prior's standard deviation of ln k.
+    pub width: f64,
+    /// Least factor allowed.
+    pub lo: f64,
+    /// Most factor allowed.
+    pub hi: f64,
+}
+
+impl Prior {
+    /// The default prior of `p`: ε' within a factor 1.5 at one standard deviation and 3 at the
+    /// bounds; σ within a factor 3 and 100; the foliage rate within a factor 2 and 10.
+    pub fn default_for(p: Parameter) -> Prior {
+        let (width, bound) = match p {
+            Parameter::Permittivity(_) => (1.5f64.ln(), 3.0),
+            Parameter::Conductivity(_) => (3f64.ln(), 100.0),
+            Parameter::FoliageDbPerM => (2f64.ln(), 10.0),
+        };
+        Prior {
+            parameter: p,
+            width,
+            lo: 1.0 / bound,
+            hi: bound,
+        }
+    }
+
+    /// ln k held within the bounds.
+    fn clamp(&self, x: f64) -> f64 {
+        x.clamp(self.lo.ln(), self.hi.ln())
+    }
+}
+
+/// One measured link for a fit: its traced paths, its cell (the offset it shares), the state
+/// of its carrier (an index into the fit's states) and its measured path loss, dB.
+#[derive(Clone, Debug)]
+pub struct Observation {
+    /// The traced link.
+    pub model: LinkModel,
+    /// The cell (transmitter) index, from 0.
+    pub cell: usize,
+    /// Which of the fit's states (carriers) the link is evaluated in.
+    pub group: usize,
+    /// Measured path loss, dB.
+    pub loss_db: f64,
+}
+
+/// What a fit found.
+#[derive(Clone, Debug)]
+pub struct Fitted {
+    /// Each fitted parameter's factor.
+    pub multipliers: Vec<(Parameter, f64)>,
+    /// Each factor's posterior standard deviation of ln k (the Laplace approximation at the
+    /// optimum, noise and priors included): near the prior's width, the links did not constrain
+    /// it.
+    pub spread: Vec<f64>,
+    /// Each cell's offset, dB (added to the predicted path loss); 0 for a cell without links.
+    pub offsets: Vec<f64>,
+    /// Levenberg-Marquardt iterations taken.
+    pub iterations: u32,
+    /// The training links' RMSE before and after, dB (each with its own cells' offsets).
+    pub rmse_db: (f64, f64),
+}
+
+/// The predicted path loss of `o` in `states` with `offsets`: -gain + the cell's offset; `None`
+/// when no path reaches it.
+pub fn predicted_loss(o: &Observation, states: &[State], offsets: &[f64]) -> Option<f64> {
+    let (g, _) = o.model.gain_db(&states[o.group], &[]);
+    g.is_finite().then(|| -g + offsets[o.cell])
+}
+
+/// Each cell's offset that best fits `obs` in `states` (the mean of measured - predicted): what
+/// fitting offsets alone gives.
+pub fn fit_offsets(obs: &[Observation], cells: usize, states: &[State]) -> Vec<f64> {
+    let zero = vec![0.0; cells];
+    let (mut sum, mut n) = (vec![0.0; cells], vec![0usize; cells]);
+    for o in obs {
+        if let Some(p) = predicted_loss(o, states, &zero) {
+            sum[o.cell] += o.loss_db - p;
+            n[o.cell] += 1;
+        }
+    }
+    sum.iter()
+        .zip(&n)
+        .map(|(s, &k)| if k > 0 { s / k as f64 } else { 0.0 })
+        .collect()
+}
+
+/// The RMSE of `obs` in `states` with `offsets`, dB, over the links some path reaches, and how
+/// many those are.
+pub fn rmse_db(obs: &[Observation], states: &[State], offsets: &[f64]) -> (f64, usize) {
+    let errs: Vec<f64> = obs
+        .iter()
+        .filter_map(|o| predicted_loss(o, states, offsets).map(|p| p - o.loss_db))
+        .collect();
+    if errs.is_empty() {
+        return (f64::NAN, 0);
+    }
+    let ms = errs.iter().map(|e| e * e).sum::<f64>() / errs.len() as f64;
+    (ms.sqrt(), errs.len())
+}
+
+/// Fits a factor on each parameter `priors` name, and one offset per cell, to the links `obs`
+/// evaluated in `states` (one per carrier): Levenberg-Marquardt on Σ ((predicted - measured) /
+/// noise_db)² plus each prior's (ln k / width)², every step held within the bounds.
+/// Deterministic: the same inputs give the same bits at any thread count.
+pub fn fit(
+    obs: &[Observation],
+    cells: usize,
+    states: &[State],
+    priors: &[Prior],
+    noise_db: f64,
+) -> Fitted {
+    use rayon::prelude::*;
+    let params: Vec<Parameter> = priors.iter().map(|p| p.parameter).collect();
+    let (np, n) = (priors.len(), priors.len() + cells);
+    let states_at = |x: &[f64]| -> Vec<State> {
+        let k: Vec<(Parameter, f64)> = params.iter().zip(x).map(|(&p, xi)| (p, xi.exp())).collect();
+        states.iter().map(|s| s.scaled(&k)).collect()
+    };
+    // Residuals and their Jacobian at x (ln k of each parameter, then the offsets).
+    let linearise = |x: &[f64]| -> (Vec<f64>, Vec<Vec<f64>>) {
+        let at = states_at(&x[..np]);
+        let rows: Vec<Option<(f64, Vec<f64>)>> = obs
+            .par_iter()
+            .map(|o| {
+                let (g, dg) = o.model.gain_db(&at[o.group], &params);
+                g.is_finite().then(|| {
+                    let mut row = vec![0.0; n];
+                    for (j, d) in dg.iter().enumerate() {
+                        row[j] = -d / noise_db;
+                    }
+                    row[np + o.cell] = 1.0 / noise_db;
+                    ((-g + x[np + o.cell] - o.loss_db) / noise_db, row)
+                })
+            })
+            .collect();
+        let (mut r, mut jac) = (Vec::new(), Vec::new());
+        for (ri, row) in rows.into_iter().flatten() {
+            r.push(ri);
+            jac.push(row);
+        }
+        for (j, p) in priors.iter().enumerate() {
+            r.push(x[j] / p.width);
+            let mut row = vec![0.0; n];
+            row[j] = 1.0 / p.width;
+            jac.push(row);
+        }
+        (r, jac)
+    };
+    let cost = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
+    let mut x = vec![0.0; np];
+    x.extend(fit_offsets(obs, cells, states));
+    let before = rmse_db(obs, states, &x[np..]).0;
+    let (mut r, mut jac) = linearise(&x);
+    let mut c = cost(&r);
+    let mut lambda = 1e-3;
+    let mut iterations = 0;
+    while iterations < 100 {
+        iterations += 1;
+        let (a, g) = normal_equations(&r, &jac, n);
+        let mut improved = false;
+        while lambda < 1e10 {
+            let mut damped = a.clone();
+            for (i, row) in damped.iter_mut().enumerate() {
+                row[i] += lambda * a[i][i].max(1e-12);
+            }
+            let Some(step) = solve_spd(damped, g.iter().map(|v| -v).collect()) else {
+                lambda *= 4.0;
+                continue;
+            };
+            let mut trial: Vec<f64> = x.iter().zip(&step).map(|(a, b)| a + b).collect();
+            for (t, p) in trial.iter_mut().zip(priors) {
+                *t = p.clamp(*t);
+            }
+            let (r2, jac2) = linearise(&trial);
+            let c2 = cost(&r2);
+            if c2 < c {
+                improved = (c - c2) / c.max(1e-300) > 1e-10;
+                (x, r, jac, c) = (trial, r2, jac2, c2);
+                lambda = (lambda / 3.0).max(1e-9);
+                break;
+            }
+            lambda *= 4.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    let multipliers: Vec<(Parameter, f64)> = params
+        .iter()
+        .zip(&x)
+        .map(|(&p, xi)| (p, xi.exp()))
+        .collect();
+    let (a, _) = normal_equations(&r, &jac, n);
+    let spread = (0..np)
+        .map(|j| {
+            let unit: Vec<f64> = (0..n).map(|i| if i == j { 1.0 } else { 0.0 }).collect();
+            solve_spd(a.clone(), unit).map_or(f64::NAN, |col| col[j].max(0.0).sqrt())
+        })
+        .collect();
+    let offsets = x[np..].to_vec();
+    let after = rmse_db(obs, &states_at(&x[..np]), &offsets).0;
+    Fitted {
+        multipliers,
+        spread,
+        offsets,
+        iterations,
+        rmse_db: (before, after),
+    }
+}
+
+/// JᵀJ and Jᵀr of residuals `r` with Jacobian rows `jac` over `n` unknowns.
+fn normal_equations(r: &[f64], jac: &[Vec<f64>], n: usize) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let mut a = vec![vec![0.0; n]; n];
+    let mut g = vec![0.0; n];
+    for (ri, row) in r.iter().zip(jac) {
+        for i in 0..n {
+            if row[i] == 0.0 {
+                continue;
+            }
+            g[i] += row[i] * ri;
+            for k in 0..n {
+                a[i][k] += row[i] * row[k];
+            }
+        }
+    }
+    (a, g)
+}
+
+/// Solves A x = b for a symmetric positive definite A (Cholesky); `None` if A is not.
+fn solve_spd(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
+    let n = b.len();
+    for j in 0..n {
+        let mut d = a[j][j];
+        for k in 0..j {
+            d -= a[j][k] * a[j][k];
+        }
+        if !(d > 0.0) {
+            return None;
+        }
+        let d = d.sqrt();
+        a[j][j] = d;
+        for i in j + 1..n {
+            let mut s = a[i][j];
+            for k in 0..j {
+                s -= a[i][k] * a[j][k];
+            }
+            a[i][j] = s / d;
+        }
+    }
+    for i in 0..n {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= a[i][k] * b[k];
+        }
+        b[i] = s / a[i][i];
+    }
+    for i in (0..n).rev() {
+        let mut s = b[i];
+        for k in i + 1..n {
+            s -= a[k][i] * b[k];
+        }
+        b[i] = s / a[i][i];
+    }
+    Some(b)
+}
