@@ -98,6 +98,7 @@ macro_rules! for_each_stage {
             $crate::stages::heights::clamp::Clamp,
             $crate::stages::heights::difference::Difference,
             $crate::stages::radio::trace::Trace,
+            $crate::stages::radio::calibrate::Calibrate,
             $crate::stages::radio::radio_map::RadioMap,
             $crate::stages::radio::coverage::Coverage,
             $crate::stages::baseline::tr38901::Tr38901,

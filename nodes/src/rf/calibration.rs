@@ -405,7 +405,7 @@ pub struct Fitted {
     pub spread: Vec<f64>,
     /// Each cell's offset, dB (added to the predicted path loss); 0 for a cell without links.
     pub offsets: Vec<f64>,
-    /// Levenberg-Marquardt iterations taken.
+    /// Levenberg-Marquardt iterations taken, over every start.
     pub iterations: u32,
     /// The training links' RMSE before and after, dB (each with its own cells' offsets).
     pub rmse_db: (f64, f64),
@@ -451,7 +451,8 @@ pub fn rmse_db(obs: &[Observation], states: &[State], offsets: &[f64]) -> (f64, 
 
 /// Fits a factor on each parameter `priors` name, and one offset per cell, to the links `obs`
 /// evaluated in `states` (one per carrier): Levenberg-Marquardt on Σ ((predicted - measured) /
-/// noise_db)² plus each prior's (ln k / width)², every step held within the bounds.
+/// noise_db)² plus each prior's (ln k / width)², every step held within the bounds, from
+/// several starts ([`PERMITTIVITY_STARTS`]), the lowest cost kept.
 /// Deterministic: the same inputs give the same bits at any thread count.
 pub fn fit(
     obs: &[Observation],
@@ -498,44 +499,76 @@ pub fn fit(
         (r, jac)
     };
     let cost = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
-    let mut x = vec![0.0; np];
-    x.extend(fit_offsets(obs, cells, states));
-    let before = rmse_db(obs, states, &x[np..]).0;
-    let (mut r, mut jac) = linearise(&x);
-    let mut c = cost(&r);
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    while iterations < 100 {
-        iterations += 1;
-        let (a, g) = normal_equations(&r, &jac, n);
-        let mut improved = false;
-        while lambda < 1e10 {
-            let mut damped = a.clone();
-            for (i, row) in damped.iter_mut().enumerate() {
-                row[i] += lambda * a[i][i].max(1e-12);
-            }
-            let Some(step) = solve_spd(damped, g.iter().map(|v| -v).collect()) else {
+    // Levenberg-Marquardt from x to the nearest minimum: (x, residuals, Jacobian, cost,
+    // iterations).
+    let descend = |mut x: Vec<f64>| {
+        let (mut r, mut jac) = linearise(&x);
+        let mut c = cost(&r);
+        let mut lambda = 1e-3;
+        let mut iterations = 0;
+        while iterations < 100 {
+            iterations += 1;
+            let (a, g) = normal_equations(&r, &jac, n);
+            let mut improved = false;
+            while lambda < 1e10 {
+                let mut damped = a.clone();
+                for (i, row) in damped.iter_mut().enumerate() {
+                    row[i] += lambda * a[i][i].max(1e-12);
+                }
+                let Some(step) = solve_spd(damped, g.iter().map(|v| -v).collect()) else {
+                    lambda *= 4.0;
+                    continue;
+                };
+                let mut trial: Vec<f64> = x.iter().zip(&step).map(|(a, b)| a + b).collect();
+                for (t, p) in trial.iter_mut().zip(priors) {
+                    *t = p.clamp(*t);
+                }
+                let (r2, jac2) = linearise(&trial);
+                let c2 = cost(&r2);
+                if c2 < c {
+                    improved = (c - c2) / c.max(1e-300) > 1e-10;
+                    (x, r, jac, c) = (trial, r2, jac2, c2);
+                    lambda = (lambda / 3.0).max(1e-9);
+                    break;
+                }
                 lambda *= 4.0;
-                continue;
-            };
-            let mut trial: Vec<f64> = x.iter().zip(&step).map(|(a, b)| a + b).collect();
-            for (t, p) in trial.iter_mut().zip(priors) {
-                *t = p.clamp(*t);
             }
-            let (r2, jac2) = linearise(&trial);
-            let c2 = cost(&r2);
-            if c2 < c {
-                improved = (c - c2) / c.max(1e-300) > 1e-10;
-                (x, r, jac, c) = (trial, r2, jac2, c2);
-                lambda = (lambda / 3.0).max(1e-9);
+            if !improved {
                 break;
             }
-            lambda *= 4.0;
         }
-        if !improved {
-            break;
+        (x, r, jac, c, iterations)
+    };
+    let offsets0 = fit_offsets(obs, cells, states);
+    let before = rmse_db(obs, states, &offsets0).0;
+    // A slab's coefficients swing with ε' through its thickness resonances, so the cost has a
+    // minimum every few tens of per cent of ε': descend from several common factors on every
+    // permittivity (the ITU values first) and keep the lowest.
+    let mut best: Option<(Vec<f64>, Vec<f64>, Vec<Vec<f64>>, f64, u32)> = None;
+    let mut iterations = 0;
+    for start in PERMITTIVITY_STARTS {
+        if start != 1.0
+            && !params
+                .iter()
+                .any(|p| matches!(p, Parameter::Permittivity(_)))
+        {
+            continue;
+        }
+        let mut x: Vec<f64> = priors
+            .iter()
+            .map(|p| match p.parameter {
+                Parameter::Permittivity(_) => p.clamp(start.ln()),
+                _ => 0.0,
+            })
+            .collect();
+        x.extend(&offsets0);
+        let found = descend(x);
+        iterations += found.4;
+        if best.as_ref().is_none_or(|b| found.3 < b.3) {
+            best = Some(found);
         }
     }
+    let (x, r, jac, _, _) = best.expect("the ITU start always runs");
     let multipliers: Vec<(Parameter, f64)> = params
         .iter()
         .zip(&x)
@@ -558,6 +591,9 @@ pub fn fit(
         rmse_db: (before, after),
     }
 }
+
+/// The common factors on every permittivity a fit descends from (the ITU values first).
+const PERMITTIVITY_STARTS: [f64; 6] = [1.0, 0.7, 0.85, 1.2, 1.45, 1.75];
 
 /// JᵀJ and Jᵀr of residuals `r` with Jacobian rows `jac` over `n` unknowns.
 fn normal_equations(r: &[f64], jac: &[Vec<f64>], n: usize) -> (Vec<Vec<f64>>, Vec<f64>) {
@@ -613,4 +649,80 @@ fn solve_spd(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
         b[i] = s / a[i][i];
     }
     Some(b)
+}
+
+/// The name under which a calibration's factor on `p` is kept (a Calibrate node's output, a
+/// Trace's `calibration` input): `calibration/permittivity/<material>`,
+/// `calibration/conductivity/<material>`, `calibration/foliage_db_per_m`.
+pub fn metric_name(p: Parameter) -> String {
+    match p {
+        Parameter::Permittivity(m) => format!("calibration/permittivity/{}", material_name(m)),
+        Parameter::Conductivity(m) => format!("calibration/conductivity/{}", material_name(m)),
+        Parameter::FoliageDbPerM => "calibration/foliage_db_per_m".into(),
+    }
+}
+
+fn material_name(m: Material) -> &'static str {
+    m.itu_type().unwrap_or("foliage")
+}
+
+/// The factors named in `metrics` ([`metric_name`]); other names are ignored. An error names a
+/// factor that is not a positive finite number or a material that does not exist.
+pub fn multipliers_from(
+    metrics: &crate::artifact::Metrics,
+) -> Result<Vec<(Parameter, f64)>, String> {
+    let mut out = Vec::new();
+    for (name, &k) in &metrics.values {
+        let Some(rest) = name.strip_prefix("calibration/") else {
+            continue;
+        };
+        let p = match rest.split_once('/') {
+            Some(("permittivity", m)) | Some(("conductivity", m)) => {
+                let material = Material::from_name(m)
+                    .filter(|m| *m != Material::Foliage)
+                    .ok_or_else(|| format!("{name}: no ITU material is called {m:?}"))?;
+                if rest.starts_with("permittivity/") {
+                    Parameter::Permittivity(material)
+                } else {
+                    Parameter::Conductivity(material)
+                }
+            }
+            None if rest == "foliage_db_per_m" => Parameter::FoliageDbPerM,
+            _ => continue,
+        };
+        if !(k > 0.0 && k.is_finite()) {
+            return Err(format!(
+                "{name}: expected a positive, finite factor, found {k}"
+            ));
+        }
+        out.push((p, k));
+    }
+    Ok(out)
+}
+
+/// `rf` and `opt` with the factors `multipliers` on their materials (P.2040 values at `freq_hz`)
+/// and foliage rate; unchanged, to the bit, without factors.
+pub fn apply(
+    rf: RfScene,
+    opt: &TraceOptions,
+    freq_hz: f64,
+    multipliers: &[(Parameter, f64)],
+) -> (RfScene, TraceOptions) {
+    if multipliers.is_empty() {
+        return (rf, opt.clone());
+    }
+    let state = State::of_scene(&rf, freq_hz, opt.foliage_loss(freq_hz)).scaled(multipliers);
+    let mut rf = rf;
+    let mut opt = opt.clone();
+    for &(p, _) in multipliers {
+        match p {
+            Parameter::Permittivity(m) | Parameter::Conductivity(m) => {
+                if let Some(eta) = state.eta(m) {
+                    rf = rf.with_permittivity(m, eta);
+                }
+            }
+            Parameter::FoliageDbPerM => opt.foliage_db_per_m = Some(state.foliage.db_per_m),
+        }
+    }
+    (rf, opt)
 }

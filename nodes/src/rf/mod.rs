@@ -34,6 +34,7 @@ pub mod sequences;
 pub mod slab_table;
 #[doc(hidden)]
 pub mod test_scenes;
+pub mod traced_links;
 pub mod utd;
 
 /// Speed of light in vacuum, m/s (Sionna's constant).

@@ -1,10 +1,10 @@
 //! Radio (Sec. 5): link paths and radio maps traced through a scene.
 
+pub mod calibrate;
 pub mod coverage;
 pub mod radio_map;
 pub mod trace;
 
-use crate::artifact::{ObjectClass, Scene};
 use crate::stage::ParamError;
 
 /// The most a transmitter's `reach_m` may be, metres: a transmitter's reach, not a country.
@@ -21,9 +21,4 @@ pub fn check_reach(reach_m: Option<f64>) -> Result<(), ParamError> {
     }
 }
 
-/// What a transmitter bounded by its reach traces: the part of `scene` meeting the box from
-/// `lo` to `hi`, every object whole (a building cut open would let rays in without walls) but
-/// the terrain, which is one object city-wide and is cut to the triangles meeting the box.
-pub fn within_reach(scene: &Scene, lo: (f64, f64), hi: (f64, f64)) -> Scene {
-    scene.near(lo, hi, |o| o.class != ObjectClass::Terrain)
-}
+pub use crate::rf::traced_links::within_reach;

@@ -1,0 +1,179 @@
+//! The Calibrate stage (issue 57) on a synthetic truth, and a Trace given its output.
+
+use kodama_nodes::artifact::{Material, Measurements, Metrics};
+use kodama_nodes::rf::calibration;
+use kodama_nodes::stage::{Ctx, Inputs, Stage};
+use kodama_nodes::stages::radio::calibrate::{Calibrate, CalibrateParams};
+
+use kodama_nodes::artifact::{Endpoint, Height, Link};
+use kodama_nodes::rf::antenna::Antenna;
+use kodama_nodes::rf::em::permittivity;
+use kodama_nodes::rf::paths::trace_links;
+use kodama_nodes::rf::scene::RfScene;
+use kodama_nodes::rf::test_scenes::street_grid_scene;
+use kodama_nodes::stage::Slot;
+use kodama_nodes::stages::radio::trace::Trace;
+use kodama_nodes::{Artifact, Site};
+use num_complex::Complex64 as C64;
+use std::sync::Arc;
+
+const FREQ: f64 = 3.5e9;
+
+fn site() -> Site {
+    Site {
+        crs: "EPSG:32618".into(),
+        origin: (0.0, 0.0),
+        cell_m: 1.0,
+    }
+}
+
+/// Two transmitters' links to receivers along the street grid's streets, measured through
+/// a truth whose concrete has 1.3 x the ITU ε' and 0.5 x its σ, with 2 dB of noise.
+fn measured() -> Measurements {
+    let itu = permittivity(Material::Concrete, FREQ, false).unwrap();
+    let truth = RfScene::new(&street_grid_scene(), FREQ, false)
+        .unwrap()
+        .with_permittivity(Material::Concrete, C64::new(1.3 * itu.re, 0.5 * itu.im));
+    let mut rxs = Vec::new();
+    for line in [-56.0, -28.0, 0.0, 28.0, 56.0] {
+        for k in 0..31 {
+            let s = -90.0 + 6.0 * k as f64;
+            rxs.push([s, line, 1.5]);
+            rxs.push([line - 4.0 * (line / 28.0), s + 3.0, 1.5]);
+        }
+    }
+    let mut out = Measurements::default();
+    let ant = Antenna::default();
+    let opt = CalibrateParams::default().trace.options.trace_options();
+    let opt = kodama_nodes::rf::path::TraceOptions {
+        rays: 100_000,
+        ..opt
+    };
+    for (id, tx) in [("A", [-60.0, -56.0, 12.0]), ("B", [30.0, 28.0, 15.0])] {
+        let pairs: Vec<_> = rxs.iter().map(|&r| (tx, r)).collect();
+        let traced = trace_links(&truth, &pairs, &ant, &ant, &opt, FREQ);
+        for (k, (r, lp)) in rxs.iter().zip(traced).enumerate() {
+            if !lp.gain_db.is_finite() {
+                continue;
+            }
+            let end = |id: &str, p: [f64; 3]| Endpoint {
+                id: id.into(),
+                x: p[0],
+                y: p[1],
+                z: Height::Absolute(p[2]),
+                azimuth_deg: None,
+            };
+            let noise = 2.0
+                * kodama_nodes::rng::gaussian(kodama_nodes::rng::mix(
+                    k as u64 ^ (id.len() as u64 + id.as_bytes()[0] as u64) << 32,
+                ));
+            out.links.push(Link {
+                tx: end(id, tx),
+                rx: end("", *r),
+                freq_hz: FREQ,
+                path_loss_db: Some(-lp.gain_db + noise),
+                rx_power_dbm: None,
+                tx_eirp_dbm: None,
+                los: None,
+            });
+        }
+    }
+    out
+}
+
+fn params() -> CalibrateParams {
+    let mut p = CalibrateParams {
+        block_m: 40.0,
+        guard_m: 2.0,
+        noise_db: 2.0,
+        ..Default::default()
+    };
+    p.trace.options.rays = 100_000;
+    p
+}
+
+/// The stage recovers the truth's concrete from the training blocks, scores the held-out
+/// blocks better than offsets alone, and a Trace given its output traces the calibrated twin.
+#[test]
+fn calibrate_recovers_the_truths_concrete_and_trace_applies_it() {
+    let links = measured();
+    let scene = Arc::new(Artifact::Scene(street_grid_scene()));
+    let inputs = Inputs::new()
+        .with("scene", Slot::One(scene.clone()))
+        .with(
+            "links",
+            Slot::One(Arc::new(Artifact::Measurements(links.clone()))),
+        )
+        .with("terrain", Slot::Optional(None));
+    let s = site();
+    let m = Calibrate::run(&params(), &inputs, &Ctx::new(&s, &[])).unwrap();
+    let get = |k: &str| m.get(k).unwrap_or_else(|| panic!("{k} missing"));
+    let eps = get("calibration/permittivity/concrete");
+    let sigma = get("calibration/conductivity/concrete");
+    let (before, after) = (
+        get("held_out/rmse_offsets_only_db"),
+        get("held_out/rmse_calibrated_db"),
+    );
+    println!(
+        "concrete ε' x{eps:.3}, σ x{sigma:.3}; {} training links; held out ({} links): \
+         {before:.2} -> {after:.2} dB",
+        get("train/links"),
+        get("held_out/links")
+    );
+    // σ is recovered. ε' is only up to the 0.2 m slab's thickness resonances, which alias
+    // it: measured, a factor 1.09 fits these training blocks better than the truth's 1.3
+    // (RMSE 1.79 against 1.85 dB; held out 2.03 against 1.95 dB), so no ε' is asserted here
+    // (tests/calibration.rs recovers it from one transmitter's links). The held-out links
+    // come to within a quarter dB of the 2 dB noise.
+    assert!((sigma / 0.5 - 1.0).abs() < 0.1, "σ factor {sigma}");
+    assert!(
+        after < before - 1.0 && after < 2.3,
+        "held out {before} -> {after}"
+    );
+    // Trace with the factors: closer to the measurements than the ITU twin, link by link.
+    let traced = |calibration: Option<Metrics>| {
+        let inputs = Inputs::new()
+            .with("scene", Slot::One(scene.clone()))
+            .with(
+                "links",
+                Slot::One(Arc::new(Artifact::Measurements(links.clone()))),
+            )
+            .with("terrain", Slot::Optional(None))
+            .with(
+                "calibration",
+                Slot::Optional(calibration.map(|c| Arc::new(Artifact::Metrics(c)))),
+            );
+        Trace::run(&params().trace, &inputs, &Ctx::new(&s, &[])).unwrap()
+    };
+    let rmse = |pred: &Measurements| {
+        let e: Vec<f64> = pred
+            .links
+            .iter()
+            .zip(&links.links)
+            .filter_map(|(p, l)| Some(p.path_loss_db? - l.path_loss_db?))
+            .filter(|e| e.is_finite())
+            .collect();
+        let mean = e.iter().sum::<f64>() / e.len() as f64;
+        (e.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / e.len() as f64).sqrt()
+    };
+    let (itu, cal) = (rmse(&traced(None)), rmse(&traced(Some(m.clone()))));
+    println!("Trace: {itu:.2} dB with the ITU values, {cal:.2} dB with the calibration");
+    assert!(cal < itu - 1.0, "{itu} -> {cal}");
+}
+
+/// A calibration naming a material that does not exist, or a factor that is not a positive
+/// number, is refused by name.
+#[test]
+fn a_bad_calibration_input_is_refused_by_name() {
+    let mut m = Metrics::default();
+    m.set("calibration/permittivity/unobtainium", 1.2);
+    let e = calibration::multipliers_from(&m).unwrap_err();
+    assert!(e.contains("unobtainium"), "{e}");
+    let mut m = Metrics::default();
+    m.set("calibration/conductivity/concrete", -1.0);
+    let e = calibration::multipliers_from(&m).unwrap_err();
+    assert!(e.contains("positive"), "{e}");
+    let mut m = Metrics::default();
+    m.set("train/links", 3.0);
+    assert!(calibration::multipliers_from(&m).unwrap().is_empty());
+}
