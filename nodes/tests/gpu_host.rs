@@ -81,6 +81,20 @@ fn diffuse(rays: u32) -> TraceOptions {
     }
 }
 
+/// The street grid's map cells: 4 m, 50 x 50 over x, y in [-100, 100], at 1.5 m.
+fn street_plane() -> MapPlane {
+    MapPlane::plane(
+        Grid {
+            x0: -100.0,
+            y0: 100.0,
+            cell_m: 4.0,
+            width: 50,
+            height: 50,
+        },
+        1.5,
+    )
+}
+
 fn check_map_with(name: &str, scene: &RfScene, tx: DVec3, plane: &MapPlane, opt: &TraceOptions) {
     let (rays, opt) = (opt.rays, opt.clone());
     let antenna = Antenna::default();
@@ -106,16 +120,7 @@ fn check_map_with(name: &str, scene: &RfScene, tx: DVec3, plane: &MapPlane, opt:
 #[test]
 fn host_kernel_maps_street_grid_as_the_cpu() {
     let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
-    let plane = MapPlane::plane(
-        Grid {
-            x0: -100.0,
-            y0: 100.0,
-            cell_m: 4.0,
-            width: 50,
-            height: 50,
-        },
-        1.5,
-    );
+    let plane = street_plane();
     check_map(
         "street grid",
         &scene,
@@ -128,16 +133,7 @@ fn host_kernel_maps_street_grid_as_the_cpu() {
 #[test]
 fn host_kernel_maps_diffuse_reflection_as_the_cpu() {
     let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
-    let plane = MapPlane::plane(
-        Grid {
-            x0: -100.0,
-            y0: 100.0,
-            cell_m: 4.0,
-            width: 50,
-            height: 50,
-        },
-        1.5,
-    );
+    let plane = street_plane();
     let tx = DVec3::new(-60.0, -56.0, 12.0);
     check_map_with(
         "street grid, diffuse",
@@ -182,16 +178,7 @@ fn host_kernel_maps_foliage_as_the_cpu() {
     use kodama_nodes::rf::foliage::FoliageLaw;
     let scene = street_grid_with_canopies();
     assert!(scene.has_foliage());
-    let plane = MapPlane::plane(
-        Grid {
-            x0: -100.0,
-            y0: 100.0,
-            cell_m: 4.0,
-            width: 50,
-            height: 50,
-        },
-        1.5,
-    );
+    let plane = street_plane();
     let tx = DVec3::new(-60.0, -56.0, 12.0);
     let bare = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
     let without = radio_map(

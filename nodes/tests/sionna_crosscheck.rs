@@ -661,7 +661,6 @@ fn agreement(cells: &[(u32, u32, f64)], ours: impl Fn(u32, u32) -> Option<f64>) 
 /// face 0 only, both polarisations; our defaults, diffraction alone.
 #[test]
 fn diffraction_by_a_conducting_wedge_against_the_exact_solution() {
-    use kodama_nodes::rf::antenna::Polarization;
     let mut r = csv::Reader::from_path(fixture("pec_wedge.csv")).unwrap();
     // (n, φ'/π, polarisation) -> (tx, rx, exact dB, Sionna dB) per receiver.
     type Case = (String, String, String);
@@ -682,14 +681,7 @@ fn diffraction_by_a_conducting_wedge_against_the_exact_solution() {
     for (key, links) in &cases {
         let (n, phi_s, pol) = key;
         let rf = conducting_wedge(n.parse().unwrap());
-        let ant = Antenna {
-            polarization: if pol == "V" {
-                Polarization::V
-            } else {
-                Polarization::H
-            },
-            ..Antenna::default()
-        };
+        let ant = iso_antenna(pol);
         let got = trace_links(&rf, links, &ant, &ant, &opt, 3.5e9);
         let (mut ours, mut sionna) = (Vec::new(), Vec::new());
         for (g, (exact, s)) in got.iter().zip(&refs[key]) {
@@ -743,7 +735,6 @@ fn diffraction_by_a_conducting_wedge_against_the_exact_solution() {
 #[test]
 fn diffraction_by_a_lossy_wedge_against_maliuzhinets() {
     use kodama_nodes::artifact::Material;
-    use kodama_nodes::rf::antenna::Polarization;
     let mut r = csv::Reader::from_path(fixture("impedance_wedge.csv")).unwrap();
     // (material, n, φ'/π, polarisation) -> links, and (exact, Luebbers, Sionna) dB per link.
     type Case = (String, String, String, String);
@@ -774,14 +765,7 @@ fn diffraction_by_a_lossy_wedge_against_maliuzhinets() {
             other => panic!("material {other}"),
         };
         let rf = prism_wedge(n.parse().unwrap(), m).with_thickness(m, 2.0);
-        let ant = Antenna {
-            polarization: if pol == "V" {
-                Polarization::V
-            } else {
-                Polarization::H
-            },
-            ..Antenna::default()
-        };
+        let ant = iso_antenna(pol);
         let got = trace_links(&rf, links, &ant, &ant, &opt, 3.5e9);
         let mut errs: [Vec<f64>; 3] = Default::default();
         for (g, [exact, lue, sionna]) in got.iter().zip(&refs[key]) {
@@ -840,6 +824,19 @@ fn diffraction_by_a_lossy_wedge_against_maliuzhinets() {
             o.0 < s.0 && o.1 < s.1,
             "{material}: ours is no closer to Maliuzhinets' solution than Sionna RT"
         );
+    }
+}
+
+/// The isotropic antenna polarised as a fixture's column names it (`V` or `H`).
+fn iso_antenna(pol: &str) -> Antenna {
+    use kodama_nodes::rf::antenna::Polarization;
+    Antenna {
+        polarization: if pol == "V" {
+            Polarization::V
+        } else {
+            Polarization::H
+        },
+        ..Antenna::default()
     }
 }
 
