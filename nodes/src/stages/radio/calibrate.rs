@@ -96,6 +96,13 @@ impl Stage for Calibrate {
             .trace_options()
             .check()
             .map_err(|(field, m)| ParamError::new("trace", format!("options.{field}: {m}")))?;
+        if p.trace.coherent {
+            return Err(ParamError::new(
+                "trace",
+                "coherent: a calibration fits the paths' summed power Σ |a|², not their coherent \
+                 sum; leave coherent false",
+            ));
+        }
         if !(p.noise_db > 0.0 && p.noise_db <= 100.0) {
             return Err(ParamError::new(
                 "noise_db",
