@@ -167,13 +167,73 @@ fn calibrate_recovers_the_truths_concrete_and_trace_applies_it() {
 fn a_bad_calibration_input_is_refused_by_name() {
     let mut m = Metrics::default();
     m.set("calibration/permittivity/unobtainium", 1.2);
-    let e = calibration::multipliers_from(&m).unwrap_err();
+    let e = calibration::calibration_from(&m).unwrap_err();
     assert!(e.contains("unobtainium"), "{e}");
     let mut m = Metrics::default();
     m.set("calibration/conductivity/concrete", -1.0);
-    let e = calibration::multipliers_from(&m).unwrap_err();
+    let e = calibration::calibration_from(&m).unwrap_err();
     assert!(e.contains("positive"), "{e}");
     let mut m = Metrics::default();
+    m.set("calibration/tilt_deg/A", 200.0);
+    let e = calibration::calibration_from(&m).unwrap_err();
+    assert!(e.contains("tilt_deg/A") && e.contains("90"), "{e}");
+    let mut m = Metrics::default();
     m.set("train/links", 3.0);
-    assert!(calibration::multipliers_from(&m).unwrap().is_empty());
+    assert!(
+        calibration::calibration_from(&m)
+            .unwrap()
+            .factors
+            .is_empty()
+    );
+}
+
+/// A Trace given a cell's antenna turn traces that cell's links with the antenna turned, and
+/// the other cells' as they were.
+#[test]
+fn trace_turns_only_the_named_cells_antenna() {
+    use kodama_nodes::rf::antenna::{Antenna, Pattern, Polarization};
+    let links = measured();
+    let scene = Arc::new(Artifact::Scene(street_grid_scene()));
+    let s = site();
+    let mut p = params().trace;
+    p.tx_antenna = Antenna {
+        pattern: Pattern::Tr38901,
+        polarization: Polarization::V,
+        azimuth_deg: 90.0,
+        tilt_deg: 0.0,
+    };
+    let run = |p: &kodama_nodes::rf::traced_links::TraceParams, c: Option<Metrics>| {
+        let inputs = Inputs::new()
+            .with("scene", Slot::One(scene.clone()))
+            .with(
+                "links",
+                Slot::One(Arc::new(Artifact::Measurements(links.clone()))),
+            )
+            .with("terrain", Slot::Optional(None))
+            .with(
+                "calibration",
+                Slot::Optional(c.map(|c| Arc::new(Artifact::Metrics(c)))),
+            );
+        Trace::run(p, &inputs, &Ctx::new(&s, &[])).unwrap()
+    };
+    let mut m = Metrics::default();
+    m.set("calibration/tilt_deg/A", 5.0);
+    m.set("calibration/azimuth_deg/A", -10.0);
+    let turned = run(&p, Some(m));
+    let mut q = p.clone();
+    q.tx_antenna.tilt_deg += 5.0;
+    q.tx_antenna.azimuth_deg -= 10.0;
+    let (plain, by_hand) = (run(&p, None), run(&q, None));
+    let mut changed = 0;
+    for ((t, a), (b, l)) in turned
+        .links
+        .iter()
+        .zip(&plain.links)
+        .zip(by_hand.links.iter().zip(&links.links))
+    {
+        let want = if l.tx.id == "A" { b } else { a };
+        assert_eq!(t.path_loss_db, want.path_loss_db, "{}", l.tx.id);
+        changed += (l.tx.id == "A" && t.path_loss_db != a.path_loss_db) as usize;
+    }
+    assert!(changed > 50, "{changed} of A's links changed");
 }

@@ -70,6 +70,39 @@ pub fn gain(pattern: Pattern, theta: f64, phi: f64) -> f64 {
     }
 }
 
+/// The slopes of [`gain`] in dB per radian of zenith θ and azimuth φ (the antenna frame's): 0
+/// where a TR 38.901 term is saturated at 30 dB.
+fn pattern_slopes_db(pattern: Pattern, theta: f64, phi: f64) -> (f64, f64) {
+    match pattern {
+        Pattern::Isotropic => (0.0, 0.0),
+        Pattern::Dipole => (
+            20.0 / std::f64::consts::LN_10 * theta.cos() / theta.sin(),
+            0.0,
+        ),
+        Pattern::Tr38901 => {
+            let (th, ph) = (theta.to_degrees(), phi.to_degrees());
+            let v = 12.0 * ((th - 90.0) / 65.0).powi(2);
+            let h = 12.0 * (ph / 65.0).powi(2);
+            let (a_v, a_h) = (-v.min(30.0), -h.min(30.0));
+            if -(a_v + a_h) >= 30.0 {
+                return (0.0, 0.0);
+            }
+            let per_radian = 180.0 / std::f64::consts::PI;
+            let d_v = if v < 30.0 {
+                -24.0 * (th - 90.0) / (65.0 * 65.0)
+            } else {
+                0.0
+            };
+            let d_h = if h < 30.0 {
+                -24.0 * ph / (65.0 * 65.0)
+            } else {
+                0.0
+            };
+            (d_v * per_radian, d_h * per_radian)
+        }
+    }
+}
+
 impl Antenna {
     /// An antenna as the command line and the Python package name it: `iso`, `dipole` or
     /// `tr38901:BEARING_DEG:TILT_DEG` (the TR 38.901 sector, boresight at a compass bearing
@@ -127,6 +160,42 @@ impl Antenna {
         }
     }
 
+    /// The gain toward `k` in dB and its slopes in the antenna's tilt and bearing, dB per degree:
+    /// the pattern's derivative carried through the rotation of [`Antenna::local_angles`]
+    /// (0 where the pattern is flat, saturated, or at the frame's poles). What a calibration
+    /// fits an antenna's tilt and bearing with (`rf::calibration`).
+    pub fn gain_slopes_db(&self, k: [f64; 3]) -> (f64, f64, f64) {
+        let g_db = 10.0 * self.gain_toward(k).log10();
+        if self.pattern == Pattern::Isotropic {
+            return (g_db, 0.0, 0.0);
+        }
+        let (sa, ca) = (self.azimuth_deg - 90.0).to_radians().sin_cos();
+        let x1 = ca * k[0] - sa * k[1];
+        let y1 = sa * k[0] + ca * k[1];
+        let z1 = k[2];
+        let (st, ct) = self.tilt_deg.to_radians().sin_cos();
+        let x2 = ct * x1 - st * z1;
+        let z2 = st * x1 + ct * z1;
+        let sin_theta = (1.0 - z2 * z2).max(0.0).sqrt();
+        let rho2 = x2 * x2 + y1 * y1;
+        if sin_theta < 1e-9 || rho2 < 1e-18 {
+            return (g_db, 0.0, 0.0);
+        }
+        // θ = acos z2 and φ = atan2(y1, x2), differentiated in the tilt t and in the rotation α
+        // = bearing - 90° (radians): dz2/dt = x2, dx2/dt = -z2; dx1/dα = -y1, dy1/dα = x1.
+        let (dtheta_dt, dphi_dt) = (-x2 / sin_theta, y1 * z2 / rho2);
+        let (dtheta_da, dphi_da) = (st * y1 / sin_theta, (x2 * x1 + ct * y1 * y1) / rho2);
+        let theta = z2.clamp(-1.0, 1.0).acos();
+        let phi = y1.atan2(x2);
+        let (dg_dtheta, dg_dphi) = pattern_slopes_db(self.pattern, theta, phi);
+        let per_degree = std::f64::consts::PI / 180.0;
+        (
+            g_db,
+            (dg_dtheta * dtheta_dt + dg_dphi * dphi_dt) * per_degree,
+            (dg_dtheta * dtheta_da + dg_dphi * dphi_da) * per_degree,
+        )
+    }
+
     /// Zenith and azimuth of `k` in the antenna frame: rotate about z by -(90° - bearing) (the
     /// bearing, clockwise from +y, is 90° - the angle counter-clockwise from +x), then by -tilt
     /// about the new y axis (a downtilt points boresight below the horizon).
@@ -178,6 +247,51 @@ pub fn check_antenna(field: &'static str, a: &Antenna) -> Result<(), ParamError>
 mod tests {
     use super::*;
     use std::f64::consts::PI;
+
+    /// The gain's slopes in tilt and bearing against central differences of the gain itself,
+    /// for the sector and the dipole over directions all round (the sector's 30 dB kinks, where
+    /// the slope jumps, left out).
+    #[test]
+    fn gain_slopes_match_central_differences() {
+        for pattern in [Pattern::Tr38901, Pattern::Dipole] {
+            let a = Antenna {
+                pattern,
+                polarization: Polarization::V,
+                azimuth_deg: 130.0,
+                tilt_deg: 6.0,
+            };
+            let mut checked = 0;
+            for i in 0..400 {
+                let z = -0.95 + 1.9 * (i as f64 + 0.5) / 400.0;
+                let az = 2.399963 * i as f64;
+                let r = (1.0 - z * z).sqrt();
+                let k = [r * az.cos(), r * az.sin(), z];
+                let db = |a: &Antenna| 10.0 * a.gain_toward(k).log10();
+                let h = 1e-5;
+                let fd = |f: &dyn Fn(f64) -> Antenna| (db(&f(h)) - db(&f(-h))) / (2.0 * h);
+                let tilt = fd(&|d| Antenna {
+                    tilt_deg: a.tilt_deg + d,
+                    ..a
+                });
+                let bearing = fd(&|d| Antenna {
+                    azimuth_deg: a.azimuth_deg + d,
+                    ..a
+                });
+                let (g, st, sb) = a.gain_slopes_db(k);
+                assert!((g - db(&a)).abs() < 1e-12);
+                if db(&a) <= 8.0 - 29.9 {
+                    continue; // at the sector's 30 dB floor the slope jumps
+                }
+                assert!(
+                    (tilt - st).abs() < 1e-4 * (1.0 + tilt.abs())
+                        && (bearing - sb).abs() < 1e-4 * (1.0 + bearing.abs()),
+                    "{pattern:?} k {k:?}: tilt {st} vs {tilt}, bearing {sb} vs {bearing}"
+                );
+                checked += 1;
+            }
+            assert!(checked > 150, "{pattern:?}: {checked}");
+        }
+    }
 
     #[test]
     fn patterns_have_their_textbook_gains() {

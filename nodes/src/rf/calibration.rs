@@ -35,6 +35,18 @@ pub enum Parameter {
     Conductivity(Material),
     /// The foliage loss rate, dB/m (the linear law's).
     FoliageDbPerM,
+    /// A cell's transmit antenna tilt, as an offset in degrees (the fit's cell index).
+    Tilt(u32),
+    /// A cell's transmit antenna bearing, as an offset in degrees (the fit's cell index).
+    Azimuth(u32),
+}
+
+impl Parameter {
+    /// True for the antenna's angles, fitted as offsets in degrees; false for the factors on
+    /// materials and foliage, fitted as their logarithm.
+    pub fn is_angle(self) -> bool {
+        matches!(self, Parameter::Tilt(_) | Parameter::Azimuth(_))
+    }
 }
 
 /// The material and foliage values a replay evaluates paths with.
@@ -76,6 +88,7 @@ impl State {
             Parameter::Permittivity(m) => self.eps_sigma[m as usize].map(|v| v.0),
             Parameter::Conductivity(m) => self.eps_sigma[m as usize].map(|v| v.1),
             Parameter::FoliageDbPerM => Some(self.foliage.db_per_m),
+            Parameter::Tilt(_) | Parameter::Azimuth(_) => None,
         }
     }
 
@@ -113,6 +126,7 @@ impl State {
                 }
             }
             Parameter::FoliageDbPerM => self.foliage.db_per_m = v,
+            Parameter::Tilt(_) | Parameter::Azimuth(_) => {}
         }
     }
 
@@ -151,7 +165,9 @@ struct Op {
 /// [`State`].
 #[derive(Clone, Debug)]
 pub struct PathReplay {
-    e0: CVec,
+    /// The transmit antenna as traced, and the first leg's direction.
+    tx: Antenna,
+    k0: DVec3,
     ops: Vec<Op>,
     rx: DVec3,
     scale: f64,
@@ -201,13 +217,20 @@ impl LinkModel {
         model
     }
 
-    /// The link's gain in dB in `state`, and its derivative in the logarithm of each of
-    /// `params` (ln ε', ln σ, ln of the foliage rate): a multiplier's derivative at 1.
-    pub fn gain_db(&self, state: &State, params: &[Parameter]) -> (f64, Vec<f64>) {
+    /// The link's gain in dB in `state` with its transmit antenna turned by `turn` (tilt,
+    /// bearing offsets in degrees), and its derivative in each of `params`: in the logarithm of
+    /// a material's or the foliage rate's value (a factor's derivative at 1), in degrees of an
+    /// antenna angle (the link's own antenna, whatever the cell index says).
+    pub fn gain_db(
+        &self,
+        state: &State,
+        params: &[Parameter],
+        turn: (f64, f64),
+    ) -> (f64, Vec<f64>) {
         let mut power = self.fixed_power;
         let mut dpower = vec![0.0; params.len()];
         for p in &self.paths {
-            let (a, da) = p.evaluate(state, params);
+            let (a, da) = p.evaluate(state, params, turn);
             power += a.norm_sqr();
             for (acc, d) in dpower.iter_mut().zip(&da) {
                 *acc += 2.0 * (a.conj() * d).re;
@@ -270,7 +293,8 @@ impl PathReplay {
             .max(0.0)
             .sqrt();
         Some(PathReplay {
-            e0: field::real(DVec3::from(setup.tx_antenna.field(k0.to_array()))),
+            tx: *setup.tx_antenna,
+            k0,
             ops,
             rx: DVec3::from(setup.rx_antenna.field((-k_last).to_array())),
             scale: scene.wavelength / (4.0 * std::f64::consts::PI * path.length_m)
@@ -283,9 +307,20 @@ impl PathReplay {
     /// (ln ε', ln σ, ln of the foliage rate): forward through the interactions, each linear in the field and in its two
     /// coefficients, so a derivative is the interaction applied to the field's derivative plus
     /// the coefficients' derivative applied to the field.
-    pub fn evaluate(&self, state: &State, params: &[Parameter]) -> (C64, Vec<C64>) {
+    pub fn evaluate(
+        &self,
+        state: &State,
+        params: &[Parameter],
+        (tilt, bearing): (f64, f64),
+    ) -> (C64, Vec<C64>) {
         let lambda = state.wavelength();
-        let mut e = self.e0;
+        let tx = Antenna {
+            tilt_deg: self.tx.tilt_deg + tilt,
+            azimuth_deg: self.tx.azimuth_deg + bearing,
+            ..self.tx
+        };
+        let k0 = self.k0.to_array();
+        let mut e = field::real(DVec3::from(tx.field(k0)));
         let mut de = vec![[C64::new(0.0, 0.0); 3]; params.len()];
         for op in &self.ops {
             let Some(eta) = state.eta(op.material) else {
@@ -328,10 +363,18 @@ impl PathReplay {
             None => self.foliage_m,
             Some(m) => self.foliage_m * (-state.foliage.db_per_m * self.foliage_m / m).exp(),
         };
+        // a ∝ √G of the transmit antenna toward the first leg.
+        let (_, slope_tilt, slope_bearing) = if params.iter().any(|p| p.is_angle()) {
+            tx.gain_slopes_db(k0)
+        } else {
+            (0.0, 0.0, 0.0)
+        };
         let da = params
             .iter()
             .zip(&de)
             .map(|(p, d)| match p {
+                Parameter::Tilt(_) => a * (std::f64::consts::LN_10 / 20.0 * slope_tilt),
+                Parameter::Azimuth(_) => a * (std::f64::consts::LN_10 / 20.0 * slope_bearing),
                 Parameter::FoliageDbPerM => {
                     a * (-std::f64::consts::LN_10 / 20.0 * dloss * state.foliage.db_per_m)
                 }
@@ -342,41 +385,59 @@ impl PathReplay {
     }
 }
 
-/// How a fit holds one parameter, as a factor on its value in each carrier's state (the P.2040
-/// value at that carrier, or the foliage rate): a Gaussian prior on ln k round 0 of standard
-/// deviation `width`, and bounds on k.
+/// How a fit holds one parameter: a material's or the foliage rate's as a factor k on its value
+/// in each carrier's state (the P.2040 value at that carrier, or the rate), with a Gaussian prior
+/// on ln k round 0 of standard deviation `width` and bounds on k; an antenna angle as an offset
+/// in degrees, the prior round 0 and the bounds in degrees.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Prior {
     /// The parameter.
     pub parameter: Parameter,
     /// The prior's standard deviation of ln k.
     pub width: f64,
-    /// Least factor allowed.
+    /// Least factor (or offset) allowed.
     pub lo: f64,
-    /// Most factor allowed.
+    /// Most factor (or offset) allowed.
     pub hi: f64,
 }
 
 impl Prior {
     /// The default prior of `p`: ε' within a factor 1.5 at one standard deviation and 3 at the
-    /// bounds; σ within a factor 3 and 100; the foliage rate within a factor 2 and 10.
+    /// bounds; σ within a factor 3 and 100; the foliage rate within a factor 2 and 10; a tilt
+    /// within 3° and 10° (a mast's tilt is seldom published, and few degrees either way); a
+    /// bearing within 5° and 20° (published bearings are surveyed, but to a few degrees).
     pub fn default_for(p: Parameter) -> Prior {
-        let (width, bound) = match p {
-            Parameter::Permittivity(_) => (1.5f64.ln(), 3.0),
-            Parameter::Conductivity(_) => (3f64.ln(), 100.0),
-            Parameter::FoliageDbPerM => (2f64.ln(), 10.0),
+        let (width, lo, hi) = match p {
+            Parameter::Permittivity(_) => (1.5f64.ln(), 1.0 / 3.0, 3.0),
+            Parameter::Conductivity(_) => (3f64.ln(), 0.01, 100.0),
+            Parameter::FoliageDbPerM => (2f64.ln(), 0.1, 10.0),
+            Parameter::Tilt(_) => (3.0, -10.0, 10.0),
+            Parameter::Azimuth(_) => (5.0, -20.0, 20.0),
         };
         Prior {
             parameter: p,
             width,
-            lo: 1.0 / bound,
-            hi: bound,
+            lo,
+            hi,
         }
     }
 
-    /// ln k held within the bounds.
+    /// The fitted coordinate held within the bounds: ln k, or the offset in degrees.
     fn clamp(&self, x: f64) -> f64 {
-        x.clamp(self.lo.ln(), self.hi.ln())
+        if self.parameter.is_angle() {
+            x.clamp(self.lo, self.hi)
+        } else {
+            x.clamp(self.lo.ln(), self.hi.ln())
+        }
+    }
+
+    /// The value of the fitted coordinate x: the factor e^x, or the offset x.
+    fn value(&self, x: f64) -> f64 {
+        if self.parameter.is_angle() {
+            x
+        } else {
+            x.exp()
+        }
     }
 }
 
@@ -397,9 +458,10 @@ pub struct Observation {
 /// What a fit found.
 #[derive(Clone, Debug)]
 pub struct Fitted {
-    /// Each fitted parameter's factor.
-    pub multipliers: Vec<(Parameter, f64)>,
-    /// Each factor's posterior standard deviation of ln k (the Laplace approximation at the
+    /// Each fitted parameter's factor (an antenna angle's offset in degrees).
+    pub values: Vec<(Parameter, f64)>,
+    /// Each parameter's posterior standard deviation in its fitted coordinate (ln k, or
+    /// degrees) (the Laplace approximation at the
     /// optimum, noise and priors included): near the prior's width, the links did not constrain
     /// it.
     pub spread: Vec<f64>,
@@ -411,20 +473,41 @@ pub struct Fitted {
     pub rmse_db: (f64, f64),
 }
 
-/// The predicted path loss of `o` in `states` with `offsets`: -gain + the cell's offset; `None`
+/// What a fit evaluates links in: one state per carrier, and each cell's antenna turn (tilt,
+/// bearing offsets in degrees; a cell past the end is not turned).
+#[derive(Clone, Copy)]
+pub struct Setting<'a> {
+    /// The states, by the observations' `group`.
+    pub states: &'a [State],
+    /// The antenna turns, by the observations' `cell`.
+    pub turns: &'a [(f64, f64)],
+}
+
+impl<'a> Setting<'a> {
+    /// `states` with no antenna turned.
+    pub fn of(states: &'a [State]) -> Setting<'a> {
+        Setting { states, turns: &[] }
+    }
+
+    fn turn(&self, cell: usize) -> (f64, f64) {
+        self.turns.get(cell).copied().unwrap_or((0.0, 0.0))
+    }
+}
+
+/// The predicted path loss of `o` in `at` with `offsets`: -gain + the cell's offset; `None`
 /// when no path reaches it.
-pub fn predicted_loss(o: &Observation, states: &[State], offsets: &[f64]) -> Option<f64> {
-    let (g, _) = o.model.gain_db(&states[o.group], &[]);
+pub fn predicted_loss(o: &Observation, at: Setting, offsets: &[f64]) -> Option<f64> {
+    let (g, _) = o.model.gain_db(&at.states[o.group], &[], at.turn(o.cell));
     g.is_finite().then(|| -g + offsets[o.cell])
 }
 
 /// Each cell's offset that best fits `obs` in `states` (the mean of measured - predicted): what
 /// fitting offsets alone gives.
-pub fn fit_offsets(obs: &[Observation], cells: usize, states: &[State]) -> Vec<f64> {
+pub fn fit_offsets(obs: &[Observation], cells: usize, at: Setting) -> Vec<f64> {
     let zero = vec![0.0; cells];
     let (mut sum, mut n) = (vec![0.0; cells], vec![0usize; cells]);
     for o in obs {
-        if let Some(p) = predicted_loss(o, states, &zero) {
+        if let Some(p) = predicted_loss(o, at, &zero) {
             sum[o.cell] += o.loss_db - p;
             n[o.cell] += 1;
         }
@@ -437,10 +520,10 @@ pub fn fit_offsets(obs: &[Observation], cells: usize, states: &[State]) -> Vec<f
 
 /// The RMSE of `obs` in `states` with `offsets`, dB, over the links some path reaches, and how
 /// many those are.
-pub fn rmse_db(obs: &[Observation], states: &[State], offsets: &[f64]) -> (f64, usize) {
+pub fn rmse_db(obs: &[Observation], at: Setting, offsets: &[f64]) -> (f64, usize) {
     let errs: Vec<f64> = obs
         .iter()
-        .filter_map(|o| predicted_loss(o, states, offsets).map(|p| p - o.loss_db))
+        .filter_map(|o| predicted_loss(o, at, offsets).map(|p| p - o.loss_db))
         .collect();
     if errs.is_empty() {
         return (f64::NAN, 0);
@@ -464,21 +547,36 @@ pub fn fit(
     use rayon::prelude::*;
     let params: Vec<Parameter> = priors.iter().map(|p| p.parameter).collect();
     let (np, n) = (priors.len(), priors.len() + cells);
-    let states_at = |x: &[f64]| -> Vec<State> {
-        let k: Vec<(Parameter, f64)> = params.iter().zip(x).map(|(&p, xi)| (p, xi.exp())).collect();
-        states.iter().map(|s| s.scaled(&k)).collect()
+    let values = |x: &[f64]| -> Vec<(Parameter, f64)> {
+        priors
+            .iter()
+            .zip(x)
+            .map(|(p, &xi)| (p.parameter, p.value(xi)))
+            .collect()
     };
-    // Residuals and their Jacobian at x (ln k of each parameter, then the offsets).
+    let states_at = |x: &[f64]| -> Vec<State> {
+        let v = values(x);
+        states.iter().map(|s| s.scaled(&v)).collect()
+    };
+    let turns_at = |x: &[f64]| -> Vec<(f64, f64)> { turns(&values(x), cells) };
+    // Residuals and their Jacobian at x (each parameter's fitted coordinate, then the offsets).
     let linearise = |x: &[f64]| -> (Vec<f64>, Vec<Vec<f64>>) {
-        let at = states_at(&x[..np]);
+        let (at, turned) = (states_at(&x[..np]), turns_at(&x[..np]));
         let rows: Vec<Option<(f64, Vec<f64>)>> = obs
             .par_iter()
             .map(|o| {
-                let (g, dg) = o.model.gain_db(&at[o.group], &params);
+                let (g, dg) = o.model.gain_db(&at[o.group], &params, turned[o.cell]);
                 g.is_finite().then(|| {
                     let mut row = vec![0.0; n];
                     for (j, d) in dg.iter().enumerate() {
-                        row[j] = -d / noise_db;
+                        // An antenna angle moves only its own cell's links.
+                        let mine = match params[j] {
+                            Parameter::Tilt(c) | Parameter::Azimuth(c) => c as usize == o.cell,
+                            _ => true,
+                        };
+                        if mine {
+                            row[j] = -d / noise_db;
+                        }
                     }
                     row[np + o.cell] = 1.0 / noise_db;
                     ((-g + x[np + o.cell] - o.loss_db) / noise_db, row)
@@ -539,8 +637,8 @@ pub fn fit(
         }
         (x, r, jac, c, iterations)
     };
-    let offsets0 = fit_offsets(obs, cells, states);
-    let before = rmse_db(obs, states, &offsets0).0;
+    let offsets0 = fit_offsets(obs, cells, Setting::of(states));
+    let before = rmse_db(obs, Setting::of(states), &offsets0).0;
     // A slab's coefficients swing with ε' through its thickness resonances, so the cost has a
     // minimum every few tens of per cent of ε': descend from several common factors on every
     // permittivity (the ITU values first) and keep the lowest.
@@ -569,11 +667,7 @@ pub fn fit(
         }
     }
     let (x, r, jac, _, _) = best.expect("the ITU start always runs");
-    let multipliers: Vec<(Parameter, f64)> = params
-        .iter()
-        .zip(&x)
-        .map(|(&p, xi)| (p, xi.exp()))
-        .collect();
+    let fitted = values(&x[..np]);
     let (a, _) = normal_equations(&r, &jac, n);
     let spread = (0..np)
         .map(|j| {
@@ -582,14 +676,36 @@ pub fn fit(
         })
         .collect();
     let offsets = x[np..].to_vec();
-    let after = rmse_db(obs, &states_at(&x[..np]), &offsets).0;
+    let (at, turned) = (states_at(&x[..np]), turns_at(&x[..np]));
+    let after = rmse_db(
+        obs,
+        Setting {
+            states: &at,
+            turns: &turned,
+        },
+        &offsets,
+    )
+    .0;
     Fitted {
-        multipliers,
+        values: fitted,
         spread,
         offsets,
         iterations,
         rmse_db: (before, after),
     }
+}
+
+/// Each of `cells` cells' antenna turn (tilt, bearing offsets in degrees) in `values`.
+pub fn turns(values: &[(Parameter, f64)], cells: usize) -> Vec<(f64, f64)> {
+    let mut out = vec![(0.0, 0.0); cells];
+    for &(p, v) in values {
+        match p {
+            Parameter::Tilt(c) if (c as usize) < cells => out[c as usize].0 = v,
+            Parameter::Azimuth(c) if (c as usize) < cells => out[c as usize].1 = v,
+            _ => {}
+        }
+    }
+    out
 }
 
 /// The common factors on every permittivity a fit descends from (the ITU values first).
@@ -651,14 +767,29 @@ fn solve_spd(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
     Some(b)
 }
 
-/// The name under which a calibration's factor on `p` is kept (a Calibrate node's output, a
-/// Trace's `calibration` input): `calibration/permittivity/<material>`,
-/// `calibration/conductivity/<material>`, `calibration/foliage_db_per_m`.
-pub fn metric_name(p: Parameter) -> String {
+/// A calibration as a Trace applies it: factors on materials and the foliage rate, and each
+/// cell's transmit antenna turn (tilt, bearing offsets in degrees) by the cell's id.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Calibration {
+    /// Factors on the P.2040 values and the foliage rate.
+    pub factors: Vec<(Parameter, f64)>,
+    /// Antenna turns by transmitter id.
+    pub turns: std::collections::BTreeMap<String, (f64, f64)>,
+}
+
+/// The name under which a calibration keeps `p` (a Calibrate node's output, a Trace's
+/// `calibration` input): `calibration/permittivity/<material>`,
+/// `calibration/conductivity/<material>`, `calibration/foliage_db_per_m`,
+/// `calibration/tilt_deg/<cell id>`, `calibration/azimuth_deg/<cell id>` (`cell_ids` by the
+/// fit's cell index).
+pub fn metric_name(p: Parameter, cell_ids: &[String]) -> String {
+    let cell = |c: u32| cell_ids.get(c as usize).map_or("?", String::as_str);
     match p {
         Parameter::Permittivity(m) => format!("calibration/permittivity/{}", material_name(m)),
         Parameter::Conductivity(m) => format!("calibration/conductivity/{}", material_name(m)),
         Parameter::FoliageDbPerM => "calibration/foliage_db_per_m".into(),
+        Parameter::Tilt(c) => format!("calibration/tilt_deg/{}", cell(c)),
+        Parameter::Azimuth(c) => format!("calibration/azimuth_deg/{}", cell(c)),
     }
 }
 
@@ -666,42 +797,62 @@ fn material_name(m: Material) -> &'static str {
     m.itu_type().unwrap_or("foliage")
 }
 
-/// The factors named in `metrics` ([`metric_name`]); other names are ignored. An error names a
-/// factor that is not a positive finite number or a material that does not exist.
-pub fn multipliers_from(
-    metrics: &crate::artifact::Metrics,
-) -> Result<Vec<(Parameter, f64)>, String> {
-    let mut out = Vec::new();
-    for (name, &k) in &metrics.values {
+/// The calibration named in `metrics` ([`metric_name`]); other names are ignored. An error names
+/// a factor that is not a positive finite number, an angle that is not finite or past 90°, or a
+/// material that does not exist.
+pub fn calibration_from(metrics: &crate::artifact::Metrics) -> Result<Calibration, String> {
+    let mut out = Calibration::default();
+    for (name, &v) in &metrics.values {
         let Some(rest) = name.strip_prefix("calibration/") else {
             continue;
         };
-        let p = match rest.split_once('/') {
-            Some(("permittivity", m)) | Some(("conductivity", m)) => {
+        match rest.split_once('/') {
+            Some((kind @ ("permittivity" | "conductivity"), m)) => {
                 let material = Material::from_name(m)
                     .filter(|m| *m != Material::Foliage)
                     .ok_or_else(|| format!("{name}: no ITU material is called {m:?}"))?;
-                if rest.starts_with("permittivity/") {
+                let p = if kind == "permittivity" {
                     Parameter::Permittivity(material)
                 } else {
                     Parameter::Conductivity(material)
+                };
+                out.factors.push((p, positive(name, v)?));
+            }
+            Some((kind @ ("tilt_deg" | "azimuth_deg"), id)) => {
+                if !(v.is_finite() && v.abs() <= 90.0) {
+                    return Err(format!(
+                        "{name}: expected an offset within ±90 degrees, found {v}"
+                    ));
+                }
+                let turn = out.turns.entry(id.to_string()).or_default();
+                if kind == "tilt_deg" {
+                    turn.0 = v;
+                } else {
+                    turn.1 = v;
                 }
             }
-            None if rest == "foliage_db_per_m" => Parameter::FoliageDbPerM,
-            _ => continue,
-        };
-        if !(k > 0.0 && k.is_finite()) {
-            return Err(format!(
-                "{name}: expected a positive, finite factor, found {k}"
-            ));
+            None if rest == "foliage_db_per_m" => {
+                out.factors
+                    .push((Parameter::FoliageDbPerM, positive(name, v)?));
+            }
+            _ => {}
         }
-        out.push((p, k));
     }
     Ok(out)
 }
 
+fn positive(name: &str, k: f64) -> Result<f64, String> {
+    if k > 0.0 && k.is_finite() {
+        Ok(k)
+    } else {
+        Err(format!(
+            "{name}: expected a positive, finite factor, found {k}"
+        ))
+    }
+}
+
 /// `rf` and `opt` with the factors `multipliers` on their materials (P.2040 values at `freq_hz`)
-/// and foliage rate; unchanged, to the bit, without factors.
+/// and foliage rate; unchanged, to the bit, without factors. Antenna turns are the caller's.
 pub fn apply(
     rf: RfScene,
     opt: &TraceOptions,
@@ -722,6 +873,7 @@ pub fn apply(
                 }
             }
             Parameter::FoliageDbPerM => opt.foliage_db_per_m = Some(state.foliage.db_per_m),
+            Parameter::Tilt(_) | Parameter::Azimuth(_) => {}
         }
     }
     (rf, opt)

@@ -7,7 +7,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::antenna::Antenna;
-use super::calibration::{self, Parameter};
+use super::calibration::{self, Calibration};
 use super::foliage::{FoliageLaw, is_linear};
 use super::path::{LinkPaths, TraceOptions};
 use super::paths::trace_links;
@@ -147,13 +147,14 @@ pub struct TracedGroup<'a> {
 
 /// Traces `links` through `scene` with `p`, as the Trace and Calibrate stages do: one radio scene per carrier, one
 /// trace per (carrier, transmitter bearing), each cut to `p.reach_m` when set, with the factors
-/// of `calibration` on its materials and foliage rate; `each` takes every group in turn.
+/// of `calibration` on its materials and foliage rate and its turns on each cell's transmit
+/// antenna (a cell its own group then); `each` takes every group in turn.
 pub fn trace_groups(
     p: &TraceParams,
     scene: &Scene,
     links: &Measurements,
     terrain: Option<&Raster>,
-    calibration: &[(Parameter, f64)],
+    calibration: &Calibration,
     ctx: &Ctx,
     mut each: impl FnMut(TracedGroup) -> Result<(), StageError>,
 ) -> Result<(), StageError> {
@@ -167,7 +168,8 @@ pub fn trace_groups(
             })
     };
     // The links' azimuths and the antenna's are both grid bearings: no conversion.
-    let mut groups: BTreeMap<(u64, u64), Vec<usize>> = BTreeMap::new();
+    let by_cell = !calibration.turns.is_empty();
+    let mut groups: BTreeMap<(u64, u64, &str), Vec<usize>> = BTreeMap::new();
     let mut ends = Vec::with_capacity(links.links.len());
     for (i, l) in links.links.iter().enumerate() {
         let (tx, rx) = ([l.tx.x, l.tx.y, z(&l.tx)?], [l.rx.x, l.rx.y, z(&l.rx)?]);
@@ -183,13 +185,17 @@ pub fn trace_groups(
         ends.push((tx, rx));
         let az = l.tx.azimuth_deg.unwrap_or(f64::NAN);
         groups
-            .entry((l.freq_hz.to_bits(), az.to_bits()))
+            .entry((
+                l.freq_hz.to_bits(),
+                az.to_bits(),
+                if by_cell { l.tx.id.as_str() } else { "" },
+            ))
             .or_default()
             .push(i);
     }
     ctx.progress.set_total(groups.len() as u64);
     let options = p.options.trace_options();
-    for ((f_bits, az_bits), idx) in &groups {
+    for ((f_bits, az_bits, cell), idx) in &groups {
         let freq = f64::from_bits(*f_bits);
         let near;
         let traced = match p.reach_m {
@@ -212,11 +218,15 @@ pub fn trace_groups(
             None => scene,
         };
         let rf = RfScene::new(traced, freq, p.extrapolate).map_err(StageError::Failed)?;
-        let (rf, options) = calibration::apply(rf, &options, freq, calibration);
+        let (rf, options) = calibration::apply(rf, &options, freq, &calibration.factors);
         let mut tx_antenna = p.tx_antenna;
         let az = f64::from_bits(*az_bits);
         if az.is_finite() {
             tx_antenna.azimuth_deg = az;
+        }
+        if let Some(&(tilt, bearing)) = calibration.turns.get(*cell) {
+            tx_antenna.tilt_deg += tilt;
+            tx_antenna.azimuth_deg += bearing;
         }
         let pairs: Vec<_> = idx.iter().map(|&i| ends[i]).collect();
         let paths = trace_links(&rf, &pairs, &tx_antenna, &p.rx_antenna, &options, freq);

@@ -13,7 +13,8 @@ use crate::artifact::{
     ArtifactType, Half, Material, Measurements, Metrics, Raster, Scene, block_half, measured_loss,
 };
 use crate::rf::calibration::{
-    self, LinkModel, Observation, Parameter, Prior, State, TraceSetup, fit, fit_offsets, rmse_db,
+    self, LinkModel, Observation, Parameter, Prior, Setting, State, TraceSetup, fit, fit_offsets,
+    rmse_db,
 };
 use crate::rf::path::InteractionKind;
 use crate::rf::traced_links::{TraceParams, trace_groups};
@@ -36,6 +37,12 @@ pub struct CalibrateParams {
     pub conductivity: bool,
     /// Fit the foliage loss rate. Default false.
     pub foliage: bool,
+    /// Fit each cell's transmit antenna tilt, as an offset within ±10° (prior 3°). Default
+    /// false.
+    pub tilt: bool,
+    /// Fit each cell's transmit antenna bearing, as an offset within ±20° (prior 5°). Default
+    /// false.
+    pub azimuth: bool,
     /// The measurements' noise, dB: the residuals' scale against the priors (shadowing and
     /// measurement error together). Default 6.
     pub noise_db: f64,
@@ -56,6 +63,8 @@ impl Default for CalibrateParams {
             permittivity: true,
             conductivity: true,
             foliage: false,
+            tilt: false,
+            azimuth: false,
             noise_db: 6.0,
             block_m: 100.0,
             guard_m: 5.0,
@@ -136,10 +145,10 @@ impl Stage for Calibrate {
                 ));
             }
         }
-        if !(p.permittivity || p.conductivity || p.foliage) {
+        if !(p.permittivity || p.conductivity || p.foliage || p.tilt || p.azimuth) {
             return Err(ParamError::new(
                 "permittivity",
-                "nothing to fit: set permittivity, conductivity or foliage",
+                "nothing to fit: set permittivity, conductivity, foliage, tilt or azimuth",
             ));
         }
         Ok(())
@@ -159,46 +168,61 @@ impl Stage for Calibrate {
         let (mut train, mut held_out) = (Vec::new(), Vec::new());
         let mut states: Vec<State> = Vec::new();
         let mut met: BTreeMap<Material, usize> = BTreeMap::new();
-        trace_groups(&p.trace, scene, links, terrain, &[], ctx, |g| {
-            let group = states.len();
-            states.push(State::of_scene(
-                &g.rf,
-                g.freq_hz,
-                g.options.foliage_loss(g.freq_hz),
-            ));
-            let setup = TraceSetup {
-                scene: &g.rf,
-                tx_antenna: &g.tx_antenna,
-                rx_antenna: &p.trace.rx_antenna,
-                opt: &g.options,
-            };
-            for ((&i, (tx, rx)), traced) in g.links.iter().zip(&g.ends).zip(&g.paths) {
-                let l = &links.links[i];
-                let Some(loss_db) = measured_loss(l) else {
-                    continue;
+        trace_groups(
+            &p.trace,
+            scene,
+            links,
+            terrain,
+            &calibration::Calibration::default(),
+            ctx,
+            |g| {
+                let group = states.len();
+                states.push(State::of_scene(
+                    &g.rf,
+                    g.freq_hz,
+                    g.options.foliage_loss(g.freq_hz),
+                ));
+                let setup = TraceSetup {
+                    scene: &g.rf,
+                    tx_antenna: &g.tx_antenna,
+                    rx_antenna: &p.trace.rx_antenna,
+                    opt: &g.options,
                 };
-                for path in &traced.paths {
-                    for it in &path.interactions {
-                        if it.kind != InteractionKind::Diffraction {
-                            *met.entry(g.rf.material[it.triangle as usize]).or_default() += 1;
+                for ((&i, (tx, rx)), traced) in g.links.iter().zip(&g.ends).zip(&g.paths) {
+                    let l = &links.links[i];
+                    let Some(loss_db) = measured_loss(l) else {
+                        continue;
+                    };
+                    for path in &traced.paths {
+                        for it in &path.interactions {
+                            if it.kind != InteractionKind::Diffraction {
+                                *met.entry(g.rf.material[it.triangle as usize]).or_default() += 1;
+                            }
                         }
                     }
+                    let o = Observation {
+                        model: LinkModel::new(&setup, (*tx).into(), (*rx).into(), traced),
+                        cell: cells[&l.tx.id],
+                        group,
+                        loss_db,
+                    };
+                    match block_half(l.rx.x + x0, l.rx.y + y0, p.block_m, p.guard_m) {
+                        Half::Train => train.push(o),
+                        Half::HeldOut => held_out.push(o),
+                        Half::Guard => {}
+                    }
                 }
-                let o = Observation {
-                    model: LinkModel::new(&setup, (*tx).into(), (*rx).into(), traced),
-                    cell: cells[&l.tx.id],
-                    group,
-                    loss_db,
-                };
-                match block_half(l.rx.x + x0, l.rx.y + y0, p.block_m, p.guard_m) {
-                    Half::Train => train.push(o),
-                    Half::HeldOut => held_out.push(o),
-                    Half::Guard => {}
-                }
+                Ok(())
+            },
+        )?;
+        let params = fitted_parameters(p, &met, cells.len());
+        let ids: Vec<String> = {
+            let mut v = vec![String::new(); cells.len()];
+            for (id, &c) in &cells {
+                v[c] = id.clone();
             }
-            Ok(())
-        })?;
-        let params = fitted_parameters(p, &met);
+            v
+        };
         if params.is_empty() {
             return Err(StageError::Failed(
                 "no traced reflection or transmission meets a material to calibrate".into(),
@@ -212,17 +236,12 @@ impl Stage for Calibrate {
         }
         let priors: Vec<Prior> = params.iter().map(|&q| Prior::default_for(q)).collect();
         let fitted = fit(&train, cells.len(), &states, &priors, p.noise_db);
-        let calibrated: Vec<State> = states
-            .iter()
-            .map(|s| s.scaled(&fitted.multipliers))
-            .collect();
+        let calibrated: Vec<State> = states.iter().map(|s| s.scaled(&fitted.values)).collect();
+        let turned = calibration::turns(&fitted.values, cells.len());
         let mut m = Metrics::default();
-        for ((q, k), (spread, prior)) in fitted
-            .multipliers
-            .iter()
-            .zip(fitted.spread.iter().zip(&priors))
+        for ((q, k), (spread, prior)) in fitted.values.iter().zip(fitted.spread.iter().zip(&priors))
         {
-            let name = calibration::metric_name(*q);
+            let name = calibration::metric_name(*q, &ids);
             m.set(name.clone(), *k);
             // The fit's detail beside each factor, under fit/ (a Trace reads calibration/).
             let detail = name.replacen("calibration/", "fit/", 1);
@@ -240,17 +259,24 @@ impl Stage for Calibrate {
         m.set("train/rmse_offsets_only_db", fitted.rmse_db.0);
         m.set("train/rmse_calibrated_db", fitted.rmse_db.1);
         // Held out: each state with its own training offsets, over all cells and per cell.
-        let offsets_only = fit_offsets(&train, cells.len(), &states);
-        let (before, n) = rmse_db(&held_out, &states, &offsets_only);
-        let (after, _) = rmse_db(&held_out, &calibrated, &fitted.offsets);
+        let (plain, tuned) = (
+            Setting::of(&states),
+            Setting {
+                states: &calibrated,
+                turns: &turned,
+            },
+        );
+        let offsets_only = fit_offsets(&train, cells.len(), plain);
+        let (before, n) = rmse_db(&held_out, plain, &offsets_only);
+        let (after, _) = rmse_db(&held_out, tuned, &fitted.offsets);
         m.set("held_out/links", n as f64);
         m.set("held_out/rmse_offsets_only_db", before);
         m.set("held_out/rmse_calibrated_db", after);
         for (id, &c) in &cells {
             let of_cell: Vec<Observation> =
                 held_out.iter().filter(|o| o.cell == c).cloned().collect();
-            let (b, n) = rmse_db(&of_cell, &states, &offsets_only);
-            let (a, _) = rmse_db(&of_cell, &calibrated, &fitted.offsets);
+            let (b, n) = rmse_db(&of_cell, plain, &offsets_only);
+            let (a, _) = rmse_db(&of_cell, tuned, &fitted.offsets);
             m.set(format!("held_out/{id}/links"), n as f64);
             m.set(format!("held_out/{id}/rmse_offsets_only_db"), b);
             m.set(format!("held_out/{id}/rmse_calibrated_db"), a);
@@ -264,8 +290,12 @@ impl Stage for Calibrate {
 }
 
 /// The parameters a fit moves: those `p` asks for, of the materials it names or (by default)
-/// every material the traced paths met but metal.
-fn fitted_parameters(p: &CalibrateParams, met: &BTreeMap<Material, usize>) -> Vec<Parameter> {
+/// every material the traced paths met but metal, and each of `cells` cells' antenna angles.
+fn fitted_parameters(
+    p: &CalibrateParams,
+    met: &BTreeMap<Material, usize>,
+    cells: usize,
+) -> Vec<Parameter> {
     let materials: Vec<Material> = match &p.materials {
         Some(names) => names
             .iter()
@@ -288,6 +318,14 @@ fn fitted_parameters(p: &CalibrateParams, met: &BTreeMap<Material, usize>) -> Ve
     }
     if p.foliage {
         out.push(Parameter::FoliageDbPerM);
+    }
+    for c in 0..cells as u32 {
+        if p.tilt {
+            out.push(Parameter::Tilt(c));
+        }
+        if p.azimuth {
+            out.push(Parameter::Azimuth(c));
+        }
     }
     out
 }

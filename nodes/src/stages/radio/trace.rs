@@ -44,7 +44,7 @@ impl Stage for Trace {
         InputSpec::optional(
             "calibration",
             ArtifactType::Metrics,
-            "a Calibrate node's factors on the materials and the foliage rate",
+            "a Calibrate node's factors on the materials and foliage rate, and antenna turns",
         ),
     ];
     type Params = TraceParams;
@@ -65,10 +65,10 @@ impl Stage for Trace {
         let links: &Measurements = inputs.one("links")?;
         let terrain: Option<&Raster> = inputs.optional("terrain")?;
         let calibration = match inputs.optional::<Metrics>("calibration")? {
-            Some(m) => calibration::multipliers_from(m).map_err(|e| {
+            Some(m) => calibration::calibration_from(m).map_err(|e| {
                 StageError::bad_input(Path::new("the `calibration` input"), "its values", e)
             })?,
-            None => Vec::new(),
+            None => calibration::Calibration::default(),
         };
         let mut out = links.clone();
         trace_groups(p, scene, links, terrain, &calibration, ctx, |g| {
