@@ -81,6 +81,33 @@ fn measured() -> Measurements {
     out
 }
 
+/// The stage inputs: the street grid, `links`, no terrain, and a `calibration` if given.
+fn inputs(links: &Measurements, calibration: Option<Metrics>) -> Inputs {
+    Inputs::new()
+        .with(
+            "scene",
+            Slot::One(Arc::new(Artifact::Scene(street_grid_scene()))),
+        )
+        .with(
+            "links",
+            Slot::One(Arc::new(Artifact::Measurements(links.clone()))),
+        )
+        .with("terrain", Slot::Optional(None))
+        .with(
+            "calibration",
+            Slot::Optional(calibration.map(|c| Arc::new(Artifact::Metrics(c)))),
+        )
+}
+
+/// A Trace of `links` with `p`, given `calibration`.
+fn trace(
+    p: &kodama_nodes::rf::traced_links::TraceParams,
+    links: &Measurements,
+    calibration: Option<Metrics>,
+) -> Measurements {
+    Trace::run(p, &inputs(links, calibration), &Ctx::new(&site(), &[])).unwrap()
+}
+
 fn params() -> CalibrateParams {
     let mut p = CalibrateParams {
         block_m: 40.0,
@@ -97,16 +124,8 @@ fn params() -> CalibrateParams {
 #[test]
 fn calibrate_recovers_the_truths_concrete_and_trace_applies_it() {
     let links = measured();
-    let scene = Arc::new(Artifact::Scene(street_grid_scene()));
-    let inputs = Inputs::new()
-        .with("scene", Slot::One(scene.clone()))
-        .with(
-            "links",
-            Slot::One(Arc::new(Artifact::Measurements(links.clone()))),
-        )
-        .with("terrain", Slot::Optional(None));
     let s = site();
-    let m = Calibrate::run(&params(), &inputs, &Ctx::new(&s, &[])).unwrap();
+    let m = Calibrate::run(&params(), &inputs(&links, None), &Ctx::new(&s, &[])).unwrap();
     let get = |k: &str| m.get(k).unwrap_or_else(|| panic!("{k} missing"));
     let eps = get("calibration/permittivity/concrete");
     let sigma = get("calibration/conductivity/concrete");
@@ -131,20 +150,7 @@ fn calibrate_recovers_the_truths_concrete_and_trace_applies_it() {
         "held out {before} -> {after}"
     );
     // Trace with the factors: closer to the measurements than the ITU twin, link by link.
-    let traced = |calibration: Option<Metrics>| {
-        let inputs = Inputs::new()
-            .with("scene", Slot::One(scene.clone()))
-            .with(
-                "links",
-                Slot::One(Arc::new(Artifact::Measurements(links.clone()))),
-            )
-            .with("terrain", Slot::Optional(None))
-            .with(
-                "calibration",
-                Slot::Optional(calibration.map(|c| Arc::new(Artifact::Metrics(c)))),
-            );
-        Trace::run(&params().trace, &inputs, &Ctx::new(&s, &[])).unwrap()
-    };
+    let traced = |calibration: Option<Metrics>| trace(&params().trace, &links, calibration);
     let rmse = |pred: &Measurements| {
         let e: Vec<f64> = pred
             .links
@@ -193,8 +199,6 @@ fn a_bad_calibration_input_is_refused_by_name() {
 fn trace_turns_only_the_named_cells_antenna() {
     use kodama_nodes::rf::antenna::{Antenna, Pattern, Polarization};
     let links = measured();
-    let scene = Arc::new(Artifact::Scene(street_grid_scene()));
-    let s = site();
     let mut p = params().trace;
     p.tx_antenna = Antenna {
         pattern: Pattern::Tr38901,
@@ -202,20 +206,7 @@ fn trace_turns_only_the_named_cells_antenna() {
         azimuth_deg: 90.0,
         tilt_deg: 0.0,
     };
-    let run = |p: &kodama_nodes::rf::traced_links::TraceParams, c: Option<Metrics>| {
-        let inputs = Inputs::new()
-            .with("scene", Slot::One(scene.clone()))
-            .with(
-                "links",
-                Slot::One(Arc::new(Artifact::Measurements(links.clone()))),
-            )
-            .with("terrain", Slot::Optional(None))
-            .with(
-                "calibration",
-                Slot::Optional(c.map(|c| Arc::new(Artifact::Metrics(c)))),
-            );
-        Trace::run(p, &inputs, &Ctx::new(&s, &[])).unwrap()
-    };
+    let run = |p, c| trace(p, &links, c);
     let mut m = Metrics::default();
     m.set("calibration/tilt_deg/A", 5.0);
     m.set("calibration/azimuth_deg/A", -10.0);

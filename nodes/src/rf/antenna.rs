@@ -169,13 +169,13 @@ impl Antenna {
         if self.pattern == Pattern::Isotropic {
             return (g_db, 0.0, 0.0);
         }
-        let (sa, ca) = (self.azimuth_deg - 90.0).to_radians().sin_cos();
-        let x1 = ca * k[0] - sa * k[1];
-        let y1 = sa * k[0] + ca * k[1];
-        let z1 = k[2];
-        let (st, ct) = self.tilt_deg.to_radians().sin_cos();
-        let x2 = ct * x1 - st * z1;
-        let z2 = st * x1 + ct * z1;
+        let Frame {
+            x1,
+            y1,
+            x2,
+            z2,
+            tilt: (st, ct),
+        } = self.frame(k);
         let sin_theta = (1.0 - z2 * z2).max(0.0).sqrt();
         let rho2 = x2 * x2 + y1 * y1;
         if sin_theta < 1e-9 || rho2 < 1e-18 {
@@ -200,17 +200,39 @@ impl Antenna {
     /// bearing, clockwise from +y, is 90° - the angle counter-clockwise from +x), then by -tilt
     /// about the new y axis (a downtilt points boresight below the horizon).
     fn local_angles(&self, k: [f64; 3]) -> (f64, f64) {
+        let Frame { y1, x2, z2, .. } = self.frame(k);
+        let theta = z2.clamp(-1.0, 1.0).acos();
+        let phi = y1.atan2(x2);
+        (theta, phi)
+    }
+
+    /// `k` rotated into the antenna frame ([`Antenna::local_angles`]), with the intermediate
+    /// coordinates its derivatives need.
+    #[inline]
+    fn frame(&self, k: [f64; 3]) -> Frame {
         let (sa, ca) = (self.azimuth_deg - 90.0).to_radians().sin_cos();
         let x1 = ca * k[0] - sa * k[1];
         let y1 = sa * k[0] + ca * k[1];
         let z1 = k[2];
         let (st, ct) = self.tilt_deg.to_radians().sin_cos();
-        let x2 = ct * x1 - st * z1;
-        let z2 = st * x1 + ct * z1;
-        let theta = z2.clamp(-1.0, 1.0).acos();
-        let phi = y1.atan2(x2);
-        (theta, phi)
+        Frame {
+            x1,
+            y1,
+            x2: ct * x1 - st * z1,
+            z2: st * x1 + ct * z1,
+            tilt: (st, ct),
+        }
     }
+}
+
+/// A direction after the bearing's rotation (x1, y1) and then the tilt's (x2, y1, z2), with the
+/// tilt's sine and cosine.
+struct Frame {
+    x1: f64,
+    y1: f64,
+    x2: f64,
+    z2: f64,
+    tilt: (f64, f64),
 }
 
 /// (θ̂, φ̂) at direction `k`; at the poles φ̂ is taken as +y and θ̂ = φ̂ × k.

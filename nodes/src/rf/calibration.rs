@@ -19,7 +19,7 @@ use num_complex::Complex64 as C64;
 use serde::{Deserialize, Serialize};
 
 use super::antenna::Antenna;
-use super::em::{slab, slab_derivative};
+use super::em::{complex_permittivity, eps_sigma_of, slab, slab_derivative};
 use super::field::{self, CVec};
 use super::foliage::FoliageLoss;
 use super::path::{InteractionKind, LinkPaths, Path, TraceOptions};
@@ -66,11 +66,10 @@ impl State {
     /// The scene's own materials (its P.2040 values and slab thicknesses) and foliage loss.
     pub fn of_scene(scene: &RfScene, freq_hz: f64, foliage: FoliageLoss) -> State {
         let n = scene.material_count();
-        let omega_eps0 = 2.0 * std::f64::consts::PI * freq_hz * EPS0;
         let (mut eps_sigma, mut thickness) = (vec![None; n], vec![0.0; n]);
         for m in 0..n {
             if let Some((eta, d)) = scene.slab_params(m) {
-                eps_sigma[m] = Some((eta.re, -eta.im * omega_eps0));
+                eps_sigma[m] = Some(eps_sigma_of(eta, freq_hz));
                 thickness[m] = d;
             }
         }
@@ -133,19 +132,13 @@ impl State {
     /// η = ε' − j σ / (ε0 ω) of material `m` (P.2040 eq. (9b), e^{+jωt}).
     fn eta(&self, m: Material) -> Option<C64> {
         let (eps, sigma) = self.eps_sigma[m as usize]?;
-        Some(C64::new(
-            eps,
-            -sigma / (EPS0 * 2.0 * std::f64::consts::PI * self.freq_hz),
-        ))
+        Some(complex_permittivity(eps, sigma, self.freq_hz))
     }
 
     fn wavelength(&self) -> f64 {
         super::wavelength(self.freq_hz)
     }
 }
-
-/// Vacuum permittivity, F/m (as `em`'s).
-const EPS0: f64 = 8.854_187_812_8e-12;
 
 /// One reflection or transmission of a path, as its replay needs it.
 #[derive(Clone, Copy, Debug)]
@@ -322,6 +315,9 @@ impl PathReplay {
         let k0 = self.k0.to_array();
         let mut e = field::real(DVec3::from(tx.field(k0)));
         let mut de = vec![[C64::new(0.0, 0.0); 3]; params.len()];
+        let materials_asked = params
+            .iter()
+            .any(|p| matches!(p, Parameter::Permittivity(_) | Parameter::Conductivity(_)));
         for op in &self.ops {
             let Some(eta) = state.eta(op.material) else {
                 continue;
@@ -329,7 +325,12 @@ impl PathReplay {
             let thickness = state.thickness[op.material as usize];
             let cos = op.d.dot(op.n).abs().min(1.0);
             let (r, t) = slab(cos, eta, thickness, lambda);
-            let (dr, dt) = slab_derivative(cos, eta, thickness, lambda);
+            let zero = (C64::new(0.0, 0.0), C64::new(0.0, 0.0));
+            let (dr, dt) = if materials_asked {
+                slab_derivative(cos, eta, thickness, lambda)
+            } else {
+                (zero, zero)
+            };
             let (c, dc) = if op.transmit { (t, dt) } else { (r, dr) };
             let apply = |e: &CVec, c: (C64, C64)| -> CVec {
                 if op.transmit {
@@ -520,9 +521,13 @@ pub fn fit_offsets(obs: &[Observation], cells: usize, at: Setting) -> Vec<f64> {
 
 /// The RMSE of `obs` in `states` with `offsets`, dB, over the links some path reaches, and how
 /// many those are.
-pub fn rmse_db(obs: &[Observation], at: Setting, offsets: &[f64]) -> (f64, usize) {
+pub fn rmse_db<'a>(
+    obs: impl IntoIterator<Item = &'a Observation>,
+    at: Setting,
+    offsets: &[f64],
+) -> (f64, usize) {
     let errs: Vec<f64> = obs
-        .iter()
+        .into_iter()
         .filter_map(|o| predicted_loss(o, at, offsets).map(|p| p - o.loss_db))
         .collect();
     if errs.is_empty() {

@@ -12,10 +12,20 @@ const EPS0: f64 = 8.854_187_812_8e-12;
 /// (9b) with the Table 3 laws; time convention e^{+jωt}, as in Sionna).
 pub fn permittivity(material: Material, freq_hz: f64, extrapolate: bool) -> Result<C64, String> {
     let (eps, sigma) = material.eps_sigma(freq_hz, extrapolate)?;
-    Ok(C64::new(
-        eps,
-        -sigma / (EPS0 * 2.0 * std::f64::consts::PI * freq_hz),
-    ))
+    Ok(complex_permittivity(eps, sigma, freq_hz))
+}
+
+/// η = ε' − j σ / (ε0 ω) (P.2040 eq. (9b), e^{+jωt}).
+pub fn complex_permittivity(eps: f64, sigma: f64, freq_hz: f64) -> C64 {
+    C64::new(eps, -sigma / (EPS0 * 2.0 * std::f64::consts::PI * freq_hz))
+}
+
+/// (ε', σ) of η at `freq_hz`: [`complex_permittivity`] undone.
+pub fn eps_sigma_of(eta: C64, freq_hz: f64) -> (f64, f64) {
+    (
+        eta.re,
+        -eta.im * (2.0 * std::f64::consts::PI * freq_hz * EPS0),
+    )
 }
 
 /// Fresnel reflection coefficients (r_TE, r_TM) of a half-space of permittivity `eta` for a wave

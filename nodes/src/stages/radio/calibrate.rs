@@ -273,10 +273,9 @@ impl Stage for Calibrate {
         m.set("held_out/rmse_offsets_only_db", before);
         m.set("held_out/rmse_calibrated_db", after);
         for (id, &c) in &cells {
-            let of_cell: Vec<Observation> =
-                held_out.iter().filter(|o| o.cell == c).cloned().collect();
-            let (b, n) = rmse_db(&of_cell, plain, &offsets_only);
-            let (a, _) = rmse_db(&of_cell, tuned, &fitted.offsets);
+            let of_cell = || held_out.iter().filter(|o| o.cell == c);
+            let (b, n) = rmse_db(of_cell(), plain, &offsets_only);
+            let (a, _) = rmse_db(of_cell(), tuned, &fitted.offsets);
             m.set(format!("held_out/{id}/links"), n as f64);
             m.set(format!("held_out/{id}/rmse_offsets_only_db"), b);
             m.set(format!("held_out/{id}/rmse_calibrated_db"), a);
