@@ -228,3 +228,28 @@ fn trace_turns_only_the_named_cells_antenna() {
     }
     assert!(changed > 50, "{changed} of A's links changed");
 }
+
+/// Every param a user sets is checked before anything is traced, the error naming it.
+#[test]
+fn bad_calibrate_params_are_refused_by_name() {
+    let bad: [(&str, fn(&mut CalibrateParams)); 7] = [
+        ("noise_db", |p| p.noise_db = f64::NAN),
+        ("noise_db", |p| p.noise_db = 0.0),
+        ("block_m", |p| p.block_m = f64::INFINITY),
+        ("guard_m", |p| p.guard_m = 60.0),
+        ("materials", |p| {
+            p.materials = Some(vec!["unobtainium".into()])
+        }),
+        ("trace", |p| p.trace.coherent = true),
+        ("permittivity", |p| {
+            (p.permittivity, p.conductivity) = (false, false);
+        }),
+    ];
+    for (field, spoil) in bad {
+        let mut p = CalibrateParams::default();
+        spoil(&mut p);
+        let e = Calibrate::validate(&p).expect_err(field);
+        assert_eq!(e.field, field, "{e:?}");
+    }
+    assert!(Calibrate::validate(&CalibrateParams::default()).is_ok());
+}
