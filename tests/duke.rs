@@ -142,7 +142,7 @@ fn duke_split_scores_match_the_numpy_reference() {
 /// BENCHMARKS.md's; this checks the route): every reading is accounted for once per model (left
 /// out for a stated reason, used to fit an offset, or scored), the 3GPP rows leave out exactly
 /// what the numpy reference does (the counts do not depend on antenna heights), and the report
-/// carries the buildings' height sources and repairs.
+/// carries the buildings' height sources and repairs and the calibrated parameters.
 #[test]
 fn duke_osm_twin_accounts_for_every_reading() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -155,6 +155,12 @@ fn duke_osm_twin_accounts_for_every_reading() {
         data.to_str().unwrap().to_string(),
         "--set".into(),
         "twin.options=(max_depth: 2, diffraction: true, rays: 20000)".into(),
+        "--set".into(),
+        "twin_cal.options=(max_depth: 2, diffraction: true, rays: 20000)".into(),
+        "--set".into(),
+        "calibration.trace=(tx_antenna: (pattern: Tr38901, polarization: V, azimuth_deg: 0.0, tilt_deg: 0.0), \
+         options: (max_depth: 2, diffraction: true, rays: 20000))"
+            .into(),
     ];
     for cell in ["a", "b", "c", "d", "e", "f"] {
         args.push("--set".into());
@@ -178,7 +184,13 @@ fn duke_osm_twin_accounts_for_every_reading() {
         "links_no_path",
         "links_held_out",
     ];
-    for name in ["twin_eval", "uma_eval", "umi_eval", "uma_iso_eval"] {
+    for name in [
+        "twin_eval",
+        "twin_cal_eval",
+        "uma_eval",
+        "umi_eval",
+        "uma_iso_eval",
+    ] {
         let m = eval(name);
         let total: f64 = reasons.iter().map(|k| count(&m, k)).sum();
         assert_eq!(total, 46_655.0, "{name}: {m}");
@@ -205,6 +217,10 @@ fn duke_osm_twin_accounts_for_every_reading() {
         "| height_default | 69 |",
         "| footprints | 158 |",
         "| buildings_dropped | 0 |",
+        "P.2040 values, antenna tilt, bearing and height (fit/: prior widths, bounds, spreads), \
+         offsets, training and held-out RMSE: calibrated parameters",
+        "| height_m/A | as mounted |",
+        "| permittivity/concrete |",
     ] {
         assert!(
             md.contains(row),

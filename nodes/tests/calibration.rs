@@ -7,7 +7,8 @@ use num_complex::Complex64 as C64;
 use kodama_nodes::artifact::Material;
 use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::calibration::{
-    LinkModel, Observation, Parameter, Prior, Setting, State, TraceSetup, fit, fit_offsets, rmse_db,
+    LinkModel, Mount, Observation, Parameter, Prior, Setting, State, TraceSetup, fit, fit_offsets,
+    rmse_db,
 };
 use kodama_nodes::rf::em::permittivity;
 use kodama_nodes::rf::path::TraceOptions;
@@ -63,7 +64,7 @@ fn traced(scene: &RfScene, tx: DVec3, rxs: &[DVec3]) -> Vec<(LinkModel, f64)> {
 }
 
 fn state(scene: &RfScene) -> State {
-    State::of_scene(scene, FREQ, options().foliage_loss(FREQ))
+    State::of_scene(scene, FREQ, &options())
 }
 
 /// Replaying the traced paths in the scene's own state gives the traced gains.
@@ -75,7 +76,7 @@ fn replayed_paths_give_the_traced_gains() {
     let mut worst = 0.0f64;
     let mut reached = 0;
     for (m, g) in &links {
-        let (got, _) = m.gain_db(&s, &[], (0.0, 0.0));
+        let (got, _) = m.gain_db(&s, &[], Mount::default());
         if g.is_finite() {
             reached += 1;
             worst = worst.max((got - g).abs());
@@ -102,14 +103,14 @@ fn gain_derivatives_match_central_differences() {
     let links = traced(&scene, DVec3::new(-60.0, -56.0, 12.0), &street_receivers());
     let mut checked = 0;
     for (m, g) in links.iter().filter(|(_, g)| g.is_finite()).step_by(3) {
-        let (_, dg) = m.gain_db(&s, &params, (0.0, 0.0));
+        let (_, dg) = m.gain_db(&s, &params, Mount::default());
         for (j, p) in params.iter().enumerate() {
             let h = 1e-5;
             let at = |sign: f64| {
                 let mut t = s.clone();
                 let v = t.get(*p).unwrap() * (sign * h).exp();
                 set(&mut t, *p, v);
-                m.gain_db(&t, &[], (0.0, 0.0)).0
+                m.gain_db(&t, &[], Mount::default()).0
             };
             let fd = (at(1.0) - at(-1.0)) / (2.0 * h);
             assert!(
@@ -300,12 +301,17 @@ fn antenna_derivatives_match_central_differences() {
             continue;
         }
         let m = LinkModel::new(&setup, tx, rx, lp);
-        let (_, dg) = m.gain_db(&s, &params, (1.0, -2.0));
+        let turn = |tilt_deg, azimuth_deg| Mount {
+            tilt_deg,
+            azimuth_deg,
+            height_m: 0.0,
+        };
+        let (_, dg) = m.gain_db(&s, &params, turn(1.0, -2.0));
         let h = 1e-5;
-        let g = |turn| m.gain_db(&s, &[], turn).0;
+        let g = |mount| m.gain_db(&s, &[], mount).0;
         let fd = [
-            (g((1.0 + h, -2.0)) - g((1.0 - h, -2.0))) / (2.0 * h),
-            (g((1.0, -2.0 + h)) - g((1.0, -2.0 - h))) / (2.0 * h),
+            (g(turn(1.0 + h, -2.0)) - g(turn(1.0 - h, -2.0))) / (2.0 * h),
+            (g(turn(1.0, -2.0 + h)) - g(turn(1.0, -2.0 - h))) / (2.0 * h),
         ];
         for (d, f) in dg.iter().zip(fd) {
             assert!((d - f).abs() <= 1e-4 * (1.0 + f.abs()), "{d} vs {f}");
@@ -313,4 +319,154 @@ fn antenna_derivatives_match_central_differences() {
         checked += 1;
     }
     assert!(checked > 20);
+}
+
+/// A replay with its transmitter raised moves each path by the image method: where a trace from
+/// the raised transmitter finds the same paths (the same faces, in order), the replay gives its
+/// gain to rounding; the links whose paths changed are what the Calibrate stage retraces for.
+#[test]
+fn a_raised_replay_gives_the_retraced_gains() {
+    let scene = street_grid();
+    let s = state(&scene);
+    let rxs = street_receivers();
+    let tx = DVec3::new(-60.0, -56.0, 12.0);
+    let up = 0.7;
+    let replays = traced(&scene, tx, &rxs);
+    let ant = Antenna::default();
+    let links: Vec<_> = rxs
+        .iter()
+        .map(|r| ((tx + DVec3::Z * up).to_array(), r.to_array()))
+        .collect();
+    let before = trace_links(
+        &scene,
+        &rxs.iter()
+            .map(|r| (tx.to_array(), r.to_array()))
+            .collect::<Vec<_>>(),
+        &ant,
+        &ant,
+        &options(),
+        FREQ,
+    );
+    let after = trace_links(&scene, &links, &ant, &ant, &options(), FREQ);
+    let faces = |lp: &kodama_nodes::rf::path::LinkPaths| {
+        let mut v: Vec<Vec<u32>> = lp
+            .paths
+            .iter()
+            .map(|p| p.interactions.iter().map(|i| i.triangle).collect())
+            .collect();
+        v.sort();
+        v
+    };
+    let raised = Mount {
+        height_m: up,
+        ..Mount::default()
+    };
+    let (mut same, mut worst, mut moved) = (0, 0.0f64, 0.0f64);
+    for (((m, g0), b), a) in replays.iter().zip(&before).zip(&after) {
+        if !(g0.is_finite() && a.gain_db.is_finite()) || faces(b) != faces(a) {
+            continue;
+        }
+        let (got, _) = m.gain_db(&s, &[], raised);
+        same += 1;
+        worst = worst.max((got - a.gain_db).abs());
+        moved = moved.max((a.gain_db - g0).abs());
+    }
+    println!(
+        "{same} of {} links keep their paths when the transmitter rises {up} m: largest \
+         |replay - retrace| {worst:.2e} dB (the rise itself moves them by up to {moved:.2} dB)",
+        rxs.len()
+    );
+    assert!(same > 100, "{same} links kept their paths");
+    assert!(
+        moved > 0.1,
+        "the rise moves the links too little to test: {moved} dB"
+    );
+    assert!(
+        worst < 1e-6,
+        "replay differs from the retrace by {worst} dB"
+    );
+}
+
+/// A truth whose surfaces are rougher than the twin's (scattering coefficient 0.5 against the
+/// twin's 0.25; diffuse scattering off the last surface on both), measured with 2 dB of noise:
+/// the fit of S over the traced paths and their diffuse power split by reflections recovers it
+/// within 10 %; the replay at the truth's S gives the truth's trace, and its derivative matches
+/// central differences of the replay.
+#[test]
+fn a_fit_recovers_the_scattering_coefficient() {
+    let scene = street_grid();
+    let rough = |s: f64| TraceOptions {
+        rays: 20_000,
+        max_depth: 2,
+        diffuse: true,
+        scattering_coefficient: s,
+        ..Default::default()
+    };
+    let (twin_opt, truth_opt) = (rough(0.25), rough(0.5));
+    let tx = DVec3::new(-60.0, -56.0, 12.0);
+    let rxs = street_receivers();
+    let ant = Antenna::default();
+    let links: Vec<_> = rxs.iter().map(|r| (tx.to_array(), r.to_array())).collect();
+    let truth = trace_links(&scene, &links, &ant, &ant, &truth_opt, FREQ);
+    let twin = trace_links(&scene, &links, &ant, &ant, &twin_opt, FREQ);
+    let setup = TraceSetup {
+        scene: &scene,
+        tx_antenna: &ant,
+        rx_antenna: &ant,
+        opt: &twin_opt,
+    };
+    let state = State::of_scene(&scene, FREQ, &twin_opt);
+    let (obs, truths): (Vec<Observation>, Vec<f64>) = (twin.iter().zip(&truth).zip(&rxs))
+        .enumerate()
+        .filter(|(_, ((w, t), _))| t.gain_db.is_finite() && w.gain_db.is_finite())
+        .map(|(i, ((lp, t), &rx))| {
+            let noise = 2.0 * kodama_nodes::rng::gaussian(kodama_nodes::rng::mix(i as u64 ^ 0x5C));
+            let o = Observation {
+                model: LinkModel::new(&setup, tx, rx, lp),
+                cell: 0,
+                group: 0,
+                loss_db: -t.gain_db + noise,
+            };
+            (o, t.gain_db)
+        })
+        .unzip();
+    // The replay at the truth's S gives the truth's gains (before the noise).
+    let at_truth = state.scaled(&[(Parameter::Scattering, 2.0)]);
+    let mut worst = 0.0f64;
+    for (o, t) in obs.iter().zip(&truths) {
+        let got = o.model.gain_db(&at_truth, &[], Mount::default()).0;
+        worst = worst.max((got - t).abs());
+    }
+    // Derivative in ln S against central differences, at S 0.3.
+    let at = state.scaled(&[(Parameter::Scattering, 1.2)]);
+    let h: f64 = 1e-5;
+    for o in obs.iter().step_by(7) {
+        let (_, dg) = o
+            .model
+            .gain_db(&at, &[Parameter::Scattering], Mount::default());
+        let g = |k: f64| {
+            let s = at.scaled(&[(Parameter::Scattering, k)]);
+            o.model.gain_db(&s, &[], Mount::default()).0
+        };
+        let fd = (g(h.exp()) - g((-h).exp())) / (2.0 * h);
+        assert!(
+            (dg[0] - fd).abs() <= 1e-5 * (1.0 + fd.abs()),
+            "{} vs {fd}",
+            dg[0]
+        );
+    }
+    let states = [state];
+    let priors = [Prior::for_scattering(0.25)];
+    let fitted = fit(&obs, 1, &states, &priors, 2.0);
+    let k = fitted.values[0].1;
+    println!(
+        "{} links: replay at the truth's S within {worst:.1e} dB of its trace; S factor {k:.3} \
+         (truth 2, posterior sd of ln k {:.3}); RMSE {:.2} -> {:.2} dB",
+        obs.len(),
+        fitted.spread[0],
+        fitted.rmse_db.0,
+        fitted.rmse_db.1
+    );
+    assert!(worst < 1e-9, "replay at the truth's S off by {worst} dB");
+    assert!((k / 2.0 - 1.0).abs() < 0.1, "S factor {k}");
 }

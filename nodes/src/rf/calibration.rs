@@ -10,9 +10,11 @@
 //! every coefficient. The fit is Levenberg-Marquardt on the training links' path loss, with
 //! Gaussian priors at the ITU-R P.2040 values in log space and bounds round them.
 //!
-//! Paths through an edge (diffraction) and diffusely scattered power keep their traced power: a
-//! material moves them too, through the wedge faces' reflection and the scattering surface, and
-//! they are left fixed here (the share they carry is small where specular paths exist).
+//! Paths through an edge (diffraction) keep their traced power, and diffusely scattered power
+//! moves only with the scattering coefficient: a material moves them too, through the wedge
+//! faces' reflection and the scattering surface, and that is left out here (the share they
+//! carry is small where specular paths exist). An antenna's height moves the specular paths by
+//! the image method; the rest waits for a retrace (the Calibrate stage).
 
 use glam::DVec3;
 use num_complex::Complex64 as C64;
@@ -35,18 +37,44 @@ pub enum Parameter {
     Conductivity(Material),
     /// The foliage loss rate, dB/m (the linear law's).
     FoliageDbPerM,
+    /// The scattering coefficient S of every surface (effective roughness: specular reflection
+    /// keeps √(1 − S²) of the field, diffuse scattering takes S²), fitted as ln S.
+    Scattering,
     /// A cell's transmit antenna tilt, as an offset in degrees (the fit's cell index).
     Tilt(u32),
     /// A cell's transmit antenna bearing, as an offset in degrees (the fit's cell index).
     Azimuth(u32),
+    /// A cell's transmit antenna height, as an offset in metres (the fit's cell index).
+    Height(u32),
 }
 
 impl Parameter {
-    /// True for the antenna's angles, fitted as offsets in degrees; false for the factors on
-    /// materials and foliage, fitted as their logarithm.
-    pub fn is_angle(self) -> bool {
-        matches!(self, Parameter::Tilt(_) | Parameter::Azimuth(_))
+    /// True for the antenna's mounting (tilt, bearing, height), fitted as offsets in degrees or
+    /// metres; false for the factors on materials and foliage, fitted as their logarithm.
+    pub fn is_offset(self) -> bool {
+        self.cell().is_some()
     }
+
+    /// The cell whose antenna this parameter moves; `None` for a material or the foliage rate,
+    /// which move every link.
+    pub fn cell(self) -> Option<usize> {
+        match self {
+            Parameter::Tilt(c) | Parameter::Azimuth(c) | Parameter::Height(c) => Some(c as usize),
+            _ => None,
+        }
+    }
+}
+
+/// How a cell's transmit antenna sits against where the twin mounts it: its tilt and bearing
+/// turned by offsets in degrees, raised by an offset in metres.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Mount {
+    /// Tilt offset, degrees (positive down, as `Antenna::tilt_deg`).
+    pub tilt_deg: f64,
+    /// Bearing offset, degrees clockwise.
+    pub azimuth_deg: f64,
+    /// Height offset, metres (positive up).
+    pub height_m: f64,
 }
 
 /// The material and foliage values a replay evaluates paths with.
@@ -60,11 +88,14 @@ pub struct State {
     pub freq_hz: f64,
     /// Foliage loss (its rate is the parameter; a saturating law keeps its maximum).
     pub foliage: FoliageLoss,
+    /// The scattering coefficient S of every surface.
+    pub scattering: f64,
 }
 
 impl State {
-    /// The scene's own materials (its P.2040 values and slab thicknesses) and foliage loss.
-    pub fn of_scene(scene: &RfScene, freq_hz: f64, foliage: FoliageLoss) -> State {
+    /// The scene's own materials (its P.2040 values and slab thicknesses), and the foliage loss
+    /// and scattering coefficient `opt` traces with.
+    pub fn of_scene(scene: &RfScene, freq_hz: f64, opt: &TraceOptions) -> State {
         let n = scene.material_count();
         let (mut eps_sigma, mut thickness) = (vec![None; n], vec![0.0; n]);
         for m in 0..n {
@@ -77,7 +108,8 @@ impl State {
             eps_sigma,
             thickness,
             freq_hz,
-            foliage,
+            foliage: opt.foliage_loss(freq_hz),
+            scattering: opt.scattering_coefficient,
         }
     }
 
@@ -87,7 +119,8 @@ impl State {
             Parameter::Permittivity(m) => self.eps_sigma[m as usize].map(|v| v.0),
             Parameter::Conductivity(m) => self.eps_sigma[m as usize].map(|v| v.1),
             Parameter::FoliageDbPerM => Some(self.foliage.db_per_m),
-            Parameter::Tilt(_) | Parameter::Azimuth(_) => None,
+            Parameter::Scattering => Some(self.scattering),
+            Parameter::Tilt(_) | Parameter::Azimuth(_) | Parameter::Height(_) => None,
         }
     }
 
@@ -125,7 +158,8 @@ impl State {
                 }
             }
             Parameter::FoliageDbPerM => self.foliage.db_per_m = v,
-            Parameter::Tilt(_) | Parameter::Azimuth(_) => {}
+            Parameter::Scattering => self.scattering = v,
+            Parameter::Tilt(_) | Parameter::Azimuth(_) | Parameter::Height(_) => {}
         }
     }
 
@@ -144,8 +178,11 @@ impl State {
 #[derive(Clone, Copy, Debug)]
 struct Op {
     transmit: bool,
-    /// The direction the wave arrives along.
-    d: DVec3,
+    /// The leg the wave arrives along (legs run between the transmitter, the reflections and
+    /// the receiver: a transmission does not bend the path).
+    leg: usize,
+    /// Where the path meets the surface as traced: a point of its plane.
+    at: DVec3,
     /// The surface's unit normal.
     n: DVec3,
     material: Material,
@@ -155,15 +192,25 @@ struct Op {
 /// first leg, its reflections and transmissions in order, the receive antenna's pattern along
 /// its last, and what does not depend on any parameter (spreading over its length, the
 /// roughness factor of its reflections). [`PathReplay::evaluate`] gives its gain `a` in any
-/// [`State`].
+/// [`State`] and antenna [`Mount`].
 #[derive(Clone, Debug)]
 pub struct PathReplay {
-    /// The transmit antenna as traced, and the first leg's direction.
+    /// The transmit antenna as traced.
     tx: Antenna,
-    k0: DVec3,
+    rx_antenna: Antenna,
+    /// The ends as traced.
+    from: DVec3,
+    to: DVec3,
+    /// Each leg's direction as traced.
+    legs: Vec<DVec3>,
     ops: Vec<Op>,
+    /// The receive antenna's field along the last leg as traced.
     rx: DVec3,
-    scale: f64,
+    /// λ / (4π L) over the traced length.
+    spreading: f64,
+    /// Specular reflections on the path (each keeps √(1 − S²) of the field).
+    reflections: i32,
+    length_m: f64,
     foliage_m: f64,
 }
 
@@ -172,8 +219,13 @@ pub struct PathReplay {
 pub struct LinkModel {
     /// The specular paths (reflections and transmissions only).
     pub paths: Vec<PathReplay>,
-    /// Power of the paths through an edge and of the diffuse scattering, as traced.
+    /// Power of the paths through an edge, as traced.
     pub fixed_power: f64,
+    /// Diffuse power as traced, by how many specular reflections came before the scattering
+    /// surface.
+    pub diffuse: Vec<f64>,
+    /// The scattering coefficient the links were traced with.
+    pub traced_scattering: f64,
 }
 
 /// What the paths of a trace were evaluated with.
@@ -195,11 +247,9 @@ impl LinkModel {
     pub fn new(setup: &TraceSetup, tx: DVec3, rx: DVec3, traced: &LinkPaths) -> LinkModel {
         let mut model = LinkModel {
             paths: Vec::new(),
-            fixed_power: if traced.diffuse_gain_db.is_finite() {
-                10f64.powf(traced.diffuse_gain_db / 10.0)
-            } else {
-                0.0
-            },
+            fixed_power: 0.0,
+            diffuse: traced.diffuse_by_reflections.clone(),
+            traced_scattering: setup.opt.scattering_coefficient,
         };
         for p in &traced.paths {
             match PathReplay::new(setup, tx, rx, p) {
@@ -210,20 +260,22 @@ impl LinkModel {
         model
     }
 
-    /// The link's gain in dB in `state` with its transmit antenna turned by `turn` (tilt,
-    /// bearing offsets in degrees), and its derivative in each of `params`: in the logarithm of
-    /// a material's or the foliage rate's value (a factor's derivative at 1), in degrees of an
-    /// antenna angle (the link's own antenna, whatever the cell index says).
-    pub fn gain_db(
-        &self,
-        state: &State,
-        params: &[Parameter],
-        turn: (f64, f64),
-    ) -> (f64, Vec<f64>) {
-        let mut power = self.fixed_power;
-        let mut dpower = vec![0.0; params.len()];
+    /// The link's gain in dB in `state` with its transmit antenna at `mount`, and its
+    /// derivative in each of `params`: in the logarithm of a material's or the foliage rate's
+    /// value (a factor's derivative at 1), in degrees of an antenna angle, in metres of its
+    /// height (the link's own antenna, whatever the cell index says).
+    pub fn gain_db(&self, state: &State, params: &[Parameter], mount: Mount) -> (f64, Vec<f64>) {
+        let (diffuse, ddiffuse) = self.diffuse_power(state.scattering);
+        let mut power = self.fixed_power + diffuse;
+        let mut dpower: Vec<f64> = params
+            .iter()
+            .map(|p| match p {
+                Parameter::Scattering => ddiffuse,
+                _ => 0.0,
+            })
+            .collect();
         for p in &self.paths {
-            let (a, da) = p.evaluate(state, params, turn);
+            let (a, da) = p.evaluate(state, params, mount);
             power += a.norm_sqr();
             for (acc, d) in dpower.iter_mut().zip(&da) {
                 *acc += 2.0 * (a.conj() * d).re;
@@ -240,13 +292,40 @@ impl LinkModel {
     }
 }
 
+impl LinkModel {
+    /// The diffuse power at scattering coefficient `s`, and its derivative in ln s: the traced
+    /// power after k specular reflections scales as s² (1 − s²)^k.
+    fn diffuse_power(&self, s: f64) -> (f64, f64) {
+        let s0 = self.traced_scattering;
+        if self.diffuse.is_empty() || s0 <= 0.0 {
+            return (0.0, 0.0);
+        }
+        let (spec, spec0) = ((1.0 - s * s).max(0.0), (1.0 - s0 * s0).max(1e-300));
+        let (mut p, mut dp) = (0.0, 0.0);
+        for (k, &pk) in self.diffuse.iter().enumerate() {
+            let v = if s == s0 {
+                pk
+            } else {
+                pk * (s * s) / (s0 * s0) * (spec / spec0).powi(k as i32)
+            };
+            p += v;
+            // d/d ln s of s² (1 − s²)^k: 2 − 2k s² / (1 − s²).
+            dp += v * (2.0 - 2.0 * k as f64 * s * s / spec.max(1e-300));
+        }
+        (p, dp)
+    }
+}
+
+/// The step of the central difference a replay's height derivative takes, metres: the image
+/// geometry is smooth, so its error (O(step²)) is far below any measurement's.
+const HEIGHT_STEP_M: f64 = 0.01;
+
 impl PathReplay {
     /// `path` of the link `tx` -> `rx` as a replay; `None` for a path through an edge.
     pub fn new(setup: &TraceSetup, tx: DVec3, rx: DVec3, path: &Path) -> Option<PathReplay> {
         let scene = setup.scene;
         let mut points = vec![tx];
         let mut ops = Vec::new();
-        let mut reflections = 0;
         for i in &path.interactions {
             let transmit = match i.kind {
                 InteractionKind::Reflection => false,
@@ -254,67 +333,121 @@ impl PathReplay {
                 InteractionKind::Diffraction => return None,
             };
             let at = DVec3::from(i.point);
-            let d = (at - *points.last().expect("starts with tx")).normalize();
             ops.push(Op {
                 transmit,
-                d,
+                leg: points.len() - 1,
+                at,
                 n: scene.normals[i.triangle as usize],
                 material: scene.material[i.triangle as usize],
             });
             if !transmit {
-                reflections += 1;
                 points.push(at);
             }
         }
         points.push(rx);
-        // A transmission does not bend the path: each leg's direction is its reflection
-        // polyline's, as the trace took it.
+        let reflections = points.len() as i32 - 2;
         let legs: Vec<DVec3> = points
             .windows(2)
             .map(|w| (w[1] - w[0]).normalize())
             .collect();
-        let mut leg = 0;
-        for op in &mut ops {
-            op.d = legs[leg];
-            if !op.transmit {
-                leg += 1;
-            }
-        }
-        let k0 = legs[0];
         let k_last = *legs.last().expect("at least one leg");
-        let specular = (1.0 - setup.opt.scattering_coefficient.powi(2))
-            .max(0.0)
-            .sqrt();
         Some(PathReplay {
             tx: *setup.tx_antenna,
-            k0,
+            rx_antenna: *setup.rx_antenna,
+            from: tx,
+            to: rx,
+            legs,
             ops,
             rx: DVec3::from(setup.rx_antenna.field((-k_last).to_array())),
-            scale: scene.wavelength / (4.0 * std::f64::consts::PI * path.length_m)
-                * specular.powi(reflections),
+            spreading: scene.wavelength / (4.0 * std::f64::consts::PI * path.length_m),
+            reflections,
+            length_m: path.length_m,
             foliage_m: path.foliage_m,
         })
     }
 
-    /// The path's gain `a` in `state` and its derivative in the logarithm of each of `params`
-    /// (ln ε', ln σ, ln of the foliage rate): forward through the interactions, each linear in the field and in its two
+    /// The path's legs and length with its transmitter raised by `height_m`, by the image
+    /// method over its reflecting planes (each the plane of the face it was traced on), the
+    /// reflection points moving along them; `None` where a moved point leaves its legs (the
+    /// path no longer exists). The faces' edges and what might block a moved leg are not
+    /// checked: a move past a tolerance is retraced (the Calibrate stage).
+    fn raised(&self, height_m: f64) -> Option<(Vec<DVec3>, f64)> {
+        let tx = self.from + DVec3::Z * height_m;
+        let planes: Vec<(DVec3, DVec3)> = self
+            .ops
+            .iter()
+            .filter(|o| !o.transmit)
+            .map(|o| (o.at, o.n))
+            .collect();
+        // images[j + 1]: the transmitter mirrored in planes 0..=j.
+        let mut images = vec![tx];
+        for &(p, n) in &planes {
+            let i = images[images.len() - 1];
+            images.push(i - 2.0 * (i - p).dot(n) * n);
+        }
+        let length = (images[planes.len()] - self.to).length();
+        let mut points = vec![self.to];
+        let mut q = self.to;
+        for (k, &(p, n)) in planes.iter().enumerate().rev() {
+            let towards = images[k + 1] - q;
+            let across = towards.dot(n);
+            if across.abs() < 1e-12 {
+                return None;
+            }
+            let t = (p - q).dot(n) / across;
+            if !(t > 0.0 && t < 1.0) {
+                return None;
+            }
+            q += towards * t;
+            points.push(q);
+        }
+        points.push(tx);
+        points.reverse();
+        let legs = points
+            .windows(2)
+            .map(|w| (w[1] - w[0]).normalize())
+            .collect();
+        Some((legs, length))
+    }
+
+    /// The path's gain `a` in `state` with the transmit antenna at `mount`, and its derivative
+    /// in each of `params`: in the logarithm of a material's value or the foliage rate
+    /// (analytic: forward through the interactions, each linear in the field and in its two
     /// coefficients, so a derivative is the interaction applied to the field's derivative plus
-    /// the coefficients' derivative applied to the field.
-    pub fn evaluate(
-        &self,
-        state: &State,
-        params: &[Parameter],
-        (tilt, bearing): (f64, f64),
-    ) -> (C64, Vec<C64>) {
+    /// the coefficients' derivative applied to the field), in degrees of the antenna's tilt and
+    /// bearing (the pattern's analytic slopes) and in metres of its height (a central
+    /// difference of the image geometry, [`HEIGHT_STEP_M`]).
+    pub fn evaluate(&self, state: &State, params: &[Parameter], mount: Mount) -> (C64, Vec<C64>) {
+        let zero = C64::new(0.0, 0.0);
+        let moved;
+        let specular = (1.0 - state.scattering.powi(2)).max(0.0).sqrt();
+        let (legs, scale, rx) = if mount.height_m == 0.0 {
+            (
+                &self.legs[..],
+                self.spreading * specular.powi(self.reflections),
+                self.rx,
+            )
+        } else {
+            let Some((legs, length)) = self.raised(mount.height_m) else {
+                return (zero, vec![zero; params.len()]);
+            };
+            moved = legs;
+            let k_last = moved[moved.len() - 1];
+            (
+                &moved[..],
+                self.spreading * self.length_m / length * specular.powi(self.reflections),
+                DVec3::from(self.rx_antenna.field((-k_last).to_array())),
+            )
+        };
         let lambda = state.wavelength();
         let tx = Antenna {
-            tilt_deg: self.tx.tilt_deg + tilt,
-            azimuth_deg: self.tx.azimuth_deg + bearing,
+            tilt_deg: self.tx.tilt_deg + mount.tilt_deg,
+            azimuth_deg: self.tx.azimuth_deg + mount.azimuth_deg,
             ..self.tx
         };
-        let k0 = self.k0.to_array();
+        let k0 = legs[0].to_array();
         let mut e = field::real(DVec3::from(tx.field(k0)));
-        let mut de = vec![[C64::new(0.0, 0.0); 3]; params.len()];
+        let mut de = vec![[zero; 3]; params.len()];
         let materials_asked = params
             .iter()
             .any(|p| matches!(p, Parameter::Permittivity(_) | Parameter::Conductivity(_)));
@@ -322,21 +455,21 @@ impl PathReplay {
             let Some(eta) = state.eta(op.material) else {
                 continue;
             };
+            let d = legs[op.leg];
             let thickness = state.thickness[op.material as usize];
-            let cos = op.d.dot(op.n).abs().min(1.0);
+            let cos = d.dot(op.n).abs().min(1.0);
             let (r, t) = slab(cos, eta, thickness, lambda);
-            let zero = (C64::new(0.0, 0.0), C64::new(0.0, 0.0));
             let (dr, dt) = if materials_asked {
                 slab_derivative(cos, eta, thickness, lambda)
             } else {
-                (zero, zero)
+                ((zero, zero), (zero, zero))
             };
             let (c, dc) = if op.transmit { (t, dt) } else { (r, dr) };
             let apply = |e: &CVec, c: (C64, C64)| -> CVec {
                 if op.transmit {
-                    field::transmit(e, op.d, op.n, c)
+                    field::transmit(e, d, op.n, c)
                 } else {
-                    field::reflect(e, op.d, op.n, c).0
+                    field::reflect(e, d, op.n, c).0
                 }
             };
             for (j, p) in params.iter().enumerate() {
@@ -345,7 +478,7 @@ impl PathReplay {
                 let deta = match *p {
                     Parameter::Permittivity(m) if m == op.material => C64::new(eta.re, 0.0),
                     Parameter::Conductivity(m) if m == op.material => C64::new(0.0, eta.im),
-                    _ => C64::new(0.0, 0.0),
+                    _ => zero,
                 };
                 if deta.norm_sqr() > 0.0 {
                     let moved = apply(&e, (dc.0 * deta, dc.1 * deta));
@@ -357,15 +490,18 @@ impl PathReplay {
             }
             e = apply(&e, c);
         }
-        let scale = self.scale * state.foliage.amplitude(self.foliage_m);
-        let a = field::dot(&e, self.rx) * scale;
+        let scale = scale * state.foliage.amplitude(self.foliage_m);
+        let a = field::dot(&e, rx) * scale;
         // d(loss dB)/dγ: the metres in foliage, or m (1 - e^{-γ d / m}) differentiated.
         let dloss = match state.foliage.max_db {
             None => self.foliage_m,
             Some(m) => self.foliage_m * (-state.foliage.db_per_m * self.foliage_m / m).exp(),
         };
         // a ∝ √G of the transmit antenna toward the first leg.
-        let (_, slope_tilt, slope_bearing) = if params.iter().any(|p| p.is_angle()) {
+        let (_, slope_tilt, slope_bearing) = if params
+            .iter()
+            .any(|p| matches!(p, Parameter::Tilt(_) | Parameter::Azimuth(_)))
+        {
             tx.gain_slopes_db(k0)
         } else {
             (0.0, 0.0, 0.0)
@@ -376,10 +512,25 @@ impl PathReplay {
             .map(|(p, d)| match p {
                 Parameter::Tilt(_) => a * (std::f64::consts::LN_10 / 20.0 * slope_tilt),
                 Parameter::Azimuth(_) => a * (std::f64::consts::LN_10 / 20.0 * slope_bearing),
+                Parameter::Height(_) => {
+                    let at = |dh: f64| {
+                        let m = Mount {
+                            height_m: mount.height_m + dh,
+                            ..mount
+                        };
+                        self.evaluate(state, &[], m).0
+                    };
+                    (at(HEIGHT_STEP_M) - at(-HEIGHT_STEP_M)) / (2.0 * HEIGHT_STEP_M)
+                }
                 Parameter::FoliageDbPerM => {
                     a * (-std::f64::consts::LN_10 / 20.0 * dloss * state.foliage.db_per_m)
                 }
-                _ => field::dot(d, self.rx) * scale,
+                // d ln √(1 − S²)^n / d ln S = −n S² / (1 − S²).
+                Parameter::Scattering => {
+                    let s2 = state.scattering * state.scattering;
+                    a * (-(self.reflections as f64) * s2 / (1.0 - s2).max(1e-300))
+                }
+                _ => field::dot(d, rx) * scale,
             })
             .collect();
         (a, da)
@@ -388,13 +539,17 @@ impl PathReplay {
 
 /// How a fit holds one parameter: a material's or the foliage rate's as a factor k on its value
 /// in each carrier's state (the P.2040 value at that carrier, or the rate), with a Gaussian prior
-/// on ln k round 0 of standard deviation `width` and bounds on k; an antenna angle as an offset
-/// in degrees, the prior round 0 and the bounds in degrees.
+/// on ln k round `centre` (0: the P.2040 value) of standard deviation `width` and bounds on k;
+/// an antenna's tilt, bearing or height as an offset in degrees or metres from where the traced
+/// paths put it, the prior round `centre` and the bounds in the same unit.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Prior {
     /// The parameter.
     pub parameter: Parameter,
-    /// The prior's standard deviation of ln k.
+    /// The prior's mean of the fitted coordinate (ln k, or the offset). 0 but where the paths
+    /// were traced away from the twin's value (an antenna already raised): minus that move.
+    pub centre: f64,
+    /// The prior's standard deviation of ln k (or of the offset).
     pub width: f64,
     /// Least factor (or offset) allowed.
     pub lo: f64,
@@ -404,37 +559,63 @@ pub struct Prior {
 
 impl Prior {
     /// The default prior of `p`: ε' within a factor 1.5 at one standard deviation and 3 at the
-    /// bounds; σ within a factor 3 and 100; the foliage rate within a factor 2 and 10; a tilt
+    /// bounds; σ within a factor 3 and 100; the foliage rate within a factor 2 and 10; the
+    /// scattering coefficient within a factor 2 and from 0.1 to 4 times its traced value (a
+    /// caller keeps it at most 1: [`Prior::for_scattering`]); a tilt
     /// within 3° and 10° (a mast's tilt is seldom published, and few degrees either way); a
-    /// bearing within 5° and 20° (published bearings are surveyed, but to a few degrees).
+    /// bearing within 5° and 20° (published bearings are surveyed, but to a few degrees); a
+    /// height within 3 m and 6 m (heights are seldom published: a mast on a roof of uncertain
+    /// height, as the twin's roof + 3 m guesses).
     pub fn default_for(p: Parameter) -> Prior {
         let (width, lo, hi) = match p {
             Parameter::Permittivity(_) => (1.5f64.ln(), 1.0 / 3.0, 3.0),
             Parameter::Conductivity(_) => (3f64.ln(), 0.01, 100.0),
             Parameter::FoliageDbPerM => (2f64.ln(), 0.1, 10.0),
+            Parameter::Scattering => (2f64.ln(), 0.1, 4.0),
             Parameter::Tilt(_) => (3.0, -10.0, 10.0),
             Parameter::Azimuth(_) => (5.0, -20.0, 20.0),
+            Parameter::Height(_) => (3.0, -6.0, 6.0),
         };
         Prior {
             parameter: p,
+            centre: 0.0,
             width,
             lo,
             hi,
         }
     }
 
-    /// The fitted coordinate held within the bounds: ln k, or the offset in degrees.
+    /// The prior of the scattering coefficient traced as `s0` (> 0): [`Prior::default_for`]'s,
+    /// the upper bound held where S stays at most 0.95.
+    pub fn for_scattering(s0: f64) -> Prior {
+        let prior = Prior::default_for(Parameter::Scattering);
+        Prior {
+            hi: prior.hi.min(0.95 / s0).max(1.0),
+            ..prior
+        }
+    }
+
+    /// The fitted coordinate held within the bounds: ln k, or the offset.
     fn clamp(&self, x: f64) -> f64 {
-        if self.parameter.is_angle() {
+        if self.parameter.is_offset() {
             x.clamp(self.lo, self.hi)
         } else {
             x.clamp(self.lo.ln(), self.hi.ln())
         }
     }
 
+    /// The fitted coordinate of a value: ln of the factor, or the offset.
+    fn coordinate(&self, v: f64) -> f64 {
+        if self.parameter.is_offset() {
+            v
+        } else {
+            v.ln()
+        }
+    }
+
     /// The value of the fitted coordinate x: the factor e^x, or the offset x.
     fn value(&self, x: f64) -> f64 {
-        if self.parameter.is_angle() {
+        if self.parameter.is_offset() {
             x
         } else {
             x.exp()
@@ -459,12 +640,11 @@ pub struct Observation {
 /// What a fit found.
 #[derive(Clone, Debug)]
 pub struct Fitted {
-    /// Each fitted parameter's factor (an antenna angle's offset in degrees).
+    /// Each fitted parameter's factor (an antenna's offset in degrees or metres).
     pub values: Vec<(Parameter, f64)>,
-    /// Each parameter's posterior standard deviation in its fitted coordinate (ln k, or
-    /// degrees) (the Laplace approximation at the
-    /// optimum, noise and priors included): near the prior's width, the links did not constrain
-    /// it.
+    /// Each parameter's posterior standard deviation in its fitted coordinate (ln k, or the
+    /// offset) (the Laplace approximation at the optimum, noise and priors included): near the
+    /// prior's width, the links did not constrain it.
     pub spread: Vec<f64>,
     /// Each cell's offset, dB (added to the predicted path loss); 0 for a cell without links.
     pub offsets: Vec<f64>,
@@ -474,31 +654,34 @@ pub struct Fitted {
     pub rmse_db: (f64, f64),
 }
 
-/// What a fit evaluates links in: one state per carrier, and each cell's antenna turn (tilt,
-/// bearing offsets in degrees; a cell past the end is not turned).
+/// What a fit evaluates links in: one state per carrier, and each cell's antenna mount (a cell
+/// past the end as traced).
 #[derive(Clone, Copy)]
 pub struct Setting<'a> {
     /// The states, by the observations' `group`.
     pub states: &'a [State],
-    /// The antenna turns, by the observations' `cell`.
-    pub turns: &'a [(f64, f64)],
+    /// The antennas' mounts, by the observations' `cell`.
+    pub mounts: &'a [Mount],
 }
 
 impl<'a> Setting<'a> {
-    /// `states` with no antenna turned.
+    /// `states` with every antenna as traced.
     pub fn of(states: &'a [State]) -> Setting<'a> {
-        Setting { states, turns: &[] }
+        Setting {
+            states,
+            mounts: &[],
+        }
     }
 
-    fn turn(&self, cell: usize) -> (f64, f64) {
-        self.turns.get(cell).copied().unwrap_or((0.0, 0.0))
+    fn mount(&self, cell: usize) -> Mount {
+        self.mounts.get(cell).copied().unwrap_or_default()
     }
 }
 
 /// The predicted path loss of `o` in `at` with `offsets`: -gain + the cell's offset; `None`
 /// when no path reaches it.
 pub fn predicted_loss(o: &Observation, at: Setting, offsets: &[f64]) -> Option<f64> {
-    let (g, _) = o.model.gain_db(&at.states[o.group], &[], at.turn(o.cell));
+    let (g, _) = o.model.gain_db(&at.states[o.group], &[], at.mount(o.cell));
     g.is_finite().then(|| -g + offsets[o.cell])
 }
 
@@ -549,6 +732,58 @@ pub fn fit(
     priors: &[Prior],
     noise_db: f64,
 ) -> Fitted {
+    // A slab's coefficients swing with ε' through its thickness resonances, so the cost has a
+    // minimum every few tens of per cent of ε': descend from several common factors on every
+    // permittivity (the ITU values first) and keep the lowest.
+    let permittivity = priors
+        .iter()
+        .any(|p| matches!(p.parameter, Parameter::Permittivity(_)));
+    let starts = PERMITTIVITY_STARTS
+        .iter()
+        .filter(|&&k| k == 1.0 || permittivity)
+        .map(|&k| {
+            priors
+                .iter()
+                .map(|p| match p.parameter {
+                    Parameter::Permittivity(_) => p.clamp(k.ln()),
+                    _ => 0.0,
+                })
+                .collect()
+        })
+        .collect();
+    descend_from(obs, cells, states, priors, noise_db, starts)
+}
+
+/// As [`fit`], from `from` alone (each parameter's factor or offset; a parameter it does not
+/// name starts at the twin's value): a fit carried on after the paths were traced again.
+pub fn fit_from(
+    obs: &[Observation],
+    cells: usize,
+    states: &[State],
+    priors: &[Prior],
+    noise_db: f64,
+    from: &[(Parameter, f64)],
+) -> Fitted {
+    let start = priors
+        .iter()
+        .map(|p| {
+            let v = from.iter().find(|(q, _)| *q == p.parameter);
+            p.clamp(v.map_or(0.0, |&(_, v)| p.coordinate(v)))
+        })
+        .collect();
+    descend_from(obs, cells, states, priors, noise_db, vec![start])
+}
+
+/// Levenberg-Marquardt from each of `starts` (the parameters' fitted coordinates; each cell's
+/// offset starts at its best alone), the lowest cost kept: [`fit`]'s work.
+fn descend_from(
+    obs: &[Observation],
+    cells: usize,
+    states: &[State],
+    priors: &[Prior],
+    noise_db: f64,
+    starts: Vec<Vec<f64>>,
+) -> Fitted {
     use rayon::prelude::*;
     let params: Vec<Parameter> = priors.iter().map(|p| p.parameter).collect();
     let (np, n) = (priors.len(), priors.len() + cells);
@@ -563,25 +798,23 @@ pub fn fit(
         let v = values(x);
         states.iter().map(|s| s.scaled(&v)).collect()
     };
-    let turns_at = |x: &[f64]| -> Vec<(f64, f64)> { turns(&values(x), cells) };
+    let mounts_at = |x: &[f64]| -> Vec<Mount> { mounts(&values(x), cells) };
     // Residuals and their Jacobian at x (each parameter's fitted coordinate, then the offsets).
     let linearise = |x: &[f64]| -> (Vec<f64>, Vec<Vec<f64>>) {
-        let (at, turned) = (states_at(&x[..np]), turns_at(&x[..np]));
+        let (at, mounted) = (states_at(&x[..np]), mounts_at(&x[..np]));
         let rows: Vec<Option<(f64, Vec<f64>)>> = obs
             .par_iter()
             .map(|o| {
-                let (g, dg) = o.model.gain_db(&at[o.group], &params, turned[o.cell]);
+                // A cell's antenna moves only its own links.
+                let mine: Vec<usize> = (0..np)
+                    .filter(|&j| params[j].cell().is_none_or(|c| c == o.cell))
+                    .collect();
+                let asked: Vec<Parameter> = mine.iter().map(|&j| params[j]).collect();
+                let (g, dg) = o.model.gain_db(&at[o.group], &asked, mounted[o.cell]);
                 g.is_finite().then(|| {
                     let mut row = vec![0.0; n];
-                    for (j, d) in dg.iter().enumerate() {
-                        // An antenna angle moves only its own cell's links.
-                        let mine = match params[j] {
-                            Parameter::Tilt(c) | Parameter::Azimuth(c) => c as usize == o.cell,
-                            _ => true,
-                        };
-                        if mine {
-                            row[j] = -d / noise_db;
-                        }
+                    for (&j, d) in mine.iter().zip(&dg) {
+                        row[j] = -d / noise_db;
                     }
                     row[np + o.cell] = 1.0 / noise_db;
                     ((-g + x[np + o.cell] - o.loss_db) / noise_db, row)
@@ -594,7 +827,7 @@ pub fn fit(
             jac.push(row);
         }
         for (j, p) in priors.iter().enumerate() {
-            r.push(x[j] / p.width);
+            r.push((x[j] - p.centre) / p.width);
             let mut row = vec![0.0; n];
             row[j] = 1.0 / p.width;
             jac.push(row);
@@ -644,26 +877,9 @@ pub fn fit(
     };
     let offsets0 = fit_offsets(obs, cells, Setting::of(states));
     let before = rmse_db(obs, Setting::of(states), &offsets0).0;
-    // A slab's coefficients swing with ε' through its thickness resonances, so the cost has a
-    // minimum every few tens of per cent of ε': descend from several common factors on every
-    // permittivity (the ITU values first) and keep the lowest.
     let mut best: Option<(Vec<f64>, Vec<f64>, Vec<Vec<f64>>, f64, u32)> = None;
     let mut iterations = 0;
-    for start in PERMITTIVITY_STARTS {
-        if start != 1.0
-            && !params
-                .iter()
-                .any(|p| matches!(p, Parameter::Permittivity(_)))
-        {
-            continue;
-        }
-        let mut x: Vec<f64> = priors
-            .iter()
-            .map(|p| match p.parameter {
-                Parameter::Permittivity(_) => p.clamp(start.ln()),
-                _ => 0.0,
-            })
-            .collect();
+    for mut x in starts {
         x.extend(&offsets0);
         let found = descend(x);
         iterations += found.4;
@@ -671,7 +887,7 @@ pub fn fit(
             best = Some(found);
         }
     }
-    let (x, r, jac, _, _) = best.expect("the ITU start always runs");
+    let (x, r, jac, _, _) = best.expect("a fit has a start");
     let fitted = values(&x[..np]);
     let (a, _) = normal_equations(&r, &jac, n);
     let spread = (0..np)
@@ -681,12 +897,12 @@ pub fn fit(
         })
         .collect();
     let offsets = x[np..].to_vec();
-    let (at, turned) = (states_at(&x[..np]), turns_at(&x[..np]));
+    let (at, mounted) = (states_at(&x[..np]), mounts_at(&x[..np]));
     let after = rmse_db(
         obs,
         Setting {
             states: &at,
-            turns: &turned,
+            mounts: &mounted,
         },
         &offsets,
     )
@@ -700,13 +916,14 @@ pub fn fit(
     }
 }
 
-/// Each of `cells` cells' antenna turn (tilt, bearing offsets in degrees) in `values`.
-pub fn turns(values: &[(Parameter, f64)], cells: usize) -> Vec<(f64, f64)> {
-    let mut out = vec![(0.0, 0.0); cells];
+/// Each of `cells` cells' antenna mount in `values`.
+pub fn mounts(values: &[(Parameter, f64)], cells: usize) -> Vec<Mount> {
+    let mut out = vec![Mount::default(); cells];
     for &(p, v) in values {
         match p {
-            Parameter::Tilt(c) if (c as usize) < cells => out[c as usize].0 = v,
-            Parameter::Azimuth(c) if (c as usize) < cells => out[c as usize].1 = v,
+            Parameter::Tilt(c) if (c as usize) < cells => out[c as usize].tilt_deg = v,
+            Parameter::Azimuth(c) if (c as usize) < cells => out[c as usize].azimuth_deg = v,
+            Parameter::Height(c) if (c as usize) < cells => out[c as usize].height_m = v,
             _ => {}
         }
     }
@@ -773,28 +990,34 @@ fn solve_spd(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
 }
 
 /// A calibration as a Trace applies it: factors on materials and the foliage rate, and each
-/// cell's transmit antenna turn (tilt, bearing offsets in degrees) by the cell's id.
+/// cell's transmit antenna mount (tilt, bearing and height offsets) by the cell's id.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Calibration {
     /// Factors on the P.2040 values and the foliage rate.
     pub factors: Vec<(Parameter, f64)>,
-    /// Antenna turns by transmitter id.
-    pub turns: std::collections::BTreeMap<String, (f64, f64)>,
+    /// Antenna mounts by transmitter id.
+    pub mounts: std::collections::BTreeMap<String, Mount>,
 }
+
+/// The largest antenna height offset a calibration may carry, metres.
+pub const MAX_HEIGHT_OFFSET_M: f64 = 100.0;
 
 /// The name under which a calibration keeps `p` (a Calibrate node's output, a Trace's
 /// `calibration` input): `calibration/permittivity/<material>`,
 /// `calibration/conductivity/<material>`, `calibration/foliage_db_per_m`,
-/// `calibration/tilt_deg/<cell id>`, `calibration/azimuth_deg/<cell id>` (`cell_ids` by the
-/// fit's cell index).
+/// `calibration/scattering_coefficient`,
+/// `calibration/tilt_deg/<cell id>`, `calibration/azimuth_deg/<cell id>`,
+/// `calibration/height_m/<cell id>` (`cell_ids` by the fit's cell index).
 pub fn metric_name(p: Parameter, cell_ids: &[String]) -> String {
     let cell = |c: u32| cell_ids.get(c as usize).map_or("?", String::as_str);
     match p {
         Parameter::Permittivity(m) => format!("calibration/permittivity/{}", material_name(m)),
         Parameter::Conductivity(m) => format!("calibration/conductivity/{}", material_name(m)),
         Parameter::FoliageDbPerM => "calibration/foliage_db_per_m".into(),
+        Parameter::Scattering => "calibration/scattering_coefficient".into(),
         Parameter::Tilt(c) => format!("calibration/tilt_deg/{}", cell(c)),
         Parameter::Azimuth(c) => format!("calibration/azimuth_deg/{}", cell(c)),
+        Parameter::Height(c) => format!("calibration/height_m/{}", cell(c)),
     }
 }
 
@@ -803,8 +1026,9 @@ fn material_name(m: Material) -> &'static str {
 }
 
 /// The calibration named in `metrics` ([`metric_name`]); other names are ignored. An error names
-/// a factor that is not a positive finite number, an angle that is not finite or past 90°, or a
-/// material that does not exist.
+/// a factor that is not a positive finite number, an angle that is not finite or past 90°, a
+/// height offset that is not finite or past [`MAX_HEIGHT_OFFSET_M`], or a material that does
+/// not exist.
 pub fn calibration_from(metrics: &crate::artifact::Metrics) -> Result<Calibration, String> {
     let mut out = Calibration::default();
     for (name, &v) in &metrics.values {
@@ -829,16 +1053,28 @@ pub fn calibration_from(metrics: &crate::artifact::Metrics) -> Result<Calibratio
                         "{name}: expected an offset within ±90 degrees, found {v}"
                     ));
                 }
-                let turn = out.turns.entry(id.to_string()).or_default();
+                let mount = out.mounts.entry(id.to_string()).or_default();
                 if kind == "tilt_deg" {
-                    turn.0 = v;
+                    mount.tilt_deg = v;
                 } else {
-                    turn.1 = v;
+                    mount.azimuth_deg = v;
                 }
+            }
+            Some(("height_m", id)) => {
+                if !(v.is_finite() && v.abs() <= MAX_HEIGHT_OFFSET_M) {
+                    return Err(format!(
+                        "{name}: expected a height offset within ±{MAX_HEIGHT_OFFSET_M} m, found {v}"
+                    ));
+                }
+                out.mounts.entry(id.to_string()).or_default().height_m = v;
             }
             None if rest == "foliage_db_per_m" => {
                 out.factors
                     .push((Parameter::FoliageDbPerM, positive(name, v)?));
+            }
+            None if rest == "scattering_coefficient" => {
+                out.factors
+                    .push((Parameter::Scattering, positive(name, v)?));
             }
             _ => {}
         }
@@ -857,7 +1093,7 @@ fn positive(name: &str, k: f64) -> Result<f64, String> {
 }
 
 /// `rf` and `opt` with the factors `multipliers` on their materials (P.2040 values at `freq_hz`)
-/// and foliage rate; unchanged, to the bit, without factors. Antenna turns are the caller's.
+/// and foliage rate; unchanged, to the bit, without factors. Antenna mounts are the caller's.
 pub fn apply(
     rf: RfScene,
     opt: &TraceOptions,
@@ -867,7 +1103,7 @@ pub fn apply(
     if multipliers.is_empty() {
         return (rf, opt.clone());
     }
-    let state = State::of_scene(&rf, freq_hz, opt.foliage_loss(freq_hz)).scaled(multipliers);
+    let state = State::of_scene(&rf, freq_hz, opt).scaled(multipliers);
     let mut rf = rf;
     let mut opt = opt.clone();
     for &(p, _) in multipliers {
@@ -878,8 +1114,78 @@ pub fn apply(
                 }
             }
             Parameter::FoliageDbPerM => opt.foliage_db_per_m = Some(state.foliage.db_per_m),
-            Parameter::Tilt(_) | Parameter::Azimuth(_) => {}
+            // Sionna's S is a share: at most 1.
+            Parameter::Scattering => opt.scattering_coefficient = state.scattering.min(1.0),
+            Parameter::Tilt(_) | Parameter::Azimuth(_) | Parameter::Height(_) => {}
         }
     }
     (rf, opt)
+}
+
+/// The columns of [`report_rows`].
+pub const REPORT_COLUMNS: [&str; 6] = [
+    "parameter",
+    "twin",
+    "calibrated",
+    "prior (1 sd)",
+    "bounds",
+    "posterior sd",
+];
+
+/// A Calibrate node's output `m` as a report's table ([`REPORT_COLUMNS`]): each fitted
+/// parameter, the twin's value (a material's at the first carrier) and the calibrated one, the
+/// prior and bounds it was fitted within, and its posterior spread; factors as ×k, offsets in
+/// their unit. Empty when `m` holds no calibration.
+pub fn report_rows(m: &crate::artifact::Metrics) -> Vec<[String; 6]> {
+    let mut rows = Vec::new();
+    for (name, &v) in &m.values {
+        let Some(rest) = name.strip_prefix("calibration/") else {
+            continue;
+        };
+        let fit = |what: &str| m.get(&format!("fit/{rest}/{what}"));
+        let unit = match rest.split_once('/').map_or(rest, |(kind, _)| kind) {
+            "tilt_deg" | "azimuth_deg" => Some("°"),
+            "height_m" => Some(" m"),
+            _ => None,
+        };
+        let (w, sd) = (
+            fit("prior_width_ln").unwrap_or(f64::NAN),
+            fit("spread_ln").unwrap_or(f64::NAN),
+        );
+        let (lo, hi) = (fit("lo").unwrap_or(f64::NAN), fit("hi").unwrap_or(f64::NAN));
+        rows.push(match unit {
+            Some(u) => [
+                rest.to_string(),
+                "as mounted".into(),
+                format!("{v:+.2}{u}"),
+                format!("±{w:.3}{u}"),
+                format!("{lo:+.2}{u} to {hi:+.2}{u}"),
+                format!("±{sd:.3}{u}"),
+            ],
+            None => {
+                let itu = fit("itu_at_first_carrier");
+                [
+                    rest.to_string(),
+                    itu.map_or("-".into(), significant),
+                    match itu {
+                        Some(x) => format!("{} (×{})", significant(x * v), significant(v)),
+                        None => format!("×{}", significant(v)),
+                    },
+                    format!("×/÷{}", significant(w.exp())),
+                    format!("×{} to ×{}", significant(lo), significant(hi)),
+                    format!("×/÷{}", significant(sd.exp())),
+                ]
+            }
+        });
+    }
+    rows
+}
+
+/// `v` to three significant digits.
+fn significant(v: f64) -> String {
+    if !(v.is_finite() && v != 0.0) {
+        return format!("{v}");
+    }
+    let digits = (2 - v.abs().log10().floor() as i32).clamp(0, 12) as usize;
+    format!("{v:.digits$}")
 }

@@ -19,23 +19,35 @@ use super::scene::EPS;
 /// depth − 1; at each surface they hit, the ray tube of solid angle Ω scatters towards every
 /// receiver it sees a field of amplitude S Γ √(f_s Ω) |E| / r (Degli-Esposti; the tube's footprint
 /// cos θ_i dA = Ω L² cancels its 1/L spreading), times the foliage loss of both legs (ITU-R
-/// P.833), summed incoherently.
-pub(super) fn diffuse_power(t: &Tracer, tx: DVec3, at_tx: FoliageDepth, rxs: &[DVec3]) -> Vec<f64> {
+/// P.833), summed incoherently: each receiver's total, and the same power split by how many
+/// specular reflections came before the scattering surface (each of which kept √(1 − S²) of
+/// the field), so a calibration can move S.
+pub(super) fn diffuse_power(
+    t: &Tracer,
+    tx: DVec3,
+    at_tx: FoliageDepth,
+    rxs: &[DVec3],
+) -> (Vec<f64>, Vec<Vec<f64>>) {
     let (scene, opt) = (t.scene, t.opt);
     let omega = 4.0 * std::f64::consts::PI / opt.rays.max(1) as f64;
     let s = opt.scattering_coefficient;
     let specular_factor = (1.0 - s * s).max(0.0).sqrt();
     let amp = scene.wavelength / (4.0 * std::f64::consts::PI);
-    let chunks: Vec<Vec<f64>> = fibonacci_sphere(opt.rays)
+    let depths = opt.max_depth.max(1) as usize;
+    let chunks: Vec<(Vec<f64>, Vec<f64>)> = fibonacci_sphere(opt.rays)
         .chunks(4096)
         .map(|dirs| {
             let mut acc = vec![0.0; rxs.len()];
+            let mut split = vec![0.0; rxs.len() * depths];
             for d0 in dirs {
                 let e0 = field::real(DVec3::from(t.tx_antenna.field(d0.to_array())));
-                // Each branch: where it starts, its field, depth, foliage depth and the metres of
-                // foliage it has run through (P.833's law saturates on the whole path's).
-                let mut stack = vec![(tx, d0, e0, 0u32, at_tx, 0.0f64)];
-                while let Some((o, d, mut e, depth, mut foliage, mut in_foliage)) = stack.pop() {
+                // Each branch: where it starts, its field, depth, specular reflections, foliage
+                // depth and the metres of foliage it has run through (P.833's law saturates on
+                // the whole path's).
+                let mut stack = vec![(tx, d0, e0, 0u32, 0usize, at_tx, 0.0f64)];
+                while let Some((o, d, mut e, depth, reflections, mut foliage, mut in_foliage)) =
+                    stack.pop()
+                {
                     let Some(h) = scene.cast(o, d, EPS, f64::INFINITY) else {
                         continue;
                     };
@@ -46,7 +58,7 @@ pub(super) fn diffuse_power(t: &Tracer, tx: DVec3, at_tx: FoliageDepth, rxs: &[D
                     }
                     let q = o + d * h.t;
                     if foliage.cross(scene, h.triangle, d) {
-                        stack.push((q, d, e, depth, foliage, in_foliage));
+                        stack.push((q, d, e, depth, reflections, foliage, in_foliage));
                         continue;
                     }
                     if depth + 1 > opt.max_depth {
@@ -84,25 +96,40 @@ pub(super) fn diffuse_power(t: &Tracer, tx: DVec3, at_tx: FoliageDepth, rxs: &[D
                             + e_ph * DVec3::from(ph_o).dot(rx_pattern))
                             * scale;
                         acc[k] += a.norm_sqr();
+                        split[k * depths + reflections] += a.norm_sqr();
                     }
                     if opt.reflection {
                         let e_r = e_spec.map(|c| c * specular_factor);
-                        stack.push((q, k_spec, e_r, depth + 1, foliage, in_foliage));
+                        stack.push((
+                            q,
+                            k_spec,
+                            e_r,
+                            depth + 1,
+                            reflections + 1,
+                            foliage,
+                            in_foliage,
+                        ));
                     }
                     if opt.transmission {
                         let e_t = field::transmit(&e, d, n, tr);
-                        stack.push((q, d, e_t, depth + 1, foliage, in_foliage));
+                        stack.push((q, d, e_t, depth + 1, reflections, foliage, in_foliage));
                     }
                 }
             }
-            acc
+            (acc, split)
         })
         .collect();
     let mut total = vec![0.0; rxs.len()];
-    for c in chunks {
+    let mut by_reflections = vec![vec![0.0; depths]; rxs.len()];
+    for (c, split) in chunks {
         for (t, v) in total.iter_mut().zip(c) {
             *t += v;
         }
+        for (b, v) in by_reflections.iter_mut().zip(split.chunks(depths)) {
+            for (x, y) in b.iter_mut().zip(v) {
+                *x += y;
+            }
+        }
     }
-    total
+    (total, by_reflections)
 }

@@ -196,6 +196,11 @@ pub struct LinkPaths {
     /// The diffusely scattered power alone, dB (-inf without it); included in both gains, not
     /// listed as paths.
     pub diffuse_gain_db: f64,
+    /// The diffuse power (linear) by how many specular reflections came before the scattering
+    /// surface: it moves with the scattering coefficient S as S² (1 − S²)^k. Empty without
+    /// diffuse scattering.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub diffuse_by_reflections: Vec<f64>,
 }
 
 /// What every path of a trace is evaluated with.

@@ -82,6 +82,7 @@ pub fn trace_links(
         .collect();
     // Diffuse power per link, computed per transmitter for all its receivers.
     let mut diffuse = vec![0.0; links.len()];
+    let mut diffuse_split = vec![Vec::new(); links.len()];
     if opt.diffuse && opt.scattering_coefficient > 0.0 && opt.max_depth > 0 {
         for (k, t) in txs.iter().enumerate() {
             let idx: Vec<usize> = (0..links.len())
@@ -89,23 +90,26 @@ pub fn trace_links(
                 .collect();
             let rxs: Vec<DVec3> = idx.iter().map(|&i| DVec3::from(links[i].1)).collect();
             let tx = DVec3::from(t.map(f64::from_bits));
-            let p = diffuse::diffuse_power(&tracer, tx, from_tx[k].foliage, &rxs);
-            for (&i, v) in idx.iter().zip(p) {
+            let (p, split) = diffuse::diffuse_power(&tracer, tx, from_tx[k].foliage, &rxs);
+            for ((&i, v), split) in idx.iter().zip(p).zip(split) {
                 diffuse[i] = v;
+                diffuse_split[i] = split;
             }
         }
     }
     links
         .par_iter()
-        .zip(diffuse.par_iter())
-        .map(|(link, &diffuse_power)| {
+        .zip(diffuse.par_iter().zip(diffuse_split))
+        .map(|(link, (&diffuse_power, diffuse_by_reflections))| {
             let shared = &from_tx[tx_of(link)];
             let (tx, rx) = (DVec3::from(link.0), DVec3::from(link.1));
             let mut paths = link_paths(&tracer, tx, rx, shared);
             if !shared.diffractions.is_empty() {
                 paths.extend(shared.diffractions.paths(&tracer, tx, rx, shared.foliage));
             }
-            summarize(paths, freq_hz, diffuse_power)
+            let mut summary = summarize(paths, freq_hz, diffuse_power);
+            summary.diffuse_by_reflections = diffuse_by_reflections;
+            summary
         })
         .collect()
 }
@@ -147,5 +151,6 @@ fn summarize(mut paths: Vec<Path>, freq_hz: f64, diffuse_power: f64) -> LinkPath
         gain_db: 10.0 * (incoherent + diffuse_power).log10(),
         coherent_gain_db: 10.0 * (coherent.norm_sqr() + diffuse_power).log10(),
         diffuse_gain_db: 10.0 * diffuse_power.log10(),
+        diffuse_by_reflections: Vec::new(),
     }
 }

@@ -147,8 +147,8 @@ pub struct TracedGroup<'a> {
 
 /// Traces `links` through `scene` with `p`, as the Trace and Calibrate stages do: one radio scene per carrier, one
 /// trace per (carrier, transmitter bearing), each cut to `p.reach_m` when set, with the factors
-/// of `calibration` on its materials and foliage rate and its turns on each cell's transmit
-/// antenna (a cell its own group then); `each` takes every group in turn.
+/// of `calibration` on its materials and foliage rate and its mounts on each cell's transmit
+/// antenna (turned, raised; a cell its own group then); `each` takes every group in turn.
 pub fn trace_groups(
     p: &TraceParams,
     scene: &Scene,
@@ -168,11 +168,15 @@ pub fn trace_groups(
             })
     };
     // The links' azimuths and the antenna's are both grid bearings: no conversion.
-    let by_cell = !calibration.turns.is_empty();
+    let by_cell = !calibration.mounts.is_empty();
     let mut groups: BTreeMap<(u64, u64, &str), Vec<usize>> = BTreeMap::new();
     let mut ends = Vec::with_capacity(links.links.len());
     for (i, l) in links.links.iter().enumerate() {
-        let (tx, rx) = ([l.tx.x, l.tx.y, z(&l.tx)?], [l.rx.x, l.rx.y, z(&l.rx)?]);
+        let raised = calibration.mounts.get(&l.tx.id).map_or(0.0, |m| m.height_m);
+        let (tx, rx) = (
+            [l.tx.x, l.tx.y, z(&l.tx)? + raised],
+            [l.rx.x, l.rx.y, z(&l.rx)?],
+        );
         for (end, p) in [("transmitter", tx), ("receiver", rx)] {
             crate::params::check_point(p).map_err(|m| {
                 StageError::bad_input(
@@ -224,9 +228,9 @@ pub fn trace_groups(
         if az.is_finite() {
             tx_antenna.azimuth_deg = az;
         }
-        if let Some(&(tilt, bearing)) = calibration.turns.get(*cell) {
-            tx_antenna.tilt_deg += tilt;
-            tx_antenna.azimuth_deg += bearing;
+        if let Some(m) = calibration.mounts.get(*cell) {
+            tx_antenna.tilt_deg += m.tilt_deg;
+            tx_antenna.azimuth_deg += m.azimuth_deg;
         }
         let pairs: Vec<_> = idx.iter().map(|&i| ends[i]).collect();
         let paths = trace_links(&rf, &pairs, &tx_antenna, &p.rx_antenna, &options, freq);

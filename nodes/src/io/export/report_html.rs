@@ -16,6 +16,7 @@ use super::glb::material_color;
 use crate::artifact::Material;
 use crate::artifact::{Metrics, ObjectClass, Raster, Scene};
 use crate::geom::raycast::SceneRays;
+use crate::rf::calibration;
 
 /// three.js (MIT; `nodes/assets/three/`, fetched by `scripts/vendor_three.sh`).
 const THREE_JS: &str = include_str!("../../../assets/three/three.module.min.js");
@@ -119,6 +120,25 @@ fn evidence_section(evidence: &[(&str, &Metrics)]) -> String {
         "<section><h2>Stage evidence</h2><p>What each stage did, from its own reports.</p>",
     );
     for (name, m) in evidence {
+        let fitted = calibration::report_rows(m);
+        if !fitted.is_empty() {
+            out += &format!(
+                "<h3>{}: calibrated parameters</h3><table><thead><tr>",
+                esc(name)
+            );
+            for c in calibration::REPORT_COLUMNS {
+                out += &format!("<th>{}</th>", esc(c));
+            }
+            out += "</tr></thead><tbody>";
+            for row in fitted {
+                out += "<tr>";
+                for cell in row {
+                    out += &format!("<td>{}</td>", esc(&cell));
+                }
+                out += "</tr>";
+            }
+            out += "</tbody></table>";
+        }
         out += &format!(
             "<h3>{}</h3><table><thead><tr><th>figure</th><th>value</th></tr></thead><tbody>",
             esc(name)
@@ -451,6 +471,49 @@ mod tests {
         assert!(html.contains("<td>share</td><td>0.004567</td>"), "{html}");
         assert_eq!(number(-1.2183483536188164), "-1.218");
         assert_eq!(number(f64::NAN), "NaN");
+    }
+
+    /// A Calibrate node's evidence gets a table of what it fitted: the twin's value, the
+    /// calibrated one, the prior and bounds, the posterior spread.
+    #[test]
+    fn a_calibration_becomes_a_table_of_its_parameters() {
+        let mut m = Metrics::default();
+        for (k, v) in [
+            ("calibration/permittivity/concrete", 0.77),
+            ("fit/permittivity/concrete/itu_at_first_carrier", 5.24),
+            ("fit/permittivity/concrete/prior_width_ln", 1.5f64.ln()),
+            ("fit/permittivity/concrete/lo", 1.0 / 3.0),
+            ("fit/permittivity/concrete/hi", 3.0),
+            ("fit/permittivity/concrete/spread_ln", 0.01),
+            ("calibration/height_m/A", 2.5),
+            ("fit/height_m/A/prior_width_ln", 3.0),
+            ("fit/height_m/A/lo", -6.0),
+            ("fit/height_m/A/hi", 6.0),
+            ("fit/height_m/A/spread_ln", 0.4),
+        ] {
+            m.set(k, v);
+        }
+        let html = evidence_section(&[("calibration", &m)]);
+        assert!(
+            html.contains("<h3>calibration: calibrated parameters</h3>"),
+            "{html}"
+        );
+        assert!(
+            html.contains(
+                "<td>permittivity/concrete</td><td>5.24</td><td>4.03 (×0.770)</td>\
+                 <td>×/÷1.50</td><td>×0.333 to ×3.00</td><td>×/÷1.01</td>"
+            ),
+            "{html}"
+        );
+        assert!(
+            html.contains(
+                "<td>height_m/A</td><td>as mounted</td><td>+2.50 m</td><td>±3.000 m</td>\
+                 <td>-6.00 m to +6.00 m</td><td>±0.400 m</td>"
+            ),
+            "{html}"
+        );
+        let plain = evidence_section(&[("counts", &Metrics::default())]);
+        assert!(!plain.contains("calibrated parameters"), "{plain}");
     }
 
     #[test]

@@ -18,6 +18,7 @@ use crate::io::export::figures::charts::{
 use crate::io::export::figures::maps::{Layer, MapFigure, Palette, robust_range, view_grid};
 use crate::io::export::figures::{Figure, render};
 use crate::io::export::report_html::{LinkPoint, Page, TableRow, number, report_html};
+use crate::rf::calibration;
 use crate::rf::em::fspl_db;
 use crate::rf::pathloss_fit::{fit_close_in, fit_power_distance};
 use crate::site::Site;
@@ -163,8 +164,9 @@ impl Stage for Report {
     // path-loss-distance chart in received power (measured as read, each model at its fitted
     // EIRP, free space at the first model's), the offsets applied said under it.
     // 14: the intro says the models were scored at different links when they were; the
-    // `assumptions` stated after it.
-    const VERSION: u32 = 14;
+    // `assumptions` stated after it. 15: a Calibrate node's evidence gets a table of its
+    // calibrated parameters with their priors.
+    const VERSION: u32 = 15;
     const DOC: &'static str = "Table 1 (site x metric by model) as Markdown/CSV/JSON with scatter, error CDF, path-loss-distance and radio map plots";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one(
@@ -661,6 +663,18 @@ fn evidence_markdown(evidence: &[(&str, &Metrics)]) -> String {
     }
     md.push_str("## Stage evidence\n\nWhat each stage did, from its own reports.\n\n");
     for (name, m) in evidence {
+        let fitted = calibration::report_rows(m);
+        if !fitted.is_empty() {
+            md.push_str(&format!(
+                "### {name}: calibrated parameters\n\n| {} |\n|{}\n",
+                calibration::REPORT_COLUMNS.join(" | "),
+                "---|".repeat(calibration::REPORT_COLUMNS.len())
+            ));
+            for row in fitted {
+                md.push_str(&format!("| {} |\n", row.join(" | ")));
+            }
+            md.push('\n');
+        }
         md.push_str(&format!("### {name}\n\n| figure | value |\n|---|---:|\n"));
         for (k, v) in &m.values {
             md.push_str(&format!("| {k} | {} |\n", number(*v)));

@@ -44,7 +44,7 @@ impl Stage for Trace {
         InputSpec::optional(
             "calibration",
             ArtifactType::Metrics,
-            "a Calibrate node's factors on the materials and foliage rate, and antenna turns",
+            "a Calibrate node's factors on the materials and foliage rate, and antenna mounts (tilt, bearing, height)",
         ),
     ];
     type Params = TraceParams;
