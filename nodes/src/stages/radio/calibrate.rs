@@ -282,14 +282,14 @@ impl Stage for Calibrate {
             offsets: offsets_only,
         };
         // Heights first by a scan (a move of a few metres can lift an antenna over a roof,
-        // which no replay sees), then every parameter by the fit, each height within half a
-        // scan step of where its paths were traced. Where the fit moved a cell's antenna past the
+        // which no replay sees), then every parameter by the fit, each height within its trust
+        // radius of where its paths were traced. Where the fit moved a cell's antenna past the
         // tolerance, that cell's links are traced again from there, and the move kept only if
         // the traced paths fit its training links better than those before (the fit's other
-        // values held), else the cell's trust radius halved: a trust region whose test is a
-        // trace. A cell's links see only its own
-        // antenna, so cells are kept or refused one by one. A height is only ever reported where
-        // a trace put it: a last move under the tolerance is not applied.
+        // values held), else the cell's radius is halved: a trust region whose test is a trace.
+        // A cell's links see only its own antenna, so cells are kept or refused one by one. A
+        // height is only ever reported where a trace put it: a last move under the tolerance
+        // is not applied.
         let mut placed = Calibration::default();
         let mut scan = vec![0.0; cells.len()];
         if p.height {
