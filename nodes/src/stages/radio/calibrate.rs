@@ -52,10 +52,11 @@ pub struct CalibrateParams {
     /// Fit each cell's transmit antenna height, as an offset within ±6 m (prior 3 m). A height
     /// moves the paths, and a few metres can lift an antenna over a roof: the links are first
     /// traced at each step of a scan (`height_scan_m`) and each cell starts from its best; the
-    /// fit then replays the paths by the image method over their reflecting faces, within half
-    /// a step, and where a cell's antenna moved further than `height_tolerance_m` its links
-    /// are traced again from there and the fit repeated (at most `max_retraces` times; a
-    /// retrace that fits the training links worse than the replay promised is undone).
+    /// fit then replays the paths by the image method over their reflecting faces, within a
+    /// trust radius of half a step, and where a cell's antenna moved further than
+    /// `height_tolerance_m` its links are traced again from there: the move is kept where they
+    /// fit that cell's training links better, else the radius is halved; then the fit again
+    /// (at most `max_retraces` times). A height is reported only where a trace put it.
     /// Default false.
     pub height: bool,
     /// How far a fitted height may move from where the paths were traced before they are
@@ -109,7 +110,7 @@ pub struct Calibrate;
 impl Stage for Calibrate {
     const KIND: &'static str = "Calibrate";
     const VERSION: u32 = 3;
-    const DOC: &'static str = "per-material permittivity and conductivity factors (and foliage rate, antenna tilt, bearing and height) fitted to measured links over traced paths, with per-cell offsets; held-out scores";
+    const DOC: &'static str = "per-material permittivity and conductivity factors (and foliage rate, scattering coefficient, antenna tilt, bearing and height) fitted to measured links over traced paths, with per-cell offsets; held-out scores";
     const INPUTS: &'static [InputSpec] = &[
         InputSpec::one("scene", ArtifactType::Scene, "the twin to calibrate"),
         InputSpec::one(
