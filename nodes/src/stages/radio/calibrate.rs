@@ -582,7 +582,6 @@ impl FitSetup<'_> {
                         .filter(|l| cells.contains(l.tx.id.as_str()))
                         .cloned()
                         .collect(),
-                    ..self.links.clone()
                 };
                 &some
             }
