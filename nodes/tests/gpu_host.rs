@@ -48,13 +48,13 @@ fn host_kernel_casts_munich_as_the_cpu() {
 }
 
 use glam::DVec3;
-use kodama_nodes::artifact::Grid;
 use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::gpu::{MapInputs, host_radio_map};
 use kodama_nodes::rf::map_plane::{MapPlane, default_plane};
 use kodama_nodes::rf::path::TraceOptions;
 use kodama_nodes::rf::radiomap::radio_map;
 use kodama_nodes::rf::scene::RfScene;
+use kodama_nodes::rf::test_scenes::street_plane;
 
 /// The host twin's map against `radio_map`; returns the comparison and prints it. Tolerance:
 /// the launch directions (closed form here, a rotation on the CPU: 1e-8 apart), the slab table's
@@ -79,20 +79,6 @@ fn diffuse(rays: u32) -> TraceOptions {
         scattering_coefficient: 0.3,
         ..Default::default()
     }
-}
-
-/// The street grid's map cells: 4 m, 50 x 50 over x, y in [-100, 100], at 1.5 m.
-fn street_plane() -> MapPlane {
-    MapPlane::plane(
-        Grid {
-            x0: -100.0,
-            y0: 100.0,
-            cell_m: 4.0,
-            width: 50,
-            height: 50,
-        },
-        1.5,
-    )
 }
 
 fn check_map_with(name: &str, scene: &RfScene, tx: DVec3, plane: &MapPlane, opt: &TraceOptions) {

@@ -365,7 +365,7 @@ fn hemisphere(n: DVec3, u1: f64, u2: f64) -> DVec3 {
 mod tests {
     use super::*;
     use crate::artifact::{Grid, Scene};
-    use crate::rf::test_scenes::{STREET_TX, street_grid};
+    use crate::rf::test_scenes::{STREET_TX, street_grid, street_plane};
 
     /// Casting in packets, in patch order and segment by segment changes nothing: the map is the
     /// bytes of tracing ray after ray, each cast alone, summed in ray order (the map sums in
@@ -375,16 +375,7 @@ mod tests {
     #[test]
     fn the_map_is_ray_after_ray_to_the_bit() {
         let scene = street_grid();
-        let plane = MapPlane::plane(
-            Grid {
-                x0: -100.0,
-                y0: 100.0,
-                cell_m: 4.0,
-                width: 50,
-                height: 50,
-            },
-            1.5,
-        );
+        let plane = street_plane();
         let tx = STREET_TX;
         let opt = TraceOptions {
             rays: 1_000_000,

@@ -4,12 +4,29 @@
 use glam::DVec3;
 
 use crate::artifact::Material;
-use crate::artifact::{Mesh, ObjectClass, PodVec, Scene, SceneObject};
+use crate::artifact::{Grid, Mesh, ObjectClass, PodVec, Scene, SceneObject};
 use crate::geom::mesh_build::cuboid;
+use crate::rf::map_plane::MapPlane;
 use crate::rf::scene::RfScene;
 
 /// A transmitter 12 m up at the crossing of [`street_grid`]'s first streets.
 pub const STREET_TX: DVec3 = DVec3::new(-60.0, -56.0, 12.0);
+
+/// The street grid's map cells: 4 m, 50 x 50 over x, y in [-100, 100].
+pub fn street_map_grid() -> Grid {
+    Grid {
+        x0: -100.0,
+        y0: 100.0,
+        cell_m: 4.0,
+        width: 50,
+        height: 50,
+    }
+}
+
+/// [`street_map_grid`]'s cells on a plane 1.5 m up.
+pub fn street_plane() -> MapPlane {
+    MapPlane::plane(street_map_grid(), 1.5)
+}
 
 /// [`street_grid_scene`] at 3.5 GHz, ready to trace.
 pub fn street_grid() -> RfScene {

@@ -138,13 +138,7 @@ pub fn compare_maps(a: &[f32], b: &[f32]) -> (usize, usize, f64, f64, f64) {
 /// once.
 pub fn rolling_surface() -> kodama_nodes::rf::map_plane::MapPlane {
     use kodama_nodes::artifact::{Grid, PodVec, Raster};
-    let grid = Grid {
-        x0: -100.0,
-        y0: 100.0,
-        cell_m: 4.0,
-        width: 50,
-        height: 50,
-    };
+    let grid = kodama_nodes::rf::test_scenes::street_map_grid();
     let n = 110u32;
     let terrain = Raster {
         grid: Grid {
