@@ -290,9 +290,7 @@ impl LinkModel {
             dpower.into_iter().map(|d| d * to_db).collect(),
         )
     }
-}
 
-impl LinkModel {
     /// The diffuse power at scattering coefficient `s`, and its derivative in ln s: the traced
     /// power after k specular reflections scales as s² (1 − s²)^k.
     fn diffuse_power(&self, s: f64) -> (f64, f64) {

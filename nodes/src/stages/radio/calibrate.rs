@@ -345,11 +345,11 @@ impl Stage for Calibrate {
             let retraced = setup.trace(&next, Some(&moving), ctx)?;
             let held = held_heights(&fitted.values);
             last = Some(held.clone());
+            let before = train_rmse_by_cell(&t, &held, cells.len());
+            let after = train_rmse_by_cell(&retraced, &held, cells.len());
             let mut kept = BTreeSet::new();
             for &(c, _) in &proposed {
-                let before = cell_rmse(&t, &held, cells.len(), c);
-                let after = cell_rmse(&retraced, &held, cells.len(), c);
-                if after < before {
+                if after[c].0 < before[c].0 {
                     kept.insert(c);
                     placed.mounts.insert(ids[c].clone(), next.mounts[&ids[c]]);
                 } else {
@@ -490,9 +490,9 @@ fn held_heights(values: &[(Parameter, f64)]) -> Vec<(Parameter, f64)> {
         .collect()
 }
 
-/// Cell `c`'s training RMSE over `t`'s paths with the fitted `values`, each cell with its own
-/// best offset.
-fn cell_rmse(t: &Traced, values: &[(Parameter, f64)], cells: usize, c: usize) -> f64 {
+/// Each cell's training RMSE over `t`'s paths with the fitted `values` (none: the twin's),
+/// each cell with its own best offset, and the links some path reaches.
+fn train_rmse_by_cell(t: &Traced, values: &[(Parameter, f64)], cells: usize) -> Vec<(f64, usize)> {
     let states: Vec<State> = t.states.iter().map(|s| s.scaled(values)).collect();
     let mounts = calibration::mounts(values, cells);
     let at = Setting {
@@ -500,7 +500,9 @@ fn cell_rmse(t: &Traced, values: &[(Parameter, f64)], cells: usize, c: usize) ->
         mounts: &mounts,
     };
     let offsets = fit_offsets(&t.train, cells, at);
-    rmse_db(t.train.iter().filter(|o| o.cell == c), at, &offsets).0
+    (0..cells)
+        .map(|c| rmse_db(t.train.iter().filter(|o| o.cell == c), at, &offsets))
+        .collect()
 }
 
 impl FitSetup<'_> {
@@ -520,13 +522,8 @@ impl FitSetup<'_> {
         let (p, cells) = (self.p, ids.len());
         let prior = Prior::default_for(Parameter::Height(0));
         let mean_squares = |t: &Traced| -> Vec<Option<f64>> {
-            let plain = Setting::of(&t.states);
-            let offsets = fit_offsets(&t.train, cells, plain);
-            (0..cells)
-                .map(|c| {
-                    let (r, n) = rmse_db(t.train.iter().filter(|o| o.cell == c), plain, &offsets);
-                    (n > 0).then_some(r * r)
-                })
+            (train_rmse_by_cell(t, &[], cells).into_iter())
+                .map(|(r, n)| (n > 0).then_some(r * r))
                 .collect()
         };
         let n0: Vec<f64> = (0..cells)
