@@ -12,50 +12,62 @@ use super::fibonacci::fibonacci_sphere;
 use super::field;
 use super::path::TraceOptions;
 use super::scene::{EPS, RfScene};
+use crate::rng::MixState;
 
 /// The distinct sequences of triangles that rays from `tx` reflect off, up to the depth, sorted.
 pub fn reflection_sequences(scene: &RfScene, tx: DVec3, opt: &TraceOptions) -> Vec<Vec<u32>> {
     if !opt.reflection || opt.max_depth == 0 {
         return Vec::new();
     }
-    let chunks: Vec<HashSet<Vec<u32>>> = fibonacci_sphere(opt.rays)
+    // Each chunk's set merged into the larger as they finish: the sorted result does not depend
+    // on the merges' order, and a sequence many chunks find is held once per set, not once per
+    // chunk until the end.
+    let found = fibonacci_sphere(opt.rays)
         .chunks(4096)
-        .map(|dirs| {
-            let mut found = HashSet::new();
-            for d in dirs {
-                // (origin, direction, reflections so far, interactions so far)
-                let mut stack = vec![(tx, d, Vec::new(), 0u32)];
-                while let Some((o, d, seq, depth)) = stack.pop() {
-                    let Some(h) = scene.cast(o, d, EPS, f64::INFINITY) else {
-                        continue;
-                    };
-                    let p = o + d * h.t;
-                    if scene.is_foliage(h.triangle) {
-                        stack.push((p, d, seq, depth));
-                        continue;
-                    }
-                    if depth + 1 > opt.max_depth {
-                        continue;
-                    }
-                    let n = scene.normals[h.triangle as usize];
-                    let mut next = seq.clone();
-                    next.push(h.triangle);
-                    found.insert(next.clone());
-                    stack.push((p, field::mirror(d, n), next, depth + 1));
-                    if opt.transmission {
-                        stack.push((p, d, seq, depth + 1));
-                    }
-                }
-            }
-            found
-        })
-        .collect();
-    let mut all: Vec<Vec<u32>> = chunks
-        .into_iter()
-        .flatten()
-        .collect::<HashSet<_>>()
-        .into_iter()
-        .collect();
+        .map(|dirs| chunk_sequences(scene, tx, opt, &dirs))
+        .reduce(Sequences::default, |a, b| {
+            let (mut big, small) = if a.len() >= b.len() { (a, b) } else { (b, a) };
+            big.extend(small);
+            big
+        });
+    let mut all: Vec<Vec<u32>> = found.into_iter().collect();
     all.sort_unstable();
     all
+}
+
+/// A set of sequences (hashed with [`MixHasher`](crate::rng::MixHasher): sorted before use).
+type Sequences = HashSet<Vec<u32>, MixState>;
+
+/// The sequences the rays `dirs` from `tx` reflect off.
+fn chunk_sequences(scene: &RfScene, tx: DVec3, opt: &TraceOptions, dirs: &[DVec3]) -> Sequences {
+    let mut found = Sequences::default();
+    for d in dirs {
+        // (origin, direction, reflections so far, interactions so far)
+        let mut stack = vec![(tx, *d, Vec::new(), 0u32)];
+        while let Some((o, d, seq, depth)) = stack.pop() {
+            let Some(h) = scene.cast(o, d, EPS, f64::INFINITY) else {
+                continue;
+            };
+            let p = o + d * h.t;
+            if scene.is_foliage(h.triangle) {
+                stack.push((p, d, seq, depth));
+                continue;
+            }
+            if depth + 1 > opt.max_depth {
+                continue;
+            }
+            let n = scene.normals[h.triangle as usize];
+            let mut next = seq.clone();
+            next.push(h.triangle);
+            // Most rays find what their neighbours found: copy only what is new.
+            if !found.contains(&next) {
+                found.insert(next.clone());
+            }
+            stack.push((p, field::mirror(d, n), next, depth + 1));
+            if opt.transmission {
+                stack.push((p, d, seq, depth + 1));
+            }
+        }
+    }
+    found
 }

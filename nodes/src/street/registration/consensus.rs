@@ -3,9 +3,8 @@
 
 use std::cell::RefCell;
 use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
 
-use crate::rng::mix;
+use crate::rng::MixState;
 
 use super::labels::Facade;
 
@@ -19,31 +18,10 @@ pub(super) struct Consensus {
 }
 
 /// Cell -> (feature, wall) sample counts.
-pub(super) type Cells = HashMap<[i64; 3], [u32; 2], BuildHasherDefault<CellHasher>>;
+pub(super) type Cells = HashMap<[i64; 3], [u32; 2], MixState>;
 
 /// One view's façade samples pooled in cells.
 pub(super) type Pool = Cells;
-
-/// Hashes a cell's key word by word with [`mix`]. The standard SipHash guards against keys
-/// chosen to collide, which cells on the twin's walls are not, and its lookups took a tenth of
-/// the registration's time. Only looked up and summed, never iterated into a result: the hash
-/// does not change what the registration does.
-#[derive(Default)]
-pub(super) struct CellHasher(u64);
-
-impl Hasher for CellHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-
-    fn write(&mut self, bytes: &[u8]) {
-        for word in bytes.chunks(8) {
-            let mut w = [0u8; 8];
-            w[..word.len()].copy_from_slice(word);
-            self.0 = mix(self.0 ^ u64::from_le_bytes(w));
-        }
-    }
-}
 
 impl Consensus {
     pub(super) fn key(cell_m: f64, at: [f64; 3]) -> [i64; 3] {
@@ -75,7 +53,7 @@ pub(super) struct OthersSay<'a> {
     /// cells again and again, and a table that small answers from the processor's cache where
     /// the consensus of every view (tens of MB) and the view's own pool took two lookups, the
     /// first mostly a miss in memory (13 % of the registration's time on the demo).
-    seen: RefCell<HashMap<[i64; 3], Option<Facade>, BuildHasherDefault<CellHasher>>>,
+    seen: RefCell<HashMap<[i64; 3], Option<Facade>, MixState>>,
 }
 
 impl<'a> OthersSay<'a> {
