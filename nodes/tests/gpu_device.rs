@@ -1,6 +1,7 @@
-//! The cast and map kernels on a real GPU (the checked-in PTX through the CUDA driver) against the Rust
-//! tracer, to the bit; and, run with `--ignored` (scripts/gpu_device_check.sh), its speed on
-//! munich against the CPU's, casts and maps. Skips, saying so, where no CUDA driver is present.
+//! The cast, map and link-search kernels on a real GPU (the checked-in PTX through the CUDA
+//! driver) against the Rust tracer, to the bit; and, run with `--ignored`
+//! (scripts/gpu_device_check.sh), their speed on munich against the CPU's: casts, maps, the
+//! sequence search. Skips, saying so, where no CUDA driver is present.
 
 mod gpu_common;
 
@@ -374,5 +375,139 @@ fn device_map_speed_on_munich() {
             cpu_s / call_s
         );
         assert!(same, "two device maps differ");
+    }
+}
+
+use kodama_nodes::rf::gpu::{SearchParams, host_reflection_sequences};
+use kodama_nodes::rf::sequences::reflection_sequences;
+
+/// The device's sequence search against the CPU's and the host twin's, as sets (sorted), twice on
+/// one resident scene: the street grid deep with transmission, a search that outgrows its first
+/// set, and munich.
+#[test]
+fn device_sequences_are_the_cpus() {
+    let Some(gpu) = gpu() else { return };
+    let grid = || RfScene::new(&street_grid(), 3.5e9, false).unwrap();
+    let tx = DVec3::new(-60.0, -56.0, 12.0);
+    let mut cases = vec![
+        ("street grid, depth 6", grid(), tx, 20_000u32, 6u32),
+        ("street grid, 300 rays, depth 9", grid(), tx, 300, 9),
+    ];
+    if let Some(xml) = munich_xml() {
+        let munich = gpu_common::munich_rf(&xml);
+        cases.push((
+            "munich, depth 5",
+            munich,
+            DVec3::new(8.5, 21.0, 27.0),
+            100_000,
+            5,
+        ));
+    }
+    for (name, scene, tx, rays, depth) in cases {
+        let opt = TraceOptions {
+            rays,
+            max_depth: depth,
+            ..TraceOptions::default()
+        };
+        let map_scene = MapScene::new(&scene).unwrap();
+        let dev = gpu.upload_scene(&map_scene).unwrap();
+        let params = SearchParams::new(tx, &opt).unwrap();
+        let (a, t) = gpu.reflection_sequences(&dev, &params).unwrap();
+        let (b, _) = gpu.reflection_sequences(&dev, &params).unwrap();
+        let host = host_reflection_sequences(&map_scene, &params).unwrap();
+        let cpu = reflection_sequences(&scene, tx, &opt);
+        println!(
+            "{name}: {} sequences, {} kernel run(s), device = host twin = CPU",
+            a.len(),
+            t.tries
+        );
+        assert!(a == cpu, "{name}: device and CPU sequences differ");
+        assert!(b == a, "{name}: two device searches differ");
+        assert!(host == cpu, "{name}: host twin and CPU sequences differ");
+    }
+}
+
+/// The sequence search on munich from tx (8.5, 21, 27) on the device (warm, on a resident scene)
+/// against `reflection_sequences` on every CPU core, with transmission: the part of a link
+/// trace that grows with the rays and the depth (BENCHMARKS.md, "The paper's solver settings on
+/// links"). Prints a markdown table.
+#[test]
+#[ignore = "timing on a GPU machine: scripts/gpu_device_check.sh"]
+fn device_link_search_speed_on_munich() {
+    let Some(gpu) = gpu() else { return };
+    let Some(xml) = munich_xml() else { return };
+    let scene = gpu_common::munich_rf(&xml);
+    let tx = DVec3::new(8.5, 21.0, 27.0);
+    let map_scene = MapScene::new(&scene).unwrap();
+    let dev = gpu.upload_scene(&map_scene).unwrap();
+    let warm = SearchParams::new(
+        tx,
+        &TraceOptions {
+            rays: 10_000,
+            ..TraceOptions::default()
+        },
+    );
+    gpu.reflection_sequences(&dev, &warm.unwrap()).unwrap();
+    println!(
+        "\nGPU call s: the warm call on the resident scene (patch order, every kernel run, the \
+         sequences back and sorted), the faster of two; CPU: reflection_sequences on {} threads, \
+         one run (none where marked: too long for one device session).",
+        rayon::current_num_threads()
+    );
+    println!(
+        "\n| device | rays | depth | sequences | GPU call s | GPU kernel s | kernel runs | CPU s | \
+         speed-up | same set |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    let rows = [
+        (100_000u32, 5u32, true),
+        (100_000, 9, true),
+        (100_000, 12, true),
+        (1_000_000, 5, true),
+        (1_000_000, 9, false),
+        (1_000_000, 12, false),
+    ];
+    for (rays, depth, with_cpu) in rows {
+        let opt = TraceOptions {
+            rays,
+            max_depth: depth,
+            ..TraceOptions::default()
+        };
+        let params = SearchParams::new(tx, &opt).unwrap();
+        let (a, t) = match gpu.reflection_sequences(&dev, &params) {
+            Ok(r) => r,
+            Err(e) => {
+                println!("| {} | {rays} | {depth} | {e} | | | | | | |", gpu.name());
+                continue;
+            }
+        };
+        let (b, t2) = gpu.reflection_sequences(&dev, &params).unwrap();
+        assert!(a == b, "two device searches differ");
+        let (cpu_s, same) = if with_cpu {
+            let clock = Instant::now();
+            let cpu = reflection_sequences(&scene, tx, &opt);
+            (
+                format!("{:.3}", clock.elapsed().as_secs_f64()),
+                format!("{}", cpu == a),
+            )
+        } else {
+            ("-".into(), "-".into())
+        };
+        let call = t.call.min(t2.call);
+        let speedup = cpu_s
+            .parse::<f64>()
+            .map(|c| format!("{:.0}x", c / call))
+            .unwrap_or_else(|_| "-".into());
+        println!(
+            "| {} | {rays} | {depth} | {} | {call:.4} | {:.4} | {} | {cpu_s} | {speedup} | {same} |",
+            gpu.name(),
+            a.len(),
+            t.kernel.min(t2.kernel),
+            t.tries
+        );
+        assert!(
+            same != "false",
+            "depth {depth}, {rays} rays: GPU and CPU sets differ"
+        );
     }
 }

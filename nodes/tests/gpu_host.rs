@@ -285,3 +285,97 @@ fn host_order_is_patch_order() {
     }
     println!("{} chunks: host order = patch_order", cases.len());
 }
+
+use kodama_nodes::rf::gpu::{MapScene, SearchParams, host_reflection_sequences};
+use kodama_nodes::rf::sequences::reflection_sequences;
+
+/// The search kernel's host twin against the CPU's sequence search: the same sorted set of
+/// sequences, which the image method then solves alike.
+fn check_sequences(name: &str, scene: &RfScene, tx: DVec3, opt: &TraceOptions) -> usize {
+    let want = reflection_sequences(scene, tx, opt);
+    let inputs = MapScene::new(scene).unwrap();
+    let params = SearchParams::new(tx, opt).unwrap();
+    let got = host_reflection_sequences(&inputs, &params).unwrap();
+    let longest = want.iter().map(Vec::len).max().unwrap_or(0);
+    println!(
+        "{name}: {} sequences (longest {longest}) from {} rays, depth {}",
+        want.len(),
+        opt.rays,
+        opt.max_depth
+    );
+    assert_eq!(got.len(), want.len(), "{name}: how many sequences");
+    assert!(got == want, "{name}: the sequences differ");
+    want.len()
+}
+
+#[test]
+fn host_kernel_finds_the_cpus_sequences() {
+    let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
+    let tx = DVec3::new(-60.0, -56.0, 12.0);
+    let deep = TraceOptions {
+        rays: 20_000,
+        max_depth: 6,
+        ..TraceOptions::default()
+    };
+    // Reflection and transmission both branch: the set is far larger than the rays.
+    let n = check_sequences("street grid, depth 6", &scene, tx, &deep);
+    assert!(n > 20_000, "only {n} sequences");
+    let reflect_only = TraceOptions {
+        transmission: false,
+        ..deep.clone()
+    };
+    check_sequences("street grid, reflection only", &scene, tx, &reflect_only);
+    // Canopies are passed through, round the transmitter too.
+    check_sequences(
+        "street grid, canopies",
+        &street_grid_with_canopies(),
+        tx,
+        &deep,
+    );
+    let none = TraceOptions {
+        reflection: false,
+        ..deep
+    };
+    assert_eq!(check_sequences("no reflection", &scene, tx, &none), 0);
+    let Some(xml) = munich_xml() else { return };
+    let scene = gpu_common::munich_rf(&xml);
+    let opt = TraceOptions {
+        rays: 50_000,
+        max_depth: 5,
+        ..TraceOptions::default()
+    };
+    check_sequences("munich, depth 5", &scene, DVec3::new(8.5, 21.0, 27.0), &opt);
+}
+
+/// A set far smaller than what one chunk finds grows until it holds them all: here the first
+/// guess (twice the rays, at least 4,096) is passed by a deep search of few rays.
+#[test]
+fn a_search_that_outgrows_its_set_runs_again() {
+    let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
+    let opt = TraceOptions {
+        rays: 300,
+        max_depth: 9,
+        ..TraceOptions::default()
+    };
+    let n = check_sequences(
+        "300 rays, depth 9",
+        &scene,
+        DVec3::new(-60.0, -56.0, 12.0),
+        &opt,
+    );
+    // More than the first set holds, and all of them: the set grew.
+    assert!(n > 4096, "only {n} sequences: the set never had to grow");
+}
+
+/// Past the kernel's 32 interactions the search is refused by name.
+#[test]
+fn the_search_kernel_refuses_more_than_32_interactions() {
+    let opt = TraceOptions {
+        max_depth: 33,
+        ..TraceOptions::default()
+    };
+    let err = SearchParams::new(DVec3::ZERO, &opt)
+        .err()
+        .expect("depth 33 accepted");
+    assert!(err.contains("at most 32"), "{err}");
+}

@@ -39,8 +39,8 @@ pub type CastHit = Option<(f32, u32)>;
 
 /// The wide BVH as the kernels read it.
 pub struct Tree {
-    nodes: Vec<u32>,
-    packets: Vec<u32>,
+    pub(super) nodes: Vec<u32>,
+    pub(super) packets: Vec<u32>,
 }
 
 impl Tree {
@@ -113,16 +113,17 @@ pub fn host_cast(tree: &Tree, rays: &[GpuRay]) -> Vec<CastHit> {
     hits(&t, &prim)
 }
 
-fn driver_err(what: &str) -> impl Fn(cudarc::driver::DriverError) -> String + '_ {
+pub(super) fn driver_err(what: &str) -> impl Fn(cudarc::driver::DriverError) -> String + '_ {
     move |e| format!("CUDA {what}: {e:?}")
 }
 
 /// A GPU with the kernels loaded.
 pub struct Gpu {
-    stream: Arc<CudaStream>,
+    pub(super) stream: Arc<CudaStream>,
     cast: CudaFunction,
     map: CudaFunction,
     order: CudaFunction,
+    pub(super) sequences: CudaFunction,
     name: String,
     driver_version: i32,
 }
@@ -169,11 +170,15 @@ impl Gpu {
         let order = module
             .load_function("kodama_order")
             .map_err(driver_err("kodama_order"))?;
+        let sequences = module
+            .load_function("kodama_sequences")
+            .map_err(driver_err("kodama_sequences"))?;
         Ok(Gpu {
             stream: ctx.default_stream(),
             cast,
             map,
             order,
+            sequences,
             name,
             driver_version,
         })
@@ -288,13 +293,14 @@ pub fn map_unsupported(antenna: &Antenna, opt: &TraceOptions) -> Option<String> 
     (!why.is_empty()).then(|| format!("the GPU map kernel does not cover {}", why.join(", ")))
 }
 
-/// What the map kernel reads of a scene: the tree, per triangle its unit normal and first
-/// vertex, its material, and the slab table. Made once per scene (and frequency): a caller
-/// mapping several transmitters or grids uploads it once ([`Gpu::upload_scene`]).
+/// What the kernels read of a scene: the tree, per triangle its unit normal and first vertex,
+/// its material, and the slab table (the map's). Made once per scene (and frequency): a caller
+/// mapping several transmitters or grids, or searching from several transmitters, uploads it
+/// once ([`Gpu::upload_scene`]).
 pub struct MapScene {
-    tree: Tree,
-    tri: Vec<f64>,
-    material: Vec<u32>,
+    pub(super) tree: Tree,
+    pub(super) tri: Vec<f64>,
+    pub(super) material: Vec<u32>,
     slabs: Vec<f64>,
     /// (λ / 4π)²: the fixed-point sums to path gain.
     scale: f64,
@@ -561,11 +567,11 @@ fn add_fixed(mut a: Vec<u64>, b: Vec<u64>) -> Vec<u64> {
 
 /// A [`MapScene`] on the device: what every map of the scene reads, uploaded once.
 pub struct DeviceScene {
-    nodes: CudaSlice<u32>,
-    packets: CudaSlice<u32>,
-    n_nodes: u32,
-    tri: CudaSlice<f64>,
-    material: CudaSlice<u32>,
+    pub(super) nodes: CudaSlice<u32>,
+    pub(super) packets: CudaSlice<u32>,
+    pub(super) n_nodes: u32,
+    pub(super) tri: CudaSlice<f64>,
+    pub(super) material: CudaSlice<u32>,
     slabs: CudaSlice<f64>,
     scale: f64,
 }
@@ -615,7 +621,7 @@ impl Gpu {
     }
 
     /// Launches the order kernel for an n-ray lattice; `None` for no rays.
-    fn order(&self, n: u32) -> Result<Option<CudaSlice<u32>>, String> {
+    pub(super) fn order(&self, n: u32) -> Result<Option<CudaSlice<u32>>, String> {
         if n == 0 {
             return Ok(None);
         }

@@ -576,6 +576,34 @@ CUDA_CALLABLE bool cell_index(const double* k, double x, double y, u32* index) {
     return true;
 }
 
+// `RfScene::cast(o, d, EPS, ∞)`: the closest hit in f32 (tmax f32::MAX), its distance then
+// refined in f64 against the triangle's plane (`RfScene::refine`); `tri` holds per triangle its
+// unit normal and first vertex (6 f64). False on a miss, leaving the outputs as they were.
+CUDA_CALLABLE bool cast_refined(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                                const double* tri, V3 o, V3 d, double* t_out, u32* tri_out) {
+    float of[3] = {(float)o.x, (float)o.y, (float)o.z};
+    float df[3] = {(float)d.x, (float)d.y, (float)d.z};
+    float t32;
+    u32 hit_tri;
+    if (!closest_hit(nodes, n_nodes, packets, of, df, (float)EPS_M, 3.40282347e38f, &t32,
+                     &hit_tri))
+        return false;
+    const double* tr = tri + 6 * (u64)hit_tri;
+    V3 nn = v3(tr[0], tr[1], tr[2]);
+    double denom = vdot(nn, d);
+    double t64 = vdot(nn, vsub(v3(tr[3], tr[4], tr[5]), o)) / denom;
+    double dt = t64 - (double)t32;
+    if (dt < 0.0) dt = -dt;
+    double ad = denom < 0.0 ? -denom : denom;
+    if (ad > 1e-12 && dt <= 1e-3 * (1.0 + (double)t32)) {
+        *t_out = t64 > EPS_M ? t64 : EPS_M;
+    } else {
+        *t_out = (double)t32;
+    }
+    *tri_out = hit_tri;
+    return true;
+}
+
 // One launched ray, the `lattice_index`-th, from the transmitter to the end of its bounces.
 // `tri` holds per triangle its unit normal and first vertex (6 f64).
 CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packets,
@@ -613,26 +641,9 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
         double before = in_foliage;
         float of[3] = {(float)o.x, (float)o.y, (float)o.z};
         float df[3] = {(float)d.x, (float)d.y, (float)d.z};
-        float t32;
-        u32 hit_tri;
-        // `RfScene::cast`: tmin EPS, tmax f32::MAX, then the distance refined in f64.
-        bool hit = closest_hit(nodes, n_nodes, packets, of, df, (float)EPS_M, 3.40282347e38f,
-                               &t32, &hit_tri);
         double t_end = 1.0 / 0.0;
-        if (hit) {
-            const double* tr = tri + 6 * (u64)hit_tri;
-            V3 nn = v3(tr[0], tr[1], tr[2]);
-            double denom = vdot(nn, d);
-            double t64 = vdot(nn, vsub(v3(tr[3], tr[4], tr[5]), o)) / denom;
-            double dt = t64 - (double)t32;
-            if (dt < 0.0) dt = -dt;
-            double ad = denom < 0.0 ? -denom : denom;
-            if (ad > 1e-12 && dt <= 1e-3 * (1.0 + (double)t32)) {
-                t_end = t64 > EPS_M ? t64 : EPS_M;
-            } else {
-                t_end = (double)t32;
-            }
-        }
+        u32 hit_tri;
+        bool hit = cast_refined(nodes, n_nodes, packets, tri, o, d, &t_end, &hit_tri);
         if ((depth > 0 || k[C_LOS] != 0.0) && surface.n_nodes == 0) {
             if (d.z != 0.0) {
                 double t = (k[C_Z] - o.z) / d.z;
@@ -750,6 +761,170 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
 }
 
 // ---------------------------------------------------------------------------------------------
+// The link search's sequence search (`rf::sequences::reflection_sequences`): each launched ray
+// walks its tree of branches depth first, reflecting off every surface it meets and, with
+// transmission, also going through it, and every sequence of surfaces it reflects off goes into
+// one hash set shared by all threads. The set is the CPU's exactly (the same casts, to the bit,
+// in f64 between them), whatever order the threads insert in: the host sorts it.
+
+// Most interactions a path may have (`path::MAX_DEPTH`).
+#define SEQ_DEPTH_MAX 32
+#define SEQ_NONE 0xffffffffu
+
+// The scalars of a sequence search, as f64 (`SearchParams` in sequences.rs writes them).
+enum {
+    S_TX = 0,  // 3
+    S_NRAYS = 3,
+    S_DEPTH = 4,
+    S_TRANSMIT = 5,
+    S_FOL_MAT = 6,
+    S_COUNT = 7
+};
+
+// The set: open addressing over `slots` (a power of two; 0 empty, else 1 + the sequence's
+// index), the sequences themselves in `seqs`, `stride` words each (its length, then its
+// triangles). A thread writes its sequence before it claims a slot with one compare-and-swap, so
+// a slot seen taken already holds what it names: no locks, no waiting. Two threads racing for a
+// slot with the same sequence leave the loser's copy unnamed, which the host never reads.
+// counters[0] counts the sequences written, counters[1] becomes 1 when `seqs` ran out (the host
+// grows the set and searches again).
+struct SeqSet {
+    u32* slots;
+    u32 slot_mask;
+    u32* seqs;
+    u32 stride;
+    u32 seq_cap;
+    u32* counters;
+};
+
+// Adds 1 to *p, returning what it was: atomically on the device.
+CUDA_CALLABLE u32 bump(u32* p) {
+#ifdef KODAMA_DEVICE
+    return atomicAdd(p, 1u);
+#else
+    return (*p)++;
+#endif
+}
+
+CUDA_CALLABLE u32 load_word(const u32* p) {
+#ifdef KODAMA_DEVICE
+    return *(const volatile u32*)p;
+#else
+    return *p;
+#endif
+}
+
+CUDA_CALLABLE u32 claim(u32* p, u32 expected, u32 value) {
+#ifdef KODAMA_DEVICE
+    return atomicCAS(p, expected, value);
+#else
+    u32 old = *p;
+    if (old == expected) *p = value;
+    return old;
+#endif
+}
+
+// What this thread wrote is seen by a thread that sees the slot naming it (and the reverse).
+CUDA_CALLABLE void publish() {
+#ifdef KODAMA_DEVICE
+    __threadfence();
+#endif
+}
+
+CUDA_CALLABLE u64 seq_hash(const u32* path, u32 len) {
+    u64 h = mix64((u64)len);
+    for (u32 i = 0; i < len; i++) h = mix64(h ^ (u64)path[i]);
+    return h;
+}
+
+CUDA_CALLABLE bool seq_equal(const u32* stored, const u32* path, u32 len) {
+    if (load_word(stored) != len) return false;
+    for (u32 i = 0; i < len; i++)
+        if (load_word(stored + 1 + i) != path[i]) return false;
+    return true;
+}
+
+// Adds path[0..len) to the set unless it is there.
+CUDA_CALLABLE void seq_insert(const SeqSet& set, const u32* path, u32 len) {
+    u64 h = seq_hash(path, len);
+    u32 mine = 0;
+    for (u32 probe = 0; probe <= set.slot_mask; probe++) {
+        u32* slot = set.slots + ((u32)(h + probe) & set.slot_mask);
+        u32 v = load_word(slot);
+        if (v == 0) {
+            if (mine == 0) {
+                u32 at = bump(&set.counters[0]);
+                if (at >= set.seq_cap) {
+                    set.counters[1] = 1;
+                    return;
+                }
+                u32* out = set.seqs + (u64)at * set.stride;
+                out[0] = len;
+                for (u32 i = 0; i < len; i++) out[1 + i] = path[i];
+                publish();
+                mine = at + 1;
+            }
+            v = claim(slot, 0, mine);
+            if (v == 0) return;
+        }
+        publish();
+        if (seq_equal(set.seqs + (u64)(v - 1) * set.stride, path, len)) return;
+    }
+    set.counters[1] = 1;
+}
+
+// A branch of a ray's tree waiting its turn: where it starts, where it goes, its interactions so
+// far, the length of its sequence and the surface that sequence ends on (SEQ_NONE when the
+// branch went through or past a surface, its sequence its parent's).
+struct Branch {
+    V3 o, d;
+    u32 depth, len, tri;
+};
+
+// The launched ray `lattice_index`: every branch of its tree, as `chunk_sequences` follows them.
+// Depth first with the reflected branch pushed under the transmitted one, the stack holds at
+// most one waiting branch per depth and the one on top; path[0..len) is a branch's sequence
+// when it is popped, since only deeper branches wrote past it meanwhile.
+CUDA_CALLABLE void search(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                          const double* tri, const u32* material, const double* k,
+                          u32 lattice_index, const SeqSet& set) {
+    u32 max_depth = (u32)k[S_DEPTH];
+    bool transmit = k[S_TRANSMIT] != 0.0;
+    u32 foliage_mat = (u32)k[S_FOL_MAT];
+    Branch stack[SEQ_DEPTH_MAX + 2];
+    u32 path[SEQ_DEPTH_MAX];
+    u32 top = 0;
+    Branch first = {v3(k[S_TX], k[S_TX + 1], k[S_TX + 2]), lattice((u32)k[S_NRAYS], lattice_index),
+                    0, 0, SEQ_NONE};
+    stack[top++] = first;
+    while (top > 0) {
+        Branch b = stack[--top];
+        if (b.tri != SEQ_NONE) path[b.len - 1] = b.tri;
+        double t;
+        u32 h;
+        if (!cast_refined(nodes, n_nodes, packets, tri, b.o, b.d, &t, &h)) continue;
+        V3 p = vadd(b.o, vmul(b.d, t));
+        if (material[h] == foliage_mat) {
+            Branch on = {p, b.d, b.depth, b.len, SEQ_NONE};
+            stack[top++] = on;
+            continue;
+        }
+        if (b.depth + 1 > max_depth) continue;
+        const double* tr = tri + 6 * (u64)h;
+        V3 n = v3(tr[0], tr[1], tr[2]);
+        path[b.len] = h;
+        seq_insert(set, path, b.len + 1);
+        // `field::mirror`: k − 2 (k · n) n.
+        Branch reflected = {p, vsub(b.d, vmul(n, 2.0 * vdot(b.d, n))), b.depth + 1, b.len + 1, h};
+        stack[top++] = reflected;
+        if (transmit) {
+            Branch through = {p, b.d, b.depth + 1, b.len, SEQ_NONE};
+            stack[top++] = through;
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // The lattice's patch order (`fibonacci::patch_order`) on the device: the rays of a chunk cut into
 // rows of latitude, each row counting-sorted by azimuth bin. A row's bins follow the previous
 // row's, so the chunk is one counting sort by (row's first bin + bin), stable in k: sorting each
@@ -831,14 +1006,6 @@ CUDA_CALLABLE u32 patch_key(u32 start, u32 k, const u32* row_start, const u32* b
     u32 b = (u32)(x * (double)bins);
     if (b > bins - 1) b = bins - 1;
     return bin_off[lo] + b;
-}
-
-CUDA_CALLABLE u32 bump(u32* p) {
-#ifdef KODAMA_DEVICE
-    return atomicAdd(p, 1u);
-#else
-    return (*p)++;
-#endif
 }
 
 // The phases of one chunk's sort, thread `tid` of `threads`. `count` has a word per bin and one
@@ -932,6 +1099,19 @@ extern "C" __global__ void kodama_map(const Node* nodes, u32 n_nodes, const TriP
         shoot(nodes, n_nodes, packets, tri, material, slabs, surface, consts, order[i], acc);
 }
 
+// Thread i searches from the lattice's `order[i]`-th ray (the patch order: a warp's rays leave
+// side by side).
+extern "C" __global__ void kodama_sequences(const Node* nodes, u32 n_nodes,
+                                            const TriPacket* packets, const double* tri,
+                                            const u32* material, const double* consts,
+                                            const u32* order, u64 n, u32* slots, u32 slot_mask,
+                                            u32* seqs, u32 stride, u32 seq_cap, u32* counters) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    SeqSet set = {slots, slot_mask, seqs, stride, seq_cap, counters};
+    if (i < n && load_word(&counters[1]) == 0)
+        search(nodes, n_nodes, packets, tri, material, consts, order[i], set);
+}
+
 // Block c orders rays c * chunk.. of an n-ray lattice (chunk at most ORDER_CHUNK, ORDER_THREADS
 // threads a block) into order[c * chunk..] as lattice indices; `scratch` holds chunk / 4 + 2
 // words a block.
@@ -991,6 +1171,17 @@ extern "C" void kodama_host_map(const void* nodes, u32 n_nodes, const void* pack
     for (u64 i = 0; i < n; i++)
         shoot((const Node*)nodes, n_nodes, (const TriPacket*)packets, tri, material, slabs,
               surface, consts, first + (u32)i, acc);
+}
+// The host twin of `kodama_sequences`: rays `first..first + n` of the lattice into one set.
+extern "C" void kodama_host_sequences(const void* nodes, u32 n_nodes, const void* packets,
+                                      const double* tri, const u32* material,
+                                      const double* consts, u32 first, u64 n, u32* slots,
+                                      u32 slot_mask, u32* seqs, u32 stride, u32 seq_cap,
+                                      u32* counters) {
+    SeqSet set = {slots, slot_mask, seqs, stride, seq_cap, counters};
+    for (u64 i = 0; i < n && counters[1] == 0; i++)
+        search((const Node*)nodes, n_nodes, (const TriPacket*)packets, tri, material, consts,
+               first + (u32)i, set);
 }
 // The host twin of `kodama_order` for one chunk, rays `start..start + len` of an n-ray lattice
 // (len at most ORDER_CHUNK and within n), as offsets from start: the device's phases, run one

@@ -19,12 +19,17 @@
 //!   every run whatever the scheduling, and the same bits as the host twin's. It covers the
 //!   flat plane and terrain-following surfaces, iso antennas, reflection, transmission,
 //!   Lambertian diffuse reflection and foliage;
-//!   anything else is refused by name ([`map_unavailable`], `map_unsupported`), and the CPU path
+//!   anything else is refused by name ([`device_unavailable`], `map_unsupported`), and the CPU path
 //!   stays the default.
 //! - A scene goes up once (`Gpu::upload_scene`) and stays for any number of maps (`Gpu::map`):
 //!   per map only its scalars travel, the rays' patch order is computed on the device
 //!   (`kodama_order`, `fibonacci::patch_order`'s to the ray) and the cells come back.
 //!   [`radio_map_on`] uploads the scene for its one map.
+//! - The link search's rays are one kernel too (`link_search`): each thread walks a launched
+//!   ray's whole tree of reflected and transmitted branches and adds the surface sequences it
+//!   finds to one hash set on the device. The set is the CPU's exactly, so a link trace on the
+//!   GPU ([`trace_links_on`](crate::rf::paths::trace_links_on)) is the CPU's to the bit: the
+//!   image method and the fields after it run on the CPU from the same sorted sequences.
 
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
@@ -80,9 +85,9 @@ pub fn driver_present() -> bool {
     }
 }
 
-/// Why a radio map cannot be traced on `device` by this build on this machine, or `None` when
-/// it can. Callers turn the reason into a user error (exit code 2).
-pub fn map_unavailable(device: Device) -> Option<String> {
+/// Why a radio map or a link trace cannot run on `device` in this build on this machine, or
+/// `None` when it can. Callers turn the reason into a user error (exit code 2).
+pub fn device_unavailable(device: Device) -> Option<String> {
     match device {
         Device::Cpu => None,
         Device::Cuda if !BUILT => Some(
@@ -112,7 +117,7 @@ pub fn radio_map_on(
     opt: &TraceOptions,
     freq_hz: f64,
 ) -> Result<Raster, String> {
-    if let Some(why) = map_unavailable(device) {
+    if let Some(why) = device_unavailable(device) {
         return Err(why);
     }
     match device {
@@ -150,10 +155,61 @@ fn cuda_map(
     _: &TraceOptions,
     _: f64,
 ) -> Result<Raster, String> {
-    unreachable!("map_unavailable refuses cuda without the feature")
+    unreachable!("device_unavailable refuses cuda without the feature")
+}
+
+/// [`reflection_sequences`](crate::rf::sequences::reflection_sequences) from each of `txs` on
+/// `device`: the same sorted sequences either way, the scene uploaded once for all of them.
+pub fn reflection_sequences_on(
+    device: Device,
+    scene: &RfScene,
+    txs: &[DVec3],
+    opt: &TraceOptions,
+) -> Result<Vec<Vec<Vec<u32>>>, String> {
+    if let Some(why) = device_unavailable(device) {
+        return Err(why);
+    }
+    match device {
+        Device::Cpu => Ok(txs
+            .iter()
+            .map(|&tx| crate::rf::sequences::reflection_sequences(scene, tx, opt))
+            .collect()),
+        Device::Cuda => cuda_sequences(scene, txs, opt).map_err(|e| format!("device cuda: {e}")),
+    }
+}
+
+#[cfg(feature = "cuda")]
+fn cuda_sequences(
+    scene: &RfScene,
+    txs: &[DVec3],
+    opt: &TraceOptions,
+) -> Result<Vec<Vec<Vec<u32>>>, String> {
+    let params = txs
+        .iter()
+        .map(|&tx| SearchParams::new(tx, opt))
+        .collect::<Result<Vec<_>, String>>()?;
+    let gpu = Gpu::new()?;
+    let resident = gpu.upload_scene(&MapScene::new(scene)?)?;
+    params
+        .iter()
+        .map(|p| gpu.reflection_sequences(&resident, p).map(|(s, _)| s))
+        .collect()
+}
+
+#[cfg(not(feature = "cuda"))]
+fn cuda_sequences(
+    _: &RfScene,
+    _: &[DVec3],
+    _: &TraceOptions,
+) -> Result<Vec<Vec<Vec<u32>>>, String> {
+    unreachable!("device_unavailable refuses cuda without the feature")
 }
 
 #[cfg(feature = "cuda")]
 mod backend;
 #[cfg(feature = "cuda")]
 pub use backend::*;
+#[cfg(feature = "cuda")]
+mod link_search;
+#[cfg(feature = "cuda")]
+pub use link_search::*;
