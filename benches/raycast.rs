@@ -2,7 +2,12 @@
 //! a 1 km² synthetic city, and the munich radio map at 10^6 / 10^7 rays, depth 3 / 5, on 1 and 2
 //! threads. Every figure is the best of `--n` runs (default 5): the machine is shared.
 //!
-//! `cargo bench --bench raycast -- [cast] [map] [--n N] [--threads 1,2] [--rays 1e6,1e7]
+//! `links` times the link tracer on munich: the sequence search alone
+//! (`rf::sequences::reflection_sequences`, the part the GPU takes) and the whole trace of 21
+//! links from the transmitter (receivers 1.5 m up on a spiral 30-190 m out), at `--rays` and
+//! `--depth`, with transmission.
+//!
+//! `cargo bench --bench raycast -- [cast] [map] [links] [--n N] [--threads 1,2] [--rays 1e6,1e7]
 //! [--depth 3,5] [--no-city] [--shuffle] [--patch-order] [--dump-rays FILE]` (both parts by
 //! default; `--no-city` casts on munich only; `--shuffle` casts the closest-hit rays in a random
 //! order, where consecutive rays share no path through the tree; `--patch-order` takes the
@@ -24,8 +29,10 @@ use kodama_nodes::rf::antenna::Antenna;
 use kodama_nodes::rf::fibonacci::{fibonacci_sphere, patch_order};
 use kodama_nodes::rf::map_plane::default_plane;
 use kodama_nodes::rf::path::TraceOptions;
+use kodama_nodes::rf::paths::trace_links;
 use kodama_nodes::rf::radiomap::radio_map;
 use kodama_nodes::rf::scene::RfScene;
+use kodama_nodes::rf::sequences::reflection_sequences;
 use kodama_nodes::stage::Slot;
 use kodama_nodes::synth::synth_city::{SynthCityParams, generate};
 use kodama_nodes::synth::truth_scene::{TruthScene, TruthSceneParams};
@@ -37,6 +44,7 @@ const TX: [f64; 3] = [8.5, 21.0, 27.0];
 struct Args {
     cast: bool,
     map: bool,
+    links: bool,
     n: usize,
     threads: Vec<usize>,
     rays: Vec<u32>,
@@ -58,6 +66,7 @@ fn args() -> Args {
     let mut a = Args {
         cast: false,
         map: false,
+        links: false,
         n: 5,
         threads: vec![1, 2],
         rays: vec![1_000_000, 10_000_000],
@@ -74,6 +83,7 @@ fn args() -> Args {
         match v[i].as_str() {
             "cast" => a.cast = true,
             "map" => a.map = true,
+            "links" => a.links = true,
             "--n" => (a.n, i) = (next.parse().unwrap_or(5), i + 1),
             "--threads" => (a.threads, i) = (list(&next), i + 1),
             "--rays" => (a.rays, i) = (list(&next), i + 1),
@@ -86,7 +96,7 @@ fn args() -> Args {
         }
         i += 1;
     }
-    if !a.cast && !a.map {
+    if !a.cast && !a.map && !a.links {
         (a.cast, a.map) = (true, true);
     }
     a
@@ -478,6 +488,49 @@ fn main() {
                 }
                 println!("{line}");
             }
+        }
+    }
+    if a.links {
+        let rf = thickness.into_iter().fold(
+            RfScene::new(&scene, 3.5e9, false).expect("munich materials"),
+            |rf, (m, d)| rf.with_thickness(m, d),
+        );
+        links_case(&rf, &a);
+    }
+}
+
+/// The sequence search and the whole link trace, best of `a.n` each, at every thread count.
+fn links_case(rf: &RfScene, a: &Args) {
+    let links: Vec<([f64; 3], [f64; 3])> = (0..21)
+        .map(|i| {
+            let angle = std::f64::consts::TAU * i as f64 / 21.0;
+            let r = 30.0 + 8.0 * i as f64;
+            (TX, [TX[0] + r * angle.cos(), TX[1] + r * angle.sin(), 1.5])
+        })
+        .collect();
+    println!("munich links: tx {TX:?}, 3.5 GHz, 21 receivers, LOS + specular + transmission");
+    let iso = Antenna::default();
+    for &rays in &a.rays {
+        for &depth in &a.depth {
+            let opt = TraceOptions {
+                max_depth: depth,
+                rays,
+                ..Default::default()
+            };
+            let found = reflection_sequences(rf, DVec3::from(TX), &opt).len();
+            let mut line = format!("  {rays:>9} rays, depth {depth}, {found} sequences:");
+            for &threads in &a.threads {
+                let search = best_of(a.n, threads, || {
+                    std::hint::black_box(reflection_sequences(rf, DVec3::from(TX), &opt));
+                });
+                let trace = best_of(a.n, threads, || {
+                    std::hint::black_box(trace_links(rf, &links, &iso, &iso, &opt, 3.5e9));
+                });
+                line += &format!(
+                    "  {threads} thread(s): search {search:.3} s of the trace's {trace:.3} s"
+                );
+            }
+            println!("{line}");
         }
     }
 }

@@ -11,11 +11,11 @@ use glam::DVec3;
 use kodama_nodes::io::export::{Encoded, encode};
 use kodama_nodes::io::sionna_xml::read_scene_with_thickness;
 use kodama_nodes::rf::antenna::Antenna;
-use kodama_nodes::rf::gpu::{Device, map_unavailable, radio_map_on};
+use kodama_nodes::rf::gpu::{Device, device_unavailable, radio_map_on};
 use kodama_nodes::rf::links_csv::{read_links, write_results};
 use kodama_nodes::rf::map_plane::default_plane;
 use kodama_nodes::rf::path::{LinkEnds, LinkPaths, TraceOptions};
-use kodama_nodes::rf::paths::trace_links;
+use kodama_nodes::rf::paths::trace_links_on;
 use kodama_nodes::rf::scene::RfScene;
 use kodama_nodes::{Artifact, Site, StageError};
 
@@ -118,6 +118,11 @@ pub struct TraceArgs {
     /// and complex gain) as JSON: what to read when one link's figure needs explaining.
     #[arg(long)]
     paths: Option<PathBuf>,
+    /// Where the rays of the links' sequence search run: `cpu`, or `cuda` (an NVIDIA GPU; a
+    /// build with `--features cuda` and the NVIDIA driver; README, "GPU backend (optional)").
+    /// The paths are the same bits on either.
+    #[arg(long, value_parser = Device::parse, default_value = "cpu")]
+    device: Device,
 }
 
 /// `radiomap` arguments.
@@ -246,6 +251,10 @@ const TRACE_STEPS: usize = 20;
 
 /// `kodama-dag trace`.
 pub fn trace(a: TraceArgs) -> Result<u8, Fail> {
+    // Before the scene is read: a GPU that cannot be had is the user's to fix (exit 2).
+    if let Some(why) = device_unavailable(a.device) {
+        return Err((2, format!("error: {why}")));
+    }
     let task = Task::new(Mode::detect(false), "reading the scene", None);
     let scene = load(&a.scene, &a.interactions)?;
     regular_file("--links", &a.links)?;
@@ -274,14 +283,15 @@ pub fn trace(a: TraceArgs) -> Result<u8, Fail> {
             .filter(|&i| batch.binary_search(&links[i].0.map(f64::to_bits)).is_ok())
             .collect();
         let pairs: Vec<_> = idx.iter().map(|&i| links[i]).collect();
-        let traced = trace_links(
+        let traced = trace_links_on(
+            a.device,
             &scene,
             &pairs,
-            &a.tx_antenna,
-            &rx_ant,
+            (&a.tx_antenna, &rx_ant),
             &a.interactions.options(),
             a.interactions.freq_hz,
-        );
+        )
+        .map_err(|e| (1, format!("error: {e}")))?;
         for (i, r) in idx.into_iter().zip(traced) {
             results[i] = Some(r);
         }
@@ -369,7 +379,7 @@ pub fn radiomap(a: RadiomapArgs) -> Result<u8, Fail> {
         ));
     }
     // Before the scene is read: a GPU that cannot be had is the user's to fix (exit 2).
-    if let Some(why) = map_unavailable(a.device) {
+    if let Some(why) = device_unavailable(a.device) {
         return Err((2, format!("error: {why}")));
     }
     let task = Task::new(Mode::detect(false), "reading the scene", None);

@@ -4,6 +4,8 @@
 //! evaluated along each path (`path_field`), to which diffracted paths (`diffracted`) and diffuse
 //! power (`diffuse`) are added.
 
+use std::convert::Infallible;
+
 use glam::DVec3;
 use num_complex::Complex64 as C64;
 use rayon::prelude::*;
@@ -11,6 +13,7 @@ use rayon::prelude::*;
 use super::antenna::Antenna;
 use super::diffraction_search::diffraction_sequences;
 use super::foliage::FoliageDepth;
+use super::gpu::{Device, reflection_sequences_on};
 use super::path::{LinkEnds, LinkPaths, Path, TraceOptions, Tracer};
 use super::scene::RfScene;
 use super::{diffracted, diffuse, image_method, path_field, sequences};
@@ -34,6 +37,42 @@ pub fn trace_links(
     opt: &TraceOptions,
     freq_hz: f64,
 ) -> Vec<LinkPaths> {
+    let search = |txs: &[DVec3]| -> Result<_, Infallible> {
+        Ok(txs
+            .iter()
+            .map(|&tx| sequences::reflection_sequences(scene, tx, opt))
+            .collect())
+    };
+    let ends = (tx_antenna, rx_antenna);
+    match trace_links_searched(scene, links, ends, opt, freq_hz, search) {
+        Ok(paths) => paths,
+        Err(never) => match never {},
+    }
+}
+
+/// [`trace_links`] with the rays of its sequence search on `device`: the same paths to the bit
+/// (the GPU's sequences are the CPU's; `rf::gpu`). An error when the device cannot be used.
+pub fn trace_links_on(
+    device: Device,
+    scene: &RfScene,
+    links: &[LinkEnds],
+    (tx_antenna, rx_antenna): (&Antenna, &Antenna),
+    opt: &TraceOptions,
+    freq_hz: f64,
+) -> Result<Vec<LinkPaths>, String> {
+    let search = |txs: &[DVec3]| reflection_sequences_on(device, scene, txs, opt);
+    trace_links_searched(scene, links, (tx_antenna, rx_antenna), opt, freq_hz, search)
+}
+
+/// [`trace_links`] with each transmitter's sorted sequences from `search`.
+fn trace_links_searched<E: Send>(
+    scene: &RfScene,
+    links: &[LinkEnds],
+    (tx_antenna, rx_antenna): (&Antenna, &Antenna),
+    opt: &TraceOptions,
+    freq_hz: f64,
+    search: impl FnOnce(&[DVec3]) -> Result<Vec<Vec<Vec<u32>>>, E> + Send,
+) -> Result<Vec<LinkPaths>, E> {
     let tracer = Tracer {
         scene,
         tx_antenna,
@@ -61,13 +100,9 @@ pub fn trace_links(
                 super::diffraction::Wedges::default()
             }
         },
-        || {
-            tx_points
-                .iter()
-                .map(|&tx| sequences::reflection_sequences(scene, tx, opt))
-                .collect::<Vec<_>>()
-        },
+        || search(&tx_points),
     );
+    let found = found?;
     let from_tx: Vec<FromTx> = tx_points
         .iter()
         .zip(found)
@@ -97,7 +132,7 @@ pub fn trace_links(
             }
         }
     }
-    links
+    Ok(links
         .par_iter()
         .zip(diffuse.par_iter().zip(diffuse_split))
         .map(|(link, (&diffuse_power, diffuse_by_reflections))| {
@@ -111,7 +146,7 @@ pub fn trace_links(
             summary.diffuse_by_reflections = diffuse_by_reflections;
             summary
         })
-        .collect()
+        .collect())
 }
 
 /// The direct path and every sequence solved, of one receiver.

@@ -9,12 +9,13 @@ use serde::{Deserialize, Serialize};
 use super::antenna::Antenna;
 use super::calibration::{self, Calibration};
 use super::foliage::{FoliageLaw, is_linear};
+use super::gpu::{Device, device_unavailable};
 use super::path::{LinkPaths, TraceOptions};
-use super::paths::trace_links;
+use super::paths::trace_links_on;
 use super::scattering::ScatteringPattern;
 use super::scene::RfScene;
 use crate::artifact::{Endpoint, Measurements, ObjectClass, Raster, Scene};
-use crate::stage::{Ctx, StageError};
+use crate::stage::{Ctx, ParamError, StageError};
 
 /// The params of a Trace node (and a Calibrate node's `trace`).
 #[derive(Clone, Debug, Default, Serialize, Deserialize)]
@@ -41,6 +42,12 @@ pub struct TraceParams {
     /// transmitter"). Default none: the whole scene.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reach_m: Option<f64>,
+    /// Where the rays of the links' sequence search run: `cpu` (the default) or `cuda` (a build
+    /// with feature `cuda` and an NVIDIA driver; README, "GPU backend (optional)"). The paths
+    /// are the same bits on either. Left out of the params' encoding at `cpu`, so earlier cache
+    /// entries stay valid.
+    #[serde(default, skip_serializing_if = "Device::is_cpu")]
+    pub device: Device,
 }
 
 /// `options` of [`TraceParams`]: which interactions the links follow, and how hard the trace
@@ -158,6 +165,10 @@ pub fn trace_groups(
     ctx: &Ctx,
     mut each: impl FnMut(TracedGroup) -> Result<(), StageError>,
 ) -> Result<(), StageError> {
+    // Refused before any group is traced, not after the first.
+    if let Some(why) = device_unavailable(p.device) {
+        return Err(StageError::Param(ParamError::new("device", why)));
+    }
     let z = |e: &Endpoint| -> Result<f64, StageError> {
         e.absolute_z(terrain.and_then(|t| t.bilinear(e.x, e.y)))
             .ok_or_else(|| {
@@ -233,7 +244,9 @@ pub fn trace_groups(
             tx_antenna.azimuth_deg += m.azimuth_deg;
         }
         let pairs: Vec<_> = idx.iter().map(|&i| ends[i]).collect();
-        let paths = trace_links(&rf, &pairs, &tx_antenna, &p.rx_antenna, &options, freq);
+        let ends_antennas = (&tx_antenna, &p.rx_antenna);
+        let paths = trace_links_on(p.device, &rf, &pairs, ends_antennas, &options, freq)
+            .map_err(|e| StageError::Param(ParamError::new("device", e)))?;
         each(TracedGroup {
             links: idx,
             freq_hz: freq,

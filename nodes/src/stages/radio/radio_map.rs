@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::artifact::{ArtifactType, Grid, Raster, Scene};
 use crate::rf::antenna::Antenna;
 use crate::rf::foliage::{FoliageLaw, is_linear};
-use crate::rf::gpu::{Device, map_unavailable, radio_map_on};
+use crate::rf::gpu::{Device, device_unavailable, radio_map_on};
 use crate::rf::map_plane::{MapPlane, default_grid};
 use crate::rf::path::TraceOptions;
 use crate::rf::scattering::ScatteringPattern;
@@ -209,7 +209,7 @@ impl Stage for RadioMap {
     }
 
     fn run(p: &Self::Params, inputs: &Inputs, _: &Ctx) -> Result<Raster, StageError> {
-        if let Some(why) = map_unavailable(p.device) {
+        if let Some(why) = device_unavailable(p.device) {
             return Err(StageError::Param(ParamError::new("device", why)));
         }
         let whole: &Scene = inputs.one("scene")?;

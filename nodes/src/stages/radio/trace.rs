@@ -174,6 +174,46 @@ mod tests {
         }
     }
 
+    /// `device: cpu` leaves the params' serialisation (the cache key) as it was; `cuda` enters
+    /// it; asking for cuda where it cannot run (no feature, or no driver here) is a param error
+    /// before anything is traced.
+    #[test]
+    fn device_param_keys_and_errors() {
+        use crate::rf::gpu::Device;
+        let p: TraceParams = serde_json::from_str("{}").unwrap();
+        assert_eq!(p.device, Device::Cpu);
+        assert!(!serde_json::to_string(&p).unwrap().contains("device"));
+        let q: TraceParams = serde_json::from_str(r#"{"device": "cuda"}"#).unwrap();
+        assert!(
+            serde_json::to_string(&q)
+                .unwrap()
+                .contains(r#""device":"cuda""#)
+        );
+        assert!(serde_json::from_str::<TraceParams>(r#"{"device": "gpu"}"#).is_err());
+        if crate::rf::gpu::device_unavailable(Device::Cuda).is_none() {
+            println!("skipped: this machine can trace on cuda, so nothing is refused");
+            return;
+        }
+        let inputs = Inputs::new()
+            .with(
+                "scene",
+                Slot::One(Arc::new(Artifact::Scene(Scene::default()))),
+            )
+            .with(
+                "links",
+                Slot::One(Arc::new(Artifact::Measurements(one_link()))),
+            )
+            .with(
+                "terrain",
+                Slot::Optional(Some(Arc::new(Artifact::Raster(flat(12.0))))),
+            );
+        let s = site();
+        match Trace::run(&q, &inputs, &Ctx::new(&s, &[])) {
+            Err(StageError::Param(e)) => assert_eq!(e.field, "device"),
+            other => panic!("expected a device error, got {:?}", other.map(|_| ())),
+        }
+    }
+
     #[test]
     fn trace_predicts_friis_in_free_space_with_heights_above_ground() {
         let mut links = one_link();
