@@ -433,6 +433,13 @@ fn main() {
     let xml = munich();
     let (scene, thickness) = read_scene_with_thickness(&xml).expect("munich (../shared/data)");
     let tx = TX.map(|c| c as f32);
+    // The scene as Sionna RT traces it: its materials at 3.5 GHz, each with the file's thickness.
+    let radio_scene = || {
+        thickness.iter().fold(
+            RfScene::new(&scene, 3.5e9, false).expect("munich materials"),
+            |rf, (&m, &d)| rf.with_thickness(m, d),
+        )
+    };
     if a.cast {
         cast_case("munich", &scene, tx, &a);
     }
@@ -451,10 +458,7 @@ fn main() {
         cast_case("synthetic city 1 km x 1 km", &city, tx, &a);
     }
     if a.map {
-        let rf = thickness.into_iter().fold(
-            RfScene::new(&scene, 3.5e9, false).expect("munich materials"),
-            |rf, (m, d)| rf.with_thickness(m, d),
-        );
+        let rf = radio_scene();
         let plane = default_plane(&rf, 5.0, 1.5);
         println!(
             "munich radio map: tx {TX:?}, 3.5 GHz, {} x {} cells of 5 m at 1.5 m, LOS + specular + \
@@ -491,10 +495,7 @@ fn main() {
         }
     }
     if a.links {
-        let rf = thickness.into_iter().fold(
-            RfScene::new(&scene, 3.5e9, false).expect("munich materials"),
-            |rf, (m, d)| rf.with_thickness(m, d),
-        );
+        let rf = radio_scene();
         links_case(&rf, &a);
     }
 }

@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Times Sionna RT 2.2.0's radio map of munich on the device machine's GPU (cuda_ad_mono_polarized),
 # with scripts/sionna_radiomap_bench.py, for (rays, depth) = (1e6, 3) (1e7, 3) (1e6, 5) (1e7, 5),
-# and the paper's settings (1e6, 12) (1e7, 12) with diffuse reflection at S 0.3, warm best of 3
+# the paper's settings (1e6, 12) (1e7, 12) with diffuse reflection at S 0.3, and (1e6, 3) (1e7, 3)
+# with first-order edge diffraction, warm best of 3
 # runs each. Run from the repository root, carrying .sionnacarry:
 #
-#     run(command="bash scripts/sionna_device_bench.sh", carry=[".sionnacarry"], timeout_s=420)
+#     run(command="bash scripts/sionna_device_bench.sh", carry=[".sionnacarry"], timeout_s=600)
 #
 # .sionnacarry/ holds wheels from PyPI, trimmed to fit the 64 MiB a run may carry: mitsuba 3.9.1
 # (cp312 manylinux_2_28, only the cuda_ad_mono_polarized variant, no srgb.coeff, no volumetric /
@@ -37,14 +38,17 @@ MUNICH="$SITE/sionna/rt/scenes/munich/munich.xml"
 [ -f "$MUNICH" ] || MUNICH=$(find "$SITE" -name munich.xml | head -1)
 echo "== scene: $MUNICH"
 rc=0
-# The last two rows are the paper's settings: depth 12 with diffuse reflection (S 0.3).
-for nd in "1e6 3 0" "1e7 3 0" "1e6 5 0" "1e7 5 0" "1e6 12 0.3" "1e7 12 0.3"; do
+# Then the paper's settings: depth 12 with diffuse reflection (S 0.3); then first-order edge
+# diffraction at depth 3 (the fourth field: 1 adds --diffraction).
+for nd in "1e6 3 0 0" "1e7 3 0 0" "1e6 5 0 0" "1e7 5 0 0" "1e6 12 0.3 0" "1e7 12 0.3 0" "1e6 3 0 1" "1e7 3 0 1"; do
     set -- $nd
+    extra=""
+    [ "$4" = 1 ] && extra="--diffraction"
     t=$(date +%s)
-    timeout 150 python3 scripts/sionna_radiomap_bench.py "$MUNICH" - --rays "$1" --depth "$2" --diffuse "$3" --runs 3 2>&1 \
-        | sed "s/^/[rays $1 depth $2 diffuse $3] /" | tail -15
+    timeout 150 python3 scripts/sionna_radiomap_bench.py "$MUNICH" - --rays "$1" --depth "$2" --diffuse "$3" $extra --runs 3 2>&1 \
+        | sed "s/^/[rays $1 depth $2 diffuse $3 diffraction $4] /" | tail -15
     r=${PIPESTATUS[0]}
-    echo "[rays $1 depth $2 diffuse $3] exit $r, $(( $(date +%s) - t )) s including import, scene load, first (compiling) call"
+    echo "[rays $1 depth $2 diffuse $3 diffraction $4] exit $r, $(( $(date +%s) - t )) s including import, scene load, first (compiling) call"
     [ "$r" = 0 ] || rc=$r
 done
 exit $rc

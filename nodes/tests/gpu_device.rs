@@ -236,7 +236,18 @@ fn map_options(rays: u32, depth: u32, diffuse: bool) -> TraceOptions {
     }
 }
 
-/// The device map is the host twin's to the bit (the same integer sums), twice.
+/// With edge diffraction too: LOS, reflection, transmission and first-order diffraction.
+fn diffraction_options(rays: u32, depth: u32) -> TraceOptions {
+    TraceOptions {
+        diffraction: true,
+        ..map_options(rays, depth, false)
+    }
+}
+
+/// The device map against the host twin's: to the bit (the same integer sums) where the rays
+/// follow specular paths, whose only transcendental functions are the lattice's; within a
+/// tolerance where diffuse directions or the UTD call the device's libm, whose last bits are
+/// not glibc's. Each case three times, twice on a resident scene, the same bits each time.
 #[test]
 fn device_maps_are_the_host_maps() {
     let Some(gpu) = gpu() else { return };
@@ -247,10 +258,12 @@ fn device_maps_are_the_host_maps() {
         (
             "street grid",
             map_inputs(&scene, street_tx, &plane, 100_000, 3),
+            true,
         ),
         (
             "street grid, diffuse",
             map_inputs_with(&scene, street_tx, &plane, &map_options(100_000, 3, true)),
+            false,
         ),
         (
             "street grid, rolling surface",
@@ -260,26 +273,48 @@ fn device_maps_are_the_host_maps() {
                 &gpu_common::rolling_surface(),
                 &map_options(100_000, 3, true),
             ),
+            false,
+        ),
+        (
+            "street grid, diffraction",
+            map_inputs_with(&scene, street_tx, &plane, &diffraction_options(100_000, 3)),
+            false,
+        ),
+        (
+            "street grid, rolling surface, diffraction",
+            map_inputs_with(
+                &scene,
+                street_tx,
+                &gpu_common::rolling_surface(),
+                &diffraction_options(100_000, 3),
+            ),
+            false,
         ),
     ];
     let munich = munich_xml().map(|xml| gpu_common::munich_rf(&xml));
     if let Some(m) = &munich {
         let plane = default_plane(m, 5.0, 1.5);
         let tx = DVec3::new(8.5, 21.0, 27.0);
-        cases.push(("munich", map_inputs(m, tx, &plane, 100_000, 3)));
+        cases.push(("munich", map_inputs(m, tx, &plane, 100_000, 3), true));
         cases.push((
             "munich, diffuse, depth 12",
             map_inputs_with(m, tx, &plane, &map_options(100_000, 12, true)),
+            false,
+        ));
+        cases.push((
+            "munich, diffraction",
+            map_inputs_with(m, tx, &plane, &diffraction_options(100_000, 3)),
+            false,
         ));
     }
-    for (name, inputs) in cases {
+    let bits = |r: &[f32]| r.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    for (name, inputs, exact) in cases {
         let host = host_radio_map(&inputs);
         let (a, _) = gpu.radio_map(&inputs).unwrap();
         // Twice more on one resident scene.
         let dev = gpu.upload_scene(&inputs.scene).unwrap();
         let (b, _) = gpu.map(&dev, &inputs.map).unwrap();
         let (c, _) = gpu.map(&dev, &inputs.map).unwrap();
-        let bits = |r: &[f32]| r.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
         assert_eq!(
             bits(&a.data.0),
             bits(&b.data.0),
@@ -290,16 +325,30 @@ fn device_maps_are_the_host_maps() {
             bits(&c.data.0),
             "{name}: two maps of a resident scene differ"
         );
-        assert_eq!(
-            bits(&a.data.0),
-            bits(&host.data.0),
-            "{name}: device map != host map"
-        );
         let reached = a.data.0.iter().filter(|v| **v > 0.0).count();
-        println!(
-            "{name}: device map = host map to the bit, thrice, twice on a resident scene \
-             ({reached} cells reached)"
-        );
+        if exact {
+            assert_eq!(
+                bits(&a.data.0),
+                bits(&host.data.0),
+                "{name}: device map != host map"
+            );
+            println!(
+                "{name}: device map = host map to the bit, thrice, twice on a resident scene \
+                 ({reached} cells reached)"
+            );
+        } else {
+            let (both, only, median, _, max) = gpu_common::compare_maps(&a.data.0, &host.data.0);
+            let same = bits(&a.data.0) == bits(&host.data.0);
+            println!(
+                "{name}: device map against host map: {both} cells both, {only} one only, |dB| \
+                 median {median:.2e}, max {max:.2e}, same bits {same}; thrice the same bits"
+            );
+            assert!(
+                only * 1000 <= both,
+                "{name}: {only} cells reached by one map only"
+            );
+            assert!(median <= 1e-3, "{name}: median |difference| {median} dB");
+        }
     }
 }
 
@@ -340,17 +389,24 @@ fn device_map_speed_on_munich() {
         rayon::current_num_threads()
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
-    // The issue's rows, then the paper's settings: depth 12 with diffuse reflection (S 0.3).
+    // The issue's rows, the paper's settings (depth 12 with diffuse reflection, S 0.3), then
+    // first-order diffraction at depth 3 (Sionna RT CUDA: 0.042 s at 10^6 rays on an H100).
+    // (rays, depth, diffuse, diffraction)
     let rows = [
-        (1_000_000u32, 3u32, false),
-        (1_000_000, 5, false),
-        (10_000_000, 3, false),
-        (10_000_000, 5, false),
-        (1_000_000, 12, true),
-        (10_000_000, 12, true),
+        (1_000_000u32, 3u32, false, false),
+        (1_000_000, 5, false, false),
+        (10_000_000, 3, false, false),
+        (10_000_000, 5, false, false),
+        (1_000_000, 12, true, false),
+        (10_000_000, 12, true, false),
+        (1_000_000, 3, false, true),
+        (10_000_000, 3, false, true),
     ];
-    for (n, depth, diffuse) in rows {
-        let opt = map_options(n, depth, diffuse);
+    for (n, depth, diffuse, diffraction) in rows {
+        let opt = TraceOptions {
+            diffraction,
+            ..map_options(n, depth, diffuse)
+        };
         let params = MapParams::new(&scene, tx, &Antenna::default(), &plane, &opt, 3.5e9).unwrap();
         let (a, t) = gpu.map(&dev, &params).unwrap();
         let (b, t2) = gpu.map(&dev, &params).unwrap();
@@ -366,7 +422,11 @@ fn device_map_speed_on_munich() {
         let cpu = radio_map(&scene, tx, &Antenna::default(), &plane, &opt, 3.5e9);
         let cpu_s = clock.elapsed().as_secs_f64();
         let (both, only, median, _, max) = gpu_common::compare_maps(&a.data.0, &cpu.data.0);
-        let depth = format!("{depth}{}", if diffuse { " + diffuse" } else { "" });
+        let depth = format!(
+            "{depth}{}{}",
+            if diffuse { " + diffuse" } else { "" },
+            if diffraction { " + diffraction" } else { "" }
+        );
         println!(
             "| {} | {n} | {depth} | {call_s:.4} | {kernel_s:.4} | {:.0} | {cpu_s:.4} | \
                  {:.1}x | {both} | {only} | {median:.2e} | {max:.2e} | {same} |",

@@ -17,10 +17,12 @@ use crate::artifact::Material;
 use crate::artifact::{Grid, PodVec, Raster};
 use crate::geom::wide_bvh::{GPU_NODE_WORDS, GPU_PACKET_WORDS, WideBvh};
 use crate::rf::antenna::{Antenna, Pattern, Polarization};
+use crate::rf::diffraction::{WedgeSize, Wedges, wedges_for};
 use crate::rf::em::slab;
 use crate::rf::foliage::FoliageDepth;
 use crate::rf::map_plane::MapPlane;
 use crate::rf::path::TraceOptions;
+use crate::rf::radiomap_diffraction::lit_wedges;
 use crate::rf::scattering::ScatteringPattern;
 use crate::rf::scene::RfScene;
 
@@ -123,6 +125,8 @@ pub struct Gpu {
     cast: CudaFunction,
     map: CudaFunction,
     order: CudaFunction,
+    draws: CudaFunction,
+    diffraction: CudaFunction,
     pub(super) sequences: CudaFunction,
     name: String,
     driver_version: i32,
@@ -173,11 +177,19 @@ impl Gpu {
         let sequences = module
             .load_function("kodama_sequences")
             .map_err(driver_err("kodama_sequences"))?;
+        let draws = module
+            .load_function("kodama_draws")
+            .map_err(driver_err("kodama_draws"))?;
+        let diffraction = module
+            .load_function("kodama_diffraction")
+            .map_err(driver_err("kodama_diffraction"))?;
         Ok(Gpu {
             stream: ctx.default_stream(),
             cast,
             map,
             order,
+            draws,
+            diffraction,
             sequences,
             name,
             driver_version,
@@ -275,11 +287,11 @@ impl Gpu {
 /// `SlabTable` has 1,024 to 16,384 by the slab's phase; this is its densest).
 pub const SLAB_SAMPLES: usize = 1 << 14;
 
-/// Why the map kernel cannot trace this map, or `None` when it can: it covers the flat
+/// Why the map kernels cannot trace this map, or `None` when they can: they cover the flat
 /// measurement plane or a surface following the terrain, the isotropic vertically polarised
-/// antenna, specular reflection, slab transmission, Lambertian diffuse reflection and foliage
-/// (either law), without edge diffraction.
-pub fn map_unsupported(antenna: &Antenna, opt: &TraceOptions) -> Option<String> {
+/// antenna, specular reflection, slab transmission, Lambertian diffuse reflection, foliage
+/// (either law) and first-order edge diffraction, but not diffraction and foliage together.
+pub fn map_unsupported(scene: &RfScene, antenna: &Antenna, opt: &TraceOptions) -> Option<String> {
     let mut why = Vec::new();
     if antenna.pattern != Pattern::Isotropic || antenna.polarization != Polarization::V {
         why.push("an antenna other than iso, vertical");
@@ -287,10 +299,15 @@ pub fn map_unsupported(antenna: &Antenna, opt: &TraceOptions) -> Option<String> 
     if opt.diffuse && opt.scattering_pattern != ScatteringPattern::Lambertian {
         why.push("a diffuse pattern other than Lambertian");
     }
-    if opt.diffraction && opt.max_depth > 0 {
-        why.push("edge diffraction");
+    if diffracts(opt) && scene.has_foliage() {
+        why.push("edge diffraction in a scene with foliage");
     }
     (!why.is_empty()).then(|| format!("the GPU map kernel does not cover {}", why.join(", ")))
+}
+
+/// Whether a map under `opt` adds edge-diffracted power (as `radio_map` decides).
+fn diffracts(opt: &TraceOptions) -> bool {
+    opt.diffraction && opt.max_depth > 0
 }
 
 /// What the kernels read of a scene: the tree, per triangle its unit normal and first vertex,
@@ -352,7 +369,97 @@ pub struct MapParams {
     grid: Grid,
     rays: u32,
     surface: Option<MapSurface>,
+    /// The scene's wedges, when the map diffracts: which of them the transmitter lights is
+    /// known once the rays have landed.
+    wedges: Option<Wedges>,
+    tx: DVec3,
 }
+
+/// A map's surface on the device: its tree's nodes, node count, packets and normals (one-word
+/// stand-ins and 0 nodes for the flat plane).
+type SurfaceOnDevice<'a> = (
+    &'a CudaSlice<u32>,
+    u32,
+    &'a CudaSlice<u32>,
+    &'a CudaSlice<f32>,
+);
+
+/// A launch of one thread per item, 128 a block.
+fn launch_for(n: u64) -> LaunchConfig {
+    let block = 128u32;
+    LaunchConfig {
+        grid_dim: (n.div_ceil(block as u64) as u32, 1, 1),
+        block_dim: (block, 1, 1),
+        shared_mem_bytes: 0,
+    }
+}
+
+/// Words of a wedge in the kernels' table (`WEDGE_WORDS` in kernels.cu).
+const WEDGE_WORDS: usize = 20;
+
+/// The lit wedges as the diffraction kernel reads them, their running lengths, and the map's
+/// scalars with their total length and count set.
+struct LitWedges {
+    words: Vec<f64>,
+    cdf: Vec<f64>,
+    consts: Vec<f64>,
+}
+
+impl MapParams {
+    /// The wedges of `all` a transmitter lights whose rays first landed on the triangles with a
+    /// 1 in `seen`, ready for the kernel; `None` when none is lit.
+    fn lit_wedges(&self, all: &Wedges, seen: &[u8]) -> Option<LitWedges> {
+        let landed: Vec<u32> = (0..seen.len() as u32)
+            .filter(|&t| seen[t as usize] != 0)
+            .collect();
+        let lit = lit_wedges(all.clone(), &landed, self.tx);
+        if lit.is_empty() {
+            return None;
+        }
+        let mut words = Vec::with_capacity(lit.len() * WEDGE_WORDS);
+        let mut cdf = Vec::with_capacity(lit.len());
+        let mut total = 0.0;
+        for w in &lit {
+            let size = w.size.unwrap_or(WedgeSize {
+                reach0: 0.0,
+                reachn: 0.0,
+                run: 0.0,
+            });
+            words.extend([
+                w.a.x,
+                w.a.y,
+                w.a.z,
+                w.e.x,
+                w.e.y,
+                w.e.z,
+                w.length,
+                w.n0.x,
+                w.n0.y,
+                w.n0.z,
+                w.nn.x,
+                w.nn.y,
+                w.nn.z,
+                w.n,
+                w.tri0 as f64,
+                w.trin as f64,
+                if w.size.is_some() { 1.0 } else { 0.0 },
+                size.reach0,
+                size.reachn,
+                size.run,
+            ]);
+            total += w.length;
+            cdf.push(total);
+        }
+        let mut consts = self.consts.clone();
+        consts[C_WEDGE_LEN] = total;
+        consts[C_WEDGES] = lit.len() as f64;
+        Some(LitWedges { words, cdf, consts })
+    }
+}
+
+/// Where the wedges' total length and count sit in the map's scalars (kernels.cu's enum).
+const C_WEDGE_LEN: usize = 24;
+const C_WEDGES: usize = 25;
 
 /// A terrain-following map surface for the kernel: its tree and each triangle's normal as the
 /// CPU's cast gives it (3 f32, by the tree's triangle index).
@@ -372,7 +479,7 @@ impl MapParams {
         opt: &TraceOptions,
         freq_hz: f64,
     ) -> Result<MapParams, String> {
-        if let Some(why) = map_unsupported(antenna, opt) {
+        if let Some(why) = map_unsupported(scene, antenna, opt) {
             return Err(why);
         }
         let g = plane.grid;
@@ -403,6 +510,9 @@ impl MapParams {
             foliage.db_per_m,
             foliage.max_db.unwrap_or(0.0),
             Material::Foliage as u32 as f64,
+            scene.wavelength,
+            0.0,
+            0.0,
         ];
         let surface = match &plane.lifted {
             None => None,
@@ -416,6 +526,8 @@ impl MapParams {
             grid: g,
             rays: opt.rays,
             surface,
+            wedges: diffracts(opt).then(|| wedges_for(scene, opt)),
+            tx,
         })
     }
 }
@@ -490,8 +602,29 @@ unsafe extern "C" {
         first: u32,
         n: u64,
         acc: *mut u64,
+        seen: *mut u8,
     );
     fn kodama_host_order(n: u32, start: u32, len: u32, out: *mut u32);
+    fn kodama_host_draws(consts: *const f64, cdf: *const f64, n: u64, drawn: *mut u32);
+    fn kodama_host_diffraction(
+        nodes: *const u32,
+        n_nodes: u32,
+        packets: *const u32,
+        tri: *const f64,
+        material: *const u32,
+        slabs: *const f64,
+        s_nodes: *const u32,
+        s_n_nodes: u32,
+        s_packets: *const u32,
+        s_normals: *const f32,
+        consts: *const f64,
+        wedges: *const f64,
+        cdf: *const f64,
+        drawn: *const u32,
+        first: u32,
+        n: u64,
+        acc: *mut u64,
+    );
 }
 
 /// The order kernel's host twin: [`crate::rf::fibonacci::patch_order`]`(n, start, len)` as kernels.cu computes it (the
@@ -505,32 +638,43 @@ pub fn host_patch_order(n: u32, start: u32, len: u32) -> Vec<u32> {
     out
 }
 
-/// The map kernel's host twin, on every core: chunks of the lattice into their own sums, added
-/// as integers (the same bits at any thread count).
+/// The map kernels' host twin, on every core: chunks of the lattice into their own sums, added
+/// as integers (the same bits at any thread count); then, when the map diffracts, the
+/// diffraction samples the same way over the wedges the rays lit.
 pub fn host_radio_map(inputs: &MapInputs) -> Raster {
     let (sc, mp) = (&inputs.scene, &inputs.map);
     let cells = mp.grid.len();
     const CHUNK: u32 = 16_384;
     let t = &sc.tree;
-    let acc = (0..mp.rays.div_ceil(CHUNK))
+    let surface = || match &mp.surface {
+        Some(s) => (
+            s.tree.nodes.as_ptr(),
+            s.tree.node_count(),
+            s.tree.packets.as_ptr(),
+            s.normals.as_ptr(),
+        ),
+        None => (std::ptr::null(), 0, std::ptr::null(), std::ptr::null()),
+    };
+    let tris = sc.material.len();
+    let diffracts = mp.wedges.is_some();
+    let (acc, seen) = (0..mp.rays.div_ceil(CHUNK))
         .into_par_iter()
         .map(|k| {
-            let (s_nodes, s_n_nodes, s_packets, s_normals) = match &mp.surface {
-                Some(s) => (
-                    s.tree.nodes.as_ptr(),
-                    s.tree.node_count(),
-                    s.tree.packets.as_ptr(),
-                    s.normals.as_ptr(),
-                ),
-                None => (std::ptr::null(), 0, std::ptr::null(), std::ptr::null()),
-            };
+            let (s_nodes, s_n_nodes, s_packets, s_normals) = surface();
             let first = k * CHUNK;
             let n = CHUNK.min(mp.rays - first);
             let mut acc = vec![0u64; 2 * cells];
+            let mut seen = vec![0u8; if diffracts { tris } else { 0 }];
+            let seen_ptr = if diffracts {
+                seen.as_mut_ptr()
+            } else {
+                std::ptr::null_mut()
+            };
             // SAFETY: the buffers are what `MapScene::new` and `MapParams::new` built for this
             // scene and grid (consts names the grid's width and height, acc has two words a
             // cell; the surface's pointers are read only when its node count is not 0); rays
-            // first..first + n are within the lattice.
+            // first..first + n are within the lattice; `seen`, when not null, has a byte per
+            // triangle.
             unsafe {
                 kodama_host_map(
                     t.nodes.as_ptr(),
@@ -547,12 +691,74 @@ pub fn host_radio_map(inputs: &MapInputs) -> Raster {
                     first,
                     n as u64,
                     acc.as_mut_ptr(),
+                    seen_ptr,
+                )
+            };
+            (acc, seen)
+        })
+        .reduce(
+            || {
+                (
+                    vec![0u64; 2 * cells],
+                    vec![0u8; if diffracts { tris } else { 0 }],
+                )
+            },
+            |(a, mut sa), (b, sb)| {
+                for (x, y) in sa.iter_mut().zip(&sb) {
+                    *x |= y;
+                }
+                (add_fixed(a, b), sa)
+            },
+        );
+    let lit = mp.wedges.as_ref().and_then(|all| mp.lit_wedges(all, &seen));
+    let Some(lit) = lit else {
+        return raster(mp.grid, sc.scale, &acc);
+    };
+    let mut drawn = vec![0u32; lit.cdf.len()];
+    // SAFETY: consts names as many wedges as `cdf` and `drawn` hold.
+    unsafe {
+        kodama_host_draws(
+            lit.consts.as_ptr(),
+            lit.cdf.as_ptr(),
+            mp.rays as u64,
+            drawn.as_mut_ptr(),
+        )
+    };
+    let diffracted = (0..mp.rays.div_ceil(CHUNK))
+        .into_par_iter()
+        .map(|k| {
+            let (s_nodes, s_n_nodes, s_packets, s_normals) = surface();
+            let first = k * CHUNK;
+            let n = CHUNK.min(mp.rays - first);
+            let mut acc = vec![0u64; 2 * cells];
+            // SAFETY: as the map's call above; `wedges` holds WEDGE_WORDS words a wedge, as
+            // many as `cdf` and `drawn` (every count of a drawn wedge above 0), and their
+            // triangles are the scene's.
+            unsafe {
+                kodama_host_diffraction(
+                    t.nodes.as_ptr(),
+                    t.node_count(),
+                    t.packets.as_ptr(),
+                    sc.tri.as_ptr(),
+                    sc.material.as_ptr(),
+                    sc.slabs.as_ptr(),
+                    s_nodes,
+                    s_n_nodes,
+                    s_packets,
+                    s_normals,
+                    lit.consts.as_ptr(),
+                    lit.words.as_ptr(),
+                    lit.cdf.as_ptr(),
+                    drawn.as_ptr(),
+                    first,
+                    n as u64,
+                    acc.as_mut_ptr(),
                 )
             };
             acc
         })
         .reduce(|| vec![0u64; 2 * cells], add_fixed);
-    raster(mp.grid, sc.scale, &acc)
+    raster(mp.grid, sc.scale, &add_fixed(acc, diffracted))
 }
 
 /// Cell-wise sum of two fixed-point maps.
@@ -572,6 +778,7 @@ pub struct DeviceScene {
     pub(super) n_nodes: u32,
     pub(super) tri: CudaSlice<f64>,
     pub(super) material: CudaSlice<u32>,
+    tris: usize,
     slabs: CudaSlice<f64>,
     scale: f64,
 }
@@ -602,6 +809,7 @@ impl Gpu {
             n_nodes: scene.tree.node_count(),
             tri: upf(&scene.tri)?,
             material: up(&scene.material)?,
+            tris: scene.material.len(),
             slabs: upf(&scene.slabs)?,
             scale: scene.scale,
         };
@@ -677,6 +885,16 @@ impl Gpu {
         let mut acc = s
             .alloc_zeros::<u64>(2 * map.grid.len())
             .map_err(driver_err("alloc"))?;
+        // A byte per triangle for where the rays first land, when the map diffracts; else a
+        // null pointer the kernel never writes through.
+        let mut seen = match map.wedges {
+            Some(_) => Some(
+                s.alloc_zeros::<u8>(scene.tris)
+                    .map_err(driver_err("alloc"))?,
+            ),
+            None => None,
+        };
+        let null: u64 = 0;
         let mut kernel = 0.0;
         let acc = match self.order(map.rays)? {
             None => s.clone_dtoh(&acc).map_err(driver_err("readback"))?,
@@ -684,12 +902,7 @@ impl Gpu {
                 s.synchronize().map_err(driver_err("order kernel"))?;
                 let clock = Instant::now();
                 let n = map.rays as u64;
-                let block = 128u32;
-                let cfg = LaunchConfig {
-                    grid_dim: (n.div_ceil(block as u64) as u32, 1, 1),
-                    block_dim: (block, 1, 1),
-                    shared_mem_bytes: 0,
-                };
+                let cfg = launch_for(n);
                 let mut launch = s.launch_builder(&self.map);
                 launch
                     .arg(&scene.nodes)
@@ -706,10 +919,27 @@ impl Gpu {
                     .arg(&order)
                     .arg(&n)
                     .arg(&mut acc);
+                match seen.as_mut() {
+                    Some(seen) => launch.arg(seen),
+                    None => launch.arg(&null),
+                };
                 // SAFETY: the arguments match `kodama_map`'s parameters in kernels.cu, in order
                 // and type; `order` holds n lattice indices below the lattice's size, `acc` two
-                // words a cell of the grid `consts` names, the scene what `MapScene::new` made.
+                // words a cell of the grid `consts` names, the scene what `MapScene::new` made,
+                // `seen` a byte per triangle or null.
                 unsafe { launch.launch(cfg) }.map_err(driver_err("launch"))?;
+                if let (Some(all), Some(seen)) = (&map.wedges, &seen) {
+                    let seen = s.clone_dtoh(seen).map_err(driver_err("readback"))?;
+                    if let Some(lit) = map.lit_wedges(all, &seen) {
+                        self.diffract(
+                            scene,
+                            map,
+                            &lit,
+                            (&s_nodes, s_n_nodes, &s_packets, &s_normals),
+                            &mut acc,
+                        )?;
+                    }
+                }
                 let acc = s.clone_dtoh(&acc).map_err(driver_err("readback"))?;
                 kernel = clock.elapsed().as_secs_f64();
                 acc
@@ -724,6 +954,54 @@ impl Gpu {
                 kernel,
             },
         ))
+    }
+
+    /// Adds the diffraction samples of a map to its sums `acc`: each sample's wedge counted
+    /// (`kodama_draws`), then the samples (`kodama_diffraction`), one thread each.
+    fn diffract(
+        &self,
+        scene: &DeviceScene,
+        map: &MapParams,
+        lit: &LitWedges,
+        (s_nodes, s_n_nodes, s_packets, s_normals): SurfaceOnDevice,
+        acc: &mut CudaSlice<u64>,
+    ) -> Result<(), String> {
+        let s = &self.stream;
+        let consts = s.clone_htod(&lit.consts).map_err(driver_err("upload"))?;
+        let cdf = s.clone_htod(&lit.cdf).map_err(driver_err("upload"))?;
+        let wedges = s.clone_htod(&lit.words).map_err(driver_err("upload"))?;
+        let mut drawn = s
+            .alloc_zeros::<u32>(lit.cdf.len())
+            .map_err(driver_err("alloc"))?;
+        let n = map.rays as u64;
+        let mut launch = s.launch_builder(&self.draws);
+        launch.arg(&consts).arg(&cdf).arg(&n).arg(&mut drawn);
+        // SAFETY: the arguments match `kodama_draws`'s parameters; consts names as many wedges
+        // as `cdf` and `drawn` hold.
+        unsafe { launch.launch(launch_for(n)) }.map_err(driver_err("launch"))?;
+        let mut launch = s.launch_builder(&self.diffraction);
+        launch
+            .arg(&scene.nodes)
+            .arg(&scene.n_nodes)
+            .arg(&scene.packets)
+            .arg(&scene.tri)
+            .arg(&scene.material)
+            .arg(&scene.slabs)
+            .arg(s_nodes)
+            .arg(&s_n_nodes)
+            .arg(s_packets)
+            .arg(s_normals)
+            .arg(&consts)
+            .arg(&wedges)
+            .arg(&cdf)
+            .arg(&drawn)
+            .arg(&n)
+            .arg(acc);
+        // SAFETY: the arguments match `kodama_diffraction`'s parameters in kernels.cu, in order
+        // and type; `wedges` holds WEDGE_WORDS words a wedge, as many as `cdf` and `drawn`, with
+        // the scene's triangles; `acc` two words a cell of the grid `consts` names.
+        unsafe { launch.launch(launch_for(n)) }.map_err(driver_err("launch"))?;
+        Ok(())
     }
 
     /// The radio map on the device, the scene uploaded for this call alone: [`Gpu::upload_scene`]

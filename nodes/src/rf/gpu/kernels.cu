@@ -335,7 +335,10 @@ enum {
     C_FOL_DB_M = 20,   // foliage loss, dB/m
     C_FOL_MAX = 21,    // P.833's saturation A_m, dB; 0 for the linear law
     C_FOL_MAT = 22,    // foliage's material index
-    C_COUNT = 23
+    C_WAVELENGTH = 23, // metres
+    C_WEDGE_LEN = 24,  // the lit wedges' total length, metres (diffraction only)
+    C_WEDGES = 25,     // how many lit wedges
+    C_COUNT = 26
 };
 
 struct Cx {
@@ -576,17 +579,19 @@ CUDA_CALLABLE bool cell_index(const double* k, double x, double y, u32* index) {
     return true;
 }
 
-// `RfScene::cast(o, d, EPS, ∞)`: the closest hit in f32 (tmax f32::MAX), its distance then
-// refined in f64 against the triangle's plane (`RfScene::refine`); `tri` holds per triangle its
-// unit normal and first vertex (6 f64). False on a miss, leaving the outputs as they were.
-CUDA_CALLABLE bool cast_refined(const Node* nodes, u32 n_nodes, const TriPacket* packets,
-                                const double* tri, V3 o, V3 d, double* t_out, u32* tri_out) {
+// `RfScene::cast(o, d, tmin, tmax)`: the closest hit in f32 (tmax at most f32::MAX), its
+// distance then refined in f64 against the triangle's plane (`RfScene::refine`); `tri` holds
+// per triangle its unit normal and first vertex (6 f64). False on a miss, leaving the outputs
+// as they were.
+CUDA_CALLABLE bool cast_between(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                                const double* tri, V3 o, V3 d, double tmin, double tmax,
+                                double* t_out, u32* tri_out) {
     float of[3] = {(float)o.x, (float)o.y, (float)o.z};
     float df[3] = {(float)d.x, (float)d.y, (float)d.z};
     float t32;
     u32 hit_tri;
-    if (!closest_hit(nodes, n_nodes, packets, of, df, (float)EPS_M, 3.40282347e38f, &t32,
-                     &hit_tri))
+    float tmax32 = tmax < 3.4028234663852886e38 ? (float)tmax : 3.40282347e38f;
+    if (!closest_hit(nodes, n_nodes, packets, of, df, (float)tmin, tmax32, &t32, &hit_tri))
         return false;
     const double* tr = tri + 6 * (u64)hit_tri;
     V3 nn = v3(tr[0], tr[1], tr[2]);
@@ -596,7 +601,7 @@ CUDA_CALLABLE bool cast_refined(const Node* nodes, u32 n_nodes, const TriPacket*
     if (dt < 0.0) dt = -dt;
     double ad = denom < 0.0 ? -denom : denom;
     if (ad > 1e-12 && dt <= 1e-3 * (1.0 + (double)t32)) {
-        *t_out = t64 > EPS_M ? t64 : EPS_M;
+        *t_out = t64 > tmin ? t64 : tmin;
     } else {
         *t_out = (double)t32;
     }
@@ -604,32 +609,45 @@ CUDA_CALLABLE bool cast_refined(const Node* nodes, u32 n_nodes, const TriPacket*
     return true;
 }
 
+// `RfScene::cast(o, d, EPS, ∞)`.
+CUDA_CALLABLE bool cast_refined(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                                const double* tri, V3 o, V3 d, double* t_out, u32* tri_out) {
+    return cast_between(nodes, n_nodes, packets, tri, o, d, EPS_M, 1.0 / 0.0, t_out, tri_out);
+}
+
+// The field an isotropic, vertically polarised antenna sends along the unit direction d: θ̂
+// (`antenna::spherical_basis`).
+CUDA_CALLABLE Field iso_v_field(V3 d) {
+    Field e;
+    double rho = dsqrt(d.x * d.x + d.y * d.y);
+    V3 th;
+    if (rho < 1e-12) {
+        th = v3(1.0 * d.z, -0.0 * d.z, 0.0);
+    } else {
+        double cp = d.x / rho, sp = d.y / rho;
+        th = v3(d.z * cp, d.z * sp, -rho);
+    }
+    e.c[0] = cx(th.x, 0.0);
+    e.c[1] = cx(th.y, 0.0);
+    e.c[2] = cx(th.z, 0.0);
+    return e;
+}
+
 // One launched ray, the `lattice_index`-th, from the transmitter to the end of its bounces.
-// `tri` holds per triangle its unit normal and first vertex (6 f64).
+// `tri` holds per triangle its unit normal and first vertex (6 f64). `seen`, when not null,
+// gets a 1 for the triangle the ray first lands on (foliage aside): the faces whose edges can
+// diffract.
 CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packets,
                          const double* tri, const u32* material, const double* slabs,
-                         const Surface& surface, const double* k, u32 lattice_index, u64* acc) {
+                         const Surface& surface, const double* k, u32 lattice_index, u64* acc,
+                         u8* seen) {
     u32 n_rays = (u32)k[C_NRAYS];
     u32 max_depth = (u32)k[C_DEPTH];
     double cell = k[C_CELL];
     double s2 = k[C_S2];
     V3 d = lattice(n_rays, lattice_index);
     V3 o = v3(k[C_TX], k[C_TX + 1], k[C_TX + 2]);
-    // Isotropic, vertically polarised: the field along θ̂ (`antenna::spherical_basis`).
-    Field e;
-    {
-        double rho = dsqrt(d.x * d.x + d.y * d.y);
-        V3 th;
-        if (rho < 1e-12) {
-            th = v3(1.0 * d.z, -0.0 * d.z, 0.0);
-        } else {
-            double cp = d.x / rho, sp = d.y / rho;
-            th = v3(d.z * cp, d.z * sp, -rho);
-        }
-        e.c[0] = cx(th.x, 0.0);
-        e.c[1] = cx(th.y, 0.0);
-        e.c[2] = cx(th.z, 0.0);
-    }
+    Field e = iso_v_field(d);
     double omega = k[C_OMEGA];
     u32 depth = 0;
     // Canopies the ray is inside (`FoliageDepth`) and the metres it has run in them.
@@ -705,6 +723,7 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
                 canopies--;
             continue;
         }
+        if (depth == 0 && seen) seen[hit_tri] = 1;
         depth++;
         if (depth > max_depth) return;
         double dn = vdot(d, n);
@@ -1079,6 +1098,488 @@ CUDA_CALLABLE void order_sort_bins(const OrderChunk& c, u32 tid, u32 threads) {
     }
 }
 
+// ---------------------------------------------------------------------------------------------
+// First-order edge diffraction in the map (`rf::radiomap_diffraction`, Sionna RT 2.2's
+// estimator): a sample per launched ray picks a lit wedge in proportion to its length, a point
+// q on it and an angle round it; the diffracted ray leaves q along the Keller cone and adds
+// |E_d|² times the map area a unit of (edge length, cone angle) maps onto, over the samples its
+// wedge drew, to each cell it crosses. The field over the edge is the UTD of `rf::utd` and
+// `rf::diffraction` (Kouyoumjian-Pathak with Luebbers' face reflection factors, bounded by the
+// wedge's size), the faces' coefficients from the slab table. Scenes with foliage are refused
+// by the host.
+
+#define PI_D 3.141592653589793
+// Sionna's offset of the visibility point outside the corner, its shortest leg, the clearance
+// of a leg's ends when looking for surfaces across it, metres (`radiomap_diffraction`).
+#define OUTSIDE_CORNER_M 5e-2
+#define MIN_LEG_M 1e-2
+#define LEG_EPS_M 1e-2
+// Salts the sample hashes apart from the shoot-and-bounce draws.
+#define DIFF_SALT 0xD1FFAC7100000001ull
+
+CUDA_CALLABLE double cos_d(double x) {
+#ifdef KODAMA_DEVICE
+    return cos(x);
+#else
+    return std::cos(x);
+#endif
+}
+CUDA_CALLABLE double acos_d(double x) {
+#ifdef KODAMA_DEVICE
+    return acos(x);
+#else
+    return std::acos(x);
+#endif
+}
+CUDA_CALLABLE double asin_d(double x) {
+#ifdef KODAMA_DEVICE
+    return asin(x);
+#else
+    return std::asin(x);
+#endif
+}
+CUDA_CALLABLE double atan2_d(double y, double x) {
+#ifdef KODAMA_DEVICE
+    return atan2(y, x);
+#else
+    return std::atan2(y, x);
+#endif
+}
+CUDA_CALLABLE double tan_d(double x) {
+#ifdef KODAMA_DEVICE
+    return tan(x);
+#else
+    return std::tan(x);
+#endif
+}
+CUDA_CALLABLE double abs_d(double x) { return x < 0.0 ? -x : x; }
+CUDA_CALLABLE double min_d(double a, double b) { return a < b ? a : b; }
+
+CUDA_CALLABLE double vlength(V3 a) { return dsqrt(vdot(a, a)); }
+// glam's `normalize_or_zero`.
+CUDA_CALLABLE V3 vnormalize_or_zero(V3 a) {
+    double r = 1.0 / vlength(a);
+    if (r > 0.0 && r < 1.0 / 0.0) return vmul(a, r);
+    return v3(0.0, 0.0, 0.0);
+}
+CUDA_CALLABLE V3 vdiv(V3 a, double s) { return v3(a.x / s, a.y / s, a.z / s); }
+CUDA_CALLABLE V3 vneg(V3 a) { return v3(-a.x, -a.y, -a.z); }
+
+CUDA_CALLABLE Cx cdiv(Cx a, Cx b) {
+    double n = b.re * b.re + b.im * b.im;
+    return cx((a.re * b.re + a.im * b.im) / n, (a.im * b.re - a.re * b.im) / n);
+}
+CUDA_CALLABLE Cx cpolar(double r, double theta) {
+    double sn, cs;
+    sincos_d(theta, &sn, &cs);
+    return cx(r * cs, r * sn);
+}
+CUDA_CALLABLE double cabs_d(Cx a) { return dsqrt(a.re * a.re + a.im * a.im); }
+
+// A wedge as the host uploads it (`Wedge` in rf::diffraction), WEDGE_WORDS f64: a, e, length,
+// n0, nn, n, tri0, trin, then its size (has_size, reach0, reachn, run).
+#define WEDGE_WORDS 20
+struct WedgeD {
+    V3 a, e;
+    double length;
+    V3 n0, nn;
+    double n;
+    u32 tri0, trin;
+    bool has_size;
+    double reach0, reachn, run;
+};
+
+CUDA_CALLABLE WedgeD wedge_at(const double* w) {
+    WedgeD x;
+    x.a = v3(w[0], w[1], w[2]);
+    x.e = v3(w[3], w[4], w[5]);
+    x.length = w[6];
+    x.n0 = v3(w[7], w[8], w[9]);
+    x.nn = v3(w[10], w[11], w[12]);
+    x.n = w[13];
+    x.tri0 = (u32)w[14];
+    x.trin = (u32)w[15];
+    x.has_size = w[16] != 0.0;
+    x.reach0 = w[17];
+    x.reachn = w[18];
+    x.run = w[19];
+    return x;
+}
+
+// `Wedge::facing`: labelled so that its 0-face is one a wave along ki meets from outside.
+CUDA_CALLABLE WedgeD wedge_facing(const WedgeD& w, V3 ki) {
+    double c0 = vdot(ki, w.n0), cn = vdot(ki, w.nn);
+    bool keep = (c0 <= 0.0 && cn <= 0.0) ? c0 <= cn : c0 <= 0.0;
+    if (keep) return w;
+    WedgeD f = w;
+    f.a = vadd(w.a, vmul(w.e, w.length));
+    f.e = vneg(w.e);
+    f.n0 = w.nn;
+    f.nn = w.n0;
+    f.tri0 = w.trin;
+    f.trin = w.tri0;
+    f.reach0 = w.reachn;
+    f.reachn = w.reach0;
+    return f;
+}
+
+// `keller_cone`: the direction at cone angle phi from the 0-face on the cone of a wave along ki.
+CUDA_CALLABLE V3 keller_cone(const WedgeD& w, V3 ki, double phi) {
+    V3 t0 = vnormalize(vcross(w.n0, w.e));
+    double along = vdot(ki, w.e);
+    V3 e_fwd = along > 0.0 ? w.e : vneg(w.e);
+    double cos_b = min_d(abs_d(along), 1.0);
+    double sin_b = dsqrt(1.0 - cos_b * cos_b);
+    double sp, cp;
+    sincos_d(phi, &sp, &cp);
+    return vnormalize(vadd(vadd(vmul(w.n0, sp * sin_b), vmul(t0, cp * sin_b)), vmul(e_fwd, cos_b)));
+}
+
+// `face_angle`: the angle of s (away from the edge) from the 0-face, in [0, 2π).
+CUDA_CALLABLE double face_angle(const WedgeD& w, V3 s) {
+    V3 t0 = vcross(w.n0, w.e);
+    V3 st = vnormalize_or_zero(vsub(s, vmul(w.e, vdot(s, w.e))));
+    double sgn = vdot(st, w.n0) >= 0.0 ? 1.0 : -1.0;
+    double c = vdot(st, t0);
+    c = c < -1.0 ? -1.0 : (c > 1.0 ? 1.0 : c);
+    return PI_D - (PI_D - acos_d(c)) * sgn;
+}
+
+// `utd::fresnel_integrals` (Numerical Recipes' frenel): (S(x), C(x)).
+CUDA_CALLABLE void fresnel_integrals(double x, double* s_out, double* c_out) {
+    const double EPS = 1e-15, FPMIN = 1e-300;
+    const int MAXIT = 200;
+    double ax = abs_d(x);
+    double s, c;
+    if (ax < dsqrt(FPMIN)) {
+        s = 0.0;
+        c = ax;
+    } else if (ax <= 1.5) {
+        double fact = PI_D / 2.0 * ax * ax;
+        double sum = 0.0, sums = 0.0, sumc = ax;
+        double sign = 1.0, term = ax, n = 3.0;
+        bool odd = true;
+        for (int k = 1; k < MAXIT; k++) {
+            term *= fact / (double)k;
+            sum += sign * term / n;
+            double test = abs_d(sum) * EPS;
+            if (odd) {
+                sign = -sign;
+                sums = sum;
+                sum = sumc;
+            } else {
+                sumc = sum;
+                sum = sums;
+            }
+            if (term < test) break;
+            odd = !odd;
+            n += 2.0;
+        }
+        s = sums;
+        c = sumc;
+    } else {
+        double pix2 = PI_D * ax * ax;
+        Cx b = cx(1.0, -pix2);
+        Cx cc = cx(1.0 / FPMIN, 0.0);
+        Cx d = cdiv(cx(1.0, 0.0), b);
+        Cx h = d;
+        double n = -1.0;
+        for (int k = 2; k < MAXIT; k++) {
+            n += 2.0;
+            double a = -n * (n + 1.0);
+            b = cadd(b, cx(4.0, 0.0));
+            d = cdiv(cx(1.0, 0.0), cadd(cscale(d, a), b));
+            cc = cadd(b, cdiv(cx(a, 0.0), cc));
+            Cx del = cmul(cc, d);
+            h = cmul(h, del);
+            if (abs_d(del.re - 1.0) + abs_d(del.im) < EPS) break;
+        }
+        h = cmul(h, cx(ax, -ax));
+        Cx one_minus = csub(cx(1.0, 0.0), cmul(cpolar(1.0, 0.5 * pix2), h));
+        Cx cs = cmul(cx(0.5, 0.5), one_minus);
+        s = cs.im;
+        c = cs.re;
+    }
+    if (x < 0.0) {
+        s = -s;
+        c = -c;
+    }
+    *s_out = s;
+    *c_out = c;
+}
+
+// `utd::transition`: the UTD's transition function F(x).
+CUDA_CALLABLE Cx transition_f(double x) {
+    if (x <= 0.0) return cx(0.0, 0.0);
+    double s, c;
+    fresnel_integrals(dsqrt(2.0 * x / PI_D), &s, &c);
+    Cx a = cscale(cpolar(1.0, x), dsqrt(PI_D * x / 2.0));
+    return cmul(a, csub(cx(1.0, 1.0), cscale(cx(s, c), 2.0)));
+}
+
+CUDA_CALLABLE double utd_a(double n, double beta, bool plus) {
+    double big_n = plus ? round_d((beta + PI_D) / (2.0 * n * PI_D))
+                        : round_d((beta - PI_D) / (2.0 * n * PI_D));
+    double cs = cos_d((2.0 * n * PI_D * big_n - beta) / 2.0);
+    return 2.0 * (cs * cs);
+}
+
+CUDA_CALLABLE Cx utd_term(Cx factor, double n, double sign, double beta, bool plus, double kl) {
+    if (abs_d(tan_d((PI_D + sign * beta) / (2.0 * n))) < 1e-9) beta = beta + 1e-7;
+    double cot = 1.0 / tan_d((PI_D + sign * beta) / (2.0 * n));
+    return cmul(cscale(factor, cot), transition_f(kl * utd_a(n, beta, plus)));
+}
+
+// `utd::wedge_coefficients`: D1..D4 of Kouyoumjian and Pathak.
+CUDA_CALLABLE void wedge_coefficients(double n, double phi, double phi_i, double beta0, double k,
+                                      double l, Cx d[4]) {
+    double sb, cb;
+    sincos_d(beta0, &sb, &cb);
+    Cx minus = cscale(cpolar(1.0, -PI_D / 4.0), -1.0);
+    double den = 2.0 * n * dsqrt(2.0 * PI_D * k) * sb;
+    Cx factor = cx(minus.re / den, minus.im / den);
+    double kl = k * l;
+    d[0] = utd_term(factor, n, 1.0, phi - phi_i, true, kl);
+    d[1] = utd_term(factor, n, -1.0, phi - phi_i, false, kl);
+    d[2] = utd_term(factor, n, 1.0, phi + phi_i, true, kl);
+    d[3] = utd_term(factor, n, -1.0, phi + phi_i, false, kl);
+}
+
+// `bounded_by_size`: no more than a wedge of its size can diffract.
+CUDA_CALLABLE void bounded_by_size(Cx d[4], const WedgeD& w, double k, double sin_b, double si,
+                                   double so) {
+    double fresnel_zone = dsqrt(2.0 * PI_D / k / (sin_b * sin_b * (1.0 / si + 1.0 / so)));
+    double along = min_d(w.run / fresnel_zone, 1.0);
+    double reach[2] = {w.reachn, w.reach0};
+    for (int j = 0; j < 2; j++) {
+        double most = 0.5 * reach[j] * dsqrt(k / (2.0 * PI_D)) / sin_b;
+        double norm = cabs_d(d[2 + j]);
+        if (norm > most) d[2 + j] = cscale(d[2 + j], most / norm);
+    }
+    for (int j = 0; j < 4; j++) d[j] = cscale(d[j], along);
+}
+
+// `face_reflection`: a face's reflection of a wave along ki, as a matrix on edge-fixed
+// components ((φ, β) in, (φ, β) of the reflected direction out).
+CUDA_CALLABLE void face_reflection(const double* slabs, u32 table, u32 mat, V3 normal, V3 ki,
+                                   V3 phi_in, V3 beta_in, V3 e, Cx r[2][2]) {
+    double c = min_d(abs_d(vdot(ki, normal)), 1.0);
+    Cx co[4];
+    slab_get(slabs, table, mat, c, co);
+    V3 kr = vsub(ki, vmul(normal, 2.0 * vdot(ki, normal)));
+    V3 phi_out = vneg(vnormalize(vcross(kr, e)));
+    V3 beta_out = vcross(phi_out, kr);
+    V3 perp, par;
+    basis(ki, normal, &perp, &par);
+    V3 par_r = vcross(perp, kr);
+    V3 ins[2] = {phi_in, beta_in};
+    V3 outs[2] = {phi_out, beta_out};
+    for (int col = 0; col < 2; col++) {
+        // `field::reflect` of the real field ins[col].
+        Cx a = cmul(co[0], cx(vdot(ins[col], perp), 0.0));
+        Cx b = cmul(co[1], cx(vdot(ins[col], par), 0.0));
+        Field f = combine(a, perp, b, par_r);
+        for (int row = 0; row < 2; row++) r[row][col] = field_dot(f, outs[row]);
+    }
+}
+
+// `diffracted_field`: the field at rx of a wave leaving tx with field e_tx (at unit distance),
+// over wedge w at q (spreading included, propagation phase not); false when either end is
+// inside the wedge.
+CUDA_CALLABLE bool diffracted_field(const double* slabs, const u32* material, const double* k,
+                                    const WedgeD& w0, V3 q, V3 tx, V3 rx, const Field& e_tx,
+                                    Field* out) {
+    V3 qi = vsub(q, tx), qo = vsub(rx, q);
+    double si = vlength(qi), so = vlength(qo);
+    V3 ki = vdiv(qi, si), ko = vdiv(qo, so);
+    WedgeD w = wedge_facing(w0, ki);
+    double phi_i = face_angle(w, vneg(ki));
+    double phi = face_angle(w, ko);
+    double limit = w.n * PI_D;
+    if (!(phi_i > 0.0 && phi_i < limit && phi > 0.0 && phi < limit)) return false;
+    double sin_b = vlength(vcross(ki, w.e));
+    if (sin_b < 1e-6) return false;
+    double beta0 = asin_d(min_d(sin_b, 1.0));
+    double kw = 2.0 * PI_D / k[C_WAVELENGTH];
+    double l = si * so * sin_b * sin_b / (si + so);
+    Cx d[4];
+    wedge_coefficients(w.n, phi, phi_i, beta0, kw, l, d);
+    if (w.has_size) bounded_by_size(d, w, kw, sin_b, si, so);
+    V3 phi_hat_i = vnormalize(vcross(ki, w.e));
+    V3 beta_hat_i = vcross(phi_hat_i, ki);
+    V3 phi_hat_o = vneg(vnormalize(vcross(ko, w.e)));
+    V3 beta_hat_o = vcross(phi_hat_o, ko);
+    u32 table = (u32)k[C_TABLE];
+    Cx r0[2][2], rn[2][2];
+    face_reflection(slabs, table, material[w.tri0], w.n0, ki, phi_hat_i, beta_hat_i, w.e, r0);
+    face_reflection(slabs, table, material[w.trin], w.nn, ki, phi_hat_i, beta_hat_i, w.e, rn);
+    Cx e_in[2] = {field_dot(e_tx, phi_hat_i), field_dot(e_tx, beta_hat_i)};
+    double spread = dsqrt(1.0 / (si * so * (si + so)));
+    Cx comp[2];
+    for (int i = 0; i < 2; i++) {
+        Cx apply_n = cadd(cmul(rn[i][0], e_in[0]), cmul(rn[i][1], e_in[1]));
+        Cx apply_0 = cadd(cmul(r0[i][0], e_in[0]), cmul(r0[i][1], e_in[1]));
+        Cx v = csub(csub(cmul(cadd(d[0], d[1]), e_in[i]), cmul(d[2], apply_n)), cmul(d[3], apply_0));
+        comp[i] = cscale(v, -spread);
+    }
+    *out = combine(comp[0], phi_hat_o, comp[1], beta_hat_o);
+    return true;
+}
+
+// `area_per_length_angle`: |∂p/∂φ × ∂p/∂ℓ|, the map area per metre of edge and radian of cone.
+CUDA_CALLABLE double area_per_length_angle(const WedgeD& w, V3 src, double ell, V3 ko, V3 p, V3 n) {
+    V3 e = w.e, n0 = w.n0;
+    V3 t0 = vnormalize(vcross(n0, e));
+    double along = vdot(vsub(src, w.a), e);
+    double r = vlength(vsub(vsub(src, w.a), vmul(e, along)));
+    double z = ell - along;
+    double rho2 = r * r + z * z;
+    double sin_t = r / dsqrt(rho2), cos_t = z / dsqrt(rho2);
+    double phi = atan2_d(vdot(ko, n0), vdot(ko, t0));
+    double sin_p, cos_p;
+    sincos_d(phi, &sin_p, &cos_p);
+    V3 dk_dphi = vmul(vsub(vmul(n0, cos_p), vmul(t0, sin_p)), sin_t);
+    double dtheta_dell = -r / rho2;
+    V3 dk_dell = vmul(vsub(vmul(vadd(vmul(t0, cos_p), vmul(n0, sin_p)), cos_t), vmul(e, sin_t)),
+                      dtheta_dell);
+    V3 q = vadd(w.a, vmul(e, ell));
+    double t = vdot(vsub(p, q), ko);
+    double nk = vdot(n, ko);
+    if (abs_d(nk) < 1e-12) return 0.0;
+    V3 a = vmul(dk_dphi, t);
+    V3 b = vadd(e, vmul(dk_dell, t));
+    V3 dp_dphi = vsub(a, vmul(ko, vdot(n, a) / nk));
+    V3 dp_dell = vsub(b, vmul(ko, vdot(n, b) / nk));
+    return vlength(vcross(dp_dphi, dp_dell));
+}
+
+// `RfScene::blocked` without foliage: a surface strictly between a and b (eps kept clear at
+// each end).
+CUDA_CALLABLE bool blocked(const Node* nodes, u32 n_nodes, const TriPacket* packets, V3 a, V3 b,
+                           double eps) {
+    V3 ab = vsub(b, a);
+    double len = vlength(ab);
+    if (len <= 2.0 * eps) return false;
+    V3 d = vdiv(ab, len);
+    float of[3] = {(float)a.x, (float)a.y, (float)a.z};
+    float df[3] = {(float)d.x, (float)d.y, (float)d.z};
+    float t32;
+    u32 h;
+    return closest_hit(nodes, n_nodes, packets, of, df, (float)eps, (float)(len - eps), &t32, &h);
+}
+
+// `first_wall` without foliage: where o + t d first meets a surface before t_max (∞ if none).
+CUDA_CALLABLE double first_wall(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                                const double* tri, V3 o, V3 d, double t_max) {
+    double t;
+    u32 h;
+    if (!cast_between(nodes, n_nodes, packets, tri, o, d, LEG_EPS_M, t_max + LEG_EPS_M, &t, &h))
+        return 1.0 / 0.0;
+    return t;
+}
+
+// The wedge sample i draws: the first whose running length passes u (`partition_point`).
+CUDA_CALLABLE u32 pick_wedge(const double* cdf, u32 n, double total, u32 i) {
+    double u = unit01(mix64(DIFF_SALT ^ (u64)i)) * total;
+    u32 lo = 0, hi = n;
+    while (lo < hi) {
+        u32 mid = lo + (hi - lo) / 2;
+        if (cdf[mid] <= u)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    return lo < n - 1 ? lo : n - 1;
+}
+
+// The n-th crossing of the map's surface by q + t ko past `after` (the flat plane: one at
+// most), as (t, cell, normal); false when there is none.
+CUDA_CALLABLE bool next_crossing(const Surface& surface, const double* k, V3 q, V3 ko,
+                                 double after, double* t_out, u32* cell, V3* normal) {
+    if (surface.n_nodes == 0) {
+        if (after > 0.0 || ko.z == 0.0) return false;
+        double t = (k[C_Z] - q.z) / ko.z;
+        if (!(t > EPS_M)) return false;
+        if (!cell_index(k, q.x + ko.x * t, q.y + ko.y * t, cell)) return false;
+        *t_out = t;
+        *normal = v3(0.0, 0.0, 1.0);
+        return true;
+    }
+    float of[3] = {(float)q.x, (float)q.y, (float)q.z};
+    float df[3] = {(float)ko.x, (float)ko.y, (float)ko.z};
+    double tmin = EPS_M;
+    if (after > 0.0) {
+        tmin = after + EPS_M;
+        // Past 2^14 m an f32 step of EPS_M can round back onto the same hit.
+        if (!((float)tmin > (float)after)) return false;
+    }
+    for (;;) {
+        float ts;
+        u32 sp;
+        if (!closest_hit(surface.nodes, surface.n_nodes, surface.packets, of, df, (float)tmin,
+                         3.40282347e38f, &ts, &sp))
+            return false;
+        double t = (double)ts;
+        const float* nf = surface.normals + 3 * (u64)sp;
+        if (cell_index(k, q.x + ko.x * t, q.y + ko.y * t, cell)) {
+            *t_out = t;
+            *normal = v3((double)nf[0], (double)nf[1], (double)nf[2]);
+            return true;
+        }
+        // Off the grid: the next crossing.
+        double next = t + EPS_M;
+        if (!((float)next > ts)) return false;
+        tmin = next;
+    }
+}
+
+// Diffraction sample i of a map (`EdgeSampler::sample`): its wedge of `wedges`
+// (WEDGE_WORDS f64 each, `cdf` their running lengths), drawn `drawn[w]` times in all.
+CUDA_CALLABLE void diffract(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                            const double* tri, const u32* material, const double* slabs,
+                            const Surface& surface, const double* k, const double* wedges,
+                            const double* cdf, const u32* drawn, u32 i, u64* acc) {
+    u32 n_wedges = (u32)k[C_WEDGES];
+    u32 wi = pick_wedge(cdf, n_wedges, k[C_WEDGE_LEN], i);
+    WedgeD w = wedge_at(wedges + (u64)wi * WEDGE_WORDS);
+    u64 h = mix64(DIFF_SALT ^ ((u64)i * 0x9E3779B97F4A7C15ull));
+    double u_edge = unit01(mix64(h ^ 1ull)), u_cone = unit01(mix64(h ^ 2ull));
+    double weight = w.length / (double)drawn[wi];
+    V3 tx = v3(k[C_TX], k[C_TX + 1], k[C_TX + 2]);
+    double ell = u_edge * w.length;
+    V3 q = vadd(w.a, vmul(w.e, ell));
+    double s_in = vlength(vsub(q, tx));
+    if (s_in <= MIN_LEG_M) return;
+    V3 ki = vdiv(vsub(q, tx), s_in);
+    double angle = w.n * PI_D;
+    V3 ko = keller_cone(w, ki, u_cone * angle);
+    // The last crossing first: most cone directions miss the map, at no cost through the scene.
+    double last = 0.0, t;
+    u32 cell;
+    V3 normal;
+    while (next_crossing(surface, k, q, ko, last, &t, &cell, &normal)) last = t;
+    if (!(last > 0.0)) return;
+    V3 q_out = vadd(q, vmul(vnormalize_or_zero(vadd(w.n0, w.nn)), OUTSIDE_CORNER_M));
+    if (blocked(nodes, n_nodes, packets, tx, q, LEG_EPS_M) ||
+        blocked(nodes, n_nodes, packets, tx, q_out, LEG_EPS_M))
+        return;
+    double t_end = min_d(first_wall(nodes, n_nodes, packets, tri, q, ko, last),
+                         first_wall(nodes, n_nodes, packets, tri, q_out, ko, last));
+    Field e_tx = iso_v_field(ki);
+    double after = 0.0;
+    while (next_crossing(surface, k, q, ko, after, &t, &cell, &normal)) {
+        after = t;
+        if (t <= MIN_LEG_M || t >= t_end) continue;
+        V3 p = vadd(q, vmul(ko, t));
+        Field e;
+        if (!diffracted_field(slabs, material, k, w, q, tx, p, e_tx, &e)) continue;
+        double area = area_per_length_angle(w, tx, ell, ko, p, normal);
+        double nz = abs_d(normal.z);
+        double patch = k[C_CELL] * k[C_CELL] / (nz > 1e-6 ? nz : 1e-6);
+        accumulate(acc, cell, field_norm2(e) * area * angle * weight / patch);
+    }
+}
+
 #ifdef KODAMA_DEVICE
 extern "C" __global__ void kodama_cast(const Node* nodes, u32 n_nodes, const TriPacket* packets,
                                        const float* rays, u64 n, float* t_out, u32* prim_out) {
@@ -1088,15 +1589,41 @@ extern "C" __global__ void kodama_cast(const Node* nodes, u32 n_nodes, const Tri
 
 // Thread i shoots the lattice's `order[i]`-th ray: the lattice's patch order, so a warp's rays
 // leave side by side and walk the same nodes.
+// `seen` (a byte per triangle) gets the triangles rays first land on; null without diffraction.
 extern "C" __global__ void kodama_map(const Node* nodes, u32 n_nodes, const TriPacket* packets,
                                       const double* tri, const u32* material, const double* slabs,
                                       const Node* s_nodes, u32 s_n_nodes,
                                       const TriPacket* s_packets, const float* s_normals,
-                                      const double* consts, const u32* order, u64 n, u64* acc) {
+                                      const double* consts, const u32* order, u64 n, u64* acc,
+                                      u8* seen) {
     u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
     Surface surface = {s_nodes, s_n_nodes, s_packets, s_normals};
     if (i < n)
-        shoot(nodes, n_nodes, packets, tri, material, slabs, surface, consts, order[i], acc);
+        shoot(nodes, n_nodes, packets, tri, material, slabs, surface, consts, order[i], acc,
+              seen);
+}
+
+// Thread i counts diffraction sample i in its wedge's `drawn`.
+extern "C" __global__ void kodama_draws(const double* consts, const double* cdf, u64 n,
+                                        u32* drawn) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < n) atomicAdd(&drawn[pick_wedge(cdf, (u32)consts[C_WEDGES], consts[C_WEDGE_LEN], (u32)i)], 1u);
+}
+
+// Thread i adds diffraction sample i to the map.
+extern "C" __global__ void kodama_diffraction(const Node* nodes, u32 n_nodes,
+                                              const TriPacket* packets, const double* tri,
+                                              const u32* material, const double* slabs,
+                                              const Node* s_nodes, u32 s_n_nodes,
+                                              const TriPacket* s_packets, const float* s_normals,
+                                              const double* consts, const double* wedges,
+                                              const double* cdf, const u32* drawn, u64 n,
+                                              u64* acc) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    Surface surface = {s_nodes, s_n_nodes, s_packets, s_normals};
+    if (i < n)
+        diffract(nodes, n_nodes, packets, tri, material, slabs, surface, consts, wedges, cdf,
+                 drawn, (u32)i, acc);
 }
 
 // Thread i searches from the lattice's `order[i]`-th ray (the patch order: a warp's rays leave
@@ -1166,11 +1693,31 @@ extern "C" void kodama_host_map(const void* nodes, u32 n_nodes, const void* pack
                                 const double* tri, const u32* material, const double* slabs,
                                 const void* s_nodes, u32 s_n_nodes, const void* s_packets,
                                 const float* s_normals, const double* consts, u32 first, u64 n,
-                                u64* acc) {
+                                u64* acc, u8* seen) {
     Surface surface = {(const Node*)s_nodes, s_n_nodes, (const TriPacket*)s_packets, s_normals};
     for (u64 i = 0; i < n; i++)
         shoot((const Node*)nodes, n_nodes, (const TriPacket*)packets, tri, material, slabs,
-              surface, consts, first + (u32)i, acc);
+              surface, consts, first + (u32)i, acc, seen);
+}
+
+// The host twin of `kodama_draws`, samples 0..n.
+extern "C" void kodama_host_draws(const double* consts, const double* cdf, u64 n, u32* drawn) {
+    for (u64 i = 0; i < n; i++)
+        drawn[pick_wedge(cdf, (u32)consts[C_WEDGES], consts[C_WEDGE_LEN], (u32)i)]++;
+}
+
+// The host twin of `kodama_diffraction`: samples first..first + n.
+extern "C" void kodama_host_diffraction(const void* nodes, u32 n_nodes, const void* packets,
+                                        const double* tri, const u32* material,
+                                        const double* slabs, const void* s_nodes, u32 s_n_nodes,
+                                        const void* s_packets, const float* s_normals,
+                                        const double* consts, const double* wedges,
+                                        const double* cdf, const u32* drawn, u32 first, u64 n,
+                                        u64* acc) {
+    Surface surface = {(const Node*)s_nodes, s_n_nodes, (const TriPacket*)s_packets, s_normals};
+    for (u64 i = 0; i < n; i++)
+        diffract((const Node*)nodes, n_nodes, (const TriPacket*)packets, tri, material, slabs,
+                 surface, consts, wedges, cdf, drawn, first + (u32)i, acc);
 }
 // The host twin of `kodama_sequences`: rays `first..first + n` of the lattice into one set.
 extern "C" void kodama_host_sequences(const void* nodes, u32 n_nodes, const void* packets,

@@ -16,11 +16,13 @@
 //!
 //! - The radio map is one megakernel, a thread per launched ray (Sionna RT's symbolic loop is
 //!   one too), summing into cells as exact fixed-point integers: a GPU map is the same bits on
-//!   every run whatever the scheduling, and the same bits as the host twin's. It covers the
-//!   flat plane and terrain-following surfaces, iso antennas, reflection, transmission,
-//!   Lambertian diffuse reflection and foliage;
-//!   anything else is refused by name ([`device_unavailable`], `map_unsupported`), and the CPU path
-//!   stays the default.
+//!   every run whatever the scheduling, and the same bits as the host twin's where its paths
+//!   are specular. It covers the flat plane and terrain-following surfaces, iso antennas,
+//!   reflection, transmission, Lambertian diffuse reflection, foliage and first-order edge
+//!   diffraction (two more kernels: each sample's wedge counted, then the samples, a thread
+//!   each, over the wedges the rays lit, which the host picks from the triangles they first
+//!   landed on); diffraction with foliage and anything else is refused by name
+//!   ([`device_unavailable`], `map_unsupported`), and the CPU path stays the default.
 //! - A scene goes up once (`Gpu::upload_scene`) and stays for any number of maps (`Gpu::map`):
 //!   per map only its scalars travel, the rays' patch order is computed on the device
 //!   (`kodama_order`, `fibonacci::patch_order`'s to the ray) and the cells come back.
@@ -104,10 +106,10 @@ pub fn device_unavailable(device: Device) -> Option<String> {
     }
 }
 
-/// [`radio_map`](crate::rf::radiomap::radio_map) on `device`. On the GPU the map is the host
-/// twin's to the bit and the CPU's within the tolerance `tests/gpu_host.rs` states; a map the
-/// kernel does not cover (a directive diffuse pattern, diffraction, antennas other than iso
-/// vertical) is an error naming what, since the user asked for the GPU.
+/// [`radio_map`](crate::rf::radiomap::radio_map) on `device`. On the GPU the map is the CPU's
+/// within the tolerance `tests/gpu_host.rs` states; a map the kernels do not cover (a
+/// directive diffuse pattern, diffraction with foliage, antennas other than iso vertical) is an
+/// error naming what, since the user asked for the GPU.
 pub fn radio_map_on(
     device: Device,
     scene: &RfScene,
