@@ -246,13 +246,8 @@ impl Gpu {
         let mut d_p = s.alloc_zeros::<u32>(n).map_err(driver_err("alloc"))?;
         s.synchronize().map_err(driver_err("sync"))?;
         let upload = clock.elapsed().as_secs_f64();
-        let block = 128u32;
-        let cfg = LaunchConfig {
-            grid_dim: ((n as u64).div_ceil(block as u64) as u32, 1, 1),
-            block_dim: (block, 1, 1),
-            shared_mem_bytes: 0,
-        };
         let n64 = n as u64;
+        let cfg = launch_for(n64);
         let clock = Instant::now();
         let mut launch = s.launch_builder(&self.cast);
         launch
@@ -385,7 +380,7 @@ type SurfaceOnDevice<'a> = (
 );
 
 /// A launch of one thread per item, 128 a block.
-fn launch_for(n: u64) -> LaunchConfig {
+pub(super) fn launch_for(n: u64) -> LaunchConfig {
     let block = 128u32;
     LaunchConfig {
         grid_dim: (n.div_ceil(block as u64) as u32, 1, 1),

@@ -1117,41 +1117,17 @@ CUDA_CALLABLE void order_sort_bins(const OrderChunk& c, u32 tid, u32 threads) {
 // Salts the sample hashes apart from the shoot-and-bounce draws.
 #define DIFF_SALT 0xD1FFAC7100000001ull
 
-CUDA_CALLABLE double cos_d(double x) {
+// libm on either compiler: CUDA's device functions, or the host's std:: ones.
 #ifdef KODAMA_DEVICE
-    return cos(x);
+#define LIBM(f) f
 #else
-    return std::cos(x);
+#define LIBM(f) std::f
 #endif
-}
-CUDA_CALLABLE double acos_d(double x) {
-#ifdef KODAMA_DEVICE
-    return acos(x);
-#else
-    return std::acos(x);
-#endif
-}
-CUDA_CALLABLE double asin_d(double x) {
-#ifdef KODAMA_DEVICE
-    return asin(x);
-#else
-    return std::asin(x);
-#endif
-}
-CUDA_CALLABLE double atan2_d(double y, double x) {
-#ifdef KODAMA_DEVICE
-    return atan2(y, x);
-#else
-    return std::atan2(y, x);
-#endif
-}
-CUDA_CALLABLE double tan_d(double x) {
-#ifdef KODAMA_DEVICE
-    return tan(x);
-#else
-    return std::tan(x);
-#endif
-}
+CUDA_CALLABLE double cos_d(double x) { return LIBM(cos)(x); }
+CUDA_CALLABLE double acos_d(double x) { return LIBM(acos)(x); }
+CUDA_CALLABLE double asin_d(double x) { return LIBM(asin)(x); }
+CUDA_CALLABLE double atan2_d(double y, double x) { return LIBM(atan2)(y, x); }
+CUDA_CALLABLE double tan_d(double x) { return LIBM(tan)(x); }
 CUDA_CALLABLE double abs_d(double x) { return x < 0.0 ? -x : x; }
 CUDA_CALLABLE double min_d(double a, double b) { return a < b ? a : b; }
 

@@ -8,11 +8,11 @@
 
 use std::time::Instant;
 
-use cudarc::driver::{LaunchConfig, PushKernelArg};
+use cudarc::driver::PushKernelArg;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::backend::{DeviceScene, Gpu, MapScene, driver_err};
+use super::backend::{DeviceScene, Gpu, MapScene, driver_err, launch_for};
 use crate::artifact::Material;
 use crate::rf::path::{MAX_DEPTH, TraceOptions};
 
@@ -248,12 +248,6 @@ impl Gpu {
             s.synchronize().map_err(driver_err("order kernel"))?;
             let clock = Instant::now();
             let n = params.rays as u64;
-            let block = 128u32;
-            let cfg = LaunchConfig {
-                grid_dim: (n.div_ceil(block as u64) as u32, 1, 1),
-                block_dim: (block, 1, 1),
-                shared_mem_bytes: 0,
-            };
             let slot_mask = size.slots - 1;
             let mut launch = s.launch_builder(&self.sequences);
             launch
@@ -275,7 +269,7 @@ impl Gpu {
             // order and type; `order` holds n lattice indices below the lattice's size, `slots`
             // a power of two words, `seqs` seq_cap entries of stride = max_depth + 1 words, the
             // scene what `MapScene::new` made.
-            unsafe { launch.launch(cfg) }.map_err(driver_err("launch"))?;
+            unsafe { launch.launch(launch_for(n)) }.map_err(driver_err("launch"))?;
             let count = s.clone_dtoh(&counters).map_err(driver_err("readback"))?;
             times.kernel += clock.elapsed().as_secs_f64();
             times.tries += 1;
