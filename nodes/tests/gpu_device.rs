@@ -17,7 +17,7 @@ use kodama_nodes::rf::fibonacci::fibonacci_run;
 use kodama_nodes::rf::fibonacci::patch_order;
 use kodama_nodes::rf::gpu::{
     CastHit, Gpu, GpuRay, MapInputs, MapParams, MapScene, ORDER_CHUNK, Tree, driver_present,
-    host_cast, host_radio_map,
+    host_cast, host_occluded, host_radio_map,
 };
 use kodama_nodes::rf::map_plane::{MapPlane, default_plane};
 use kodama_nodes::rf::path::TraceOptions;
@@ -50,7 +50,8 @@ fn cpu_cast(cpu: &SceneRays, rays: &[GpuRay]) -> Vec<CastHit> {
         .collect()
 }
 
-/// Device hits == host twin's == the Rust tracer's, for every ray; returns the hit count.
+/// Device hits == host twin's == the Rust tracer's, for every ray, closest and any; returns the
+/// hit count.
 fn check(gpu: &Gpu, scene: &Scene, rays: &[GpuRay]) -> usize {
     let cpu = SceneRays::new(scene);
     let tree = Tree::new(cpu.wide_bvh()).unwrap();
@@ -58,7 +59,12 @@ fn check(gpu: &Gpu, scene: &Scene, rays: &[GpuRay]) -> usize {
     let got = gpu.cast(&dev, rays).unwrap();
     let host = host_cast(&tree, rays);
     let want = cpu_cast(&cpu, rays);
+    let any = gpu.occluded(&dev, rays).unwrap();
+    let any_host = host_occluded(&tree, rays);
     for (k, r) in rays.iter().enumerate() {
+        let want_any = cpu.occluded([r[0], r[1], r[2]], [r[3], r[4], r[5]], r[6], r[7]);
+        assert_eq!(any[k], want_any, "device any-hit vs CPU, ray {k}: {r:?}");
+        assert_eq!(any_host[k], want_any, "host any-hit vs CPU, ray {k}: {r:?}");
         assert_eq!(
             bits(&got[k]),
             bits(&want[k]),

@@ -452,3 +452,48 @@ fn the_map_kernel_refuses_diffraction_with_foliage() {
         "{err}"
     );
 }
+
+use kodama_nodes::rf::gpu::host_occluded;
+
+/// The any-hit kernel's host twin against `SceneRays::occluded`, ray for ray, on the cast test's
+/// rays with finite ends (shadow rays: from the launch point to points across the scene) and
+/// infinite ones.
+#[test]
+fn host_kernel_answers_any_hit_as_the_cpu() {
+    let check = |name: &str, scene: &Scene, tx: [f32; 3], centre: [f32; 3], span: f32| {
+        let v = vertices(scene);
+        let mut rays = rays(tx, centre, span, 50_000, &v);
+        // Every other ray ends part of the way: a shadow ray to a point before or past a wall.
+        let mut s = 11u64;
+        for (k, r) in rays.iter_mut().enumerate() {
+            if k % 2 == 0 {
+                s = kodama_nodes::rng::mix(s);
+                r[7] = 1.0 + 150.0 * kodama_nodes::rng::unit(s) as f32;
+            }
+        }
+        let cpu = SceneRays::new(scene);
+        let tree = Tree::new(cpu.wide_bvh()).unwrap();
+        let got = host_occluded(&tree, &rays);
+        let mut blocked = 0;
+        for (k, (r, g)) in rays.iter().zip(&got).enumerate() {
+            let want = cpu.occluded([r[0], r[1], r[2]], [r[3], r[4], r[5]], r[6], r[7]);
+            assert_eq!(*g, want, "{name}, ray {k}: {r:?}");
+            blocked += want as usize;
+        }
+        println!(
+            "{name}: {} rays, {blocked} blocked, all as the CPU",
+            rays.len()
+        );
+        assert!(blocked > rays.len() / 10 && blocked < rays.len() * 9 / 10);
+    };
+    check(
+        "street grid",
+        &street_grid(),
+        [-60.0, -56.0, 12.0],
+        [0.0, 0.0, 10.0],
+        200.0,
+    );
+    let Some(xml) = munich_xml() else { return };
+    let scene = read_scene(&xml).unwrap();
+    check("munich", &scene, [8.5, 21.0, 27.0], [0.0, 0.0, 20.0], 400.0);
+}

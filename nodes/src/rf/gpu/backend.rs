@@ -82,6 +82,40 @@ unsafe extern "C" {
     );
 }
 
+unsafe extern "C" {
+    fn kodama_host_occluded(
+        nodes: *const u32,
+        n_nodes: u32,
+        packets: *const u32,
+        rays: *const f32,
+        n: u64,
+        out: *mut u8,
+    );
+}
+
+/// The any-hit kernel's host twin over `rays`, on every core: whether each meets a triangle
+/// between its tmin and tmax (`SceneRays::occluded`).
+pub fn host_occluded(tree: &Tree, rays: &[GpuRay]) -> Vec<bool> {
+    let mut out = vec![0u8; rays.len()];
+    const CHUNK: usize = 4096;
+    rays.par_chunks(CHUNK)
+        .zip(out.par_chunks_mut(CHUNK))
+        .for_each(|(r, o)| {
+            // SAFETY: as `host_cast`'s; `o` has a byte per ray of `r`.
+            unsafe {
+                kodama_host_occluded(
+                    tree.nodes.as_ptr(),
+                    tree.node_count(),
+                    tree.packets.as_ptr(),
+                    r.as_ptr().cast(),
+                    r.len() as u64,
+                    o.as_mut_ptr(),
+                )
+            }
+        });
+    out.into_iter().map(|b| b != 0).collect()
+}
+
 fn hits(t: &[f32], prim: &[u32]) -> Vec<CastHit> {
     t.iter()
         .zip(prim)
@@ -123,6 +157,7 @@ pub(super) fn driver_err(what: &str) -> impl Fn(cudarc::driver::DriverError) -> 
 pub struct Gpu {
     pub(super) stream: Arc<CudaStream>,
     cast: CudaFunction,
+    occluded: CudaFunction,
     map: CudaFunction,
     order: CudaFunction,
     draws: CudaFunction,
@@ -168,6 +203,9 @@ impl Gpu {
         let cast = module
             .load_function("kodama_cast")
             .map_err(driver_err("kodama_cast"))?;
+        let occluded = module
+            .load_function("kodama_occluded")
+            .map_err(driver_err("kodama_occluded"))?;
         let map = module
             .load_function("kodama_map")
             .map_err(driver_err("kodama_map"))?;
@@ -186,6 +224,7 @@ impl Gpu {
         Ok(Gpu {
             stream: ctx.default_stream(),
             cast,
+            occluded,
             map,
             order,
             draws,
@@ -219,6 +258,35 @@ impl Gpu {
     /// The closest hits of `rays` on the device: the host twin's, to the bit.
     pub fn cast(&self, tree: &DeviceTree, rays: &[GpuRay]) -> Result<Vec<CastHit>, String> {
         self.cast_timed(tree, rays).map(|(h, _)| h)
+    }
+
+    /// Whether each of `rays` meets a triangle between its tmin and tmax, on the device: the
+    /// host twin's answers ([`host_occluded`]).
+    pub fn occluded(&self, tree: &DeviceTree, rays: &[GpuRay]) -> Result<Vec<bool>, String> {
+        if rays.is_empty() {
+            return Ok(Vec::new());
+        }
+        let s = &self.stream;
+        let d_rays = s
+            .clone_htod(rays.as_flattened())
+            .map_err(driver_err("upload"))?;
+        let mut out = s
+            .alloc_zeros::<u8>(rays.len())
+            .map_err(driver_err("alloc"))?;
+        let n = rays.len() as u64;
+        let mut launch = s.launch_builder(&self.occluded);
+        launch
+            .arg(&tree.nodes)
+            .arg(&tree.n_nodes)
+            .arg(&tree.packets)
+            .arg(&d_rays)
+            .arg(&n)
+            .arg(&mut out);
+        // SAFETY: the arguments match `kodama_occluded`'s parameters in kernels.cu, in order and
+        // type; the buffers hold n rays and n bytes, the tree whole nodes and packets.
+        unsafe { launch.launch(launch_for(n)) }.map_err(driver_err("launch"))?;
+        let out = s.clone_dtoh(&out).map_err(driver_err("readback"))?;
+        Ok(out.into_iter().map(|b| b != 0).collect())
     }
 
     /// [`Gpu::cast`] with the time of each step.

@@ -207,11 +207,11 @@ CUDA_CALLABLE int ctz(u32 x) {
 #endif
 }
 
-// `SceneRays::cast_index`: the closest (t, triangle) of `o + t d`, t in (tmin, tmax); returns
-// false on a miss. `d` need not be canonical: -0.0 is made +0.0 first, as the CPU does.
-CUDA_CALLABLE bool closest_hit(const Node* nodes, u32 n_nodes, const TriPacket* packets,
-                               const float o_in[3], const float d_in[3], float tmin, float tmax,
-                               float* t_out, u32* prim_out) {
+// The traversal of `closest_hit` and `any_hit`: with `any`, the first triangle met in
+// (tmin, tmax) ends it (no (t, triangle) is then given).
+CUDA_CALLABLE bool traverse(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                            const float o_in[3], const float d_in[3], float tmin, float tmax,
+                            bool any, float* t_out, u32* prim_out) {
     if (n_nodes == 0) return false;
     float o[3], d[3];
     for (int a = 0; a < 3; a++) {
@@ -238,6 +238,7 @@ CUDA_CALLABLE bool closest_hit(const Node* nodes, u32 n_nodes, const TriPacket* 
                         float t = tri_intersect(ray, p, lane, tmax);
                         u32 q = p.prim[lane];
                         if (t < tmax && t <= best_t && (t < best_t || q < best_p)) {
+                            if (any) return true;
                             best_t = t;
                             best_p = q;
                         }
@@ -283,6 +284,23 @@ CUDA_CALLABLE bool closest_hit(const Node* nodes, u32 n_nodes, const TriPacket* 
     return true;
 }
 
+// `SceneRays::cast_index`: the closest (t, triangle) of `o + t d`, t in (tmin, tmax); returns
+// false on a miss. `d` need not be canonical: -0.0 is made +0.0 first, as the CPU does.
+CUDA_CALLABLE bool closest_hit(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                               const float o[3], const float d[3], float tmin, float tmax,
+                               float* t_out, u32* prim_out) {
+    return traverse(nodes, n_nodes, packets, o, d, tmin, tmax, false, t_out, prim_out);
+}
+
+// `SceneRays::occluded`: whether any triangle meets `o + t d` for t in (tmin, tmax). The same
+// triangles as `closest_hit` tests, so the same answer as asking it for a hit, sooner.
+CUDA_CALLABLE bool any_hit(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                           const float o[3], const float d[3], float tmin, float tmax) {
+    float t;
+    u32 p;
+    return traverse(nodes, n_nodes, packets, o, d, tmin, tmax, true, &t, &p);
+}
+
 // One cast per ray; `rays` holds 8 floats a ray (origin, direction, tmin, tmax). A miss writes
 // infinity and 0xffffffff.
 CUDA_CALLABLE void cast_one(const Node* nodes, u32 n_nodes, const TriPacket* packets,
@@ -299,6 +317,13 @@ CUDA_CALLABLE void cast_one(const Node* nodes, u32 n_nodes, const TriPacket* pac
     }
 }
 
+
+// One any-hit query per ray (8 floats a ray, as `cast_one`'s): 1 when something lies between.
+CUDA_CALLABLE void occluded_one(const Node* nodes, u32 n_nodes, const TriPacket* packets,
+                                const float* rays, u64 i, u8* out) {
+    const float* r = rays + 8 * i;
+    out[i] = any_hit(nodes, n_nodes, packets, r, r + 3, r[6], r[7]) ? 1 : 0;
+}
 
 // ---------------------------------------------------------------------------------------------
 // The radio map (`rf::radiomap::radio_map`, `Shooter::segment`): Sionna RT's shoot-and-bounce
@@ -1439,9 +1464,7 @@ CUDA_CALLABLE bool blocked(const Node* nodes, u32 n_nodes, const TriPacket* pack
     V3 d = vdiv(ab, len);
     float of[3] = {(float)a.x, (float)a.y, (float)a.z};
     float df[3] = {(float)d.x, (float)d.y, (float)d.z};
-    float t32;
-    u32 h;
-    return closest_hit(nodes, n_nodes, packets, of, df, (float)eps, (float)(len - eps), &t32, &h);
+    return any_hit(nodes, n_nodes, packets, of, df, (float)eps, (float)(len - eps));
 }
 
 // `first_wall` without foliage: where o + t d first meets a surface before t_max (∞ if none).
@@ -1563,6 +1586,13 @@ extern "C" __global__ void kodama_cast(const Node* nodes, u32 n_nodes, const Tri
     if (i < n) cast_one(nodes, n_nodes, packets, rays, i, t_out, prim_out);
 }
 
+extern "C" __global__ void kodama_occluded(const Node* nodes, u32 n_nodes,
+                                           const TriPacket* packets, const float* rays, u64 n,
+                                           u8* out) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i < n) occluded_one(nodes, n_nodes, packets, rays, i, out);
+}
+
 // Thread i shoots the lattice's `order[i]`-th ray: the lattice's patch order, so a warp's rays
 // leave side by side and walk the same nodes.
 // `seen` (a byte per triangle) gets the triangles rays first land on; null without diffraction.
@@ -1661,6 +1691,13 @@ extern "C" void kodama_host_cast(const void* nodes, u32 n_nodes, const void* pac
     for (u64 i = 0; i < n; i++)
         cast_one((const Node*)nodes, n_nodes, (const TriPacket*)packets, rays, i, t_out,
                  prim_out);
+}
+
+// The host twin of `kodama_occluded`.
+extern "C" void kodama_host_occluded(const void* nodes, u32 n_nodes, const void* packets,
+                                     const float* rays, u64 n, u8* out) {
+    for (u64 i = 0; i < n; i++)
+        occluded_one((const Node*)nodes, n_nodes, (const TriPacket*)packets, rays, i, out);
 }
 
 // The host twin of `kodama_map`: rays `first..first + n` of the lattice (any order gives the
