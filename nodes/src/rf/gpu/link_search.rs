@@ -226,7 +226,7 @@ impl Gpu {
         let stride = params.stride;
         let mut size = SetSize::first(params.rays);
         loop {
-            let (free, _) = cudarc::driver::result::mem_get_info().map_err(driver_err("memory"))?;
+            let (free, _) = s.context().mem_get_info().map_err(driver_err("memory"))?;
             if size.bytes(stride) > free as u64 {
                 return Err(format!(
                     "the link search needs {:.1} GB of GPU memory to hold {} sequences of up to \

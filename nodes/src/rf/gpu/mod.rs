@@ -141,11 +141,24 @@ fn cuda_map(
 ) -> Result<Raster, String> {
     let inputs = MapInputs::new(scene, tx, antenna, plane, opt, freq_hz)
         .map_err(|e| format!("device cuda: {e}; use --device cpu"))?;
-    let gpu = Gpu::new().map_err(|e| format!("device cuda: {e}"))?;
+    let gpu = shared_gpu().map_err(|e| format!("device cuda: {e}"))?;
     let (map, _) = gpu
         .radio_map(&inputs)
         .map_err(|e| format!("device cuda: {e}"))?;
     Ok(map)
+}
+
+/// The process's GPU, opened (and its PTX loaded) on first use: a graph or a trace command
+/// that maps or traces many times pays for the context and the module once. A failure to open
+/// is not kept, so a later call tries again.
+#[cfg(feature = "cuda")]
+fn shared_gpu() -> Result<&'static Gpu, String> {
+    static GPU: std::sync::OnceLock<Gpu> = std::sync::OnceLock::new();
+    if let Some(g) = GPU.get() {
+        return Ok(g);
+    }
+    let g = Gpu::new()?;
+    Ok(GPU.get_or_init(|| g))
 }
 
 #[cfg(not(feature = "cuda"))]
@@ -190,7 +203,7 @@ fn cuda_sequences(
         .iter()
         .map(|&tx| SearchParams::new(tx, opt))
         .collect::<Result<Vec<_>, String>>()?;
-    let gpu = Gpu::new()?;
+    let gpu = shared_gpu()?;
     let resident = gpu.upload_scene(&MapScene::new(scene)?)?;
     params
         .iter()
