@@ -287,6 +287,19 @@ fn device_maps_are_the_host_maps() {
             false,
         ),
         (
+            "street grid, TR 38.901 sector, diffraction",
+            MapInputs::new(
+                &scene,
+                street_tx,
+                &kodama_nodes::rf::antenna::Antenna::parse("tr38901:130:6").unwrap(),
+                &plane,
+                &diffraction_options(100_000, 3),
+                3.5e9,
+            )
+            .unwrap(),
+            false,
+        ),
+        (
             "street grid, rolling surface, diffraction",
             map_inputs_with(
                 &scene,

@@ -82,10 +82,20 @@ fn diffuse(rays: u32) -> TraceOptions {
 }
 
 fn check_map_with(name: &str, scene: &RfScene, tx: DVec3, plane: &MapPlane, opt: &TraceOptions) {
+    check_map_from(name, scene, (tx, &Antenna::default()), plane, opt);
+}
+
+/// [`check_map_with`] from a transmitter with its own antenna.
+fn check_map_from(
+    name: &str,
+    scene: &RfScene,
+    (tx, antenna): (DVec3, &Antenna),
+    plane: &MapPlane,
+    opt: &TraceOptions,
+) {
     let (rays, opt) = (opt.rays, opt.clone());
-    let antenna = Antenna::default();
-    let cpu = radio_map(scene, tx, &antenna, plane, &opt, 3.5e9);
-    let inputs = MapInputs::new(scene, tx, &antenna, plane, &opt, 3.5e9).unwrap();
+    let cpu = radio_map(scene, tx, antenna, plane, &opt, 3.5e9);
+    let inputs = MapInputs::new(scene, tx, antenna, plane, &opt, 3.5e9).unwrap();
     let host = host_radio_map(&inputs);
     let again = host_radio_map(&inputs);
     assert_eq!(host.data.0, again.data.0, "{name}: two host maps differ");
@@ -496,4 +506,59 @@ fn host_kernel_answers_any_hit_as_the_cpu() {
     let Some(xml) = munich_xml() else { return };
     let scene = read_scene(&xml).unwrap();
     check("munich", &scene, [8.5, 21.0, 27.0], [0.0, 0.0, 20.0], 400.0);
+}
+
+/// Every antenna on the GPU as on the CPU: the TR 38.901 sector turned and tilted (with
+/// diffraction, whose edges it lights too) and a horizontally polarised dipole; the sector
+/// must shape the map for the comparison to test it.
+#[test]
+fn host_kernel_maps_antenna_patterns_as_the_cpu() {
+    use kodama_nodes::rf::antenna::{Pattern, Polarization};
+    let scene = RfScene::new(&street_grid(), 3.5e9, false).unwrap();
+    let tx = DVec3::new(-60.0, -56.0, 12.0);
+    let plane = street_plane();
+    let sector = Antenna {
+        pattern: Pattern::Tr38901,
+        polarization: Polarization::V,
+        azimuth_deg: 130.0,
+        tilt_deg: 6.0,
+    };
+    let opt = TraceOptions {
+        rays: 100_000,
+        max_depth: 3,
+        diffraction: true,
+        ..Default::default()
+    };
+    check_map_from("street grid, sector", &scene, (tx, &sector), &plane, &opt);
+    let dipole = Antenna {
+        pattern: Pattern::Dipole,
+        polarization: Polarization::H,
+        ..Antenna::default()
+    };
+    check_map_from(
+        "street grid, H dipole",
+        &scene,
+        (tx, &dipole),
+        &plane,
+        &diffuse(100_000),
+    );
+    // The sector's back lobe is 30 dB down: cells behind it lose power against the iso map.
+    let map =
+        |a: &Antenna| host_radio_map(&MapInputs::new(&scene, tx, a, &plane, &opt, 3.5e9).unwrap());
+    let (s, iso) = (map(&sector), map(&Antenna::default()));
+    let spread: Vec<f64> = (s.data.0.iter().zip(&iso.data.0))
+        .filter(|(a, b)| **a > 0.0 && **b > 0.0)
+        .map(|(a, b)| 10.0 * (*a as f64 / *b as f64).log10())
+        .collect();
+    let (lo, hi) = spread
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+            (l.min(*v), h.max(*v))
+        });
+    println!("sector against iso: cells from {lo:.1} to {hi:.1} dB");
+    assert!(
+        hi - lo > 20.0,
+        "the sector shapes the map by only {} dB",
+        hi - lo
+    );
 }

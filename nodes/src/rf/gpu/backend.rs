@@ -351,14 +351,12 @@ impl Gpu {
 pub const SLAB_SAMPLES: usize = 1 << 14;
 
 /// Why the map kernels cannot trace this map, or `None` when they can: they cover the flat
-/// measurement plane or a surface following the terrain, the isotropic vertically polarised
-/// antenna, specular reflection, slab transmission, Lambertian diffuse reflection, foliage
-/// (either law) and first-order edge diffraction, but not diffraction and foliage together.
-pub fn map_unsupported(scene: &RfScene, antenna: &Antenna, opt: &TraceOptions) -> Option<String> {
+/// measurement plane or a surface following the terrain, every antenna (isotropic, dipole, the
+/// TR 38.901 sector; either polarisation, any bearing and tilt), specular reflection, slab
+/// transmission, Lambertian diffuse reflection, foliage (either law) and first-order edge
+/// diffraction, but not diffraction and foliage together.
+pub fn map_unsupported(scene: &RfScene, opt: &TraceOptions) -> Option<String> {
     let mut why = Vec::new();
-    if antenna.pattern != Pattern::Isotropic || antenna.polarization != Polarization::V {
-        why.push("an antenna other than iso, vertical");
-    }
     if opt.diffuse && opt.scattering_pattern != ScatteringPattern::Lambertian {
         why.push("a diffuse pattern other than Lambertian");
     }
@@ -542,14 +540,14 @@ impl MapParams {
         opt: &TraceOptions,
         freq_hz: f64,
     ) -> Result<MapParams, String> {
-        if let Some(why) = map_unsupported(scene, antenna, opt) {
+        if let Some(why) = map_unsupported(scene, opt) {
             return Err(why);
         }
         let g = plane.grid;
         let foliage = opt.foliage_loss(freq_hz);
         let at_tx = FoliageDepth::at(scene, tx);
         let flag = |b: bool| if b { 1.0 } else { 0.0 };
-        let consts = vec![
+        let mut consts = vec![
             tx.x,
             tx.y,
             tx.z,
@@ -576,7 +574,21 @@ impl MapParams {
             scene.wavelength,
             0.0,
             0.0,
+            match antenna.pattern {
+                Pattern::Isotropic => 0.0,
+                Pattern::Dipole => 1.0,
+                Pattern::Tr38901 => 2.0,
+            },
+            match antenna.polarization {
+                Polarization::V => 0.0,
+                Polarization::H => 1.0,
+            },
         ];
+        // `Antenna::frame`'s rotations, as the CPU computes them.
+        let (sa, ca) = (antenna.azimuth_deg - 90.0).to_radians().sin_cos();
+        let (st, ct) = antenna.tilt_deg.to_radians().sin_cos();
+        consts.extend([sa, ca, st, ct]);
+        debug_assert_eq!(consts.len(), 32, "C_COUNT in kernels.cu");
         let surface = match &plane.lifted {
             None => None,
             Some(rays) => Some(MapSurface {

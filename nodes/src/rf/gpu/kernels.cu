@@ -363,7 +363,10 @@ enum {
     C_WAVELENGTH = 23, // metres
     C_WEDGE_LEN = 24,  // the lit wedges' total length, metres (diffraction only)
     C_WEDGES = 25,     // how many lit wedges
-    C_COUNT = 26
+    C_ANT_PATTERN = 26, // the transmit antenna (`Antenna`): 0 isotropic, 1 dipole, 2 TR 38.901
+    C_ANT_POL = 27,     // 0 V, 1 H
+    C_ANT_ROT = 28,     // sin, cos of (bearing - 90°), then of the tilt (`Antenna::frame`)
+    C_COUNT = 32
 };
 
 struct Cx {
@@ -456,6 +459,21 @@ CUDA_CALLABLE void sincos_d(double x, double* s, double* c) {
     *c = std::cos(x);
 #endif
 }
+
+// libm on either compiler: CUDA's device functions, or the host's std:: ones.
+#ifdef KODAMA_DEVICE
+#define LIBM(f) f
+#else
+#define LIBM(f) std::f
+#endif
+CUDA_CALLABLE double cos_d(double x) { return LIBM(cos)(x); }
+CUDA_CALLABLE double acos_d(double x) { return LIBM(acos)(x); }
+CUDA_CALLABLE double asin_d(double x) { return LIBM(asin)(x); }
+CUDA_CALLABLE double atan2_d(double y, double x) { return LIBM(atan2)(y, x); }
+CUDA_CALLABLE double tan_d(double x) { return LIBM(tan)(x); }
+
+CUDA_CALLABLE double abs_d(double x) { return x < 0.0 ? -x : x; }
+CUDA_CALLABLE double min_d(double a, double b) { return a < b ? a : b; }
 
 // The i-th of n points of the Fibonacci lattice (`fibonacci::fibonacci_sphere`, Sionna's).
 CUDA_CALLABLE V3 lattice(u32 n, u32 i) {
@@ -640,22 +658,55 @@ CUDA_CALLABLE bool cast_refined(const Node* nodes, u32 n_nodes, const TriPacket*
     return cast_between(nodes, n_nodes, packets, tri, o, d, EPS_M, 1.0 / 0.0, t_out, tri_out);
 }
 
-// The field an isotropic, vertically polarised antenna sends along the unit direction d: θ̂
-// (`antenna::spherical_basis`).
-CUDA_CALLABLE Field iso_v_field(V3 d) {
-    Field e;
+// `antenna::gain`: the pattern's power gain at (θ, φ) of the antenna's frame.
+CUDA_CALLABLE double pattern_gain(u32 pattern, double theta, double phi) {
+    if (pattern == 1) {
+        double s = LIBM(sin)(theta);
+        return 1.5 * (s * s);
+    }
+    // TR 38.901's element: 65° beamwidths, 30 dB floor, 8 dBi (degrees as `f64::to_degrees`).
+    double th = theta * 57.29577951308232, ph = phi * 57.29577951308232;
+    double v = (th - 90.0) / 65.0, h = ph / 65.0;
+    double a_v = -min_d(12.0 * (v * v), 30.0);
+    double a_h = -min_d(12.0 * (h * h), 30.0);
+    double a = -min_d(-(a_v + a_h), 30.0);
+    return pow10_d((a + 8.0) / 10.0);
+}
+
+// `Antenna::field`: the field the map's transmit antenna sends along the unit direction d (site
+// frame): √G times θ̂ or φ̂ of the site frame, G evaluated in the antenna's rotated frame.
+CUDA_CALLABLE Field antenna_field(const double* k, V3 d) {
+    u32 pattern = (u32)k[C_ANT_PATTERN];
+    double g = 1.0;
+    if (pattern != 0) {
+        double sa = k[C_ANT_ROT], ca = k[C_ANT_ROT + 1], st = k[C_ANT_ROT + 2],
+               ct = k[C_ANT_ROT + 3];
+        double x1 = ca * d.x - sa * d.y;
+        double y1 = sa * d.x + ca * d.y;
+        double z1 = d.z;
+        double x2 = ct * x1 - st * z1;
+        double z2 = st * x1 + ct * z1;
+        double zc = z2 < -1.0 ? -1.0 : (z2 > 1.0 ? 1.0 : z2);
+        g = pattern_gain(pattern, acos_d(zc), atan2_d(y1, x2));
+    }
+    double amp = dsqrt(g);
+    // `antenna::spherical_basis`: at the poles φ̂ is +y and θ̂ = φ̂ × k.
     double rho = dsqrt(d.x * d.x + d.y * d.y);
-    V3 th;
+    V3 th, ph;
     if (rho < 1e-12) {
+        ph = v3(0.0, 1.0, 0.0);
         th = v3(1.0 * d.z, -0.0 * d.z, 0.0);
     } else {
         double cp = d.x / rho, sp = d.y / rho;
         th = v3(d.z * cp, d.z * sp, -rho);
+        ph = v3(-sp, cp, 0.0);
     }
-    e.c[0] = cx(th.x, 0.0);
-    e.c[1] = cx(th.y, 0.0);
-    e.c[2] = cx(th.z, 0.0);
-    return e;
+    V3 e = (u32)k[C_ANT_POL] == 0 ? th : ph;
+    Field f;
+    f.c[0] = cx(e.x * amp, 0.0);
+    f.c[1] = cx(e.y * amp, 0.0);
+    f.c[2] = cx(e.z * amp, 0.0);
+    return f;
 }
 
 // One launched ray, the `lattice_index`-th, from the transmitter to the end of its bounces.
@@ -672,7 +723,7 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
     double s2 = k[C_S2];
     V3 d = lattice(n_rays, lattice_index);
     V3 o = v3(k[C_TX], k[C_TX + 1], k[C_TX + 2]);
-    Field e = iso_v_field(d);
+    Field e = antenna_field(k, d);
     double omega = k[C_OMEGA];
     u32 depth = 0;
     // Canopies the ray is inside (`FoliageDepth`) and the metres it has run in them.
@@ -1142,19 +1193,6 @@ CUDA_CALLABLE void order_sort_bins(const OrderChunk& c, u32 tid, u32 threads) {
 // Salts the sample hashes apart from the shoot-and-bounce draws.
 #define DIFF_SALT 0xD1FFAC7100000001ull
 
-// libm on either compiler: CUDA's device functions, or the host's std:: ones.
-#ifdef KODAMA_DEVICE
-#define LIBM(f) f
-#else
-#define LIBM(f) std::f
-#endif
-CUDA_CALLABLE double cos_d(double x) { return LIBM(cos)(x); }
-CUDA_CALLABLE double acos_d(double x) { return LIBM(acos)(x); }
-CUDA_CALLABLE double asin_d(double x) { return LIBM(asin)(x); }
-CUDA_CALLABLE double atan2_d(double y, double x) { return LIBM(atan2)(y, x); }
-CUDA_CALLABLE double tan_d(double x) { return LIBM(tan)(x); }
-CUDA_CALLABLE double abs_d(double x) { return x < 0.0 ? -x : x; }
-CUDA_CALLABLE double min_d(double a, double b) { return a < b ? a : b; }
 
 CUDA_CALLABLE double vlength(V3 a) { return dsqrt(vdot(a, a)); }
 // glam's `normalize_or_zero`.
@@ -1564,7 +1602,7 @@ CUDA_CALLABLE void diffract(const Node* nodes, u32 n_nodes, const TriPacket* pac
         return;
     double t_end = min_d(first_wall(nodes, n_nodes, packets, tri, q, ko, last),
                          first_wall(nodes, n_nodes, packets, tri, q_out, ko, last));
-    Field e_tx = iso_v_field(ki);
+    Field e_tx = antenna_field(k, ki);
     double after = 0.0;
     while (next_crossing(surface, k, q, ko, after, &t, &cell, &normal)) {
         after = t;

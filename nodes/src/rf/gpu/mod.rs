@@ -17,9 +17,9 @@
 //! - The radio map is one megakernel, a thread per launched ray (Sionna RT's symbolic loop is
 //!   one too), summing into cells as exact fixed-point integers: a GPU map is the same bits on
 //!   every run whatever the scheduling, and the same bits as the host twin's where its paths
-//!   are specular. It covers the flat plane and terrain-following surfaces, iso antennas,
-//!   reflection, transmission, Lambertian diffuse reflection, foliage and first-order edge
-//!   diffraction (two more kernels: each sample's wedge counted, then the samples, a thread
+//!   are specular. It covers the flat plane and terrain-following surfaces, every antenna
+//!   (isotropic, dipole, the TR 38.901 sector, either polarisation), reflection, transmission,
+//!   Lambertian diffuse reflection, foliage and first-order edge diffraction (two more kernels: each sample's wedge counted, then the samples, a thread
 //!   each, over the wedges the rays lit, which the host picks from the triangles they first
 //!   landed on); diffraction with foliage and anything else is refused by name
 //!   ([`device_unavailable`], `map_unsupported`), and the CPU path stays the default.
@@ -108,8 +108,8 @@ pub fn device_unavailable(device: Device) -> Option<String> {
 
 /// [`radio_map`](crate::rf::radiomap::radio_map) on `device`. On the GPU the map is the CPU's
 /// within the tolerance `tests/gpu_host.rs` states; a map the kernels do not cover (a
-/// directive diffuse pattern, diffraction with foliage, antennas other than iso vertical) is an
-/// error naming what, since the user asked for the GPU.
+/// directive diffuse pattern, diffraction with foliage) is an error naming what, since the user
+/// asked for the GPU.
 pub fn radio_map_on(
     device: Device,
     scene: &RfScene,
