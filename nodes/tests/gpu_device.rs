@@ -272,6 +272,20 @@ fn device_maps_are_the_host_maps() {
             false,
         ),
         (
+            "street grid, directive lobe",
+            map_inputs_with(
+                &scene,
+                street_tx,
+                &plane,
+                &TraceOptions {
+                    scattering_pattern:
+                        kodama_nodes::rf::scattering::ScatteringPattern::Directive { alpha_r: 4 },
+                    ..map_options(100_000, 3, true)
+                },
+            ),
+            false,
+        ),
+        (
             "street grid, rolling surface",
             map_inputs_with(
                 &scene,

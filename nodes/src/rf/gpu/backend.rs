@@ -353,17 +353,12 @@ pub const SLAB_SAMPLES: usize = 1 << 14;
 /// Why the map kernels cannot trace this map, or `None` when they can: they cover the flat
 /// measurement plane or a surface following the terrain, every antenna (isotropic, dipole, the
 /// TR 38.901 sector; either polarisation, any bearing and tilt), specular reflection, slab
-/// transmission, Lambertian diffuse reflection, foliage (either law) and first-order edge
-/// diffraction, but not diffraction and foliage together.
+/// transmission, diffuse reflection (Lambertian or directive), foliage (either law) and
+/// first-order edge diffraction, but not diffraction and foliage together.
 pub fn map_unsupported(scene: &RfScene, opt: &TraceOptions) -> Option<String> {
-    let mut why = Vec::new();
-    if opt.diffuse && opt.scattering_pattern != ScatteringPattern::Lambertian {
-        why.push("a diffuse pattern other than Lambertian");
-    }
-    if diffracts(opt) && scene.has_foliage() {
-        why.push("edge diffraction in a scene with foliage");
-    }
-    (!why.is_empty()).then(|| format!("the GPU map kernel does not cover {}", why.join(", ")))
+    (diffracts(opt) && scene.has_foliage()).then(|| {
+        "the GPU map kernel does not cover edge diffraction in a scene with foliage".to_string()
+    })
 }
 
 /// Whether a map under `opt` adds edge-diffracted power (as `radio_map` decides).
@@ -588,7 +583,11 @@ impl MapParams {
         let (sa, ca) = (antenna.azimuth_deg - 90.0).to_radians().sin_cos();
         let (st, ct) = antenna.tilt_deg.to_radians().sin_cos();
         consts.extend([sa, ca, st, ct]);
-        debug_assert_eq!(consts.len(), 32, "C_COUNT in kernels.cu");
+        consts.push(match opt.scattering_pattern {
+            ScatteringPattern::Lambertian => -1.0,
+            ScatteringPattern::Directive { alpha_r } => alpha_r as f64,
+        });
+        debug_assert_eq!(consts.len(), 33, "C_COUNT in kernels.cu");
         let surface = match &plane.lifted {
             None => None,
             Some(rays) => Some(MapSurface {

@@ -366,7 +366,8 @@ enum {
     C_ANT_PATTERN = 26, // the transmit antenna (`Antenna`): 0 isotropic, 1 dipole, 2 TR 38.901
     C_ANT_POL = 27,     // 0 V, 1 H
     C_ANT_ROT = 28,     // sin, cos of (bearing - 90°), then of the tilt (`Antenna::frame`)
-    C_COUNT = 32
+    C_SCAT_ALPHA = 32,  // the diffuse lobe: -1 Lambertian, else the directive α_R
+    C_COUNT = 33
 };
 
 struct Cx {
@@ -602,6 +603,56 @@ CUDA_CALLABLE double foliage_step(const double* k, double before, double len) {
     return pow10_d(-added / 20.0);
 }
 
+// `scattering::binomial`: n choose k, as the CPU's running product.
+CUDA_CALLABLE double binomial_d(u32 n, u32 k) {
+    double acc = 1.0;
+    for (u32 i = 0; i < k; i++) acc = acc * (double)(n - i) / (double)(i + 1);
+    return acc;
+}
+
+// x to a non-negative integer power, by repeated squaring (`f64::powi`).
+CUDA_CALLABLE double powi_d(double x, u32 n) {
+    double r = 1.0;
+    while (n > 0) {
+        if (n & 1u) r *= x;
+        x *= x;
+        n >>= 1;
+    }
+    return r;
+}
+
+// `scattering::directive_norm`: ∫ ((1 + cos ψ) / 2)^α dΩ over the hemisphere, at incidence θ_i.
+CUDA_CALLABLE double directive_norm(u32 alpha, double theta_i) {
+    double sn, c;
+    sincos_d(theta_i, &sn, &c);
+    double s2 = sn * sn;
+    double sum = 0.0;
+    for (u32 k = 0; k <= alpha; k++) {
+        double i_k = 2.0 * 3.141592653589793 / (double)(k + 1);
+        if (k % 2 == 1) {
+            double inner = 0.0;
+            for (u32 w = 0; w <= (k - 1) / 2; w++)
+                inner += binomial_d(2 * w, w) * powi_d(s2, w) / powi_d(4.0, w);
+            i_k = i_k * c * inner;
+        }
+        sum += binomial_d(alpha, k) * i_k;
+    }
+    return sum / powi_d(2.0, alpha);
+}
+
+// `scattering::pattern`: the diffuse lobe's density toward ks of a wave along ki off a surface
+// of normal n (facing the wave): Lambertian (alpha < 0) or directive with α_R = alpha.
+CUDA_CALLABLE double scattering_pattern(double alpha, V3 ki, V3 ks, V3 n) {
+    double cos_s = vdot(ks, n);
+    if (cos_s <= 0.0) return 0.0;
+    if (alpha < 0.0) return cos_s / 3.141592653589793;
+    V3 kr = vsub(ki, vmul(n, 2.0 * vdot(ki, n)));
+    double ct = -vdot(ki, n);
+    ct = ct < -1.0 ? -1.0 : (ct > 1.0 ? 1.0 : ct);
+    u32 a = (u32)alpha;
+    return powi_d((1.0 + vdot(kr, ks)) / 2.0, a) / directive_norm(a, acos_d(ct));
+}
+
 // A map surface following the terrain (`MapPlane::lifted`): its own tree, and per triangle the
 // f32 unit normal `SceneRays::cast` gives (3 f32). n_nodes 0: the flat plane at C_Z.
 struct Surface {
@@ -835,8 +886,7 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
                                    cmul(co[1], field_dot(e, par)), par_r);
             double before = field_norm2(e);
             double gamma = dsqrt(field_norm2(e_spec) / (before > 1e-300 ? before : 1e-300));
-            double cos_s = vdot(ko, side);
-            double fp = cos_s <= 0.0 ? 0.0 : cos_s / 3.141592653589793;
+            double fp = scattering_pattern(k[C_SCAT_ALPHA], d, ko, side);
             V3 th_i, ph_i, th_o, ph_o;
             spherical_basis(d, &th_i, &ph_i);
             spherical_basis(ko, &th_o, &ph_o);

@@ -19,9 +19,9 @@
 //!   every run whatever the scheduling, and the same bits as the host twin's where its paths
 //!   are specular. It covers the flat plane and terrain-following surfaces, every antenna
 //!   (isotropic, dipole, the TR 38.901 sector, either polarisation), reflection, transmission,
-//!   Lambertian diffuse reflection, foliage and first-order edge diffraction (two more kernels: each sample's wedge counted, then the samples, a thread
+//!   diffuse reflection (Lambertian or directive), foliage and first-order edge diffraction (two more kernels: each sample's wedge counted, then the samples, a thread
 //!   each, over the wedges the rays lit, which the host picks from the triangles they first
-//!   landed on); diffraction with foliage and anything else is refused by name
+//!   landed on); diffraction in a scene with foliage is refused by name
 //!   ([`device_unavailable`], `map_unsupported`), and the CPU path stays the default.
 //! - A scene goes up once (`Gpu::upload_scene`) and stays for any number of maps (`Gpu::map`):
 //!   per map only its scalars travel, the rays' patch order is computed on the device
@@ -107,9 +107,9 @@ pub fn device_unavailable(device: Device) -> Option<String> {
 }
 
 /// [`radio_map`](crate::rf::radiomap::radio_map) on `device`. On the GPU the map is the CPU's
-/// within the tolerance `tests/gpu_host.rs` states; a map the kernels do not cover (a
-/// directive diffuse pattern, diffraction with foliage) is an error naming what, since the user
-/// asked for the GPU.
+/// within the tolerance `tests/gpu_host.rs` states; a map the kernels do not cover
+/// (diffraction in a scene with foliage) is an error saying so, since the user asked for the
+/// GPU.
 pub fn radio_map_on(
     device: Device,
     scene: &RfScene,

@@ -142,6 +142,12 @@ mod tests {
                 max_depth: 33,
                 ..Default::default()
             },
+            LinkOptions {
+                scattering_pattern: crate::rf::scattering::ScatteringPattern::Directive {
+                    alpha_r: 101,
+                },
+                ..Default::default()
+            },
         ] {
             let q = TraceParams {
                 options,
