@@ -38,10 +38,7 @@ pub fn trace_links(
     freq_hz: f64,
 ) -> Vec<LinkPaths> {
     let search = |txs: &[DVec3]| -> Result<_, Infallible> {
-        Ok(txs
-            .iter()
-            .map(|&tx| sequences::reflection_sequences(scene, tx, opt))
-            .collect())
+        Ok(sequences::reflection_sequences_from(scene, txs, opt))
     };
     let ends = (tx_antenna, rx_antenna);
     match trace_links_searched(scene, links, ends, opt, freq_hz, search) {

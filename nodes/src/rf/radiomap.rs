@@ -98,7 +98,7 @@ pub fn radio_map(
     if let Some(all) = all {
         seen.sort_unstable();
         seen.dedup();
-        let wedges = lit_wedges(all, &seen, tx);
+        let wedges = lit_wedges(&all, &seen, tx);
         let sampler = EdgeSampler {
             scene,
             tx,

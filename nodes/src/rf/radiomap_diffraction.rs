@@ -45,13 +45,14 @@ pub(super) struct EdgeSampler<'a> {
 
 /// The wedges of `all` that can diffract the wave from `tx`, whose rays first land on the sorted
 /// triangles `seen` ([`Wedge::diffracts_from`]).
-pub(crate) fn lit_wedges(all: Wedges, seen: &[u32], tx: DVec3) -> Vec<Wedge> {
+pub(crate) fn lit_wedges(all: &Wedges, seen: &[u32], tx: DVec3) -> Vec<Wedge> {
     let mut lit: Vec<u32> = seen.iter().map(|&t| all.face[t as usize]).collect();
     lit.sort_unstable();
     lit.dedup();
     all.list
-        .into_iter()
+        .iter()
         .filter(|w| w.diffracts_from(tx, |f| lit.binary_search(&f).is_ok()))
+        .copied()
         .collect()
 }
 

@@ -35,6 +35,17 @@ pub fn reflection_sequences(scene: &RfScene, tx: DVec3, opt: &TraceOptions) -> V
     all
 }
 
+/// [`reflection_sequences`] from each of `txs`, in turn.
+pub fn reflection_sequences_from(
+    scene: &RfScene,
+    txs: &[DVec3],
+    opt: &TraceOptions,
+) -> Vec<Vec<Vec<u32>>> {
+    txs.iter()
+        .map(|&tx| reflection_sequences(scene, tx, opt))
+        .collect()
+}
+
 /// A set of sequences (hashed with [`MixHasher`](crate::rng::MixHasher): sorted before use).
 type Sequences = HashSet<Vec<u32>, MixState>;
 

@@ -462,13 +462,15 @@ struct LitWedges {
 }
 
 impl MapParams {
-    /// The wedges of `all` a transmitter lights whose rays first landed on the triangles with a
-    /// 1 in `seen`, ready for the kernel; `None` when none is lit.
-    fn lit_wedges(&self, all: &Wedges, seen: &[u8]) -> Option<LitWedges> {
+    /// The map's wedges that its transmitter lights, its rays having first landed on the
+    /// triangles with a 1 in `seen`, ready for the kernel; `None` when the map does not
+    /// diffract or no wedge is lit.
+    fn lit_wedges(&self, seen: &[u8]) -> Option<LitWedges> {
+        let all = self.wedges.as_ref()?;
         let landed: Vec<u32> = (0..seen.len() as u32)
             .filter(|&t| seen[t as usize] != 0)
             .collect();
-        let lit = lit_wedges(all.clone(), &landed, self.tx);
+        let lit = lit_wedges(all, &landed, self.tx);
         if lit.is_empty() {
             return None;
         }
@@ -784,8 +786,7 @@ pub fn host_radio_map(inputs: &MapInputs) -> Raster {
                 (add_fixed(a, b), sa)
             },
         );
-    let lit = mp.wedges.as_ref().and_then(|all| mp.lit_wedges(all, &seen));
-    let Some(lit) = lit else {
+    let Some(lit) = mp.lit_wedges(&seen) else {
         return raster(mp.grid, sc.scale, &acc);
     };
     let mut drawn = vec![0u32; lit.cdf.len()];
@@ -1002,9 +1003,9 @@ impl Gpu {
                 // words a cell of the grid `consts` names, the scene what `MapScene::new` made,
                 // `seen` a byte per triangle or null.
                 unsafe { launch.launch(cfg) }.map_err(driver_err("launch"))?;
-                if let (Some(all), Some(seen)) = (&map.wedges, &seen) {
+                if let Some(seen) = &seen {
                     let seen = s.clone_dtoh(seen).map_err(driver_err("readback"))?;
-                    if let Some(lit) = map.lit_wedges(all, &seen) {
+                    if let Some(lit) = map.lit_wedges(&seen) {
                         self.diffract(
                             scene,
                             map,

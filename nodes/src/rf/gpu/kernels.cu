@@ -916,7 +916,7 @@ CUDA_CALLABLE void shoot(const Node* nodes, u32 n_nodes, const TriPacket* packet
 #define SEQ_DEPTH_MAX 32
 #define SEQ_NONE 0xffffffffu
 
-// The scalars of a sequence search, as f64 (`SearchParams` in sequences.rs writes them).
+// The scalars of a sequence search, as f64 (`SearchParams` in link_search.rs writes them).
 enum {
     S_TX = 0,  // 3
     S_NRAYS = 3,

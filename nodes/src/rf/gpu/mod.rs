@@ -185,10 +185,9 @@ pub fn reflection_sequences_on(
         return Err(why);
     }
     match device {
-        Device::Cpu => Ok(txs
-            .iter()
-            .map(|&tx| crate::rf::sequences::reflection_sequences(scene, tx, opt))
-            .collect()),
+        Device::Cpu => Ok(crate::rf::sequences::reflection_sequences_from(
+            scene, txs, opt,
+        )),
         Device::Cuda => cuda_sequences(scene, txs, opt).map_err(|e| format!("device cuda: {e}")),
     }
 }
